@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Build and run vge's hardware-in-the-loop tests (crate vge-tests, test target `hil`) on a real
+# SocketCAN interface, vcan0. Where this kernel can create vcan0 the tests run directly;
+# where it has no CAN (WSL2, many containers and CI runners) scripts/canvm/run.sh boots a
+# user-mode-linux (or QEMU) guest with vcan0 up and runs the test binary inside it, passing
+# its exit status back. Extra arguments go to the test binary (e.g. a test name filter).
+set -euo pipefail
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$repo"
+export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUNNER="$repo/scripts/canvm/run.sh"
+exec cargo test --release -p vge-tests --test hil -- --ignored "$@"
