@@ -1,0 +1,106 @@
+//! A single dense layer over borrowed weights.
+
+use nalgebra::{ComplexField, DVectorView, DVectorViewMut, Dyn, MatrixView};
+
+use crate::RuntimeError;
+
+/// Element-wise non-linearity applied after a layer's affine map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Activation {
+    /// `y = x`
+    Identity,
+    /// `y = max(x, 0)`
+    Relu,
+    /// `y = tanh(x)`
+    Tanh,
+}
+
+impl Activation {
+    /// Applies the activation to one value.
+    #[inline]
+    pub fn apply(self, x: f32) -> f32 {
+        match self {
+            Self::Identity => x,
+            Self::Relu => x.max(0.0),
+            Self::Tanh => ComplexField::tanh(x),
+        }
+    }
+}
+
+/// A dense layer `y = activation(W x + b)` over borrowed data.
+///
+/// `weights` is row-major `out_dim × in_dim` (the layout of a PyTorch/tch `Linear` weight),
+/// `bias` has `out_dim` entries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layer<'a> {
+    pub in_dim: usize,
+    pub out_dim: usize,
+    pub weights: &'a [f32],
+    pub bias: &'a [f32],
+    pub activation: Activation,
+}
+
+impl<'a> Layer<'a> {
+    /// Checks slice lengths against the dimensions, and that all parameters are finite.
+    /// `index` is only used to label errors.
+    pub fn validate(&self, index: usize) -> Result<(), RuntimeError> {
+        if self.in_dim == 0 || self.out_dim == 0 {
+            return Err(RuntimeError::ZeroDim { layer: index });
+        }
+        let expected =
+            self.in_dim.checked_mul(self.out_dim).ok_or(RuntimeError::SizeOverflow { layer: index })?;
+        if self.weights.len() != expected {
+            return Err(RuntimeError::WeightLen { layer: index, expected, got: self.weights.len() });
+        }
+        if self.bias.len() != self.out_dim {
+            return Err(RuntimeError::BiasLen { layer: index, expected: self.out_dim, got: self.bias.len() });
+        }
+        if let Some(i) = self.weights.iter().position(|w| !w.is_finite()) {
+            return Err(RuntimeError::NonFiniteWeight { layer: index, index: i });
+        }
+        if let Some(i) = self.bias.iter().position(|b| !b.is_finite()) {
+            return Err(RuntimeError::NonFiniteBias { layer: index, index: i });
+        }
+        Ok(())
+    }
+
+    /// Computes `y = activation(W x + b)`.
+    ///
+    /// The layer must have passed [`Layer::validate`]; sizes are re-checked here (cheaply)
+    /// so that a mismatch is an error rather than a panic inside nalgebra.
+    /// `index` labels errors.
+    pub(crate) fn apply(&self, index: usize, x: &[f32], y: &mut [f32]) -> Result<(), RuntimeError> {
+        let (n_in, n_out) = (self.in_dim, self.out_dim);
+        if x.len() != n_in {
+            return Err(RuntimeError::DimMismatch { layer: index, expected_in: x.len(), got_in: n_in });
+        }
+        if y.len() != n_out {
+            return Err(RuntimeError::ActionLen { expected: n_out, got: y.len() });
+        }
+        let layer = index;
+        let n_w = n_in.checked_mul(n_out).ok_or(RuntimeError::SizeOverflow { layer })?;
+        if self.weights.len() != n_w {
+            return Err(RuntimeError::WeightLen { layer, expected: n_w, got: self.weights.len() });
+        }
+        if self.bias.len() != n_out {
+            return Err(RuntimeError::BiasLen { layer, expected: n_out, got: self.bias.len() });
+        }
+
+        // Row-major out×in is column-major in×out: view it as Wᵀ and use the transposed product.
+        let w_t = MatrixView::<f32, Dyn, Dyn>::from_slice_generic(self.weights, Dyn(n_in), Dyn(n_out));
+        let xv = DVectorView::<f32>::from_slice(x, n_in);
+        for (yo, b) in y.iter_mut().zip(self.bias) {
+            *yo = *b;
+        }
+        let mut yv = DVectorViewMut::<f32>::from_slice(y, n_out);
+        // y = 1 * (Wᵀ)ᵀ x + 1 * b
+        yv.gemv_tr(1.0, &w_t, &xv, 1.0);
+
+        if self.activation != Activation::Identity {
+            for yo in y.iter_mut() {
+                *yo = self.activation.apply(*yo);
+            }
+        }
+        Ok(())
+    }
+}
