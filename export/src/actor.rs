@@ -1,0 +1,92 @@
+//! The deterministic head of a SAC actor, built from `tch::nn::Linear` layers.
+
+use tch::Tensor;
+use tch::nn::{self, Module};
+
+use crate::ExportError;
+
+/// Shape of an actor MLP: `obs_dim -> hidden[0] -> ... -> act_dim`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ActorSpec {
+    pub obs_dim: usize,
+    pub hidden: Vec<usize>,
+    pub act_dim: usize,
+}
+
+impl ActorSpec {
+    /// Variable-path name of hidden layer `i` relative to the actor prefix (`"l0"`, `"l1"`, ...).
+    pub fn hidden_name(i: usize) -> String {
+        format!("l{i}")
+    }
+
+    /// Variable-path name of the mean layer relative to the actor prefix.
+    pub const MEAN_NAME: &'static str = "mean";
+
+    /// `(in_dim, out_dim)` of every linear layer, hidden layers first, mean layer last.
+    pub fn layer_dims(&self) -> Vec<(usize, usize)> {
+        let mut dims = Vec::with_capacity(self.hidden.len() + 1);
+        let mut prev = self.obs_dim;
+        for &h in &self.hidden {
+            dims.push((prev, h));
+            prev = h;
+        }
+        dims.push((prev, self.act_dim));
+        dims
+    }
+
+    /// Checks that every dimension is non-zero and fits in `i64`.
+    pub fn validate(&self) -> Result<(), ExportError> {
+        let all = std::iter::once(self.obs_dim).chain(self.hidden.iter().copied()).chain([self.act_dim]);
+        for d in all {
+            if d == 0 {
+                return Err(ExportError::InvalidSpec(format!("zero dimension in {self:?}")));
+            }
+            if i64::try_from(d).is_err() {
+                return Err(ExportError::InvalidSpec(format!("dimension {d} does not fit in i64")));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The deterministic head of a SAC actor: `tanh(mean(relu(... relu(l0(obs)))))`.
+///
+/// A full SAC actor also has a log-std head; it is not needed for deployment and is not built
+/// (nor read) here.
+#[derive(Debug)]
+pub struct TchActor {
+    pub hidden: Vec<nn::Linear>,
+    pub mean: nn::Linear,
+}
+
+impl Module for TchActor {
+    fn forward(&self, obs: &Tensor) -> Tensor {
+        let h = self.hidden.iter().fold(obs.shallow_clone(), |x, l| l.forward(&x).relu());
+        self.mean.forward(&h).tanh()
+    }
+}
+
+/// Builds the actor under `path` (e.g. `&(vs.root() / "actor")`), creating the variables
+/// `<path>.l0.weight`, `<path>.l0.bias`, ..., `<path>.mean.weight`, `<path>.mean.bias` with
+/// tch's default `Linear` initialisation.
+pub fn build_actor(path: &nn::Path<'_>, spec: &ActorSpec) -> Result<TchActor, ExportError> {
+    spec.validate()?;
+    let to_i64 = |d: usize| {
+        i64::try_from(d).map_err(|_| ExportError::InvalidSpec(format!("dimension {d} does not fit in i64")))
+    };
+    let dims = spec.layer_dims();
+    let mut hidden = Vec::with_capacity(spec.hidden.len());
+    let mut mean = None;
+    for (i, &(n_in, n_out)) in dims.iter().enumerate() {
+        let name =
+            if i < spec.hidden.len() { ActorSpec::hidden_name(i) } else { ActorSpec::MEAN_NAME.into() };
+        let lin = nn::linear(path / name, to_i64(n_in)?, to_i64(n_out)?, Default::default());
+        if i < spec.hidden.len() {
+            hidden.push(lin);
+        } else {
+            mean = Some(lin);
+        }
+    }
+    let mean = mean.ok_or_else(|| ExportError::InvalidSpec("no mean layer".into()))?;
+    Ok(TchActor { hidden, mean })
+}

@@ -1,0 +1,29 @@
+//! Errors raised while reading an actor out of a `VarStore`.
+
+use tch::Kind;
+
+/// Why an actor could not be exported.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The spec itself is unusable (a zero dimension or a dimension over `i64`).
+    #[error("invalid actor spec: {0}")]
+    InvalidSpec(String),
+    /// No variable with this name in the `VarStore`.
+    #[error("variable `{name}` not found in the var store")]
+    MissingVariable { name: String },
+    /// The variable exists but has another shape than the spec implies.
+    #[error("variable `{name}` has shape {got:?}, expected {expected:?}")]
+    WrongShape { name: String, expected: Vec<i64>, got: Vec<i64> },
+    /// The variable is not `f32` (`Kind::Float`).
+    #[error("variable `{name}` has kind {kind:?}, expected Float (f32)")]
+    WrongKind { name: String, kind: Kind },
+    /// The variable holds a NaN or infinity at this flat (row-major) index.
+    #[error("variable `{name}` holds a non-finite value at flat index {index}")]
+    NonFinite { name: String, index: usize },
+    /// The extracted layers were rejected by the runtime.
+    #[error("runtime rejected the exported layers: {0}")]
+    Runtime(#[from] vge_runtime::RuntimeError),
+    /// libtorch failed while copying a tensor out.
+    #[error(transparent)]
+    Tch(#[from] tch::TchError),
+}
