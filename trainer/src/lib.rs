@@ -1,0 +1,6 @@
+//! vge-trainer: Soft Actor-Critic in tch with value-guided exploration (VGE) for
+//! finger-gaiting, and the `vge` command.
+
+pub mod bench_update;
+pub mod nets;
+pub mod sac;

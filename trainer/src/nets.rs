@@ -1,0 +1,143 @@
+//! The SAC networks: a tanh-Gaussian actor and twin Q critics evaluated in one batched pass.
+//!
+//! Parameter paths are part of the export contract (`vge-export` reads the actor by name):
+//! `actor.l{i}` hidden layers, `actor.mean`, `actor.log_std`; `critic.w{i}` / `critic.b{i}`.
+
+use tch::nn::{self, Module};
+use tch::{Kind, Tensor};
+
+/// log σ is squashed into [LOG_STD_MIN, LOG_STD_MAX] (as in CleanRL's SAC) so that the policy
+/// can neither collapse to a point nor explode early in training.
+pub const LOG_STD_MIN: f64 = -5.0;
+pub const LOG_STD_MAX: f64 = 2.0;
+
+/// Sizes shared by the actor and critics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetSpec {
+    pub obs_dim: i64,
+    pub act_dim: i64,
+    pub hidden: Vec<i64>,
+}
+
+/// PyTorch's default `nn.Linear` initialisation bound for a layer with `fan_in` inputs.
+fn linear_bound(fan_in: i64) -> f64 {
+    1.0 / (fan_in as f64).sqrt()
+}
+
+/// Squashed Gaussian policy: a ReLU trunk, then mean and log σ heads; a = tanh(u) · scale.
+#[derive(Debug)]
+pub struct GaussianActor {
+    trunk: nn::Sequential,
+    mean: nn::Linear,
+    log_std: nn::Linear,
+    /// Per-dimension half-range of the action (e.g. the max joint-target change per step).
+    action_scale: Tensor,
+}
+
+/// An action drawn from the policy with its log-density (after the tanh change of variables).
+#[derive(Debug)]
+pub struct PolicySample {
+    pub action: Tensor,
+    pub log_prob: Tensor,
+}
+
+impl GaussianActor {
+    pub fn new(root: &nn::Path, spec: &NetSpec, action_scale: &[f32]) -> Self {
+        assert_eq!(action_scale.len() as i64, spec.act_dim, "one action scale per action dimension");
+        let p = root / "actor";
+        let mut trunk = nn::seq();
+        let mut width = spec.obs_dim;
+        for (i, &h) in spec.hidden.iter().enumerate() {
+            trunk = trunk
+                .add(nn::linear(&p / format!("l{i}"), width, h, Default::default()))
+                .add_fn(|x| x.relu());
+            width = h;
+        }
+        let mean = nn::linear(&p / "mean", width, spec.act_dim, Default::default());
+        let log_std = nn::linear(&p / "log_std", width, spec.act_dim, Default::default());
+        let action_scale = Tensor::from_slice(action_scale).to_device(root.device());
+        Self { trunk, mean, log_std, action_scale }
+    }
+
+    /// The deployed behaviour: tanh(mean) · scale, no noise.
+    pub fn deterministic(&self, obs: &Tensor) -> Tensor {
+        self.mean.forward(&self.trunk.forward(obs)).tanh() * &self.action_scale
+    }
+
+    /// Mean and log σ of the pre-tanh Gaussian.
+    pub fn distribution(&self, obs: &Tensor) -> (Tensor, Tensor) {
+        let h = self.trunk.forward(obs);
+        let log_std =
+            LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (self.log_std.forward(&h).tanh() + 1.0);
+        (self.mean.forward(&h), log_std)
+    }
+
+    /// Reparameterised sample a = tanh(μ + σ ε) · scale and log π(a|s), summed over dimensions.
+    pub fn sample(&self, obs: &Tensor) -> PolicySample {
+        let (mean, log_std) = self.distribution(obs);
+        let std = log_std.exp();
+        let eps = mean.randn_like();
+        let u = &mean + &std * &eps;
+        let y = u.tanh();
+        // log N(u; μ, σ) = -ε²/2 - log σ - log √(2π); then the Jacobian of a = tanh(u)·scale.
+        let log_normal = eps.square() * -0.5 - &log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let one_minus_y2: Tensor = 1.0 - y.square();
+        let log_det = (&self.action_scale * one_minus_y2 + 1e-6).log();
+        let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);
+        PolicySample { action: y * &self.action_scale, log_prob }
+    }
+}
+
+/// Twin Q networks Q₁, Q₂ stored as stacked weights `[2, in, out]`, so one batched matmul
+/// per layer evaluates both: half the kernel launches of two separate critics.
+#[derive(Debug)]
+pub struct TwinCritic {
+    weights: Vec<Tensor>,
+    biases: Vec<Tensor>,
+}
+
+impl TwinCritic {
+    pub const TWINS: i64 = 2;
+
+    pub fn new(root: &nn::Path, spec: &NetSpec) -> Self {
+        let p = root / "critic";
+        let mut widths = vec![spec.obs_dim + spec.act_dim];
+        widths.extend(&spec.hidden);
+        widths.push(1);
+        let (mut weights, mut biases) = (Vec::new(), Vec::new());
+        for (i, pair) in widths.windows(2).enumerate() {
+            let (fan_in, fan_out) = (pair[0], pair[1]);
+            let b = linear_bound(fan_in);
+            let init = nn::Init::Uniform { lo: -b, up: b };
+            weights.push(p.var(&format!("w{i}"), &[Self::TWINS, fan_in, fan_out], init));
+            biases.push(p.var(&format!("b{i}"), &[Self::TWINS, 1, fan_out], init));
+        }
+        Self { weights, biases }
+    }
+
+    /// Q-values of both twins, shape `[2, batch, 1]`.
+    pub fn q_values(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+        let x = Tensor::cat(&[obs, action], -1);
+        let batch = x.size()[0];
+        let mut h = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
+        let last = self.weights.len() - 1;
+        for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
+            h = b.baddbmm(&h, w, 1.0, 1.0);
+            if i < last {
+                h = h.relu();
+            }
+        }
+        h
+    }
+
+    /// Weight and bias tensors, layer by layer (shallow handles sharing storage).
+    pub fn parameters(&self) -> impl Iterator<Item = Tensor> + '_ {
+        self.weights.iter().zip(&self.biases).flat_map(|(w, b)| [w.shallow_clone(), b.shallow_clone()])
+    }
+
+    /// min(Q₁, Q₂), shape `[batch, 1]`: the pessimistic estimate SAC uses against
+    /// overestimation.
+    pub fn min_q(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+        self.q_values(obs, action).amin(0, false)
+    }
+}

@@ -1,0 +1,129 @@
+//! SAC networks and update on real tch tensors.
+
+use tch::{Device, Kind, Tensor, nn};
+use vge_trainer::nets::{GaussianActor, NetSpec, TwinCritic};
+use vge_trainer::sac::{Batch, EntropyCoef, Sac, SacConfig};
+
+fn small_spec() -> NetSpec {
+    NetSpec { obs_dim: 6, act_dim: 3, hidden: vec![32, 32] }
+}
+
+fn max_abs(t: &Tensor) -> f64 {
+    t.abs().max().double_value(&[])
+}
+
+#[test]
+fn actor_log_prob_matches_the_tanh_gaussian_density() {
+    let vs = nn::VarStore::new(Device::Cpu);
+    let scale = [0.5f32, 1.0, 2.0];
+    let actor = GaussianActor::new(&vs.root(), &small_spec(), &scale);
+    let obs = Tensor::randn([64, 6], (Kind::Float, Device::Cpu));
+    let sample = tch::no_grad(|| actor.sample(&obs));
+    let (mean, log_std) = tch::no_grad(|| actor.distribution(&obs));
+
+    // Recompute log π(a|s) from the action alone: u = atanh(a / scale).
+    let scale_t = Tensor::from_slice(&scale);
+    let y = (&sample.action / &scale_t).to_kind(Kind::Double);
+    let u = y.atanh();
+    let (mean, log_std) = (mean.to_kind(Kind::Double), log_std.to_kind(Kind::Double));
+    let z = (&u - &mean) / log_std.exp();
+    let log_normal = z.square() * -0.5 - &log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
+    let one_minus_y2: Tensor = 1.0 - y.square();
+    let log_det = (scale_t.to_kind(Kind::Double) * one_minus_y2 + 1e-6).log();
+    let expected = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Double);
+
+    assert_eq!(sample.log_prob.size(), vec![64, 1]);
+    // atanh cannot invert an f32 action that saturated to ±scale: compare the other rows.
+    let invertible = y.abs().lt(0.999).all_dim(-1, true);
+    assert!(invertible.sum(Kind::Int64).int64_value(&[]) > 32, "most samples are invertible");
+    let diff = max_abs(
+        &((sample.log_prob.to_kind(Kind::Double) - expected) * invertible.to_kind(Kind::Double))
+            .nan_to_num(0.0, 0.0, 0.0),
+    );
+    assert!(diff < 2e-3, "log-prob differs by {diff}");
+    // Actions stay inside ±scale, and the deterministic head is tanh(mean)·scale.
+    assert!(max_abs(&(sample.action.abs() - &scale_t).clamp_min(0.0)) == 0.0);
+    let det = tch::no_grad(|| actor.deterministic(&obs));
+    let expected_det = mean.tanh().to_kind(Kind::Float) * &scale_t;
+    assert!(max_abs(&(det - expected_det)) < 1e-6);
+}
+
+#[test]
+fn twin_critic_batched_pass_equals_two_separate_mlps() {
+    let vs = nn::VarStore::new(Device::Cpu);
+    let spec = small_spec();
+    let critic = TwinCritic::new(&vs.root(), &spec);
+    let obs = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
+    let act = Tensor::randn([16, 3], (Kind::Float, Device::Cpu));
+    let q = tch::no_grad(|| critic.q_values(&obs, &act));
+    assert_eq!(q.size(), vec![2, 16, 1]);
+
+    let vars = vs.variables();
+    let x = Tensor::cat(&[&obs, &act], -1);
+    for twin in 0..2 {
+        let mut h = x.shallow_clone();
+        for layer in 0..3 {
+            let w = vars[&format!("critic.w{layer}")].get(twin);
+            let b = vars[&format!("critic.b{layer}")].get(twin);
+            h = tch::no_grad(|| h.matmul(&w) + b);
+            if layer < 2 {
+                h = h.relu();
+            }
+        }
+        assert!(max_abs(&(q.get(twin) - h)) < 1e-5, "twin {twin}");
+    }
+    let min_q = tch::no_grad(|| critic.min_q(&obs, &act));
+    assert!(max_abs(&(min_q - q.amin(0, false))) == 0.0);
+}
+
+fn fixed_batch(spec: &NetSpec) -> Batch {
+    let opts = (Kind::Float, Device::Cpu);
+    Batch {
+        obs: Tensor::randn([128, spec.obs_dim], opts),
+        action: Tensor::rand([128, spec.act_dim], opts) * 2.0 - 1.0,
+        reward: Tensor::randn([128, 1], opts),
+        next_obs: Tensor::randn([128, spec.obs_dim], opts),
+        done: Tensor::ones([128, 1], opts),
+    }
+}
+
+fn config(entropy: EntropyCoef) -> SacConfig {
+    SacConfig {
+        net: small_spec(),
+        action_scale: vec![1.0; 3],
+        gamma: 0.9,
+        tau: 0.05,
+        actor_lr: 1e-3,
+        critic_lr: 3e-3,
+        entropy,
+    }
+}
+
+#[test]
+fn critic_fits_terminal_rewards_and_fixed_alpha_stays_put() {
+    let mut sac = Sac::new(config(EntropyCoef::Fixed(0.0)), Device::Cpu).expect("sac");
+    let batch = fixed_batch(&sac.config.net);
+    let first = sac.update(&batch);
+    let mut last = first;
+    for _ in 0..300 {
+        last = sac.update(&batch);
+    }
+    // All transitions are terminal, so Q must regress onto the rewards (variance ~1).
+    assert!(first.critic_loss > 1.0, "initial loss {}", first.critic_loss);
+    assert!(last.critic_loss < 0.2 * first.critic_loss, "{} -> {}", first.critic_loss, last.critic_loss);
+    assert_eq!(sac.alpha(), 0.0);
+    assert_eq!(last.alpha, 0.0);
+}
+
+#[test]
+fn auto_alpha_moves_and_target_critic_trails_the_critic() {
+    let mut sac =
+        Sac::new(config(EntropyCoef::Auto { target_entropy: 10.0, initial: 0.1 }), Device::Cpu).expect("sac");
+    let batch = fixed_batch(&sac.config.net);
+    for _ in 0..50 {
+        sac.update(&batch);
+    }
+    // A target entropy far above what the policy has drives α up.
+    assert!(sac.alpha() > 0.1, "alpha {}", sac.alpha());
+    assert!(sac.alpha().is_finite());
+}
