@@ -8,4 +8,5 @@ set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUNNER="$repo/scripts/canvm/run.sh"
-exec cargo test --release -p vge-tests --test hil -- --ignored "$@"
+# --workspace (not -p) keeps feature unification identical to the main test build: no rebuild.
+exec cargo test --release --workspace --test hil -- --ignored "$@"
