@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# vge's whole test suite: the README's test command, and what .ci/run calls.
+#
+# On first use it installs what it needs (Debian packages, the thumbv7em rustup target,
+# libtorch from PyPI wheels); later runs find them in place and go straight to the checks:
+#   formatting, clippy (-D warnings), the no_std runtime built for a Cortex-M4F,
+#   the workspace tests in release, and the hardware-in-the-loop tests on vcan0.
+set -euo pipefail
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$repo"
+
+t0=$SECONDS
+step() { printf '\n==> %s  [%ds]\n' "$*" $((SECONDS - t0)); }
+
+# torch-sys treats these as set whatever their value; they would send it to another libtorch.
+unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
+
+step "system packages"
+# user-mode-linux: a CAN-capable guest for HIL tests where this kernel has no vcan.
+# kmod/iproute2: insmod and ip inside that guest.
+packages=(user-mode-linux kmod iproute2 gcc python3)
+missing=()
+for p in "${packages[@]}"; do dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p"); done
+if ((${#missing[@]})); then
+  sudo=(); [[ $(id -u) == 0 ]] || sudo=(sudo)
+  echo "installing: ${missing[*]}"
+  "${sudo[@]}" apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+else
+  echo "present: ${packages[*]}"
+fi
+
+step "rust components and targets"
+for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done
+rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
+echo "$(rustc --version); targets: $(rustup target list --installed | tr '\n' ' ')"
+
+step "libtorch (scripts/setup-libtorch.sh)"
+scripts/setup-libtorch.sh
+echo "LIBTORCH -> $(readlink .deps/libtorch)"
+
+step "cargo fmt --check"
+cargo fmt --all --check
+
+step "cargo clippy --workspace --all-targets -- -D warnings"
+# --release shares build-script outputs (torch-sys' C++) with the test build below.
+cargo clippy --release --workspace --all-targets -- -D warnings
+
+step "no_std runtime for thumbv7em-none-eabihf (Cortex-M4F)"
+cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
+ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib
+
+step "cargo test --workspace (release)"
+cargo test --release --workspace
+
+step "HIL runner passes the guest's exit status back"
+set +e; scripts/canvm/run.sh /bin/sh -c 'exit 7'; rc=$?; set -e
+[[ $rc == 7 ]] || { echo "scripts/canvm/run.sh returned $rc for a program that exited 7"; exit 1; }
+echo "exit status 7 came back"
+
+step "hardware-in-the-loop tests on vcan0 (scripts/hil.sh)"
+scripts/hil.sh
+
+step "all checks passed in $((SECONDS - t0)) s"
