@@ -24,6 +24,15 @@ fn linear_bound(fan_in: i64) -> f64 {
     1.0 / (fan_in as f64).sqrt()
 }
 
+/// A linear layer initialised as PyTorch's `nn.Linear` (U(±1/√fan_in) for weights and bias),
+/// as CleanRL's SAC is. tch's default (Kaiming, ReLU gain) is ~2.4x wider, which starts the
+/// actor with means of several units: tanh saturates and exploration collapses.
+fn torch_linear(path: nn::Path, fan_in: i64, fan_out: i64) -> nn::Linear {
+    let b = linear_bound(fan_in);
+    let init = nn::Init::Uniform { lo: -b, up: b };
+    nn::linear(path, fan_in, fan_out, nn::LinearConfig { ws_init: init, bs_init: Some(init), bias: true })
+}
+
 /// Squashed Gaussian policy: a ReLU trunk, then mean and log σ heads; a = tanh(u) · scale.
 #[derive(Debug)]
 pub struct GaussianActor {
@@ -48,13 +57,11 @@ impl GaussianActor {
         let mut trunk = nn::seq();
         let mut width = spec.obs_dim;
         for (i, &h) in spec.hidden.iter().enumerate() {
-            trunk = trunk
-                .add(nn::linear(&p / format!("l{i}"), width, h, Default::default()))
-                .add_fn(|x| x.relu());
+            trunk = trunk.add(torch_linear(&p / format!("l{i}"), width, h)).add_fn(|x| x.relu());
             width = h;
         }
-        let mean = nn::linear(&p / "mean", width, spec.act_dim, Default::default());
-        let log_std = nn::linear(&p / "log_std", width, spec.act_dim, Default::default());
+        let mean = torch_linear(&p / "mean", width, spec.act_dim);
+        let log_std = torch_linear(&p / "log_std", width, spec.act_dim);
         let action_scale = Tensor::from_slice(action_scale).to_device(root.device());
         Self { trunk, mean, log_std, action_scale }
     }

@@ -14,6 +14,7 @@ fn max_abs(t: &Tensor) -> f64 {
 
 #[test]
 fn actor_log_prob_matches_the_tanh_gaussian_density() {
+    tch::manual_seed(7);
     let vs = nn::VarStore::new(Device::Cpu);
     let scale = [0.5f32, 1.0, 2.0];
     let actor = GaussianActor::new(&vs.root(), &small_spec(), &scale);
@@ -35,7 +36,9 @@ fn actor_log_prob_matches_the_tanh_gaussian_density() {
     assert_eq!(sample.log_prob.size(), vec![64, 1]);
     // atanh cannot invert an f32 action that saturated to ±scale: compare the other rows.
     let invertible = y.abs().lt(0.999).all_dim(-1, true);
-    assert!(invertible.sum(Kind::Int64).int64_value(&[]) > 32, "most samples are invertible");
+    // With PyTorch's initialisation the initial policy is far from saturation.
+    let invertible_rows = invertible.sum(Kind::Int64).int64_value(&[]);
+    assert!(invertible_rows > 56, "only {invertible_rows} of 64 samples are invertible");
     let diff = max_abs(
         &((sample.log_prob.to_kind(Kind::Double) - expected) * invertible.to_kind(Kind::Double))
             .nan_to_num(0.0, 0.0, 0.0),
