@@ -2,17 +2,15 @@
 //!
 //! It lets the bridge be exercised end to end on a virtual CAN bus (vcan) without hardware:
 //! each finger node applies enabled commands as a first-order lag towards the target and
-//! answers every command with a joint state frame that echoes its sequence number.
+//! answers every command with a joint position frame that echoes its sequence number.
 
 use std::time::Duration;
 
 use socketcan::{CanSocket, Socket};
 use thiserror::Error;
 
-use crate::protocol::{JointCommand, JointState, NUM_FINGERS, ProtocolError};
+use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError, STATUS_ENABLED};
 use crate::socketcan_io::{FrameError, standard_id_and_data, to_can_frame};
-
-const STATUS_ENABLED: u8 = 0x01;
 
 /// Joint positions of all fingers, moving towards their commanded targets.
 #[derive(Debug, Clone)]
@@ -29,14 +27,14 @@ impl JointControllerEmulator {
     }
 
     /// Applies one command and returns the finger's state after it.
-    pub fn apply(&mut self, cmd: &JointCommand) -> JointState {
+    pub fn apply(&mut self, cmd: &JointCommand) -> JointPosition {
         let q = &mut self.q_rad[usize::from(cmd.finger.index())];
         if cmd.enable {
             for (q_i, target) in q.iter_mut().zip(cmd.q_target_rad) {
                 *q_i += self.response * (target - *q_i);
             }
         }
-        JointState {
+        JointPosition {
             finger: cmd.finger,
             q_rad: *q,
             status: if cmd.enable { STATUS_ENABLED } else { 0 },
@@ -87,11 +85,11 @@ pub fn serve(
             stats.ignored += 1;
             continue;
         };
-        let Ok(cmd) = JointCommand::decode(id, data) else {
+        let Ok(Message::JointCommand(cmd)) = Message::decode(id, data) else {
             stats.ignored += 1;
             continue;
         };
-        let state = emulator.apply(&cmd);
+        let state = Message::JointPosition(emulator.apply(&cmd));
         socket.write_frame(&to_can_frame(&state.encode()?)?)?;
         stats.commands += 1;
     }

@@ -1,10 +1,16 @@
 //! vge-bridge: runs an exported vge policy at a fixed control rate against the simulator or
 //! against a hand's joint controllers over SocketCAN.
 //!
-//! This crate never links libtorch: it reads policy files with `vge-runtime` only.
+//! Without the default `std` feature this crate is only [`protocol`], `no_std`, so joint
+//! controller firmware can share the frame definitions. The bridge never links libtorch: it
+//! reads policy files with `vge-runtime` only.
+#![cfg_attr(not(feature = "std"), no_std)]
 
-pub mod emulator;
 pub mod protocol;
+
+#[cfg(feature = "std")]
+pub mod emulator;
+#[cfg(feature = "std")]
 pub mod socketcan_io;
 
-pub use protocol::{FingerId, JointCommand, JointState, ProtocolError, RawFrame};
+pub use protocol::{FingerId, Message, ProtocolError, RawFrame};

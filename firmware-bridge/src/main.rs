@@ -19,7 +19,7 @@ struct Cli {
 enum Command {
     /// Emulate the hand's five joint-controller nodes on a CAN interface.
     ///
-    /// Answers every joint command frame (id 0x100 + finger) with a joint state frame
+    /// Answers every joint command frame (id 0x100 + finger) with a joint position frame
     /// (id 0x180 + finger), moving each joint part of the way to its target. Use it to try
     /// the bridge without hardware: `ip link add dev vcan0 type vcan && ip link set up vcan0`
     /// (or scripts/canvm/run.sh on a kernel without CAN), then `vge-bridge emulate`.

@@ -1,0 +1,119 @@
+//! The CAN protocol between the bridge (host) and the hand's per-finger nodes.
+//!
+//! `no_std`: the same code runs in the bridge and can run in a joint controller's firmware.
+//! Every frame is a classic CAN data frame with an 11-bit id and 8 data bytes; multi-byte
+//! fields are little-endian. Each finger is one node (`FingerId` 0..=4) driving its three
+//! joints (roll, proximal flexion, distal flexion) and reading its fingertip sensor. The id is
+//! a function code plus the node, CANopen-style, so that commands win arbitration:
+//!
+//! | frame            | id           | dir          | payload                                             |
+//! |------------------|--------------|--------------|-----------------------------------------------------|
+//! | fault            | 0x080 + node | node -> host | code u16, joint u8, value i16, reserved, seq u8    |
+//! | joint command    | 0x100 + node | host -> node | q_target[3] i16 (1e-4 rad), flags u8, seq u8        |
+//! | joint position   | 0x180 + node | node -> host | q[3] i16 (1e-4 rad), status u8, seq u8              |
+//! | joint velocity   | 0x200 + node | node -> host | dq[3] i16 (1e-3 rad/s), reserved u8, seq u8         |
+//! | joint effort     | 0x280 + node | node -> host | tau[3] i16 (1e-4 N·m), reserved u8, seq u8          |
+//! | tip contact      | 0x300 + node | node -> host | p[3] i16 (1e-4 m, hand frame), force u16 (1e-3 N)   |
+//! | tip normal       | 0x380 + node | node -> host | n[3] i16 (1/32767), flags u8, seq u8                |
+//! | heartbeat        | 0x700 + node | both         | state u8, counter u8, reserved[6]                   |
+//!
+//! The host's heartbeat uses node 0x0F. `seq` in node frames is the sequence number of the
+//! last joint command the node applied. `docs/can-protocol.md` is the full description
+//! (with bus load) and `docs/vge-hand.dbc` describes the same frames for CAN tools.
+
+mod fields;
+mod messages;
+
+pub use fields::{
+    ANGLE_RAD_PER_COUNT, EFFORT_NM_PER_COUNT, FORCE_N_PER_COUNT, NORMAL_PER_COUNT, POSITION_M_PER_COUNT,
+    VELOCITY_RADPS_PER_COUNT,
+};
+pub use messages::*;
+
+/// Fingers on the hand, one CAN node each.
+pub const NUM_FINGERS: u8 = 5;
+/// Node id of the host (the bridge) in heartbeat frames.
+pub const HOST_NODE: u8 = 0x0F;
+
+/// Function codes: the id of a frame is `code + node`.
+pub mod ids {
+    pub const FAULT: u16 = 0x080;
+    pub const JOINT_COMMAND: u16 = 0x100;
+    pub const JOINT_POSITION: u16 = 0x180;
+    pub const JOINT_VELOCITY: u16 = 0x200;
+    pub const JOINT_EFFORT: u16 = 0x280;
+    pub const TIP_CONTACT: u16 = 0x300;
+    pub const TIP_NORMAL: u16 = 0x380;
+    pub const HEARTBEAT: u16 = 0x700;
+}
+
+/// Errors decoding or encoding frames. Frames come from a bus: nothing here panics on them.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ProtocolError {
+    #[error("finger id {0} out of range (0..{NUM_FINGERS})")]
+    BadFinger(u8),
+    #[error("frame id {0:#05x} is not part of the hand protocol")]
+    UnknownId(u16),
+    #[error("frame id {id:#05x} has {len} data bytes, expected 8")]
+    BadLength { id: u16, len: usize },
+    #[error("{what} = {value} is not finite or outside ±{max} (the field's range)")]
+    OutOfRange { what: &'static str, value: f32, max: f32 },
+}
+
+/// A finger node on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct FingerId(u8);
+
+impl FingerId {
+    pub fn new(index: u8) -> Result<Self, ProtocolError> {
+        if index < NUM_FINGERS { Ok(Self(index)) } else { Err(ProtocolError::BadFinger(index)) }
+    }
+
+    pub fn index(self) -> u8 {
+        self.0
+    }
+
+    /// All fingers, in node order.
+    pub fn all() -> impl Iterator<Item = FingerId> {
+        (0..NUM_FINGERS).map(FingerId)
+    }
+}
+
+/// A classic CAN frame's identifier and payload, independent of the socket layer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawFrame {
+    pub id: u16,
+    pub data: [u8; 8],
+}
+
+/// Frames per control step with every node reporting: one command per finger, and
+/// position, velocity, effort, tip contact and tip normal from each.
+pub const FRAMES_PER_STEP: u32 = NUM_FINGERS as u32 * 6;
+
+/// Worst-case bits on the wire of a classic data frame with an 11-bit id and 8 data bytes:
+/// 44 bits of framing + 64 data bits + 3 bits interframe space, plus one stuff bit per four
+/// bits over the 98 stuffable bits (SOF to CRC).
+pub const WORST_CASE_FRAME_BITS: u32 = 44 + 64 + 3 + (34 + 64 - 1) / 4;
+
+/// Fraction of a bus of `bitrate_bps` that the protocol uses at `rate_hz` control steps per
+/// second (heartbeats at 10 Hz per node included), with worst-case bit stuffing.
+pub fn bus_load(rate_hz: f64, bitrate_bps: f64) -> f64 {
+    let heartbeats_per_s = 10.0 * f64::from(NUM_FINGERS + 1);
+    let frames_per_s = rate_hz * f64::from(FRAMES_PER_STEP) + heartbeats_per_s;
+    frames_per_s * f64::from(WORST_CASE_FRAME_BITS) / bitrate_bps
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bus_load_at_the_default_rate_is_far_below_the_limit() {
+        assert_eq!(WORST_CASE_FRAME_BITS, 135);
+        // 30 Hz: (30 * 30 + 60) frames/s * 135 bits = 129,600 bit/s = 13% of 1 Mbit/s.
+        let load = bus_load(30.0, 1e6);
+        assert!((load - 0.1296).abs() < 1e-9, "{load}");
+        // 1 kHz does not fit a classic bus: that is what the CAN FD option is for.
+        assert!(bus_load(1000.0, 1e6) > 1.0);
+    }
+}
