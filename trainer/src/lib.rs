@@ -2,5 +2,6 @@
 //! finger-gaiting, and the `vge` command.
 
 pub mod bench_update;
+pub mod controllers;
 pub mod nets;
 pub mod sac;

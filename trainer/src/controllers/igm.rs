@@ -1,0 +1,267 @@
+//! In-grasp manipulation (IGM), the paper's Alg. 1, as a pure function over plain inputs
+//! ([`igm_step`]) and as a [`Controller`] ([`IgmController`]).
+//!
+//! For the k >= 3 fingertips in contact (points p_i, normals n_i into the object, measured
+//! normal forces c_i in N), at the measured joints q:
+//! 1. J_S (3k x 15, [`HandModel::stacked_jacobian`] at the actual contact points) and
+//!    G (6 x 3k, [`vge_sim::grasp_map`] about the object centre).
+//! 2. c* from the contact-force QP ([`contact_force_qp`]), normalised so that one
+//!    `c*_j = 1`. **Force scaling**: the paper's `c*_i - c_i` mixes that unitless c* with
+//!    forces in newtons, so c* is first scaled to desired forces `f*_i = s c*_i`:
+//!    by default ([`ForceScaling::MatchMeanMeasured`]) `s = max(mean_i c_i, min_mean_n) /
+//!    mean_i c*_i`, i.e. the stability term *redistributes* the grip the hand already
+//!    applies (keeping its total), and squeezes to a floor of `min_mean_n` per contact when
+//!    the measured grip is lighter; [`ForceScaling::MaxEquals`] instead asks for a fixed
+//!    grip `max_i f*_i = grip_n`.
+//! 3. `dp_i = alpha (f*_i - c_i) n_i` (m; alpha in m/N), and `J_S dq_stable = [dp]` solved
+//!    by damped least squares `dq = J^T (J J^T + lambda^2 I)^-1 dp`, lambda = `damping_m`
+//!    (default 5 mm: the fingertip Jacobians' singular values are ~0.02-0.1 m/rad, so
+//!    this biases the weakest direction by ~6 % and keeps dq bounded near singularities).
+//! 4. `J_S dq_rot = G^T do`, same solver; `do` = [dx, dy, dz, rx, ry, rz] is a small
+//!    object twist per step, by default a 0.0225 rad turn about +z (the paper's value;
+//!    [`IgmConfig::reversed`] turns the other way).
+//! 5. `psi = dq_stable + dq_rot`, scaled down uniformly (direction kept) so that no joint
+//!    moves more than `max_delta_rad`; the controller then also keeps the targets inside
+//!    the joint limits ([`limit_to_joint_range`]).
+//!
+//! J_S has zero columns for fingers not in the contact set, so psi is exactly zero on
+//! them: FG can add a switching finger's trajectory on top without interference.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+use vge_sim::{Contact, HandModel, NUM_JOINTS, grasp_map};
+
+use super::qp::{ContactForces, MIN_CONTACTS, contact_force_qp};
+use super::{Controller, ControllerError, ControllerInput, limit_to_joint_range};
+
+/// One fingertip contact for [`igm_step`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TipContact {
+    /// Which finger touches (0..5).
+    pub finger: usize,
+    /// Contact point, world frame (m).
+    pub point_m: Vector3<f32>,
+    /// Contact normal, either orientation (it is turned to point into the object).
+    pub normal: Vector3<f32>,
+    /// Measured normal force magnitude (N).
+    pub force_n: f32,
+}
+
+/// How the unitless c* becomes desired forces in newtons (module docs, step 2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ForceScaling {
+    /// Same mean as the measured forces, but at least `min_mean_n` per contact.
+    MatchMeanMeasured {
+        /// Floor of the mean desired force (N).
+        min_mean_n: f32,
+    },
+    /// The largest desired force is `grip_n`.
+    MaxEquals {
+        /// Largest desired force (N).
+        grip_n: f32,
+    },
+}
+
+/// Parameters of IGM.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IgmConfig {
+    /// Stability gain alpha (m of fingertip motion per N of force error).
+    pub alpha_m_per_n: f32,
+    /// Damping lambda of the least-squares solves (m).
+    pub damping_m: f32,
+    /// Desired object twist per step do = [dx, dy, dz, rx, ry, rz] (m, rad), world frame,
+    /// about the object centre.
+    pub object_delta: [f32; 6],
+    /// Largest change of any joint target per step (rad).
+    pub max_delta_rad: f32,
+    /// c* to newtons.
+    pub force_scaling: ForceScaling,
+}
+
+impl Default for IgmConfig {
+    /// alpha 1 mm/N, lambda 5 mm, do = 0.0225 rad about +z, at most 0.05 rad per joint per
+    /// step, desired mean force = measured mean but at least 0.5 N. alpha, the clip and the
+    /// force floor are first guesses to be tuned on the env.
+    fn default() -> Self {
+        Self {
+            alpha_m_per_n: 1e-3,
+            damping_m: 5e-3,
+            object_delta: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0225],
+            max_delta_rad: 0.05,
+            force_scaling: ForceScaling::MatchMeanMeasured { min_mean_n: 0.5 },
+        }
+    }
+}
+
+impl IgmConfig {
+    /// The same configuration turning the object the other way (do negated).
+    #[must_use]
+    pub fn reversed(mut self) -> Self {
+        self.object_delta = self.object_delta.map(|v| -v);
+        self
+    }
+}
+
+/// Everything one IGM step computed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IgmOutput {
+    /// psi = dq_stable + dq_rot after the per-step clip (rad, 15 joints).
+    pub delta_rad: [f32; NUM_JOINTS],
+    /// dq_stable before the clip.
+    pub dq_stable_rad: [f32; NUM_JOINTS],
+    /// dq_rot before the clip.
+    pub dq_rot_rad: [f32; NUM_JOINTS],
+    /// The QP's answer, in the order of the contacts given.
+    pub forces: ContactForces,
+    /// Desired forces f*_i = s c*_i (N), same order.
+    pub target_forces_n: Vec<f32>,
+    /// Factor (<= 1) applied to psi by the clip.
+    pub clip_scale: f32,
+}
+
+/// `J^T (J J^T + lambda^2 I)^-1 rhs`.
+#[must_use]
+pub fn damped_least_squares(jacobian: &DMatrix<f64>, rhs: &DVector<f64>, lambda: f64) -> DVector<f64> {
+    let rows = jacobian.nrows();
+    let gram = jacobian * jacobian.transpose() + DMatrix::identity(rows, rows) * (lambda * lambda);
+    // SPD for lambda > 0; fall back to a pseudo-inverse solve when lambda = 0 and J is rank
+    // deficient.
+    let y = match gram.clone().cholesky() {
+        Some(chol) => chol.solve(rhs),
+        None => gram.svd(true, true).solve(rhs, 1e-12).unwrap_or_else(|_| DVector::zeros(rows)),
+    };
+    jacobian.transpose() * y
+}
+
+fn to_array(v: &DVector<f64>) -> [f32; NUM_JOINTS] {
+    std::array::from_fn(|j| v[j] as f32)
+}
+
+/// One IGM step (module docs) for `contacts` (k >= 3, at most one per finger for a
+/// meaningful J_S) on an object centred at `object_position_m`, at joints `q_rad`.
+pub fn igm_step(
+    hand: &HandModel,
+    q_rad: &[f32; NUM_JOINTS],
+    contacts: &[TipContact],
+    object_position_m: Vector3<f32>,
+    config: &IgmConfig,
+) -> Result<IgmOutput, ControllerError> {
+    if contacts.len() < MIN_CONTACTS {
+        return Err(ControllerError::TooFewContacts { got: contacts.len(), need: MIN_CONTACTS });
+    }
+    let mut kin_contacts = Vec::with_capacity(contacts.len());
+    let mut points = Vec::with_capacity(contacts.len());
+    let mut normals = Vec::with_capacity(contacts.len());
+    let mut measured = Vec::with_capacity(contacts.len());
+    for (i, c) in contacts.iter().enumerate() {
+        if !c.force_n.is_finite() {
+            return Err(ControllerError::NonFinite(format!("force of contact {i}")));
+        }
+        let tip = hand.fingertip_position_m(c.finger, &hand.finger_joints(c.finger, q_rad)?)?;
+        kin_contacts.push(Contact { finger: c.finger, offset_from_tip_m: c.point_m - tip });
+        points.push(c.point_m);
+        let inward = object_position_m - c.point_m;
+        let n = if c.normal.dot(&inward) < 0.0 { -c.normal } else { c.normal };
+        normals.push(n.cast::<f64>());
+        measured.push(f64::from(c.force_n.max(0.0)));
+    }
+    let jacobian = hand.stacked_jacobian(&kin_contacts, q_rad)?.cast::<f64>();
+    let grasp = grasp_map(&points, object_position_m)?.cast::<f64>();
+
+    let forces = contact_force_qp(&grasp, &normals)?;
+    let k = contacts.len() as f64;
+    let mean_star = forces.magnitudes.iter().sum::<f64>() / k;
+    let scale = match config.force_scaling {
+        ForceScaling::MatchMeanMeasured { min_mean_n } => {
+            (measured.iter().sum::<f64>() / k).max(f64::from(min_mean_n)) / mean_star
+        }
+        ForceScaling::MaxEquals { grip_n } => {
+            f64::from(grip_n) / forces.magnitudes.iter().copied().fold(0.0, f64::max)
+        }
+    };
+    let targets: Vec<f64> = forces.magnitudes.iter().map(|c| scale * c).collect();
+
+    let alpha = f64::from(config.alpha_m_per_n);
+    let lambda = f64::from(config.damping_m);
+    let mut dp = DVector::zeros(3 * contacts.len());
+    for i in 0..contacts.len() {
+        let n = normals[i].normalize();
+        dp.fixed_rows_mut::<3>(3 * i).copy_from(&(n * (alpha * (targets[i] - measured[i]))));
+    }
+    let dq_stable = damped_least_squares(&jacobian, &dp, lambda);
+    let twist = DVector::from_iterator(6, config.object_delta.iter().map(|&v| f64::from(v)));
+    let dq_rot = damped_least_squares(&jacobian, &(grasp.transpose() * twist), lambda);
+
+    let psi = &dq_stable + &dq_rot;
+    let largest = psi.amax();
+    let max_delta = f64::from(config.max_delta_rad);
+    let clip_scale = if largest > max_delta { max_delta / largest } else { 1.0 };
+    if !psi.iter().all(|v| v.is_finite()) {
+        return Err(ControllerError::NonFinite("IGM joint step".to_owned()));
+    }
+    Ok(IgmOutput {
+        delta_rad: to_array(&(psi * clip_scale)),
+        dq_stable_rad: to_array(&dq_stable),
+        dq_rot_rad: to_array(&dq_rot),
+        target_forces_n: targets.iter().map(|&t| t as f32).collect(),
+        forces,
+        clip_scale: clip_scale as f32,
+    })
+}
+
+/// The contacts of `input` as [`TipContact`]s, leaving out finger `exclude`.
+#[must_use]
+pub fn tip_contacts(input: &ControllerInput, exclude: Option<usize>) -> Vec<TipContact> {
+    input
+        .contacts
+        .iter()
+        .enumerate()
+        .filter(|(f, _)| Some(*f) != exclude)
+        .filter_map(|(finger, c)| {
+            c.map(|c| TipContact { finger, point_m: c.point_m, normal: c.normal, force_n: c.force_n })
+        })
+        .collect()
+}
+
+/// IGM as a [`Controller`]: [`igm_step`] on every fingertip in contact, then kept inside
+/// the joint limits. Stateless; the rng is unused.
+#[derive(Debug, Clone)]
+pub struct IgmController {
+    /// The hand the kinematics are taken from (the env's).
+    pub hand: HandModel,
+    /// IGM parameters.
+    pub config: IgmConfig,
+}
+
+impl IgmController {
+    /// IGM on `hand` with `config`.
+    #[must_use]
+    pub fn new(hand: HandModel, config: IgmConfig) -> Self {
+        Self { hand, config }
+    }
+
+    /// The step on the given contacts, kept inside the joint limits.
+    pub fn step_on(
+        &self,
+        input: &ControllerInput,
+        contacts: &[TipContact],
+    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+        let out = igm_step(&self.hand, &input.q_rad, contacts, input.object_position_m, &self.config)?;
+        Ok(limit_to_joint_range(&self.hand, &input.q_target_rad, &out.delta_rad))
+    }
+}
+
+impl Controller for IgmController {
+    fn name(&self) -> &'static str {
+        "igm"
+    }
+
+    fn reset(&mut self, _rng: &mut dyn rand::Rng) {}
+
+    fn act(
+        &mut self,
+        input: &ControllerInput,
+        _rng: &mut dyn rand::Rng,
+    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+        self.step_on(input, &tip_contacts(input, None))
+    }
+}
