@@ -5,9 +5,25 @@
 //! through the same forward kinematics, so the physics and the controllers cannot
 //! disagree about where a fingertip is.
 
+pub mod bench;
+pub mod env;
+pub mod error;
 pub mod kinematics;
+pub mod objects;
+pub mod observation;
+pub mod vec_env;
+pub mod world;
 
+pub use env::{
+    Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState, ResetInfo, StepInfo,
+    StepResult,
+};
+pub use error::SimError;
 pub use kinematics::{
     Contact, FingerModel, HandModel, JOINTS_PER_FINGER, JointLimit, KinematicsError, NOMINAL_CUBE_SIDE_M,
     NUM_FINGERS, NUM_JOINTS, grasp_map,
 };
+pub use objects::{ObjectConfig, ObjectShape};
+pub use observation::{FingertipReading, OBS_DIM, build_observation};
+pub use vec_env::VecEnv;
+pub use world::{ContactReading, HandWorld, ObjectState, PhysicsConfig};

@@ -1,0 +1,154 @@
+//! Throughput of the simulator, for `vge bench sim --json`.
+//!
+//! Both figures step the default task (grasp held, small deterministic pseudo-random
+//! actions, automatic reset on termination or truncation, reset time included).
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::env::{Env, EnvConfig};
+use crate::error::SimError;
+use crate::kinematics::NUM_JOINTS;
+
+/// What to measure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BenchSettings {
+    /// Environment configuration (rates, object, ...).
+    pub env: EnvConfig,
+    /// Control steps timed per world.
+    pub steps_per_world: usize,
+    /// Worlds in the vectorized run.
+    pub num_worlds: usize,
+    /// Threads of the vectorized run (0: all cores).
+    pub threads: usize,
+}
+
+impl Default for BenchSettings {
+    fn default() -> Self {
+        Self { env: EnvConfig::default(), steps_per_world: 2_000, num_worlds: 8, threads: 0 }
+    }
+}
+
+/// Measured figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimBench {
+    /// Settings used.
+    pub settings: BenchSettings,
+    /// Threads actually used by the vectorized run.
+    pub threads_used: usize,
+    /// Control steps per second, one world on one thread.
+    pub control_steps_per_s_single: f64,
+    /// Control steps per second summed over all worlds, on `threads_used` threads.
+    pub control_steps_per_s_vec: f64,
+    /// Physics steps per second, one world.
+    pub physics_steps_per_s_single: f64,
+    /// Resets during the single-world run.
+    pub resets_single: usize,
+}
+
+impl SimBench {
+    /// `control_steps_per_s_vec / control_steps_per_s_single`.
+    #[must_use]
+    pub fn speedup(&self) -> f64 {
+        self.control_steps_per_s_vec / self.control_steps_per_s_single
+    }
+
+    /// One JSON line with the figures and the settings.
+    #[must_use]
+    pub fn to_json_line(&self) -> String {
+        let e = &self.settings.env;
+        format!(
+            concat!(
+                "{{\"bench\":\"sim\",\"control_steps_per_s_single\":{:.1},\"control_steps_per_s_vec\":{:.1},",
+                "\"speedup\":{:.3},\"physics_steps_per_s_single\":{:.1},\"resets_single\":{},",
+                "\"num_worlds\":{},\"threads\":{},\"steps_per_world\":{},\"control_hz\":{},\"physics_hz\":{},",
+                "\"solver_iterations\":{},\"physics_steps_per_control\":{},\"object\":\"{}\"}}"
+            ),
+            self.control_steps_per_s_single,
+            self.control_steps_per_s_vec,
+            self.speedup(),
+            self.physics_steps_per_s_single,
+            self.resets_single,
+            self.settings.num_worlds,
+            self.threads_used,
+            self.settings.steps_per_world,
+            e.control_hz,
+            e.physics.physics_hz,
+            e.physics.solver_iterations,
+            e.physics_steps_per_control(),
+            e.object.shape.name(),
+        )
+    }
+}
+
+/// Deterministic small action for step `k` of world `w` (a SplitMix-style hash).
+fn action(w: usize, k: usize, max: f32) -> [f32; NUM_JOINTS] {
+    std::array::from_fn(|j| {
+        let mut x = (w as u64) << 40 ^ (k as u64) << 8 ^ j as u64;
+        x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        x ^= x >> 31;
+        let u = (x >> 40) as f32 / (1u64 << 24) as f32;
+        0.2 * max * (2.0 * u - 1.0)
+    })
+}
+
+/// Runs `steps` control steps on `env`, resetting when an episode ends; returns resets.
+fn drive(env: &mut Env, w: usize, steps: usize) -> Result<usize, SimError> {
+    let max = env.config().max_action_rad;
+    let mut resets = 0;
+    let mut seed = w as u64 * 1_000_003;
+    env.reset(seed)?;
+    for k in 0..steps {
+        let r = env.step(&action(w, k, max))?;
+        if r.terminated || r.truncated {
+            seed += 1;
+            resets += 1;
+            env.reset(seed)?;
+        }
+    }
+    Ok(resets)
+}
+
+/// Measures one world on the calling thread, then `num_worlds` worlds across a rayon pool.
+pub fn run(settings: &BenchSettings) -> Result<SimBench, SimError> {
+    settings.env.validate()?;
+    if settings.num_worlds == 0 || settings.steps_per_world == 0 {
+        return Err(SimError::InvalidConfig("bench needs worlds and steps".to_owned()));
+    }
+    let mut env = Env::new(settings.env.clone())?;
+    drive(&mut env, 0, 20)?; // warm-up
+    let t = Instant::now();
+    let resets_single = drive(&mut env, 0, settings.steps_per_world)?;
+    let single_s = t.elapsed().as_secs_f64();
+    let control_steps_per_s_single = settings.steps_per_world as f64 / single_s;
+
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if settings.threads > 0 {
+        builder = builder.num_threads(settings.threads);
+    }
+    let pool = builder.build().map_err(|e| SimError::InvalidConfig(format!("thread pool: {e}")))?;
+    let threads_used = pool.current_num_threads();
+    let mut envs =
+        (0..settings.num_worlds).map(|_| Env::new(settings.env.clone())).collect::<Result<Vec<_>, _>>()?;
+    let t = Instant::now();
+    pool.install(|| {
+        envs.par_iter_mut()
+            .enumerate()
+            .map(|(w, env)| drive(env, w, settings.steps_per_world).map(|_| ()))
+            .collect::<Result<Vec<()>, _>>()
+    })?;
+    let vec_s = t.elapsed().as_secs_f64();
+    let control_steps_per_s_vec = (settings.num_worlds * settings.steps_per_world) as f64 / vec_s;
+    Ok(SimBench {
+        settings: settings.clone(),
+        threads_used,
+        control_steps_per_s_single,
+        control_steps_per_s_vec,
+        physics_steps_per_s_single: control_steps_per_s_single
+            * settings.env.physics_steps_per_control() as f64,
+        resets_single,
+    })
+}

@@ -1,0 +1,536 @@
+//! Gymnasium-shaped environment: `reset(seed) -> (obs, info)`,
+//! `step(action) -> StepResult { obs, reward, terminated, truncated, info }`.
+//!
+//! - Action: 15 joint-target deltas (rad), each clipped to
+//!   [`EnvConfig::max_action_rad`]; the new targets are clipped to the joint limits.
+//! - Observation: [`crate::observation`] (65 floats), with the configured noise.
+//! - Reward: the object's angular velocity about world z (rad/s) while at least
+//!   [`EnvConfig::reward_min_contacts`] fingertips touch it, else 0. It is clipped to
+//!   +-[`EnvConfig::max_reward_rad_per_s`]: a fingertip slipping off can flick the object
+//!   for a step at several rad/s, a spike that says nothing about gaiting and would
+//!   dominate the critic's targets. No other penalty is added.
+//! - Terminated: the object centre fell more than [`EnvConfig::drop_height_m`] below its
+//!   height after the grasp, or fewer than [`EnvConfig::min_contacts`] fingertips touch it.
+//! - Truncated: [`EnvConfig::episode_length_steps`] control steps without termination.
+//!
+//! Every random draw (grasp randomisation, noise, perturbation forces) comes from the
+//! env's own ChaCha8 generator, seeded in [`Env::reset`]: same seed and actions, same
+//! bits.
+
+use nalgebra::{Isometry3, Vector3};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::error::SimError;
+use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
+use crate::objects::ObjectConfig;
+use crate::observation::{FingertipReading, OBS_DIM, build_observation};
+use crate::world::{ContactReading, HandWorld, ObjectState, PhysicsConfig};
+
+/// How the initial grasp is made: the fingers close (both flexions together) until they
+/// touch the object, found geometrically by bisection on the closing angle; their targets
+/// are then set `squeeze_rad` further, the object is held in place for `hold_s` while
+/// the grip builds, then released and left to settle for `settle_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GraspConfig {
+    /// Extra flexion of the targets past first contact (rad); the motor torque caps then
+    /// set the grip force (notes: ~0.05 rad).
+    pub squeeze_rad: f32,
+    /// Time the object is held fixed while the fingers press (s).
+    pub hold_s: f32,
+    /// Time the released object settles in the grasp before the episode starts (s).
+    pub settle_s: f32,
+    /// Randomise which fingers grasp: with probability 0.5 one of the four non-thumb
+    /// fingers stays open (it stays at q = 0).
+    pub randomize_fingers: bool,
+    /// Uniform noise (rad, +-) on the roll angles and on the closing flexions.
+    pub pose_noise_rad: f32,
+}
+
+impl Default for GraspConfig {
+    fn default() -> Self {
+        Self {
+            squeeze_rad: 0.05,
+            hold_s: 0.05,
+            settle_s: 0.25,
+            randomize_fingers: false,
+            pose_noise_rad: 0.0,
+        }
+    }
+}
+
+/// Observation noise (zero-mean Gaussian), applied to the observation only: the
+/// privileged state stays exact.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct NoiseConfig {
+    /// Standard deviation of the noise on each joint angle (rad).
+    pub q_std_rad: f32,
+    /// Standard deviation of the noise on each contact-normal component, as a fraction of
+    /// the unit normal (the noisy normal is re-normalised).
+    pub normal_std_frac: f32,
+    /// Standard deviation of the noise on each contact-point coordinate (m).
+    pub position_std_m: f32,
+}
+
+/// Random external forces on the object: at each control step, with probability
+/// `change_probability` a new force is drawn (each component Gaussian with standard
+/// deviation `force_std_n`), otherwise the previous one is kept.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PerturbationConfig {
+    /// Standard deviation of each force component (N); 0 disables perturbations.
+    pub force_std_n: f32,
+    /// Probability per control step of drawing a new force.
+    pub change_probability: f32,
+}
+
+/// Everything that defines an environment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvConfig {
+    /// The hand (shared with the controllers).
+    pub hand: HandModel,
+    /// Physics parameters (rate, solver, contacts, motors).
+    pub physics: PhysicsConfig,
+    /// The object.
+    pub object: ObjectConfig,
+    /// Control rate (Hz); must divide the physics rate into a whole number of steps.
+    /// Default 20 Hz: each control step is 6 physics steps at 120 Hz (the paper's hand
+    /// runs position targets at a few tens of Hz; see `physics_hz` for the physics).
+    pub control_hz: f32,
+    /// Largest joint-target change per control step (rad).
+    pub max_action_rad: f32,
+    /// Episode length in control steps (truncation).
+    pub episode_length_steps: usize,
+    /// Terminate when fewer fingertips than this touch the object.
+    pub min_contacts: usize,
+    /// Reward is paid only while at least this many fingertips touch the object.
+    pub reward_min_contacts: usize,
+    /// Terminate when the object centre is this far below its post-grasp height (m).
+    pub drop_height_m: f32,
+    /// Reward clip (rad/s).
+    pub max_reward_rad_per_s: f32,
+    /// Initial grasp.
+    pub grasp: GraspConfig,
+    /// Observation noise.
+    pub noise: NoiseConfig,
+    /// External forces on the object.
+    pub perturbation: PerturbationConfig,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        Self {
+            hand: HandModel::default(),
+            physics: PhysicsConfig::default(),
+            object: ObjectConfig::default(),
+            control_hz: 20.0,
+            max_action_rad: 0.05,
+            episode_length_steps: 400,
+            min_contacts: 3,
+            reward_min_contacts: 3,
+            drop_height_m: 0.03,
+            max_reward_rad_per_s: 3.0,
+            grasp: GraspConfig::default(),
+            noise: NoiseConfig::default(),
+            perturbation: PerturbationConfig::default(),
+        }
+    }
+}
+
+fn round_steps(duration_s: f32, hz: f32) -> usize {
+    (duration_s * hz).round().max(0.0) as usize
+}
+
+impl EnvConfig {
+    /// Physics steps per control step (rounded: `(1/30)/(1/240)` in f32 is not 8).
+    #[must_use]
+    pub fn physics_steps_per_control(&self) -> usize {
+        ((self.physics.physics_hz / self.control_hz).round() as usize).max(1)
+    }
+
+    /// Simulated time per control step (s).
+    #[must_use]
+    pub fn control_dt_s(&self) -> f32 {
+        self.physics_steps_per_control() as f32 * self.physics.dt_s()
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), SimError> {
+        self.physics.validate()?;
+        self.object.validate()?;
+        let bad = |what: &str, v: f32| Err(SimError::InvalidConfig(format!("{what} {v}")));
+        if !(self.control_hz.is_finite()
+            && self.control_hz > 0.0
+            && self.control_hz <= self.physics.physics_hz)
+        {
+            return bad("control rate (Hz)", self.control_hz);
+        }
+        let ratio = self.physics.physics_hz / self.control_hz;
+        if (ratio - ratio.round()).abs() > 1e-3 * ratio {
+            return Err(SimError::InvalidConfig(format!(
+                "physics rate {} Hz is not a whole multiple of control rate {} Hz",
+                self.physics.physics_hz, self.control_hz
+            )));
+        }
+        for (what, v) in [
+            ("max action (rad)", self.max_action_rad),
+            ("drop height (m)", self.drop_height_m),
+            ("max reward (rad/s)", self.max_reward_rad_per_s),
+            ("squeeze (rad)", self.grasp.squeeze_rad),
+            ("hold time (s)", self.grasp.hold_s),
+            ("settle time (s)", self.grasp.settle_s),
+            ("grasp pose noise (rad)", self.grasp.pose_noise_rad),
+            ("q noise (rad)", self.noise.q_std_rad),
+            ("normal noise", self.noise.normal_std_frac),
+            ("position noise (m)", self.noise.position_std_m),
+            ("perturbation force (N)", self.perturbation.force_std_n),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return bad(what, v);
+            }
+        }
+        let p = self.perturbation.change_probability;
+        if !(0.0..=1.0).contains(&p) {
+            return bad("perturbation change probability", p);
+        }
+        if self.min_contacts > NUM_FINGERS || self.reward_min_contacts > NUM_FINGERS {
+            return Err(SimError::InvalidConfig("contact counts above the number of fingers".to_owned()));
+        }
+        if self.episode_length_steps == 0 {
+            return Err(SimError::InvalidConfig("episode length 0".to_owned()));
+        }
+        Ok(())
+    }
+}
+
+/// What `reset` reports besides the observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResetInfo {
+    /// Which fingers were closed on the object.
+    pub grasping_fingers: [bool; NUM_FINGERS],
+    /// Fingertips touching the object after settling.
+    pub num_tip_contacts: usize,
+    /// Object height after settling (m): the reference for the drop test.
+    pub object_height_m: f32,
+}
+
+/// What `step` reports besides observation and reward.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// Fingertips touching the object.
+    pub num_tip_contacts: usize,
+    /// Object angular velocity about world z (rad/s), unclipped.
+    pub object_angvel_z_rad_per_s: f32,
+    /// Object yaw (rad).
+    pub object_yaw_rad: f32,
+    /// Object height (m).
+    pub object_height_m: f32,
+    /// Whether the object dropped below the termination height.
+    pub dropped: bool,
+    /// Control steps since reset.
+    pub step: usize,
+}
+
+/// The Gymnasium step tuple.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepResult {
+    /// Observation after the step.
+    pub obs: [f32; OBS_DIM],
+    /// Reward of the step.
+    pub reward: f32,
+    /// The episode ended (drop or lost grasp).
+    pub terminated: bool,
+    /// The episode hit its length.
+    pub truncated: bool,
+    /// Extra information.
+    pub info: StepInfo,
+}
+
+/// Noise-free state for controllers and evaluation (the IGM/CS controllers build J_S and
+/// G_S from `q` and `contacts` with [`crate::kinematics`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrivilegedState {
+    /// Object pose and velocity.
+    pub object: ObjectState,
+    /// Joint angles (rad).
+    pub q_rad: [f32; NUM_JOINTS],
+    /// Joint targets (rad).
+    pub q_target_rad: [f32; NUM_JOINTS],
+    /// Fingertip contacts (point, normal, force).
+    pub contacts: [Option<ContactReading>; NUM_FINGERS],
+}
+
+impl PrivilegedState {
+    /// Number of fingertips touching the object.
+    #[must_use]
+    pub fn num_tip_contacts(&self) -> usize {
+        self.contacts.iter().filter(|c| c.is_some()).count()
+    }
+}
+
+/// One environment: a hand world plus episode bookkeeping and its random generator.
+#[derive(Debug)]
+pub struct Env {
+    config: EnvConfig,
+    world: Option<HandWorld>,
+    rng: ChaCha8Rng,
+    state: Option<PrivilegedState>,
+    external_force_n: Vector3<f32>,
+    reference_height_m: f32,
+    steps: usize,
+}
+
+/// A standard normal draw (Box-Muller; deterministic given the generator).
+fn gaussian(rng: &mut ChaCha8Rng) -> f32 {
+    let u1: f32 = rng.random::<f32>().max(f32::MIN_POSITIVE);
+    let u2: f32 = rng.random::<f32>();
+    (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+}
+
+impl Env {
+    /// A new environment; call [`Self::reset`] before stepping.
+    pub fn new(config: EnvConfig) -> Result<Self, SimError> {
+        config.validate()?;
+        Ok(Self {
+            config,
+            world: None,
+            rng: ChaCha8Rng::seed_from_u64(0),
+            state: None,
+            external_force_n: Vector3::zeros(),
+            reference_height_m: 0.0,
+            steps: 0,
+        })
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &EnvConfig {
+        &self.config
+    }
+
+    /// The physics world (after a reset).
+    #[must_use]
+    pub fn world(&self) -> Option<&HandWorld> {
+        self.world.as_ref()
+    }
+
+    /// Mutable physics world, for tests and controllers that script the hand directly.
+    pub fn world_mut(&mut self) -> Option<&mut HandWorld> {
+        self.world.as_mut()
+    }
+
+    /// Noise-free state after the last reset or step.
+    #[must_use]
+    pub fn privileged(&self) -> Option<&PrivilegedState> {
+        self.state.as_ref()
+    }
+
+    /// The external force currently applied to the object (N, world).
+    #[must_use]
+    pub fn external_force_n(&self) -> Vector3<f32> {
+        self.external_force_n
+    }
+
+    /// Rebuilds the world, closes the fingers on the object and lets it settle.
+    pub fn reset(&mut self, seed: u64) -> Result<([f32; OBS_DIM], ResetInfo), SimError> {
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        let cfg = &self.config;
+        let grasp = cfg.grasp;
+        let mut grasping = [true; NUM_FINGERS];
+        if grasp.randomize_fingers && self.rng.random::<f32>() < 0.5 {
+            let skip = 1 + (self.rng.random::<u32>() % (NUM_FINGERS as u32 - 1)) as usize;
+            grasping[skip] = false;
+        }
+        let mut noise = [0.0f32; 2 * NUM_FINGERS];
+        if grasp.pose_noise_rad > 0.0 {
+            for v in &mut noise {
+                *v = self.rng.random_range(-grasp.pose_noise_rad..=grasp.pose_noise_rad);
+            }
+        }
+        let q0 = [0.0f32; NUM_JOINTS];
+        let mut world = HandWorld::new(&cfg.hand, &cfg.physics, &cfg.object, &q0, &Isometry3::identity())?;
+        world.set_object_fixed(true);
+        let mut q = q0;
+        for finger in 0..NUM_FINGERS {
+            if !grasping[finger] {
+                continue;
+            }
+            let roll = cfg.hand.fingers[finger].joint_limits[0].clamp(noise[2 * finger]);
+            match close_finger(&world, finger, roll)? {
+                Some(s) => {
+                    let s = s + noise[2 * finger + 1].min(0.0);
+                    q[joint_index(finger, 0)] = roll;
+                    q[joint_index(finger, 1)] = s;
+                    q[joint_index(finger, 2)] = s;
+                }
+                None => grasping[finger] = false,
+            }
+        }
+        world.set_joint_positions(&q)?;
+        let mut target = q;
+        for finger in (0..NUM_FINGERS).filter(|f| grasping[*f]) {
+            for j in 1..JOINTS_PER_FINGER {
+                target[joint_index(finger, j)] += grasp.squeeze_rad;
+            }
+        }
+        world.set_joint_targets(&target);
+        let hz = cfg.physics.physics_hz;
+        for _ in 0..round_steps(grasp.hold_s, hz) {
+            world.step();
+        }
+        world.set_object_fixed(false);
+        for _ in 0..round_steps(grasp.settle_s, hz) {
+            world.step();
+        }
+        if !world.is_finite() {
+            return Err(SimError::NonFiniteState("after the initial grasp".to_owned()));
+        }
+        self.world = Some(world);
+        self.external_force_n = Vector3::zeros();
+        self.steps = 0;
+        let state = self.read_state()?;
+        self.reference_height_m = state.object.pose.translation.vector.z;
+        let info = ResetInfo {
+            grasping_fingers: grasping,
+            num_tip_contacts: state.num_tip_contacts(),
+            object_height_m: self.reference_height_m,
+        };
+        self.state = Some(state);
+        let obs = self.observe(&state);
+        Ok((obs, info))
+    }
+
+    fn read_state(&self) -> Result<PrivilegedState, SimError> {
+        let world = self.world.as_ref().ok_or(SimError::NotReset)?;
+        Ok(PrivilegedState {
+            object: world.object_state(),
+            q_rad: world.joint_positions(),
+            q_target_rad: *world.joint_targets(),
+            contacts: world.fingertip_contacts(),
+        })
+    }
+
+    fn observe(&mut self, state: &PrivilegedState) -> [f32; OBS_DIM] {
+        let noise = self.config.noise;
+        let mut q = state.q_rad;
+        if noise.q_std_rad > 0.0 {
+            for v in &mut q {
+                *v += noise.q_std_rad * gaussian(&mut self.rng);
+            }
+        }
+        let mut readings = [None; NUM_FINGERS];
+        for (slot, contact) in readings.iter_mut().zip(&state.contacts) {
+            let Some(c) = contact else { continue };
+            let mut p = c.position_m;
+            let mut n = c.normal;
+            if noise.position_std_m > 0.0 {
+                for v in p.iter_mut() {
+                    *v += noise.position_std_m * gaussian(&mut self.rng);
+                }
+            }
+            if noise.normal_std_frac > 0.0 {
+                for v in n.iter_mut() {
+                    *v += noise.normal_std_frac * gaussian(&mut self.rng);
+                }
+                n = n.try_normalize(1e-6).unwrap_or(c.normal);
+            }
+            *slot = Some(FingertipReading {
+                position_m: [p.x, p.y, p.z],
+                normal: [n.x, n.y, n.z],
+                force_n: c.normal_force_n,
+            });
+        }
+        build_observation(&q, &state.q_target_rad, &readings)
+    }
+
+    /// Validates an action: 15 finite entries.
+    pub fn check_action(action: &[f32]) -> Result<[f32; NUM_JOINTS], SimError> {
+        let a: [f32; NUM_JOINTS] = action
+            .try_into()
+            .map_err(|_| SimError::ActionLength { got: action.len(), expected: NUM_JOINTS })?;
+        if let Some(index) = a.iter().position(|v| !v.is_finite()) {
+            return Err(SimError::NonFiniteAction { index, value: a[index] });
+        }
+        Ok(a)
+    }
+
+    /// One control step: apply the clipped target deltas, advance the physics, observe.
+    pub fn step(&mut self, action: &[f32]) -> Result<StepResult, SimError> {
+        let action = Self::check_action(action)?;
+        let cfg = &self.config;
+        let max = cfg.max_action_rad;
+        let n_physics = cfg.physics_steps_per_control();
+        let world = self.world.as_mut().ok_or(SimError::NotReset)?;
+        let current = *world.joint_targets();
+        let target: [f32; NUM_JOINTS] = std::array::from_fn(|k| current[k] + action[k].clamp(-max, max));
+        world.set_joint_targets(&target);
+        let pert = cfg.perturbation;
+        if pert.force_std_n > 0.0 && self.rng.random::<f32>() < pert.change_probability {
+            let f = Vector3::new(gaussian(&mut self.rng), gaussian(&mut self.rng), gaussian(&mut self.rng));
+            self.external_force_n = f * pert.force_std_n;
+            world.set_object_external_force(&self.external_force_n);
+        }
+        for _ in 0..n_physics {
+            world.step();
+        }
+        if !world.is_finite() {
+            return Err(SimError::NonFiniteState(format!("at control step {}", self.steps)));
+        }
+        self.steps += 1;
+        let state = self.read_state()?;
+        let cfg = &self.config;
+        let n_contacts = state.num_tip_contacts();
+        let wz = state.object.angvel_rad_per_s.z;
+        let reward = if n_contacts >= cfg.reward_min_contacts {
+            wz.clamp(-cfg.max_reward_rad_per_s, cfg.max_reward_rad_per_s)
+        } else {
+            0.0
+        };
+        let height = state.object.pose.translation.vector.z;
+        let dropped = height < self.reference_height_m - cfg.drop_height_m;
+        let terminated = dropped || n_contacts < cfg.min_contacts;
+        let truncated = !terminated && self.steps >= cfg.episode_length_steps;
+        let info = StepInfo {
+            num_tip_contacts: n_contacts,
+            object_angvel_z_rad_per_s: wz,
+            object_yaw_rad: state.object.yaw_rad(),
+            object_height_m: height,
+            dropped,
+            step: self.steps,
+        };
+        self.state = Some(state);
+        let obs = self.observe(&state);
+        Ok(StepResult { obs, reward, terminated, truncated, info })
+    }
+}
+
+/// Closing angle `s` (both flexions = s) at which `finger`, at roll `roll`, first touches
+/// the object; `None` when it never does within the flexion limit.
+fn close_finger(world: &HandWorld, finger: usize, roll: f32) -> Result<Option<f32>, SimError> {
+    let limit = world.hand().fingers[finger].joint_limits[1];
+    let dist = |s: f32| world.finger_object_distance_m(finger, &[roll, s, s]);
+    let step = 0.02;
+    let mut lo = 0.0f32.max(limit.lower_rad);
+    if dist(lo)? <= 0.0 {
+        return Ok(Some(lo));
+    }
+    let mut hi = lo;
+    loop {
+        hi += step;
+        if hi > limit.upper_rad {
+            return Ok(None);
+        }
+        if dist(hi)? <= 0.0 {
+            break;
+        }
+        lo = hi;
+    }
+    for _ in 0..24 {
+        let mid = 0.5 * (lo + hi);
+        if dist(mid)? <= 0.0 {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Ok(Some(lo))
+}

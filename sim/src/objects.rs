@@ -1,0 +1,204 @@
+//! The objects the hand turns: a cube (default), a sphere, a cylinder (axis along z) and
+//! two convex polyhedra (dodecahedron, icosahedron) whose vertices are generated here.
+//!
+//! Every shape is scaled so that its *width* (twice the distance from its centre to its
+//! closest surface point, i.e. twice the inradius) equals [`ObjectConfig::width_m`]: the
+//! fingers then meet every object at about the same flexion as the 10 cm cube.
+
+use rapier3d::geometry::{ColliderBuilder, SharedShape};
+use rapier3d::math::{Pose, Rotation, Vector};
+
+use crate::error::SimError;
+
+/// Which object is grasped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum ObjectShape {
+    /// A cube (the paper's default).
+    #[default]
+    Cube,
+    /// A sphere.
+    Sphere,
+    /// A cylinder standing on its axis (axis along world z).
+    Cylinder,
+    /// A regular dodecahedron (convex hull of its 20 vertices).
+    Dodecahedron,
+    /// A regular icosahedron (convex hull of its 12 vertices).
+    Icosahedron,
+}
+
+impl ObjectShape {
+    /// All shapes, in a fixed order.
+    pub const ALL: [Self; 5] =
+        [Self::Cube, Self::Sphere, Self::Cylinder, Self::Dodecahedron, Self::Icosahedron];
+
+    /// Lower-case name, e.g. "cube".
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Cube => "cube",
+            Self::Sphere => "sphere",
+            Self::Cylinder => "cylinder",
+            Self::Dodecahedron => "dodecahedron",
+            Self::Icosahedron => "icosahedron",
+        }
+    }
+}
+
+/// Object parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectConfig {
+    /// Shape.
+    pub shape: ObjectShape,
+    /// Width: twice the inradius (a cube's side, a sphere's or cylinder's diameter).
+    pub width_m: f32,
+    /// Mass.
+    pub mass_kg: f32,
+    /// Coulomb friction coefficient of the object (combined with the fingers' by average).
+    pub friction: f32,
+}
+
+impl Default for ObjectConfig {
+    /// 10 cm cube, 0.15 kg, friction 0.8 (the notes: 0.5-1.0 behaves like Coulomb).
+    fn default() -> Self {
+        Self { shape: ObjectShape::Cube, width_m: 0.10, mass_kg: 0.15, friction: 0.8 }
+    }
+}
+
+impl ObjectConfig {
+    /// A default-sized object of `shape`.
+    #[must_use]
+    pub fn of(shape: ObjectShape) -> Self {
+        Self { shape, ..Self::default() }
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), SimError> {
+        let ok = |v: f32| v.is_finite() && v > 0.0;
+        if !ok(self.width_m) || self.width_m > 0.3 {
+            return Err(SimError::InvalidConfig(format!("object width {} m", self.width_m)));
+        }
+        if !ok(self.mass_kg) {
+            return Err(SimError::InvalidConfig(format!("object mass {} kg", self.mass_kg)));
+        }
+        if !self.friction.is_finite() || self.friction < 0.0 {
+            return Err(SimError::InvalidConfig(format!("object friction {}", self.friction)));
+        }
+        Ok(())
+    }
+
+    /// The collision shape, centred on the body origin.
+    pub fn shape(&self) -> Result<SharedShape, SimError> {
+        let half = 0.5 * self.width_m;
+        let hull = |unit: Vec<Vector>, inradius: f32| -> Result<SharedShape, SimError> {
+            let scaled: Vec<Vector> = unit.iter().map(|v| *v * (half / inradius)).collect();
+            SharedShape::convex_hull(&scaled)
+                .ok_or_else(|| SimError::InvalidConfig("degenerate convex hull".to_owned()))
+        };
+        Ok(match self.shape {
+            ObjectShape::Cube => SharedShape::cuboid(half, half, half),
+            ObjectShape::Sphere => SharedShape::ball(half),
+            ObjectShape::Cylinder => SharedShape::cylinder(half, half),
+            ObjectShape::Dodecahedron => hull(dodecahedron_vertices(), DODECAHEDRON_INRADIUS)?,
+            ObjectShape::Icosahedron => hull(icosahedron_vertices(), ICOSAHEDRON_INRADIUS)?,
+        })
+    }
+
+    /// Collider (shape, mass, friction); a cylinder is turned so that its axis is z.
+    pub(crate) fn collider(&self) -> Result<ColliderBuilder, SimError> {
+        let pose = match self.shape {
+            ObjectShape::Cylinder => {
+                Pose::from_rotation(Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2))
+            }
+            _ => Pose::IDENTITY,
+        };
+        Ok(ColliderBuilder::new(self.shape()?).position(pose).mass(self.mass_kg).friction(self.friction))
+    }
+}
+
+const PHI: f32 = 1.618_034;
+/// Inradius of [`dodecahedron_vertices`]: edge 2/phi, r = (a/2) sqrt(5/2 + 11 sqrt(5)/10).
+const DODECAHEDRON_INRADIUS: f32 = 1.376_382;
+/// Inradius of [`icosahedron_vertices`]: edge 2, r = phi^2 a / (2 sqrt(3)).
+const ICOSAHEDRON_INRADIUS: f32 = 1.511_523;
+
+/// The 20 vertices of a regular dodecahedron (circumradius sqrt(3)).
+#[must_use]
+pub fn dodecahedron_vertices() -> Vec<Vector> {
+    let mut v = Vec::with_capacity(20);
+    for sx in [-1.0, 1.0] {
+        for sy in [-1.0, 1.0] {
+            for sz in [-1.0f32, 1.0] {
+                v.push(Vector::new(sx, sy, sz));
+            }
+        }
+    }
+    let (a, b) = (1.0 / PHI, PHI);
+    for s1 in [-1.0, 1.0] {
+        for s2 in [-1.0f32, 1.0] {
+            v.push(Vector::new(0.0, s1 * a, s2 * b));
+            v.push(Vector::new(s1 * a, s2 * b, 0.0));
+            v.push(Vector::new(s1 * b, 0.0, s2 * a));
+        }
+    }
+    v
+}
+
+/// The 12 vertices of a regular icosahedron (edge 2).
+#[must_use]
+pub fn icosahedron_vertices() -> Vec<Vector> {
+    let mut v = Vec::with_capacity(12);
+    for s1 in [-1.0, 1.0] {
+        for s2 in [-1.0f32, 1.0] {
+            v.push(Vector::new(0.0, s1, s2 * PHI));
+            v.push(Vector::new(s1, s2 * PHI, 0.0));
+            v.push(Vector::new(s2 * PHI, 0.0, s1));
+        }
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_shape_has_the_configured_width() {
+        for shape in ObjectShape::ALL {
+            let cfg = ObjectConfig::of(shape);
+            let shape_ref = cfg.shape().expect("shape");
+            let s = shape_ref.as_support_map().expect("convex");
+            // The inradius is the smallest support distance over the face normals; those of
+            // a dodecahedron point at an icosahedron's vertices (in one of two orientations)
+            // and vice versa (duality),
+            // and the axes cover the cube, sphere and cylinder.
+            let axes = [Vector::X, Vector::Y, Vector::Z, -Vector::X, -Vector::Y, -Vector::Z];
+            let inradius = axes
+                .into_iter()
+                .chain(dodecahedron_vertices())
+                .chain(icosahedron_vertices())
+                .chain(icosahedron_vertices().into_iter().map(|v| Vector::new(v.y, v.x, v.z)))
+                .map(|d| {
+                    let d = d.normalize();
+                    s.local_support_point(d).dot(d)
+                })
+                .fold(f32::INFINITY, f32::min);
+            assert!((inradius - 0.05).abs() < 1e-5, "{}: inradius {inradius}", shape.name());
+        }
+    }
+
+    #[test]
+    fn polyhedra_are_regular() {
+        for (verts, n) in [(dodecahedron_vertices(), 20), (icosahedron_vertices(), 12)] {
+            assert_eq!(verts.len(), n);
+            let r0 = verts[0].length();
+            assert!(verts.iter().all(|v| (v.length() - r0).abs() < 1e-5));
+        }
+    }
+
+    #[test]
+    fn bad_configs_are_rejected() {
+        let c = ObjectConfig { mass_kg: f32::NAN, ..ObjectConfig::default() };
+        assert!(c.validate().is_err());
+        let c = ObjectConfig { friction: -1.0, ..ObjectConfig::default() };
+        assert!(c.validate().is_err());
+    }
+}

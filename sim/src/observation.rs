@@ -1,0 +1,100 @@
+//! The policy observation: exactly [`OBS_DIM`] = 65 `f32`, built from raw readings only
+//! (joint angles, joint targets, per-fingertip contacts), so that the simulator and the
+//! deployment bridge (which gets the same readings over CAN) build it with this one
+//! function.
+//!
+//! Layout (named slices; all world frame, SI units):
+//!
+//! | slice | content |
+//! |---|---|
+//! | [`OBS_Q`] = 0..15 | joint angles q (rad), finger-major |
+//! | [`OBS_Q_TARGET`] = 15..30 | joint position targets (rad) |
+//! | [`OBS_CONTACT_POSITION`] = 30..45 | per fingertip contact point (m), 5 x 3 |
+//! | [`OBS_CONTACT_NORMAL`] = 45..60 | per fingertip unit normal, fingertip into object, 5 x 3 |
+//! | [`OBS_CONTACT_FORCE`] = 60..65 | per fingertip normal force magnitude (N) |
+//!
+//! A fingertip out of contact contributes zeros to the last three slices.
+
+use std::ops::Range;
+
+use crate::kinematics::{NUM_FINGERS, NUM_JOINTS};
+
+/// Length of the observation vector.
+pub const OBS_DIM: usize = 65;
+/// Joint angles (rad), finger-major.
+pub const OBS_Q: Range<usize> = 0..15;
+/// Joint position targets (rad), finger-major.
+pub const OBS_Q_TARGET: Range<usize> = 15..30;
+/// Contact points (m, world), three per fingertip.
+pub const OBS_CONTACT_POSITION: Range<usize> = 30..45;
+/// Contact normals (unit, world, from the fingertip into the object), three per fingertip.
+pub const OBS_CONTACT_NORMAL: Range<usize> = 45..60;
+/// Normal force magnitudes (N), one per fingertip.
+pub const OBS_CONTACT_FORCE: Range<usize> = 60..65;
+
+/// One fingertip's contact reading, in plain arrays so that non-simulator callers (the
+/// CAN bridge) need no math library.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FingertipReading {
+    /// Contact point, world frame (m).
+    pub position_m: [f32; 3],
+    /// Unit contact normal, world frame, pointing from the fingertip into the object.
+    pub normal: [f32; 3],
+    /// Normal force magnitude (N).
+    pub force_n: f32,
+}
+
+/// Builds the 65-float observation from raw readings (see the module docs for the
+/// layout). `contacts[i]` is `None` when fingertip `i` does not touch the object.
+#[must_use]
+pub fn build_observation(
+    q_rad: &[f32; NUM_JOINTS],
+    q_target_rad: &[f32; NUM_JOINTS],
+    contacts: &[Option<FingertipReading>; NUM_FINGERS],
+) -> [f32; OBS_DIM] {
+    let mut obs = [0.0; OBS_DIM];
+    obs[OBS_Q].copy_from_slice(q_rad);
+    obs[OBS_Q_TARGET].copy_from_slice(q_target_rad);
+    for (i, contact) in contacts.iter().enumerate() {
+        if let Some(c) = contact {
+            let p = OBS_CONTACT_POSITION.start + 3 * i;
+            let n = OBS_CONTACT_NORMAL.start + 3 * i;
+            obs[p..p + 3].copy_from_slice(&c.position_m);
+            obs[n..n + 3].copy_from_slice(&c.normal);
+            obs[OBS_CONTACT_FORCE.start + i] = c.force_n;
+        }
+    }
+    obs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slices_tile_the_vector() {
+        assert_eq!(OBS_Q.end, OBS_Q_TARGET.start);
+        assert_eq!(OBS_Q_TARGET.end, OBS_CONTACT_POSITION.start);
+        assert_eq!(OBS_CONTACT_POSITION.end, OBS_CONTACT_NORMAL.start);
+        assert_eq!(OBS_CONTACT_NORMAL.end, OBS_CONTACT_FORCE.start);
+        assert_eq!(OBS_CONTACT_FORCE.end, OBS_DIM);
+        assert_eq!(OBS_CONTACT_POSITION.len(), 3 * NUM_FINGERS);
+    }
+
+    #[test]
+    fn contacts_land_in_their_slots_and_absent_ones_are_zero() {
+        let q = std::array::from_fn(|j| j as f32);
+        let t = std::array::from_fn(|j| -(j as f32));
+        let mut contacts = [None; NUM_FINGERS];
+        contacts[2] =
+            Some(FingertipReading { position_m: [1.0, 2.0, 3.0], normal: [0.0, 1.0, 0.0], force_n: 4.5 });
+        let obs = build_observation(&q, &t, &contacts);
+        assert_eq!(obs[OBS_Q.start + 3], 3.0);
+        assert_eq!(obs[OBS_Q_TARGET.start + 3], -3.0);
+        assert_eq!(&obs[36..39], &[1.0, 2.0, 3.0]);
+        assert_eq!(&obs[51..54], &[0.0, 1.0, 0.0]);
+        assert_eq!(obs[62], 4.5);
+        assert!(obs[30..36].iter().chain(&obs[39..51]).chain(&obs[54..62]).all(|v| *v == 0.0));
+        assert_eq!(obs[64], 0.0);
+    }
+}

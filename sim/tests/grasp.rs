@@ -1,0 +1,181 @@
+//! Acceptance tests on the real rapier world: holding, turning, force balance.
+
+use vge_sim::{Env, EnvConfig, NUM_FINGERS, NUM_JOINTS, ObjectConfig, ObjectShape, StepResult};
+
+fn env_for(shape: ObjectShape) -> Env {
+    let config =
+        EnvConfig { object: ObjectConfig::of(shape), episode_length_steps: 100_000, ..EnvConfig::default() };
+    Env::new(config).expect("config")
+}
+
+fn steps_for(env: &Env, seconds: f32) -> usize {
+    (seconds / env.config().control_dt_s()).round() as usize
+}
+
+/// Each object is held for 10 s with zero action: height drift < 2 mm, yaw drift
+/// < 0.01 rad, never fewer than 3 fingertips in contact.
+#[test]
+fn zero_action_holds_every_object_for_ten_seconds() {
+    for shape in ObjectShape::ALL {
+        let mut env = env_for(shape);
+        let (_, info) = env.reset(7).expect("reset");
+        assert!(
+            info.num_tip_contacts >= 3,
+            "{}: only {} tips after the grasp",
+            shape.name(),
+            info.num_tip_contacts
+        );
+        let start = env.privileged().expect("state").object;
+        let n = steps_for(&env, 10.0);
+        let mut min_contacts = NUM_FINGERS;
+        let mut last: Option<StepResult> = None;
+        for _ in 0..n {
+            let r = env.step(&[0.0; NUM_JOINTS]).expect("step");
+            min_contacts = min_contacts.min(r.info.num_tip_contacts);
+            assert!(!r.terminated, "{}: terminated at step {} ({:?})", shape.name(), r.info.step, r.info);
+            last = Some(r);
+        }
+        let end = env.privileged().expect("state").object;
+        let dz = (end.pose.translation.vector.z - start.pose.translation.vector.z).abs();
+        let dyaw = (end.yaw_rad() - start.yaw_rad()).abs();
+        println!(
+            "{}: tips {} (min {min_contacts}), dz {:.3} mm, dyaw {:.5} rad",
+            shape.name(),
+            info.num_tip_contacts,
+            dz * 1e3,
+            dyaw
+        );
+        assert!(last.is_some());
+        assert!(dz < 2e-3, "{}: height drift {dz} m", shape.name());
+        assert!(dyaw < 0.01, "{}: yaw drift {dyaw} rad", shape.name());
+        assert!(min_contacts >= 3, "{}: contacts fell to {min_contacts}", shape.name());
+    }
+}
+
+/// Ramping all roll joints 0 -> 0.3 rad over 2 s turns the cube > 0.3 rad about z while
+/// at least 3 fingertips stay in contact.
+#[test]
+fn roll_ramp_turns_the_cube_in_grasp() {
+    let mut env = env_for(ObjectShape::Cube);
+    env.reset(3).expect("reset");
+    let yaw0 = env.privileged().expect("state").object.yaw_rad();
+    let n = steps_for(&env, 2.0);
+    let per_step = 0.3 / n as f32;
+    let mut action = [0.0; NUM_JOINTS];
+    for f in 0..NUM_FINGERS {
+        action[vge_sim::kinematics::joint_index(f, 0)] = per_step;
+    }
+    let mut min_contacts = NUM_FINGERS;
+    for _ in 0..n + steps_for(&env, 0.5) {
+        let r = env.step(&action).expect("step");
+        action = if r.info.step >= n { [0.0; NUM_JOINTS] } else { action };
+        min_contacts = min_contacts.min(r.info.num_tip_contacts);
+        assert!(!r.terminated, "terminated: {:?}", r.info);
+    }
+    let yaw = env.privileged().expect("state").object.yaw_rad() - yaw0;
+    println!("cube turned {yaw:.3} rad, min contacts {min_contacts}");
+    assert!(yaw > 0.3, "turned only {yaw} rad");
+    assert!(min_contacts >= 3);
+}
+
+/// At rest the contact normal and friction forces on the object balance its weight.
+#[test]
+fn contact_forces_balance_the_weight_at_rest() {
+    for shape in [ObjectShape::Cube, ObjectShape::Sphere, ObjectShape::Icosahedron] {
+        let mut env = env_for(shape);
+        env.reset(11).expect("reset");
+        for _ in 0..steps_for(&env, 0.5) {
+            env.step(&[0.0; NUM_JOINTS]).expect("step");
+        }
+        let world = env.world().expect("world");
+        let weight = world.object_mass_kg() * world.physics().gravity_m_per_s2;
+        let mut total = nalgebra::Vector3::zeros();
+        let mut normal_only = nalgebra::Vector3::zeros();
+        for c in world.fingertip_contacts().iter().flatten() {
+            total += c.force_on_object_n();
+            normal_only += c.normal * c.normal_force_n;
+        }
+        for c in world.link_contacts().iter().flatten().flatten() {
+            total += c.force_on_object_n();
+        }
+        println!(
+            "{}: weight {weight:.4} N, contact force {total:?}, normal part {normal_only:?}",
+            shape.name()
+        );
+        assert!(
+            (total.z - weight).abs() < 0.05 * weight,
+            "{}: vertical {} vs weight {weight}",
+            shape.name(),
+            total.z
+        );
+        assert!(
+            total.xy().norm() < 0.05 * weight,
+            "{}: horizontal residual {}",
+            shape.name(),
+            total.xy().norm()
+        );
+        // The check must be able to fail: the normal forces alone do not carry the
+        // weight of a cube squeezed on vertical faces.
+        if shape == ObjectShape::Cube {
+            assert!((normal_only.z - weight).abs() > 0.05 * weight);
+        }
+    }
+}
+
+/// Opening the hand drops the object and terminates the episode.
+#[test]
+fn dropping_the_object_terminates() {
+    let mut env = env_for(ObjectShape::Cube);
+    env.reset(5).expect("reset");
+    let mut open = [0.0; NUM_JOINTS];
+    for f in 0..NUM_FINGERS {
+        open[vge_sim::kinematics::joint_index(f, 1)] = -1.0;
+        open[vge_sim::kinematics::joint_index(f, 2)] = -1.0;
+    }
+    let mut ended = None;
+    for _ in 0..steps_for(&env, 2.0) {
+        let r = env.step(&open).expect("step");
+        if r.terminated {
+            ended = Some(r);
+            break;
+        }
+    }
+    let r = ended.expect("episode did not terminate");
+    assert!(!r.truncated);
+    assert_eq!(r.reward, 0.0, "no reward once the grasp is lost");
+    // Keep stepping the world: the object does fall away.
+    let world = env.world_mut().expect("world");
+    for _ in 0..60 {
+        world.step();
+    }
+    assert!(world.object_state().pose.translation.vector.z < -0.05);
+}
+
+/// NaN, infinite and wrong-length actions are errors and leave the world finite and
+/// unchanged.
+#[test]
+fn bad_actions_are_errors_and_the_world_stays_finite() {
+    let mut env = env_for(ObjectShape::Cube);
+    assert!(matches!(env.step(&[0.0; NUM_JOINTS]), Err(vge_sim::SimError::NotReset)));
+    env.reset(1).expect("reset");
+    let before = *env.privileged().expect("state");
+    let mut nan = [0.0; NUM_JOINTS];
+    nan[4] = f32::NAN;
+    let mut inf = [0.0; NUM_JOINTS];
+    inf[0] = f32::NEG_INFINITY;
+    assert!(matches!(env.step(&nan), Err(vge_sim::SimError::NonFiniteAction { index: 4, .. })));
+    assert!(matches!(env.step(&inf), Err(vge_sim::SimError::NonFiniteAction { index: 0, .. })));
+    assert!(matches!(env.step(&[0.0; 14]), Err(vge_sim::SimError::ActionLength { got: 14, expected: 15 })));
+    assert!(matches!(env.step(&[0.0; 16]), Err(vge_sim::SimError::ActionLength { got: 16, .. })));
+    let world = env.world().expect("world");
+    assert!(world.is_finite());
+    assert_eq!(world.joint_targets(), &before.q_target_rad);
+    assert_eq!(world.object_state(), before.object);
+    // Huge finite actions are clipped, not errors.
+    let r = env.step(&[1e30; NUM_JOINTS]).expect("clipped");
+    assert!(r.obs.iter().all(|v| v.is_finite()));
+    let max = env.config().max_action_rad;
+    for (t, t0) in r.obs[vge_sim::observation::OBS_Q_TARGET].iter().zip(&before.q_target_rad) {
+        assert!(*t - *t0 <= max + 1e-6);
+    }
+}
