@@ -6,11 +6,10 @@
 
 use std::time::Duration;
 
-use socketcan::{CanSocket, Socket};
 use thiserror::Error;
 
 use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError, STATUS_ENABLED};
-use crate::socketcan_io::{FrameError, standard_id_and_data, to_can_frame};
+use crate::transport::{Received, Transport, TransportError};
 
 /// Joint positions of all fingers, moving towards their commanded targets.
 #[derive(Debug, Clone)]
@@ -45,10 +44,8 @@ impl JointControllerEmulator {
 
 #[derive(Debug, Error)]
 pub enum EmulatorError {
-    #[error("CAN socket: {0}")]
-    Io(#[from] std::io::Error),
     #[error(transparent)]
-    Frame(#[from] FrameError),
+    Transport(#[from] TransportError),
     #[error(transparent)]
     Protocol(#[from] ProtocolError),
 }
@@ -61,36 +58,27 @@ pub struct EmulatorStats {
     pub ignored: u64,
 }
 
-/// Serves joint commands on `iface` until `max_commands` were answered or no frame arrived
-/// for `idle_timeout`.
-pub fn serve(
-    iface: &str,
+/// Serves joint commands on `transport` until `max_commands` were answered or no frame
+/// arrived for `idle_timeout`.
+pub fn serve<T: Transport>(
+    transport: &mut T,
     emulator: &mut JointControllerEmulator,
     max_commands: u64,
     idle_timeout: Duration,
 ) -> Result<EmulatorStats, EmulatorError> {
-    let socket = CanSocket::open(iface)?;
     let mut stats = EmulatorStats::default();
     while stats.commands < max_commands {
-        let frame = match socket.read_frame_timeout(idle_timeout) {
-            Ok(frame) => frame,
-            Err(e)
-                if e.kind() == std::io::ErrorKind::WouldBlock || e.kind() == std::io::ErrorKind::TimedOut =>
-            {
-                break;
-            }
-            Err(e) => return Err(e.into()),
-        };
-        let Ok((id, data)) = standard_id_and_data(&frame) else {
+        let Some(received) = transport.recv(idle_timeout)? else { break };
+        let Received::Frame(frame) = received else {
             stats.ignored += 1;
             continue;
         };
-        let Ok(Message::JointCommand(cmd)) = Message::decode(id, data) else {
+        let Ok(Message::JointCommand(cmd)) = Message::decode_frame(&frame) else {
             stats.ignored += 1;
             continue;
         };
         let state = Message::JointPosition(emulator.apply(&cmd));
-        socket.write_frame(&to_can_frame(&state.encode()?)?)?;
+        transport.send(&state.encode()?)?;
         stats.commands += 1;
     }
     Ok(stats)

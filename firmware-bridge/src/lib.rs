@@ -9,8 +9,18 @@
 pub mod protocol;
 
 #[cfg(feature = "std")]
+pub mod control_loop;
+#[cfg(feature = "std")]
 pub mod emulator;
 #[cfg(feature = "std")]
+pub mod hand_state;
+#[cfg(feature = "std")]
+pub mod safety;
+#[cfg(feature = "std")]
 pub mod socketcan_io;
+#[cfg(feature = "std")]
+pub mod stats;
+#[cfg(feature = "std")]
+pub mod transport;
 
 pub use protocol::{FingerId, Message, ProtocolError, RawFrame};

@@ -6,6 +6,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use vge_bridge::emulator::{JointControllerEmulator, serve};
+use vge_bridge::transport::SocketCanTransport;
 
 /// Runs exported vge policies against the simulator or a real hand over SocketCAN.
 #[derive(Debug, Parser)]
@@ -58,8 +59,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             anyhow::ensure!((0.0..=1.0).contains(&response), "--response must be in [0, 1], got {response}");
             let mut emulator = JointControllerEmulator::new(response);
-            let stats = serve(&iface, &mut emulator, max_commands, Duration::from_secs_f64(idle_timeout_s))
-                .with_context(|| format!("emulating joint controllers on {iface}"))?;
+            let mut transport =
+                SocketCanTransport::open(&iface).with_context(|| format!("opening CAN interface {iface}"))?;
+            let stats =
+                serve(&mut transport, &mut emulator, max_commands, Duration::from_secs_f64(idle_timeout_s))
+                    .with_context(|| format!("emulating joint controllers on {iface}"))?;
             eprintln!(
                 "vge-bridge: answered {} commands, ignored {} other frames",
                 stats.commands, stats.ignored

@@ -10,6 +10,7 @@ use socketcan::{CanFrame, CanSocket, EmbeddedFrame, Socket, StandardId};
 use vge_bridge::emulator::{JointControllerEmulator, serve};
 use vge_bridge::protocol::*;
 use vge_bridge::socketcan_io::{standard_id_and_data, to_can_frame};
+use vge_bridge::transport::SocketCanTransport;
 use vge_tests::hil_iface;
 
 const READ_TIMEOUT: Duration = Duration::from_secs(2);
@@ -53,7 +54,8 @@ fn joint_controller_emulator_answers_commands_over_vcan() {
     let server_iface = iface.clone();
     let server = thread::spawn(move || {
         let mut emulator = JointControllerEmulator::new(0.5);
-        serve(&server_iface, &mut emulator, expected, READ_TIMEOUT)
+        let mut transport = SocketCanTransport::open(&server_iface)?;
+        serve(&mut transport, &mut emulator, expected, READ_TIMEOUT)
     });
     // The server must be listening before the first command: CAN does not queue for sockets
     // opened later. Give it a moment, then check it answered every command.
@@ -207,11 +209,12 @@ fn frames_captured_on_vcan_decode_with_the_dbc() {
     std::fs::write(&capture_file, &lines).expect("write capture");
 
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/dbc_check.py");
-    let out = std::process::Command::new("python3")
+    let python = std::env::var("VGE_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let out = std::process::Command::new(python)
         .arg(script)
         .arg(&capture_file)
         .output()
-        .expect("python3 runs (scripts/test.sh installs cantools)");
+        .expect("python runs (VGE_PYTHON; scripts/test.sh makes .deps/py with cantools)");
     let _ = std::fs::remove_file(&capture_file);
     let stdout = String::from_utf8_lossy(&out.stdout);
     eprintln!("{stdout}{}", String::from_utf8_lossy(&out.stderr));

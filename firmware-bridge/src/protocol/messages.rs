@@ -59,7 +59,7 @@ pub struct TipContact {
     pub force_n: f32,
 }
 
-/// Fingertip contact normal (unit, hand frame, pointing into the fingertip) and contact flag.
+/// Fingertip contact normal (unit, hand frame, from the fingertip into the object) and flag.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TipNormal {
     pub finger: FingerId,

@@ -1,0 +1,95 @@
+//! The last line before the motors: every commanded target is finite, within the joint
+//! limits, and no further than a fixed step from the previous safe target.
+
+use vge_sim::kinematics::JointLimit;
+
+/// What the filter did to one proposed command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SafetyCounts {
+    /// Proposals that contained NaN/inf: the previous safe targets were held instead.
+    pub non_finite_holds: u64,
+    /// Joint deltas cut to the per-step maximum.
+    pub delta_clamps: u64,
+    /// Joint targets cut to the joint limits.
+    pub limit_clamps: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct SafetyFilter {
+    max_delta_rad: f32,
+    limits: [JointLimit; 15],
+    last_safe_rad: [f32; 15],
+    pub counts: SafetyCounts,
+}
+
+impl SafetyFilter {
+    /// `start_rad` (e.g. the measured joint positions) becomes the first safe target; it is
+    /// clamped into the limits.
+    pub fn new(max_delta_rad: f32, limits: [JointLimit; 15], start_rad: [f32; 15]) -> Self {
+        let last_safe_rad = std::array::from_fn(|i| limits[i].clamp(start_rad[i]));
+        Self { max_delta_rad: max_delta_rad.abs(), limits, last_safe_rad, counts: SafetyCounts::default() }
+    }
+
+    pub fn last_safe_rad(&self) -> [f32; 15] {
+        self.last_safe_rad
+    }
+
+    /// Applies a proposed change of the targets and returns the safe targets to send.
+    pub fn apply_delta(&mut self, delta_rad: &[f32; 15]) -> [f32; 15] {
+        if delta_rad.iter().any(|d| !d.is_finite()) {
+            self.counts.non_finite_holds += 1;
+            return self.last_safe_rad;
+        }
+        for (i, &d) in delta_rad.iter().enumerate() {
+            let clamped = d.clamp(-self.max_delta_rad, self.max_delta_rad);
+            if clamped != d {
+                self.counts.delta_clamps += 1;
+            }
+            let proposed = self.last_safe_rad[i] + clamped;
+            let limited = self.limits[i].clamp(proposed);
+            if limited != proposed {
+                self.counts.limit_clamps += 1;
+            }
+            self.last_safe_rad[i] = limited;
+        }
+        self.last_safe_rad
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> [JointLimit; 15] {
+        [JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15]
+    }
+
+    #[test]
+    fn clamps_deltas_and_limits_and_holds_on_nan() {
+        let mut f = SafetyFilter::new(0.05, limits(), [0.0; 15]);
+        let mut d = [0.01; 15];
+        d[0] = 1.0;
+        d[1] = -1.0;
+        let t = f.apply_delta(&d);
+        assert_eq!((t[0], t[1], t[2]), (0.05, -0.05, 0.01));
+        assert_eq!(f.counts.delta_clamps, 2);
+        for _ in 0..20 {
+            f.apply_delta(&[0.05; 15]);
+        }
+        assert_eq!(f.last_safe_rad()[3], 0.5);
+        assert!(f.counts.limit_clamps > 0);
+        let before = f.last_safe_rad();
+        let mut bad = [0.0; 15];
+        bad[7] = f32::NAN;
+        assert_eq!(f.apply_delta(&bad), before);
+        bad[7] = f32::INFINITY;
+        assert_eq!(f.apply_delta(&bad), before);
+        assert_eq!(f.counts.non_finite_holds, 2);
+    }
+
+    #[test]
+    fn start_outside_the_limits_is_pulled_in() {
+        let f = SafetyFilter::new(0.05, limits(), [2.0; 15]);
+        assert_eq!(f.last_safe_rad(), [0.5; 15]);
+    }
+}
