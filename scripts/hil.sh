@@ -8,5 +8,7 @@ set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUNNER="$repo/scripts/canvm/run.sh"
+# The DBC test decodes frames with cantools: scripts/test.sh puts it in .deps/py.
+if [[ -z ${VGE_PYTHON:-} && -x $repo/.deps/py/bin/python ]]; then export VGE_PYTHON=$repo/.deps/py/bin/python; fi
 # --workspace (not -p) keeps feature unification identical to the main test build: no rebuild.
 exec cargo test --release --workspace --test hil -- --ignored "$@"

@@ -18,7 +18,7 @@ unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION
 step "system packages"
 # user-mode-linux: a CAN-capable guest for HIL tests where this kernel has no vcan.
 # kmod/iproute2: insmod and ip inside that guest.
-packages=(user-mode-linux kmod iproute2 gcc python3)
+packages=(user-mode-linux kmod iproute2 gcc python3 python3-venv)
 missing=()
 for p in "${packages[@]}"; do dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p"); done
 if ((${#missing[@]})); then
@@ -29,6 +29,14 @@ if ((${#missing[@]})); then
 else
   echo "present: ${packages[*]}"
 fi
+
+step "python tools (cantools, in .deps/py)"
+# The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc.
+if ! .deps/py/bin/python -c 'import cantools' 2>/dev/null; then
+  python3 -m venv .deps/py
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools
+fi
+echo "cantools $(.deps/py/bin/python -c 'import cantools; print(cantools.__version__)')"
 
 step "rust components and targets"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done
@@ -46,9 +54,10 @@ step "cargo clippy --workspace --all-targets -- -D warnings"
 # --release shares build-script outputs (torch-sys' C++) with the test build below.
 cargo clippy --release --workspace --all-targets -- -D warnings
 
-step "no_std runtime for thumbv7em-none-eabihf (Cortex-M4F)"
+step "no_std builds for thumbv7em-none-eabihf (Cortex-M4F): runtime, CAN protocol"
 cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
-ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib
+cargo build --release -p vge-bridge --lib --no-default-features --target thumbv7em-none-eabihf
+ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib target/thumbv7em-none-eabihf/release/libvge_bridge.rlib
 
 step "cargo test --workspace (release)"
 cargo test --release --workspace
