@@ -152,18 +152,24 @@ pub fn run<T: Transport, P: PolicyRunner>(
         Io { transport, state: HandState::default(), frames_in: 0, frames_out: 0, bad_frames: 0, seq: 0 };
 
     // Startup: disabled commands ask every node for its state, until all have answered.
+    // Start from the targets the nodes hold (they keep the current grasp). Nodes answer a
+    // query with positions then targets; a node that never reports targets gets its
+    // measured positions after a few more query rounds.
     let started = Instant::now();
+    let mut rounds_with_positions = 0;
     let q_start = loop {
         io.drain()?;
-        if let Some(q) = io.state.q_rad() {
-            break q;
+        match (io.state.q_rad(), io.state.q_target_rad()) {
+            (Some(_), Some(targets)) => break targets,
+            (Some(q), None) if rounds_with_positions >= 3 => break q,
+            (Some(_), None) => rounds_with_positions += 1,
+            _ => {}
         }
         if started.elapsed() > config.startup_timeout || stop.load(Ordering::Relaxed) {
             return Err(LoopError::StartupTimeout(config.startup_timeout));
         }
         io.send_targets(&[0.0; 15], false)?;
         std::thread::sleep(period.min(Duration::from_millis(10)));
-        io.drain()?;
     };
     let mut safety = SafetyFilter::new(config.max_delta_rad, config.limits, q_start);
     let watchdog = period * config.watchdog_periods.max(1);

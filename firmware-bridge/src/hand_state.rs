@@ -18,6 +18,7 @@ pub struct HandState {
     pub applied_seq: [Option<u8>; FINGERS],
     pub dq_radps: [Option<[f32; 3]>; FINGERS],
     pub tau_nm: [Option<[f32; 3]>; FINGERS],
+    q_target_rad: [Option<[f32; 3]>; FINGERS],
     tip_position_m: [Option<([f32; 3], f32)>; FINGERS],
     tip_normal: [Option<([f32; 3], bool)>; FINGERS],
     /// A node reported a fault (fault frame, or the fault bit in its position status).
@@ -44,6 +45,9 @@ impl HandState {
             Message::TipNormal(n) => {
                 self.tip_normal[usize::from(n.finger.index())] = Some((n.normal, n.in_contact))
             }
+            Message::JointTarget(t) => {
+                self.q_target_rad[usize::from(t.finger.index())] = Some(t.q_target_rad)
+            }
             Message::Fault(f) => self.fault[usize::from(f.finger.index())] = true,
             Message::JointCommand(_) | Message::Heartbeat(_) => {}
         }
@@ -54,6 +58,15 @@ impl HandState {
         let mut q = [0.0; 15];
         for (f, chunk) in q.chunks_exact_mut(3).enumerate() {
             chunk.copy_from_slice(&self.q_rad[f]?);
+        }
+        Some(q)
+    }
+
+    /// All 15 targets the nodes reported holding, once every finger has reported them.
+    pub fn q_target_rad(&self) -> Option<[f32; 15]> {
+        let mut q = [0.0; 15];
+        for (f, chunk) in q.chunks_exact_mut(3).enumerate() {
+            chunk.copy_from_slice(&self.q_target_rad[f]?);
         }
         Some(q)
     }

@@ -17,6 +17,8 @@ pub mod hand_state;
 #[cfg(feature = "std")]
 pub mod safety;
 #[cfg(feature = "std")]
+pub mod sim_hand;
+#[cfg(feature = "std")]
 pub mod socketcan_io;
 #[cfg(feature = "std")]
 pub mod stats;

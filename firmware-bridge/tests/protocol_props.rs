@@ -30,6 +30,9 @@ fn message() -> impl Strategy<Value = Message> {
         (finger(), triple(1.0), any::<bool>(), any::<u8>()).prop_map(|(finger, n, in_contact, seq)| {
             Message::TipNormal(TipNormal { finger, normal: n, in_contact, seq })
         }),
+        (finger(), triple(3.2), any::<u8>()).prop_map(|(finger, q, seq)| {
+            Message::JointTarget(JointTarget { finger, q_target_rad: q, seq })
+        }),
         (prop_oneof![0u8..NUM_FINGERS, Just(HOST_NODE)], 0usize..4, any::<u8>()).prop_map(
             |(node, s, counter)| {
                 let state = [NodeState::Booting, NodeState::Ready, NodeState::Enabled, NodeState::Fault][s];
@@ -82,6 +85,8 @@ fn max_error_in_counts(a: &Message, b: &Message) -> Option<f32> {
             (x.finger == y.finger && x.in_contact == y.in_contact && x.seq == y.seq)
                 .then(|| err(&x.normal, &y.normal, NORMAL_PER_COUNT))
         }
+        (Message::JointTarget(x), Message::JointTarget(y)) => (x.finger == y.finger && x.seq == y.seq)
+            .then(|| err(&x.q_target_rad, &y.q_target_rad, ANGLE_RAD_PER_COUNT)),
         (Message::Heartbeat(x), Message::Heartbeat(y)) => (x == y).then_some(0.0),
         (Message::Fault(x), Message::Fault(y)) => (x == y).then_some(0.0),
         _ => None,

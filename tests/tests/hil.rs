@@ -139,6 +139,10 @@ fn dbc_signals(m: &Message) -> Vec<(&'static str, f64)> {
             triple(["n_x", "n_y", "n_z"], n.normal);
             out.push(("in_contact", f64::from(u8::from(n.in_contact))));
         }
+        Message::JointTarget(t) => {
+            triple(["q_target_roll", "q_target_prox", "q_target_dist"], t.q_target_rad);
+            out.push(("seq", f64::from(t.seq)));
+        }
         Message::Heartbeat(h) => out.push(("counter", f64::from(h.counter))),
         Message::Fault(f) => {
             out.push(("joint", f64::from(f.joint.unwrap_or(0xff))));
@@ -180,6 +184,7 @@ fn frames_captured_on_vcan_decode_with_the_dbc() {
                 force_n: 3.1 + k,
             }),
             Message::TipNormal(TipNormal { finger, normal: [0.6, -0.8, 0.0], in_contact: true, seq: 6 }),
+            Message::JointTarget(JointTarget { finger, q_target_rad: [0.05 * k, 0.3, 0.31], seq: 8 }),
             Message::Heartbeat(Heartbeat { node: finger.index(), state: NodeState::Enabled, counter: 42 }),
             Message::Fault(Fault {
                 finger,

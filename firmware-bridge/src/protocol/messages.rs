@@ -68,6 +68,14 @@ pub struct TipNormal {
     pub seq: u8,
 }
 
+/// The targets a node is currently holding (reply to a query command).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointTarget {
+    pub finger: FingerId,
+    pub q_target_rad: [f32; 3],
+    pub seq: u8,
+}
+
 /// Node states reported in heartbeats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NodeState {
@@ -120,6 +128,7 @@ pub enum Message {
     JointEffort(JointEffort),
     TipContact(TipContact),
     TipNormal(TipNormal),
+    JointTarget(JointTarget),
     Heartbeat(Heartbeat),
 }
 
@@ -217,6 +226,11 @@ impl Message {
                 d[7] = n.seq;
                 frame(ids::TIP_NORMAL, n.finger.index(), d)
             }
+            Message::JointTarget(t) => {
+                put_i16x3(&mut d, scaled3("q_target_rad", t.q_target_rad, ANGLE_RAD_PER_COUNT)?);
+                d[7] = t.seq;
+                frame(ids::JOINT_TARGET, t.finger.index(), d)
+            }
             Message::Heartbeat(h) => {
                 if h.node >= NUM_FINGERS && h.node != HOST_NODE {
                     return Err(ProtocolError::BadFinger(h.node));
@@ -280,6 +294,11 @@ impl Message {
                 finger,
                 normal: unscaled3(get_i16x3(&d), NORMAL_PER_COUNT),
                 in_contact: d[6] & TIP_IN_CONTACT != 0,
+                seq: d[7],
+            }),
+            ids::JOINT_TARGET => Message::JointTarget(JointTarget {
+                finger,
+                q_target_rad: unscaled3(get_i16x3(&d), ANGLE_RAD_PER_COUNT),
                 seq: d[7],
             }),
             ids::HEARTBEAT => {

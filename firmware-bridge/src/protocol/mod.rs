@@ -15,6 +15,7 @@
 //! | joint effort     | 0x280 + node | node -> host | tau[3] i16 (1e-4 N·m), reserved u8, seq u8          |
 //! | tip contact      | 0x300 + node | node -> host | p[3] i16 (1e-4 m, hand frame), force u16 (1e-3 N)   |
 //! | tip normal       | 0x380 + node | node -> host | n[3] i16 (1/32767), flags u8, seq u8                |
+//! | joint target     | 0x400 + node | node -> host | q_target[3] i16 (1e-4 rad), reserved u8, seq u8     |
 //! | heartbeat        | 0x700 + node | both         | state u8, counter u8, reserved[6]                   |
 //!
 //! The host's heartbeat uses node 0x0F. `seq` in node frames is the sequence number of the
@@ -44,6 +45,9 @@ pub mod ids {
     pub const JOINT_EFFORT: u16 = 0x280;
     pub const TIP_CONTACT: u16 = 0x300;
     pub const TIP_NORMAL: u16 = 0x380;
+    /// A node's active targets, sent in reply to a disabled (query) command, so the bridge
+    /// starts from the targets that hold the current grasp instead of releasing it.
+    pub const JOINT_TARGET: u16 = 0x400;
     pub const HEARTBEAT: u16 = 0x700;
 }
 

@@ -1,0 +1,233 @@
+//! The hand's five nodes emulated by the simulator, speaking the CAN protocol: what
+//! `vge-bridge emulate` puts on a bus and what `vge-bridge run --backend sim` drives.
+//!
+//! Lockstep: when enabled joint commands with one sequence number have arrived for all five
+//! fingers, the simulator advances one control period towards those targets and every node
+//! reports its state. Disabled commands (the bridge's start-up query) are answered without
+//! advancing time. The sensor frames carry what the env observes (noise included), so the
+//! bridge rebuilds the env's own observation, up to the protocol's quantisation.
+
+use std::f32::consts::PI;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use thiserror::Error;
+use vge_sim::observation::{OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q};
+use vge_sim::{Env, EnvConfig, SimError};
+
+use crate::protocol::*;
+use crate::transport::{Received, Transport, TransportError};
+
+const FINGERS: usize = NUM_FINGERS as usize;
+
+#[derive(Debug, Error)]
+pub enum SimHandError {
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Protocol(#[from] ProtocolError),
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+}
+
+/// Frames the emulated nodes saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ServeStats {
+    pub frames_in: u64,
+    pub frames_out: u64,
+    /// Malformed frames or unknown ids: counted and ignored.
+    pub bad_frames: u64,
+}
+
+/// Answers the bridge on `transport` until `stop` is raised or nothing arrives for
+/// `idle_timeout` (the bridge has gone).
+pub fn serve<T: Transport>(
+    transport: &mut T,
+    hand: &mut SimHand,
+    idle_timeout: Duration,
+    stop: &AtomicBool,
+) -> Result<ServeStats, SimHandError> {
+    let mut stats = ServeStats::default();
+    let poll = Duration::from_millis(20).min(idle_timeout);
+    let mut idle = Duration::ZERO;
+    while !stop.load(Ordering::Relaxed) && idle < idle_timeout {
+        let Some(received) = transport.recv(poll)? else {
+            idle += poll;
+            continue;
+        };
+        idle = Duration::ZERO;
+        stats.frames_in += 1;
+        let message = match received {
+            Received::Frame(f) => Message::decode_frame(&f),
+            Received::Malformed { .. } => Err(ProtocolError::UnknownId(0)),
+        };
+        let Ok(message) = message else {
+            stats.bad_frames += 1;
+            continue;
+        };
+        for frame in hand.on_message(&message)? {
+            transport.send(&frame)?;
+            stats.frames_out += 1;
+        }
+    }
+    Ok(stats)
+}
+
+/// What happened to the object while the bridge drove the simulated hand.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SimHandSummary {
+    /// Control periods simulated.
+    pub steps: u64,
+    /// Net object rotation about +z (rad), unwrapped across ±π.
+    pub rotation_rad: f32,
+    /// Sum of the env's reward over the run.
+    pub total_reward: f32,
+    /// The env reported termination (drop, or too few fingertip contacts).
+    pub terminated: bool,
+    pub mean_tip_contacts: f32,
+}
+
+#[derive(Debug)]
+pub struct SimHand {
+    env: Env,
+    obs: [f32; OBS_DIM],
+    pending: [Option<JointCommand>; FINGERS],
+    last_yaw_rad: f32,
+    contact_sum: f32,
+    summary: SimHandSummary,
+}
+
+impl SimHand {
+    /// Builds the env and resets it with `seed` (the grasp is found by closing the fingers).
+    pub fn new(config: EnvConfig, seed: u64) -> Result<Self, SimHandError> {
+        let mut env = Env::new(config)?;
+        let (obs, _) = env.reset(seed)?;
+        let last_yaw_rad = env.privileged().map(|s| s.object.yaw_rad()).unwrap_or(0.0);
+        Ok(Self {
+            env,
+            obs,
+            pending: [None; FINGERS],
+            last_yaw_rad,
+            contact_sum: 0.0,
+            summary: SimHandSummary::default(),
+        })
+    }
+
+    pub fn env(&self) -> &Env {
+        &self.env
+    }
+
+    pub fn summary(&self) -> SimHandSummary {
+        let mut s = self.summary;
+        s.mean_tip_contacts = if s.steps == 0 { 0.0 } else { self.contact_sum / s.steps as f32 };
+        s
+    }
+
+    /// Takes one received message; returns the frames the nodes send in reply.
+    pub fn on_message(&mut self, message: &Message) -> Result<Vec<RawFrame>, SimHandError> {
+        let Message::JointCommand(cmd) = *message else { return Ok(Vec::new()) };
+        if !cmd.enable {
+            let mut frames = self.state_frames(cmd.seq)?;
+            let q_target = self.env.privileged().map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
+            for finger in FingerId::all() {
+                let f = 3 * usize::from(finger.index());
+                let q_target_rad = [q_target[f], q_target[f + 1], q_target[f + 2]];
+                frames
+                    .push(Message::JointTarget(JointTarget { finger, q_target_rad, seq: cmd.seq }).encode()?);
+            }
+            return Ok(frames);
+        }
+        self.pending[usize::from(cmd.finger.index())] = Some(cmd);
+        let complete = self.pending.iter().all(|p| p.is_some_and(|p| p.seq == cmd.seq));
+        if !complete {
+            return Ok(Vec::new());
+        }
+        let current = self.env.privileged().map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
+        let mut action = [0.0f32; 15];
+        for p in self.pending.iter().flatten() {
+            let base = usize::from(p.finger.index()) * 3;
+            for j in 0..3 {
+                action[base + j] = p.q_target_rad[j] - current[base + j];
+            }
+        }
+        self.pending = [None; FINGERS];
+        let result = self.env.step(&action)?;
+        self.obs = result.obs;
+        let yaw = result.info.object_yaw_rad;
+        self.summary.rotation_rad += wrap_angle(yaw - self.last_yaw_rad);
+        self.last_yaw_rad = yaw;
+        self.summary.steps += 1;
+        self.summary.total_reward += result.reward;
+        self.summary.terminated |= result.terminated;
+        self.contact_sum += result.info.num_tip_contacts as f32;
+        self.state_frames(cmd.seq)
+    }
+
+    /// Every node's state frames, from the latest observation.
+    fn state_frames(&self, seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
+        let state = self.env.privileged();
+        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or([0.0; 15]);
+        let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
+        let hand = &self.env.config().hand;
+        let kp = self.env.config().physics.motor_stiffness_nm_per_rad;
+        let caps = hand.torque_caps_nm();
+        let mut frames = Vec::with_capacity(FINGERS * 5);
+        for finger in FingerId::all() {
+            let f = usize::from(finger.index());
+            let q: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_Q.start + 3 * f + j]);
+            // Effort: the motor law's stiffness term, capped as the motors are (an estimate:
+            // the simulator does not expose the applied motor torque).
+            let tau: [f32; 3] = std::array::from_fn(|j| {
+                let k = 3 * f + j;
+                (kp * (q_target[k] - self.obs[OBS_Q.start + k])).clamp(-caps[k], caps[k])
+            });
+            let p: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_CONTACT_POSITION.start + 3 * f + j]);
+            let n: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_CONTACT_NORMAL.start + 3 * f + j]);
+            let force_n = self.obs[OBS_CONTACT_FORCE.start + f];
+            let in_contact = state.is_some_and(|s| s.contacts[f].is_some());
+            let messages = [
+                Message::JointPosition(JointPosition { finger, q_rad: q, status: STATUS_ENABLED, seq }),
+                Message::JointVelocity(JointVelocity {
+                    finger,
+                    dq_radps: std::array::from_fn(|j| dq[3 * f + j].clamp(-32.0, 32.0)),
+                    seq,
+                }),
+                Message::JointEffort(JointEffort { finger, tau_nm: tau, seq }),
+                Message::TipContact(TipContact { finger, position_m: p, force_n: force_n.clamp(0.0, 65.0) }),
+                Message::TipNormal(TipNormal {
+                    finger,
+                    normal: n.map(|c| c.clamp(-1.0, 1.0)),
+                    in_contact,
+                    seq,
+                }),
+            ];
+            for m in messages {
+                frames.push(m.encode()?);
+            }
+        }
+        Ok(frames)
+    }
+}
+
+/// Angle wrapped to (-π, π].
+fn wrap_angle(a: f32) -> f32 {
+    let mut a = a % (2.0 * PI);
+    if a > PI {
+        a -= 2.0 * PI;
+    } else if a <= -PI {
+        a += 2.0 * PI;
+    }
+    a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wraps_angles() {
+        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-5);
+        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-5);
+        assert_eq!(wrap_angle(0.25), 0.25);
+    }
+}
