@@ -79,3 +79,101 @@ impl fmt::Display for RuntimeError {
 }
 
 impl core::error::Error for RuntimeError {}
+
+/// Everything that can go wrong loading or running a policy file.
+///
+/// `field` names are those of `docs/policy-format.md`; `offset` is a byte offset into the
+/// payload (add 16 for the file offset).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PolicyError {
+    /// Shorter than header + CRC.
+    TooShort { len: usize, min: usize },
+    /// The first eight bytes are not `VGEPOLCY`.
+    BadMagic,
+    /// A format version this runtime does not read.
+    UnsupportedVersion { found: u16, supported: u16 },
+    /// Non-zero flags (reserved).
+    UnsupportedFlags { flags: u16 },
+    /// The declared payload length does not match the file length (truncated or trailing bytes).
+    LengthMismatch { payload_len: u32, file_len: usize },
+    /// The CRC-32 stored in the file is not that of its contents.
+    ChecksumMismatch { stored: u32, computed: u32 },
+    /// A field could not be decoded (runs off the payload, bad varint, invalid UTF-8, ...).
+    Malformed { field: &'static str, offset: usize },
+    /// The payload has bytes after its last field.
+    TrailingPayload { unused: usize },
+    /// A list or a dimension has the wrong length.
+    Len { field: &'static str, expected: usize, got: usize },
+    /// A value is NaN or infinite.
+    NonFinite { field: &'static str, index: usize },
+    /// A value that must be > 0 (std, clip, control rate) is not.
+    NotPositive { field: &'static str, index: usize },
+    /// An empty name in the observation layout or the action names.
+    EmptyName { field: &'static str, index: usize },
+    /// The observation layout's slices are not contiguous, non-empty and covering `0..obs_dim`.
+    BadLayout { index: usize },
+    /// A layer record holds an unknown activation code.
+    UnknownActivation { layer: usize, code: u8 },
+    /// The caller's storage holds fewer `f32` than the policy needs.
+    StorageTooSmall { needed: usize, got: usize },
+    /// The network was rejected by, or failed in, the MLP runtime.
+    Runtime(RuntimeError),
+}
+
+impl From<RuntimeError> for PolicyError {
+    fn from(e: RuntimeError) -> Self {
+        Self::Runtime(e)
+    }
+}
+
+impl fmt::Display for PolicyError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::TooShort { len, min } => {
+                write!(f, "file is {len} bytes, shorter than the {min}-byte minimum")
+            }
+            Self::BadMagic => write!(f, "not a vge policy file (bad magic)"),
+            Self::UnsupportedVersion { found, supported } => {
+                write!(f, "format version {found} is not supported (this runtime reads {supported})")
+            }
+            Self::UnsupportedFlags { flags } => write!(f, "unsupported header flags {flags:#06x}"),
+            Self::LengthMismatch { payload_len, file_len } => write!(
+                f,
+                "header declares a {payload_len}-byte payload but the file is {file_len} bytes (truncated or trailing data)"
+            ),
+            Self::ChecksumMismatch { stored, computed } => {
+                write!(f, "checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")
+            }
+            Self::Malformed { field, offset } => {
+                write!(f, "malformed `{field}` at payload offset {offset}")
+            }
+            Self::TrailingPayload { unused } => write!(f, "{unused} unused bytes after the payload"),
+            Self::Len { field, expected, got } => {
+                write!(f, "`{field}` has length {got}, expected {expected}")
+            }
+            Self::NonFinite { field, index } => write!(f, "`{field}`[{index}] is not finite"),
+            Self::NotPositive { field, index } => write!(f, "`{field}`[{index}] must be > 0"),
+            Self::EmptyName { field, index } => write!(f, "`{field}`[{index}] is an empty name"),
+            Self::BadLayout { index } => write!(
+                f,
+                "observation layout entry {index} does not continue a contiguous cover of 0..obs_dim"
+            ),
+            Self::UnknownActivation { layer, code } => {
+                write!(f, "layer {layer} has unknown activation code {code}")
+            }
+            Self::StorageTooSmall { needed, got } => {
+                write!(f, "policy needs storage for {needed} f32, got {got}")
+            }
+            Self::Runtime(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl core::error::Error for PolicyError {
+    fn source(&self) -> Option<&(dyn core::error::Error + 'static)> {
+        match self {
+            Self::Runtime(e) => Some(e),
+            _ => None,
+        }
+    }
+}

@@ -30,9 +30,12 @@
 #![cfg_attr(not(test), deny(clippy::panic, clippy::unwrap_used, clippy::expect_used, clippy::unreachable))]
 
 mod error;
+pub mod format;
 mod layer;
 mod mlp;
+pub mod policy;
 
-pub use error::RuntimeError;
+pub use error::{PolicyError, RuntimeError};
 pub use layer::{Activation, Layer};
 pub use mlp::{Mlp, PolicyMlp};
+pub use policy::{HandPolicy, ObsLayout, ObsSlice, Policy, PolicyInfo, Provenance, storage_len};
