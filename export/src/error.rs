@@ -1,5 +1,7 @@
 //! Errors raised while reading an actor out of a `VarStore`.
 
+use std::path::PathBuf;
+
 use tch::Kind;
 
 /// Why an actor could not be exported.
@@ -26,4 +28,16 @@ pub enum ExportError {
     /// libtorch failed while copying a tensor out.
     #[error(transparent)]
     Tch(#[from] tch::TchError),
+    /// The policy file (or the metadata going into it) failed validation.
+    #[error("invalid policy file: {0}")]
+    Format(#[from] vge_runtime::PolicyError),
+    /// postcard could not encode the payload.
+    #[error("cannot encode policy: {0}")]
+    Encode(postcard::Error),
+    /// postcard could not decode a payload the runtime accepted (a reader bug).
+    #[error("cannot decode policy payload: {0}")]
+    Decode(postcard::Error),
+    /// Reading or writing a policy file failed.
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
 }

@@ -1,15 +1,19 @@
-//! Exports tch SAC actors to the `vge_runtime` MLP representation.
+//! Exports tch SAC actors to vge policy files and the `vge_runtime` MLP representation.
 //!
-//! This first piece builds the deterministic head of a SAC actor in a [`tch::nn::VarStore`]
-//! ([`build_actor`]) and reads such an actor's parameters back by variable name into owned,
-//! validated [`ExportedLayer`]s ([`extract_actor`]), which can be borrowed as
-//! [`vge_runtime::Layer`]s for evaluation with [`vge_runtime::Mlp`].
+//! [`build_actor`] builds the deterministic head of a SAC actor in a [`tch::nn::VarStore`];
+//! [`extract_actor`] reads such an actor's parameters back by variable name into owned,
+//! validated [`ExportedLayer`]s. [`export_policy`] / [`PolicyFile`] write and read policy
+//! files (`docs/policy-format.md`), and [`inspect::report`] describes one.
 
 mod actor;
+pub mod bench;
 mod error;
 mod extract;
+pub mod inspect;
+mod policy_file;
 
 pub use actor::{ActorSpec, TchActor, build_actor};
 pub use error::ExportError;
 pub use extract::{ExportedActor, ExportedLayer, extract_actor};
+pub use policy_file::{LayerRecord, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, export_policy};
 pub use vge_runtime::Activation;

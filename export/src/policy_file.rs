@@ -1,0 +1,244 @@
+//! Policy files (`docs/policy-format.md`): the owned, serde-encoded model written by the
+//! trainer and read back on the host. The `no_std` reader is `vge_runtime::policy`.
+
+use std::ops::Range;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use tch::nn::VarStore;
+use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
+use vge_runtime::{Activation, PolicyError};
+
+use crate::{ActorSpec, ExportError, ExportedActor, ExportedLayer, extract_actor};
+
+/// Who made the policy, from what.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Provenance {
+    pub vge_version: String,
+    /// Hash of the training configuration (free-form text, typically hex).
+    pub config_hash: String,
+    pub seed: u64,
+    /// Environment steps trained.
+    pub steps: u64,
+}
+
+/// A named slice `start..end` of the observation vector.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ObsSlice {
+    pub name: String,
+    pub start: u32,
+    pub end: u32,
+}
+
+impl ObsSlice {
+    /// `ObsSlice::new("q", 0..15)`.
+    pub fn new(name: impl Into<String>, range: Range<u32>) -> Self {
+        Self { name: name.into(), start: range.start, end: range.end }
+    }
+}
+
+/// One dense layer as stored: `y = act(W x + b)`, `W` row-major `out_dim × in_dim`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LayerRecord {
+    pub in_dim: u32,
+    pub out_dim: u32,
+    /// 0 identity, 1 ReLU, 2 tanh (`vge_runtime::format::ACT_*`).
+    pub activation: u8,
+    pub weights: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+/// The payload of a policy file, field for field in file order.
+///
+/// `action = action_offset + action_scale * mlp(clip((obs - obs_mean) / obs_std))`, where
+/// `clip` clamps to `[-obs_clip, obs_clip]` when `obs_clip` is set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PolicyFile {
+    pub provenance: Provenance,
+    /// Control rate the policy was trained at.
+    pub control_hz: f32,
+    pub obs_dim: u32,
+    pub act_dim: u32,
+    pub obs_layout: Vec<ObsSlice>,
+    pub obs_mean: Vec<f32>,
+    pub obs_std: Vec<f32>,
+    pub obs_clip: Option<f32>,
+    pub layers: Vec<LayerRecord>,
+    pub action_names: Vec<String>,
+    pub action_scale: Vec<f32>,
+    pub action_offset: Vec<f32>,
+}
+
+/// Observation normalisation `(obs - mean) / std`, then optionally clamp to `[-clip, clip]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObsNorm {
+    pub mean: Vec<f32>,
+    pub std: Vec<f32>,
+    pub clip: Option<f32>,
+}
+
+impl ObsNorm {
+    /// No normalisation: mean 0, std 1, no clip.
+    pub fn identity(obs_dim: usize) -> Self {
+        Self { mean: vec![0.0; obs_dim], std: vec![1.0; obs_dim], clip: None }
+    }
+}
+
+/// Everything in a policy file besides the network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolicyMeta {
+    /// Named, contiguous slices covering `0..obs_dim`.
+    pub obs_layout: Vec<ObsSlice>,
+    /// One name per action dimension (e.g. `"index.flex1"`).
+    pub action_names: Vec<String>,
+    pub obs_norm: ObsNorm,
+    /// Per-dimension scale of the network's tanh output (e.g. max joint-target delta, rad).
+    pub action_scale: Vec<f32>,
+    /// Added after scaling (zeros for the SAC actor).
+    pub action_offset: Vec<f32>,
+    pub control_hz: f32,
+    pub provenance: Provenance,
+}
+
+impl PolicyMeta {
+    /// Placeholder metadata: one slice `"obs"`, actions `"a0"`.., identity normalisation,
+    /// scale 1, offset 0.
+    pub fn unnamed(obs_dim: usize, act_dim: usize, control_hz: f32, provenance: Provenance) -> Self {
+        let obs_end = u32::try_from(obs_dim).unwrap_or(u32::MAX);
+        Self {
+            obs_layout: vec![ObsSlice::new("obs", 0..obs_end)],
+            action_names: (0..act_dim).map(|i| format!("a{i}")).collect(),
+            obs_norm: ObsNorm::identity(obs_dim),
+            action_scale: vec![1.0; act_dim],
+            action_offset: vec![0.0; act_dim],
+            control_hz,
+            provenance,
+        }
+    }
+}
+
+fn activation_code(a: Activation) -> u8 {
+    match a {
+        Activation::Identity => ACT_IDENTITY,
+        Activation::Relu => ACT_RELU,
+        Activation::Tanh => ACT_TANH,
+    }
+}
+
+fn u32_dim(d: usize) -> Result<u32, ExportError> {
+    u32::try_from(d).map_err(|_| ExportError::InvalidSpec(format!("dimension {d} does not fit in u32")))
+}
+
+impl PolicyFile {
+    /// Combines an extracted actor with its metadata. The result is validated when encoded.
+    pub fn from_actor(actor: &ExportedActor, meta: PolicyMeta) -> Result<Self, ExportError> {
+        let layers = actor
+            .layers
+            .iter()
+            .map(|l| {
+                Ok(LayerRecord {
+                    in_dim: u32_dim(l.in_dim)?,
+                    out_dim: u32_dim(l.out_dim)?,
+                    activation: activation_code(l.activation),
+                    weights: l.weights.clone(),
+                    bias: l.bias.clone(),
+                })
+            })
+            .collect::<Result<Vec<_>, ExportError>>()?;
+        Ok(Self {
+            provenance: meta.provenance,
+            control_hz: meta.control_hz,
+            obs_dim: u32_dim(actor.obs_dim())?,
+            act_dim: u32_dim(actor.act_dim())?,
+            obs_layout: meta.obs_layout,
+            obs_mean: meta.obs_norm.mean,
+            obs_std: meta.obs_norm.std,
+            obs_clip: meta.obs_norm.clip,
+            layers,
+            action_names: meta.action_names,
+            action_scale: meta.action_scale,
+            action_offset: meta.action_offset,
+        })
+    }
+
+    /// The network as owned layers (e.g. for `ExportedActor::to_mlp`).
+    pub fn actor(&self) -> Result<ExportedActor, ExportError> {
+        let layers = self
+            .layers
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let activation = match l.activation {
+                    ACT_IDENTITY => Activation::Identity,
+                    ACT_RELU => Activation::Relu,
+                    ACT_TANH => Activation::Tanh,
+                    code => return Err(PolicyError::UnknownActivation { layer: i, code }.into()),
+                };
+                Ok(ExportedLayer {
+                    in_dim: l.in_dim as usize,
+                    out_dim: l.out_dim as usize,
+                    weights: l.weights.clone(),
+                    bias: l.bias.clone(),
+                    activation,
+                })
+            })
+            .collect::<Result<Vec<_>, ExportError>>()?;
+        Ok(ExportedActor { layers })
+    }
+
+    /// Weights and biases of all layers.
+    pub fn num_params(&self) -> usize {
+        self.layers.iter().map(|l| l.weights.len() + l.bias.len()).sum()
+    }
+
+    /// Encodes the file (header, postcard payload, CRC-32) and checks that the `no_std`
+    /// runtime accepts it; invalid metadata (a layout that does not cover the observation,
+    /// a non-positive std, ...) is reported as [`ExportError::Format`].
+    pub fn to_bytes(&self) -> Result<Vec<u8>, ExportError> {
+        let payload = postcard::to_allocvec(self).map_err(ExportError::Encode)?;
+        let len = u32::try_from(payload.len()).map_err(|_| {
+            ExportError::InvalidSpec(format!("payload of {} bytes exceeds 4 GiB", payload.len()))
+        })?;
+        let mut out = Vec::with_capacity(payload.len() + format::HEADER_LEN + format::TRAILER_LEN);
+        out.extend_from_slice(&format::header(len));
+        out.extend_from_slice(&payload);
+        let crc = format::crc32(&out);
+        out.extend_from_slice(&crc.to_le_bytes());
+        vge_runtime::policy::inspect(&out)?;
+        Ok(out)
+    }
+
+    /// Decodes and fully validates a policy file (the same checks as the runtime).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, ExportError> {
+        vge_runtime::policy::inspect(bytes)?;
+        let frame = format::check_frame(bytes)?;
+        postcard::from_bytes(frame.payload).map_err(ExportError::Decode)
+    }
+
+    /// Writes the encoded file to `path`.
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), ExportError> {
+        let path = path.as_ref();
+        let bytes = self.to_bytes()?;
+        std::fs::write(path, bytes).map_err(|source| ExportError::Io { path: path.to_owned(), source })
+    }
+
+    /// Reads and validates the file at `path`.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self, ExportError> {
+        let path = path.as_ref();
+        let bytes =
+            std::fs::read(path).map_err(|source| ExportError::Io { path: path.to_owned(), source })?;
+        Self::from_bytes(&bytes)
+    }
+}
+
+/// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`
+/// and encodes it with `meta` as a policy file.
+pub fn export_policy(
+    vs: &VarStore,
+    prefix: &str,
+    spec: &ActorSpec,
+    meta: PolicyMeta,
+) -> Result<Vec<u8>, ExportError> {
+    let actor = extract_actor(vs, prefix, spec)?;
+    PolicyFile::from_actor(&actor, meta)?.to_bytes()
+}

@@ -1,0 +1,295 @@
+//! Policy files from real tch actors: round trip, inspect, metadata errors, and every
+//! truncation and single-bit flip rejected with a typed error.
+#![allow(clippy::unwrap_used, clippy::indexing_slicing)]
+
+use tch::Device;
+use tch::nn::VarStore;
+use vge_export::{
+    ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, build_actor,
+    export_policy, extract_actor, inspect,
+};
+use vge_runtime::format::crc32;
+use vge_runtime::{HandPolicy, PolicyError, RuntimeError};
+
+const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+const JOINTS: [&str; 3] = ["roll", "flex1", "flex2"];
+
+/// The hand's 65-dim observation and 15 joint-target deltas.
+fn hand_meta() -> PolicyMeta {
+    let obs_layout = vec![
+        ObsSlice::new("q", 0..15),
+        ObsSlice::new("qd", 15..30),
+        ObsSlice::new("q_target", 30..45),
+        ObsSlice::new("fingertips", 45..60),
+        ObsSlice::new("object_quat", 60..64),
+        ObsSlice::new("object_wz", 64..65),
+    ];
+    let action_names = FINGERS.iter().flat_map(|f| JOINTS.iter().map(move |j| format!("{f}.{j}"))).collect();
+    let mean = (0..65).map(|i| (i as f32 * 0.37).sin() * 0.5).collect();
+    let std = (0..65).map(|i| 0.5 + (i as f32 * 0.11).cos().abs()).collect();
+    PolicyMeta {
+        obs_layout,
+        action_names,
+        obs_norm: ObsNorm { mean, std, clip: Some(5.0) },
+        action_scale: (0..15).map(|i| 0.02 + 0.002 * i as f32).collect(),
+        action_offset: vec![0.0; 15],
+        control_hz: 20.0,
+        provenance: Provenance {
+            vge_version: "0.1.0".into(),
+            config_hash: "3f2a9c0d5e6b7a81".into(),
+            seed: 42,
+            steps: 2_000_000,
+        },
+    }
+}
+
+fn actor_store(spec: &ActorSpec, seed: i64) -> VarStore {
+    tch::manual_seed(seed);
+    let vs = VarStore::new(Device::Cpu);
+    build_actor(&(vs.root() / "actor"), spec).unwrap();
+    vs
+}
+
+/// A real exported policy, small enough to flip every bit of: 65 -> 16 -> 15.
+fn small_file() -> Vec<u8> {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![16], act_dim: 15 };
+    export_policy(&actor_store(&spec, 5), "actor", &spec, hand_meta()).unwrap()
+}
+
+fn big_file() -> Vec<u8> {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![256, 256], act_dim: 15 };
+    export_policy(&actor_store(&spec, 6), "actor", &spec, hand_meta()).unwrap()
+}
+
+fn refix(bytes: &mut [u8]) {
+    let n = bytes.len() - 4;
+    let crc = crc32(&bytes[..n]);
+    bytes[n..].copy_from_slice(&crc.to_le_bytes());
+}
+
+#[test]
+fn round_trip_write_read() {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![32, 32], act_dim: 15 };
+    let vs = actor_store(&spec, 1);
+    let actor = extract_actor(&vs, "actor", &spec).unwrap();
+    let file = PolicyFile::from_actor(&actor, hand_meta()).unwrap();
+    let bytes = file.to_bytes().unwrap();
+    assert_eq!(bytes, export_policy(&vs, "actor", &spec, hand_meta()).unwrap(), "deterministic bytes");
+    assert_eq!(PolicyFile::from_bytes(&bytes).unwrap(), file);
+    assert_eq!(file.actor().unwrap(), actor);
+
+    let path = std::env::temp_dir().join(format!("vge-policy-{}.vgep", std::process::id()));
+    file.write(&path).unwrap();
+    assert_eq!(PolicyFile::read(&path).unwrap(), file);
+    std::fs::remove_file(&path).unwrap();
+    assert!(matches!(PolicyFile::read(&path), Err(ExportError::Io { .. })));
+
+    // The no_std runtime sees the same metadata.
+    let mut storage = vec![0.0f32; vge_runtime::storage_len(&[65, 32, 32, 15])];
+    let storage_len = storage.len();
+    let policy = HandPolicy::load(&bytes, &mut storage).unwrap();
+    let info = policy.info();
+    assert_eq!((info.obs_dim, info.act_dim, info.num_layers), (65, 15, 3));
+    assert_eq!(info.num_params, file.num_params());
+    assert_eq!(info.storage_len, storage_len);
+    assert_eq!(info.control_hz, 20.0);
+    assert_eq!(info.obs_clip, Some(5.0));
+    assert_eq!(info.provenance.config_hash, "3f2a9c0d5e6b7a81");
+    assert_eq!((info.provenance.seed, info.provenance.steps), (42, 2_000_000));
+    let q = info.obs_layout.get("fingertips").unwrap();
+    assert_eq!((q.start, q.end), (45, 60));
+    let names: Vec<&str> = info.action_names.iter().collect();
+    assert_eq!(names, file.action_names);
+    assert_eq!(info.action_names.position("index.flex1"), Some(4));
+}
+
+#[test]
+fn inspect_reports_everything() {
+    let bytes = small_file();
+    let r = inspect::report(&bytes).unwrap();
+    assert!(r.checksum_ok() && r.is_valid());
+    assert_eq!((r.format_version, r.file_len, r.num_params()), (1, bytes.len(), 65 * 16 + 16 + 16 * 15 + 15));
+    let text = r.to_string();
+    for needle in [
+        "format version 1",
+        "ok (loadable by vge-runtime)",
+        "seed 42, 2000000 steps",
+        "65 -> 16 -> 15 (2 layers, 1311 parameters)",
+        "layer 1: 16 -> 15 tanh",
+        "q 0..15, qd 15..30",
+        "little.flex2",
+        "20 Hz",
+    ] {
+        assert!(text.contains(needle), "{needle:?} not in\n{text}");
+    }
+    let mut bad = bytes.clone();
+    bad[100] ^= 0x10;
+    let r = inspect::report(&bad).unwrap();
+    assert!(!r.checksum_ok() && !r.is_valid());
+    assert!(r.to_string().contains("CRC-32 MISMATCH"), "{r}");
+    assert!(matches!(inspect::report(&bytes[..10]), Err(ExportError::Format(PolicyError::TooShort { .. }))));
+}
+
+#[test]
+fn invalid_metadata_is_rejected_when_encoding() {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![8], act_dim: 15 };
+    let vs = actor_store(&spec, 2);
+    let enc = |meta: PolicyMeta| export_policy(&vs, "actor", &spec, meta);
+    let mut m = hand_meta();
+    m.obs_layout.pop();
+    assert!(matches!(enc(m), Err(ExportError::Format(PolicyError::BadLayout { index: 5 }))));
+    let mut m = hand_meta();
+    m.obs_norm.std[3] = 0.0;
+    assert!(matches!(
+        enc(m),
+        Err(ExportError::Format(PolicyError::NotPositive { field: "obs_std", index: 3 }))
+    ));
+    let mut m = hand_meta();
+    m.action_names.pop();
+    assert!(matches!(enc(m), Err(ExportError::Format(PolicyError::Len { field: "action_names", .. }))));
+    let mut m = hand_meta();
+    m.action_scale[2] = f32::NAN;
+    assert!(matches!(
+        enc(m),
+        Err(ExportError::Format(PolicyError::NonFinite { field: "action_scale", index: 2 }))
+    ));
+    let mut m = hand_meta();
+    m.control_hz = 0.0;
+    assert!(matches!(enc(m), Err(ExportError::Format(PolicyError::NotPositive { field: "control_hz", .. }))));
+    let wrong_obs = ActorSpec { obs_dim: 64, ..spec.clone() };
+    let vs64 = actor_store(&wrong_obs, 2);
+    assert!(matches!(
+        export_policy(&vs64, "actor", &wrong_obs, hand_meta()),
+        Err(ExportError::Format(PolicyError::BadLayout { index: 5 }))
+    ));
+}
+
+#[test]
+fn wrong_magic_and_version_are_rejected() {
+    let bytes = small_file();
+    let mut bad = bytes.clone();
+    bad[..8].copy_from_slice(b"VGEPOLCZ");
+    assert!(matches!(PolicyFile::from_bytes(&bad), Err(ExportError::Format(PolicyError::BadMagic))));
+    let mut bad = bytes.clone();
+    bad[8..10].copy_from_slice(&2u16.to_le_bytes());
+    refix(&mut bad);
+    assert!(matches!(
+        PolicyFile::from_bytes(&bad),
+        Err(ExportError::Format(PolicyError::UnsupportedVersion { found: 2, supported: 1 }))
+    ));
+    let mut storage = vec![0.0f32; 4096];
+    assert_eq!(
+        HandPolicy::load(&bad, &mut storage).unwrap_err(),
+        PolicyError::UnsupportedVersion { found: 2, supported: 1 }
+    );
+}
+
+#[test]
+fn nan_observation_is_an_error() {
+    let bytes = small_file();
+    let mut storage = vec![0.0f32; 4096];
+    let policy = HandPolicy::load(&bytes, &mut storage).unwrap();
+    let mut obs = vec![0.1f32; 65];
+    let mut action = [9.0f32; 15];
+    policy.forward(&obs, &mut action).unwrap();
+    assert!(action.iter().zip(policy.info().action_names.iter()).all(|(a, _)| a.abs() <= 0.05));
+    obs[17] = f32::NAN;
+    let before = action;
+    assert_eq!(
+        policy.forward(&obs, &mut action),
+        Err(PolicyError::Runtime(RuntimeError::NonFiniteObs { index: 17 }))
+    );
+    obs[17] = f32::NEG_INFINITY;
+    assert_eq!(
+        policy.forward(&obs, &mut action),
+        Err(PolicyError::Runtime(RuntimeError::NonFiniteObs { index: 17 }))
+    );
+    assert_eq!(action, before);
+}
+
+/// Every truncation and every single-bit flip of a real exported policy file is rejected
+/// with a typed error (a panic fails the test).
+#[test]
+fn every_truncation_and_bit_flip_is_rejected() {
+    let bytes = small_file();
+    let mut storage = vec![0.0f32; vge_runtime::storage_len(&[65, 16, 15])];
+    HandPolicy::load(&bytes, &mut storage).unwrap();
+    for n in 0..bytes.len() {
+        let err = HandPolicy::load(&bytes[..n], &mut storage).unwrap_err();
+        assert!(
+            matches!(err, PolicyError::TooShort { .. } | PolicyError::LengthMismatch { .. }),
+            "{n}: {err}"
+        );
+    }
+    let mut flipped = bytes.clone();
+    for bit in 0..bytes.len() * 8 {
+        let (i, mask) = (bit / 8, 1u8 << (bit % 8));
+        flipped[i] ^= mask;
+        let err = HandPolicy::load(&flipped, &mut storage).unwrap_err();
+        match i {
+            0..8 => assert_eq!(err, PolicyError::BadMagic),
+            8..10 => assert!(matches!(err, PolicyError::UnsupportedVersion { .. })),
+            10..12 => assert!(matches!(err, PolicyError::UnsupportedFlags { .. })),
+            12..16 => assert!(matches!(err, PolicyError::LengthMismatch { .. })),
+            _ => assert!(matches!(err, PolicyError::ChecksumMismatch { .. }), "bit {bit}: {err}"),
+        }
+        flipped[i] ^= mask;
+    }
+    eprintln!(
+        "{} truncations and {} bit flips of a {}-byte file rejected",
+        bytes.len(),
+        bytes.len() * 8,
+        bytes.len()
+    );
+}
+
+/// Every truncation of the full-size policy, and bit flips spread over it.
+#[test]
+fn full_size_truncations_and_sampled_flips_are_rejected() {
+    let bytes = big_file();
+    let mut storage = vec![0.0f32; vge_runtime::storage_len(&[65, 256, 256, 15])];
+    HandPolicy::load(&bytes, &mut storage).unwrap();
+    for n in 0..bytes.len() {
+        assert!(HandPolicy::load(&bytes[..n], &mut storage).is_err(), "truncation to {n}");
+    }
+    let mut flipped = bytes.clone();
+    let mut state = 0x9E37_79B9_u64;
+    for _ in 0..300 {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        let bit = (state >> 16) as usize % (bytes.len() * 8);
+        flipped[bit / 8] ^= 1 << (bit % 8);
+        assert!(HandPolicy::load(&flipped, &mut storage).is_err(), "bit {bit}");
+        flipped[bit / 8] ^= 1 << (bit % 8);
+    }
+}
+
+/// Single-bit flips of the payload with the CRC recomputed, so that they reach the decoder:
+/// each is either still a valid policy (a changed weight or name) that runs without panicking,
+/// or a typed error.
+#[test]
+fn every_payload_bit_flip_behind_a_valid_crc_decodes_or_errors() {
+    let bytes = small_file();
+    let mut storage = vec![0.0f32; 4096];
+    let obs = [0.3f32; 65];
+    let mut action = [0.0f32; 15];
+    let (mut accepted, mut rejected) = (0usize, 0usize);
+    let mut flipped = bytes.clone();
+    for bit in 16 * 8..(bytes.len() - 4) * 8 {
+        let (i, mask) = (bit / 8, 1u8 << (bit % 8));
+        flipped[i] ^= mask;
+        refix(&mut flipped);
+        match HandPolicy::load(&flipped, &mut storage) {
+            Ok(p) => {
+                accepted += 1;
+                let _ = p.forward(&obs, &mut action);
+            }
+            Err(e) => {
+                rejected += 1;
+                assert!(!e.to_string().is_empty());
+            }
+        }
+        flipped[i] ^= mask;
+    }
+    eprintln!("payload flips with valid CRC: {accepted} still valid, {rejected} rejected");
+    assert!(rejected > 0 && accepted > 0);
+}
