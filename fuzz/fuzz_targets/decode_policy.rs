@@ -1,0 +1,45 @@
+//! Fuzzes the `no_std` policy decoder: `RUSTC_BOOTSTRAP=1 cargo fuzz run decode_policy`
+//! (from the repository root; seeds in `fuzz/seeds/`).
+//!
+//! An input starting with the magic is decoded as a whole file. Any other input is taken as a
+//! payload and framed with a valid header and CRC-32 first, so that mutations get past the
+//! checksum into the postcard decoder and the field validation. Whatever loads is run on an
+//! observation taken from the input.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use vge_runtime::Policy;
+use vge_runtime::format::{MAGIC, crc32, header};
+
+fn exercise(file: &[u8], storage: &mut [f32]) {
+    let info = vge_runtime::policy::inspect(file);
+    let loaded = Policy::<4, 64>::load(file, storage);
+    if let (Ok(info), Ok(policy)) = (info, loaded) {
+        assert_eq!(policy.obs_dim(), info.obs_dim);
+        let _ = info.obs_layout.iter().count();
+        let _ = info.action_names.iter().count();
+        let mut obs = [0.0f32; 64];
+        for (o, c) in obs.iter_mut().zip(file.chunks_exact(4).rev()) {
+            *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        }
+        let mut action = [0.0f32; 64];
+        let n_obs = info.obs_dim.min(64);
+        let n_act = info.act_dim.min(64);
+        let _ = policy.forward(&obs[..n_obs], &mut action[..n_act]);
+        let _ = policy.forward(&[0.0; 64][..n_obs], &mut action[..n_act]);
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let mut storage = vec![0.0f32; 8192];
+    if data.starts_with(&MAGIC) {
+        exercise(data, &mut storage);
+    } else if let Ok(len) = u32::try_from(data.len()) {
+        let mut file = Vec::with_capacity(data.len() + 20);
+        file.extend_from_slice(&header(len));
+        file.extend_from_slice(data);
+        let crc = crc32(&file);
+        file.extend_from_slice(&crc.to_le_bytes());
+        exercise(&file, &mut storage);
+    }
+});
