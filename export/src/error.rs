@@ -23,13 +23,13 @@ pub enum ExportError {
     #[error("variable `{name}` holds a non-finite value at flat index {index}")]
     NonFinite { name: String, index: usize },
     /// The extracted layers were rejected by the runtime.
-    #[error("runtime rejected the exported layers: {0}")]
+    #[error("runtime rejected the exported layers")]
     Runtime(#[from] vge_runtime::RuntimeError),
     /// libtorch failed while copying a tensor out.
     #[error(transparent)]
     Tch(#[from] tch::TchError),
     /// The policy file (or the metadata going into it) failed validation.
-    #[error("invalid policy file: {0}")]
+    #[error("invalid policy file")]
     Format(#[from] vge_runtime::PolicyError),
     /// postcard could not encode the payload.
     #[error("cannot encode policy: {0}")]
@@ -38,6 +38,6 @@ pub enum ExportError {
     #[error("cannot decode policy payload: {0}")]
     Decode(postcard::Error),
     /// Reading or writing a policy file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}", path.display())]
     Io { path: PathBuf, source: std::io::Error },
 }

@@ -4,4 +4,5 @@
 pub mod bench_update;
 pub mod controllers;
 pub mod nets;
+pub mod policy_export;
 pub mod sac;

@@ -1,9 +1,15 @@
 //! `vge`: train, evaluate, export and inspect finger-gaiting policies.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
-use vge_trainer::bench_update;
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use tch::{Device, nn};
+use vge_export::Provenance;
+use vge_sim::EnvConfig;
+use vge_trainer::nets::{GaussianActor, NetSpec};
+use vge_trainer::{bench_update, policy_export};
 
 /// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
 /// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
@@ -16,9 +22,43 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Write a policy file (postcard, see docs/policy-format.md) from an actor.
+    ///
+    /// The file carries the actor's layers, the hand's observation and action layouts, the
+    /// action scaling and control rate of the default env, and provenance. Load it with
+    /// `vge-runtime` (no_std) or run it with `vge-bridge`.
+    Export(ExportArgs),
+    /// Check a policy file and print what it holds: format version, dimensions, layers,
+    /// parameter count, provenance, checksum status. Exits non-zero if it is not valid.
+    Inspect {
+        /// The policy file.
+        file: PathBuf,
+    },
     /// Measure vge's hot paths on this machine.
     #[command(subcommand)]
     Bench(Bench),
+}
+
+#[derive(Debug, Args)]
+struct ExportArgs {
+    /// Actor variables saved by tch (`VarStore::save`, names `actor.l{i}`, `actor.mean`, ...).
+    #[arg(long, conflicts_with = "init", required_unless_present = "init")]
+    actor: Option<PathBuf>,
+    /// Export a freshly initialised (untrained) actor instead, e.g. to test a deployment path.
+    #[arg(long)]
+    init: bool,
+    /// Seed of the initialisation (--init) and recorded as provenance.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Hidden layer widths of the actor.
+    #[arg(long, value_delimiter = ',', default_value = "256,256")]
+    hidden: Vec<usize>,
+    /// Environment steps the actor was trained for (provenance).
+    #[arg(long, default_value_t = 0)]
+    steps: u64,
+    /// Where to write the policy file.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, Subcommand)]
@@ -39,6 +79,31 @@ enum Bench {
         #[arg(long, default_value_t = 0)]
         seed: i64,
     },
+    /// Simulator throughput: control steps per second of one world on one thread, and of N
+    /// worlds stepped across all cores, at the default env rates.
+    Sim {
+        /// Print one JSON line instead of a summary.
+        #[arg(long)]
+        json: bool,
+        /// Control steps per world.
+        #[arg(long, default_value_t = 2_000)]
+        steps: usize,
+        /// Worlds in the vectorized run.
+        #[arg(long, default_value_t = 8)]
+        worlds: usize,
+        /// Threads for the vectorized run (0: all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+    },
+    /// Policy forward latency at batch 1 (65-256-256-15): the no_std runtime against tch.
+    Runtime {
+        /// Print one JSON line instead of a summary.
+        #[arg(long)]
+        json: bool,
+        /// Timed forwards per implementation.
+        #[arg(long, default_value_t = 20_000)]
+        iters: usize,
+    },
 }
 
 fn main() -> ExitCode {
@@ -53,7 +118,53 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Bench(Bench::Update { json, updates, batch, seed }) => {
+        Command::Export(args) => export(args),
+        Command::Inspect { file } => {
+            let report = vge_export::inspect::report_file(&file)
+                .with_context(|| format!("reading policy file {}", file.display()))?;
+            print!("{report}");
+            if !report.is_valid() {
+                bail!("{} is not a valid policy file", file.display());
+            }
+            Ok(())
+        }
+        Command::Bench(bench) => run_bench(bench),
+    }
+}
+
+fn export(args: ExportArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.hidden.iter().all(|&h| h > 0), "--hidden widths must be positive");
+    let env = EnvConfig::default();
+    let mut vs = nn::VarStore::new(Device::Cpu);
+    let spec = NetSpec {
+        obs_dim: vge_sim::OBS_DIM as i64,
+        act_dim: vge_sim::NUM_JOINTS as i64,
+        hidden: args.hidden.iter().map(|&h| h as i64).collect(),
+    };
+    tch::manual_seed(args.seed as i64);
+    let _actor = GaussianActor::new(&vs.root(), &spec, &[env.max_action_rad; vge_sim::NUM_JOINTS]);
+    let config_hash = match &args.actor {
+        Some(path) => {
+            vs.load(path).with_context(|| format!("loading actor variables from {}", path.display()))?;
+            format!("actor:{}", path.display())
+        }
+        None => "untrained".to_owned(),
+    };
+    let provenance = Provenance {
+        vge_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config_hash,
+        seed: args.seed,
+        steps: args.steps,
+    };
+    let bytes = policy_export::export_hand_actor(&vs, &args.hidden, &env, provenance)?;
+    std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
+    println!("wrote {} ({} bytes)", args.out.display(), bytes.len());
+    Ok(())
+}
+
+fn run_bench(bench: Bench) -> anyhow::Result<()> {
+    match bench {
+        Bench::Update { json, updates, batch, seed } => {
             anyhow::ensure!(updates > 0, "--updates must be at least 1");
             anyhow::ensure!(batch > 0, "--batch must be at least 1");
             let r = bench_update::run(batch, 20, updates, seed)?;
@@ -74,7 +185,44 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("  achieved GFLOP/s {:>8.2}", r.gflops);
                 println!("  matmul GFLOP/s   {:>8.2}  (1024^3 f32 matmul, same run)", r.matmul_gflops);
             }
-            Ok(())
+        }
+        Bench::Sim { json, steps, worlds, threads } => {
+            anyhow::ensure!(steps > 0 && worlds > 0, "--steps and --worlds must be at least 1");
+            let settings = vge_sim::bench::BenchSettings {
+                env: EnvConfig::default(),
+                steps_per_world: steps,
+                num_worlds: worlds,
+                threads,
+            };
+            if !json {
+                eprintln!("stepping 1 world then {worlds} worlds, {steps} control steps each...");
+            }
+            let r = vge_sim::bench::run(&settings)?;
+            if json {
+                println!("{}", r.to_json_line());
+            } else {
+                println!("control steps/s, one world, one thread: {:>8.0}", r.control_steps_per_s_single);
+                println!(
+                    "control steps/s, {worlds} worlds, {} threads: {:>8.0}  ({:.2}x)",
+                    r.threads_used,
+                    r.control_steps_per_s_vec,
+                    r.speedup()
+                );
+            }
+        }
+        Bench::Runtime { json, iters } => {
+            anyhow::ensure!(iters > 0, "--iters must be at least 1");
+            let config = vge_export::bench::BenchConfig { iters, ..Default::default() };
+            let r = vge_export::bench::run(&config)?;
+            if json {
+                println!("{}", r.to_json_line());
+            } else {
+                println!("batch-1 forward, {:?}, {} iterations", r.dims, r.iters);
+                println!("  vge-runtime  median {:>8.0} ns", r.runtime_ns);
+                println!("  tch          median {:>8.0} ns  ({} threads)", r.tch_ns, r.tch_threads);
+                println!("  speedup {:.1}x, max |diff| {:.2e}", r.tch_ns / r.runtime_ns, r.max_abs_diff);
+            }
         }
     }
+    Ok(())
 }

@@ -1,0 +1,57 @@
+//! What a trained hand actor becomes on disk: the policy file's metadata for the hand's
+//! observation and action layouts, and the export of an actor's variables.
+
+use tch::nn::VarStore;
+use vge_export::{ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyMeta, Provenance, export_policy};
+use vge_sim::EnvConfig;
+use vge_sim::observation::{
+    OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q, OBS_Q_TARGET,
+};
+
+/// Joint names within a finger, in joint order.
+pub const JOINT_NAMES: [&str; 3] = ["roll", "flex_prox", "flex_dist"];
+
+fn slice(name: &str, range: std::ops::Range<usize>) -> ObsSlice {
+    // The observation is 65 floats: the casts are exact.
+    ObsSlice::new(name, range.start as u32..range.end as u32)
+}
+
+/// Metadata of a hand policy trained on `env`: named observation slices (as
+/// `vge_sim::observation` lays them out), `finger.joint` action names, actions scaled to the
+/// env's largest joint-target change per step, and the env's control rate.
+pub fn hand_policy_meta(env: &EnvConfig, provenance: Provenance) -> PolicyMeta {
+    let action_names = env
+        .hand
+        .fingers
+        .iter()
+        .flat_map(|f| JOINT_NAMES.iter().map(move |j| format!("{}.{j}", f.name)))
+        .collect::<Vec<_>>();
+    let act_dim = action_names.len();
+    PolicyMeta {
+        obs_layout: vec![
+            slice("q_rad", OBS_Q),
+            slice("q_target_rad", OBS_Q_TARGET),
+            slice("contact_position_m", OBS_CONTACT_POSITION),
+            slice("contact_normal", OBS_CONTACT_NORMAL),
+            slice("contact_force_n", OBS_CONTACT_FORCE),
+        ],
+        action_names,
+        obs_norm: ObsNorm::identity(OBS_DIM),
+        action_scale: vec![env.max_action_rad; act_dim],
+        action_offset: vec![0.0; act_dim],
+        control_hz: env.control_hz,
+        provenance,
+    }
+}
+
+/// Policy-file bytes of the actor in `actor_vs` (variables `actor.*`, as `nets::GaussianActor`
+/// names them) for the hand of `env`.
+pub fn export_hand_actor(
+    actor_vs: &VarStore,
+    hidden: &[usize],
+    env: &EnvConfig,
+    provenance: Provenance,
+) -> Result<Vec<u8>, ExportError> {
+    let spec = ActorSpec { obs_dim: OBS_DIM, hidden: hidden.to_vec(), act_dim: vge_sim::NUM_JOINTS };
+    export_policy(actor_vs, "actor", &spec, hand_policy_meta(env, provenance))
+}
