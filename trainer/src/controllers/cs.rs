@@ -44,12 +44,25 @@ pub struct CsConfig {
     pub min_remaining_contacts: usize,
 }
 
+impl CsConfig {
+    /// The defaults at `env`'s control period.
+    #[must_use]
+    pub fn for_env(env: &vge_sim::EnvConfig) -> Self {
+        Self { control_period_s: env.control_dt_s(), ..Self::default() }
+    }
+}
+
 impl Default for CsConfig {
-    /// H = 20 steps at 0.05 s (1 s), speeds in [0.1, 0.4] rad/s, 40 % detach, keep 3.
-    /// H and the period must match the env once it exists.
+    /// H = 50 steps at 0.05 s (2.5 s, the env's 20 Hz), speeds in [0.1, 0.4] rad/s, 40 %
+    /// detach, keep 3. Tuned on the env (cube, 20 seeded single switches): the grasp
+    /// squeezes 0.05 rad past first contact and the other fingers push the object after a
+    /// retreating tip, so the detach phase must open the proximal flexion by well over
+    /// that at the slowest speed. H = 20 (8 detach steps, >= 0.04 rad) broke and remade
+    /// the contact in 15/20, H = 30-40 in 16/20, H = 50 (20 detach steps, >= 0.1 rad,
+    /// then 30 closing: 0.05-0.2 rad past the start) in 18/20; H = 60 in 17/20.
     fn default() -> Self {
         Self {
-            horizon_steps: 20,
+            horizon_steps: 50,
             control_period_s: 0.05,
             speed_min_rad_s: 0.1,
             speed_max_rad_s: 0.4,

@@ -10,7 +10,7 @@
 use vge_sim::{HandModel, NUM_JOINTS};
 
 use super::cs::{CsConfig, CsController};
-use super::igm::{IgmConfig, IgmController, tip_contacts};
+use super::igm::{IgmConfig, IgmController, fit_to_joint_limits, tip_contacts};
 use super::{Controller, ControllerError, ControllerInput, limit_to_joint_range};
 
 /// FG as a [`Controller`] (module docs).
@@ -56,7 +56,11 @@ impl Controller for FgController {
                     &self.igm.config,
                 );
                 match igm {
-                    Ok(out) => std::array::from_fn(|j| out.delta_rad[j] + cs_delta[j]),
+                    Ok(out) => {
+                        let igm_delta =
+                            fit_to_joint_limits(&self.igm.hand, &input.q_target_rad, &out, &self.igm.config);
+                        std::array::from_fn(|j| igm_delta[j] + cs_delta[j])
+                    }
                     Err(_) => cs_delta,
                 }
             }

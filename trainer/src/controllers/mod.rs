@@ -4,7 +4,8 @@
 //!
 //! Controllers run in training only, so they read privileged simulator state (the object
 //! pose). They do not depend on the simulator's env types: the env's privileged state is
-//! converted into a [`ControllerInput`] (one adapter, written next to the env), and every
+//! converted into a [`ControllerInput`] by one adapter,
+//! [`ControllerInput::from_privileged`] ([`input`]), and every
 //! controller is a function of that plus its own small state and a seeded rng.
 //!
 //! Conventions (those of [`vge_sim::kinematics`]): world frame, z up; joint vectors are
@@ -15,7 +16,9 @@
 pub mod cs;
 pub mod fg;
 pub mod igm;
+pub mod input;
 pub mod qp;
+pub mod rollout;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
@@ -23,8 +26,9 @@ use vge_sim::{HandModel, KinematicsError, NUM_FINGERS, NUM_JOINTS};
 
 pub use cs::{CsConfig, CsController, CsPlan, CsProfile};
 pub use fg::FgController;
-pub use igm::{ForceScaling, IgmConfig, IgmController, IgmOutput, TipContact, igm_step};
-pub use qp::{ContactForces, QpError, contact_force_qp};
+pub use igm::{ForceScaling, ForceSelection, IgmConfig, IgmController, IgmOutput, TipContact, igm_step};
+pub use qp::{ContactForces, QpError, contact_force_qp, nearest_balanced_forces};
+pub use rollout::{ControllerKind, EpisodeStats, RolloutOptions, RolloutSummary};
 
 /// One fingertip's contact with the object, as the simulator reports it.
 #[derive(Debug, Clone, Copy, PartialEq)]

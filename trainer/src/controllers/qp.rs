@@ -278,6 +278,86 @@ fn better(a: &ContactForces, b: &ContactForces) -> bool {
     }
 }
 
+/// Among the force distributions that balance the object as well as the QP's optimum
+/// does, the one nearest `reference` (IGM's choice of c*: the measured forces).
+///
+/// The QP's minimiser is often not unique: on the cube, two opposing fingers alone reach
+/// ||w|| = 0, and so does every mix of that pair with the other opposing sets. Which
+/// minimiser [`contact_force_qp`] returns is then an accident of the solver and the
+/// tie-break, and one with zeros tells IGM to pull those fingers off the object (measured
+/// on the env: a five-finger grasp shrank to three within 0.3 s). This second stage keeps
+/// the QP's balance and picks the minimiser closest to what the hand already applies:
+///
+/// ```text
+/// minimise ||c - r||^2   subject to   ||M c|| <= rho sum(c),   c >= 0
+/// rho = residual / sum(c*) + slack
+/// ```
+///
+/// (a second-order cone program, solved with clarabel), i.e. at most the QP's residual
+/// per unit of total force, plus `slack` for the solver's tolerance. The feasible set is a
+/// cone, so a reference that already balances is returned unchanged, at any scale. The
+/// answer is in the units of `reference`. Returns `forces`' magnitudes, rescaled to the
+/// sum of `reference`, when the problem fails to solve.
+pub fn nearest_balanced_forces(
+    grasp: &DMatrix<f64>,
+    normals: &[Vector3<f64>],
+    forces: &ContactForces,
+    reference: &[f64],
+    slack: f64,
+) -> Result<Vec<f64>, QpError> {
+    let units = validate(grasp, normals)?;
+    let k = units.len();
+    if reference.len() != k || reference.iter().any(|v| !v.is_finite() || *v < 0.0) {
+        return Err(QpError::NonFinite("reference force"));
+    }
+    let ref_sum: f64 = reference.iter().sum();
+    let star_sum: f64 = forces.magnitudes.iter().sum();
+    let fallback = || forces.magnitudes.iter().map(|c| c * ref_sum / star_sum.max(1e-12)).collect();
+    if ref_sum <= 0.0 || star_sum <= 0.0 {
+        return Ok(fallback());
+    }
+    let m = wrench_basis(grasp, &units);
+    let rho = forces.residual / star_sum + slack;
+    let p = upper_csc(&(DMatrix::identity(k, k) * 2.0));
+    let q: Vec<f64> = reference.iter().map(|r| -2.0 * r).collect();
+    // Rows 0..7: the cone (rho 1^T c; M c) via s = b - A c with A = [-rho 1^T; -M], b = 0.
+    // Rows 7..7+k: s = -(-I) c = c >= 0.
+    let mut a = DMatrix::zeros(7 + k, k);
+    a.row_mut(0).fill(-rho);
+    a.view_mut((1, 0), (6, k)).copy_from(&(-&m));
+    a.view_mut((7, 0), (k, k)).copy_from(&(-DMatrix::identity(k, k)));
+    let a = dense_csc(&a);
+    let b = vec![0.0; 7 + k];
+    let cones = [SupportedConeT::SecondOrderConeT(7), SupportedConeT::NonnegativeConeT(k)];
+    let mut solver =
+        DefaultSolver::new(&p, &q, &a, &b, &cones, settings()).map_err(|e| QpError::Setup(e.to_string()))?;
+    solver.solve();
+    if !matches!(solver.solution.status, SolverStatus::Solved | SolverStatus::AlmostSolved)
+        || solver.solution.x.iter().any(|v| !v.is_finite())
+    {
+        return Ok(fallback());
+    }
+    Ok(solver.solution.x.iter().map(|&v| v.max(0.0)).collect())
+}
+
+/// A dense matrix in clarabel's CSC, exact zeros left out.
+fn dense_csc(a: &DMatrix<f64>) -> CscMatrix<f64> {
+    let mut colptr = Vec::with_capacity(a.ncols() + 1);
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    colptr.push(0);
+    for c in 0..a.ncols() {
+        for r in 0..a.nrows() {
+            if a[(r, c)] != 0.0 {
+                rowval.push(r);
+                nzval.push(a[(r, c)]);
+            }
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(a.nrows(), a.ncols(), colptr, rowval, nzval)
+}
+
 /// Mean wall time of one [`contact_force_qp`] call (microseconds) for `k` contacts spread
 /// evenly round the equator of a 5 cm sphere, tilted so they are not coplanar with the
 /// centre's horizontal plane, over `iterations` calls; for `vge bench`.

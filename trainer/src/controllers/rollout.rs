@@ -1,0 +1,380 @@
+//! Roll a sub-skill controller out alone on the simulator (the `vge controller` command):
+//! every control step the env's privileged state becomes a [`ControllerInput`], the
+//! controller's joint-target change is the env's action (zero when the controller has no
+//! action that step, e.g. too few contacts), and the episode runs until the env
+//! terminates or truncates it.
+//!
+//! Measured per episode ([`EpisodeStats`]): the return (sum of the env's rewards), the
+//! object's rotation about world z (yaw at the end minus yaw after the grasp settled,
+//! unwrapped step by step, so several turns add up), the mean number of fingertip
+//! contacts over the steps, and whether the env terminated it (the object fell, or fewer
+//! than [`EnvConfig::min_contacts`] fingertips held it): a *drop*. Also the wall time of
+//! each controller call (the adapter plus [`Controller::act`]), since the behaviour policy
+//! queries the controller every step.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Instant;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use vge_sim::{Env, EnvConfig, NUM_JOINTS, ObjectConfig, ObjectShape, SimError, StepResult};
+
+use super::{Controller, ControllerInput, CsConfig, CsController, FgController, IgmConfig, IgmController};
+
+/// Which controller to roll out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ControllerKind {
+    /// In-grasp manipulation.
+    Igm,
+    /// Contact switching.
+    Cs,
+    /// Finger-gaiting (IGM + CS).
+    Fg,
+}
+
+impl ControllerKind {
+    /// All kinds, in a fixed order.
+    pub const ALL: [Self; 3] = [Self::Igm, Self::Cs, Self::Fg];
+
+    /// Lower-case name ("igm", "cs", "fg").
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Igm => "igm",
+            Self::Cs => "cs",
+            Self::Fg => "fg",
+        }
+    }
+
+    /// The controller with the given configurations (`cs.control_period_s` should be the
+    /// env's control period: [`CsConfig::for_env`]).
+    #[must_use]
+    pub fn build(self, env: &EnvConfig, igm: IgmConfig, cs: CsConfig) -> Box<dyn Controller + Send> {
+        let hand = env.hand.clone();
+        match self {
+            Self::Igm => Box::new(IgmController::new(hand, igm)),
+            Self::Cs => Box::new(CsController::new(hand, cs)),
+            Self::Fg => Box::new(FgController::new(hand, igm, cs)),
+        }
+    }
+}
+
+impl fmt::Display for ControllerKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for ControllerKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| format!("unknown controller kind {s:?} (expected igm, cs or fg)"))
+    }
+}
+
+/// Everything besides kind, object, episodes and seed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RolloutOptions {
+    /// The env (its `object` is replaced by the object asked for; its
+    /// `episode_length_steps` is the episode length).
+    pub env: EnvConfig,
+    /// IGM parameters (IGM and FG).
+    pub igm: IgmConfig,
+    /// CS parameters (CS and FG); `control_period_s` is overwritten with the env's.
+    pub cs: CsConfig,
+}
+
+impl Default for RolloutOptions {
+    /// The default env (20 Hz, 400 steps = 20 s) and the tuned controller defaults.
+    fn default() -> Self {
+        let env = EnvConfig::default();
+        let cs = CsConfig::for_env(&env);
+        Self { env, igm: IgmConfig::default(), cs }
+    }
+}
+
+/// One control step as [`run_episode`] saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepTrace {
+    /// Control step, 1-based (after the step).
+    pub step: usize,
+    /// The action applied (zero when the controller had none).
+    pub action: [f32; NUM_JOINTS],
+    /// Whether the controller had an action.
+    pub acted: bool,
+    /// Fingertips touching the object after the step.
+    pub contacts: usize,
+    /// Which fingertips touch after the step.
+    pub in_contact: [bool; vge_sim::NUM_FINGERS],
+    /// Object rotation about z since the episode began (rad, unwrapped).
+    pub rotation_rad: f32,
+    /// Reward of the step.
+    pub reward: f32,
+    /// Controller call time (s).
+    pub controller_s: f64,
+}
+
+/// One episode's figures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EpisodeStats {
+    /// Sum of rewards.
+    pub episode_return: f32,
+    /// Object rotation about world z over the episode (rad, unwrapped).
+    pub rotation_rad: f32,
+    /// Mean fingertip contacts over the steps.
+    pub mean_contacts: f32,
+    /// Control steps run.
+    pub steps: usize,
+    /// The env terminated the episode (object fell or too few contacts).
+    pub dropped: bool,
+    /// Steps on which the controller had no action.
+    pub no_action_steps: usize,
+    /// Controller call times (s), one per step.
+    pub controller_s: Vec<f64>,
+}
+
+fn wrap_pi(a: f32) -> f32 {
+    let tau = std::f32::consts::TAU;
+    a - tau * ((a + std::f32::consts::PI) / tau).floor()
+}
+
+/// Resets `env` with `seed`, resets `controller` with a generator seeded from `seed`,
+/// and runs one episode; `on_step` sees every step.
+pub fn run_episode(
+    env: &mut Env,
+    controller: &mut dyn Controller,
+    seed: u64,
+    mut on_step: impl FnMut(&StepTrace, &Env),
+) -> Result<EpisodeStats, SimError> {
+    env.reset(seed)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_c0de_0000_0000);
+    controller.reset(&mut rng);
+    let mut yaw = env.privileged().ok_or(SimError::NotReset)?.object.yaw_rad();
+    let (mut rotation, mut ret, mut contact_sum) = (0.0f32, 0.0f32, 0usize);
+    let mut stats = EpisodeStats {
+        episode_return: 0.0,
+        rotation_rad: 0.0,
+        mean_contacts: 0.0,
+        steps: 0,
+        dropped: false,
+        no_action_steps: 0,
+        controller_s: Vec::with_capacity(env.config().episode_length_steps),
+    };
+    loop {
+        let state = env.privileged().ok_or(SimError::NotReset)?;
+        let start = Instant::now();
+        let input = ControllerInput::from_privileged(state);
+        let acted = controller.act(&input, &mut rng);
+        let elapsed = start.elapsed().as_secs_f64();
+        stats.controller_s.push(elapsed);
+        let action = acted.as_ref().copied().unwrap_or([0.0; NUM_JOINTS]);
+        if acted.is_err() {
+            stats.no_action_steps += 1;
+        }
+        let StepResult { reward, terminated, truncated, info, .. } = env.step(&action)?;
+        rotation += wrap_pi(info.object_yaw_rad - yaw);
+        yaw = info.object_yaw_rad;
+        ret += reward;
+        contact_sum += info.num_tip_contacts;
+        stats.steps += 1;
+        let in_contact =
+            env.privileged().map_or([false; vge_sim::NUM_FINGERS], |s| s.contacts.map(|c| c.is_some()));
+        on_step(
+            &StepTrace {
+                step: info.step,
+                action,
+                acted: acted.is_ok(),
+                contacts: info.num_tip_contacts,
+                in_contact,
+                rotation_rad: rotation,
+                reward,
+                controller_s: elapsed,
+            },
+            env,
+        );
+        if terminated || truncated {
+            stats.dropped = terminated;
+            break;
+        }
+    }
+    stats.episode_return = ret;
+    stats.rotation_rad = rotation;
+    stats.mean_contacts = contact_sum as f32 / stats.steps.max(1) as f32;
+    Ok(stats)
+}
+
+/// Mean figures over a rollout.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RolloutSummary {
+    /// Controller rolled out.
+    pub kind: ControllerKind,
+    /// Object.
+    pub object: ObjectShape,
+    /// Episodes run.
+    pub episodes: usize,
+    /// First seed (episode i uses `seed + i`).
+    pub seed: u64,
+    /// Mean return (sum of rewards, i.e. of the object's z angular velocity in rad/s while
+    /// >= 3 fingertips touch, per control step).
+    pub mean_return: f32,
+    /// Mean object rotation about z per episode (rad).
+    pub mean_rotation_rad: f32,
+    /// Largest |rotation| of any episode (rad).
+    pub max_abs_rotation_rad: f32,
+    /// Mean fingertip contacts (over all steps of all episodes).
+    pub mean_contacts: f32,
+    /// Episodes the env terminated (object fell, or fewer than 3 fingertips held it).
+    pub drops: usize,
+    /// Mean episode length (control steps).
+    pub mean_steps: f32,
+    /// Fraction of steps on which the controller had no action (zero action applied).
+    pub no_action_fraction: f32,
+    /// Median controller cost per call (adapter + act), microseconds.
+    pub controller_median_us: f64,
+    /// 90th percentile of the controller cost per call, microseconds.
+    pub controller_p90_us: f64,
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn json_num(v: f64) -> String {
+    if v.is_finite() { format!("{v}") } else { "null".to_owned() }
+}
+
+impl RolloutSummary {
+    /// One JSON object on one line (no trailing newline), keys: `kind`, `object`,
+    /// `episodes`, `seed`, `mean_return`, `mean_rotation_rad`, `max_abs_rotation_rad`,
+    /// `mean_contacts`, `drops`, `mean_steps`, `no_action_fraction`,
+    /// `controller_median_us`, `controller_p90_us`. Non-finite numbers are `null`.
+    #[must_use]
+    pub fn to_json_line(&self) -> String {
+        format!(
+            "{{\"kind\":\"{}\",\"object\":\"{}\",\"episodes\":{},\"seed\":{},\"mean_return\":{},\
+             \"mean_rotation_rad\":{},\"max_abs_rotation_rad\":{},\"mean_contacts\":{},\"drops\":{},\
+             \"mean_steps\":{},\"no_action_fraction\":{},\"controller_median_us\":{},\
+             \"controller_p90_us\":{}}}",
+            self.kind.name(),
+            self.object.name(),
+            self.episodes,
+            self.seed,
+            json_num(f64::from(self.mean_return)),
+            json_num(f64::from(self.mean_rotation_rad)),
+            json_num(f64::from(self.max_abs_rotation_rad)),
+            json_num(f64::from(self.mean_contacts)),
+            self.drops,
+            json_num(f64::from(self.mean_steps)),
+            json_num(f64::from(self.no_action_fraction)),
+            json_num(self.controller_median_us),
+            json_num(self.controller_p90_us),
+        )
+    }
+}
+
+impl fmt::Display for RolloutSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "controller {} on {}: {} episodes from seed {}",
+            self.kind,
+            self.object.name(),
+            self.episodes,
+            self.seed
+        )?;
+        writeln!(f, "  mean return          {:.3}", self.mean_return)?;
+        writeln!(
+            f,
+            "  mean rotation about z {:.3} rad ({:.1} deg), largest |rotation| {:.3} rad",
+            self.mean_rotation_rad,
+            self.mean_rotation_rad.to_degrees(),
+            self.max_abs_rotation_rad
+        )?;
+        writeln!(f, "  mean fingertip contacts {:.2}", self.mean_contacts)?;
+        writeln!(f, "  drops                {} of {}", self.drops, self.episodes)?;
+        writeln!(
+            f,
+            "  mean episode length  {:.1} steps; no action on {:.1} % of steps",
+            self.mean_steps,
+            100.0 * self.no_action_fraction
+        )?;
+        write!(
+            f,
+            "  controller cost      {:.1} us median, {:.1} us p90 per call",
+            self.controller_median_us, self.controller_p90_us
+        )
+    }
+}
+
+/// Rolls `kind` out for `episodes` episodes on `object` (episode i resets the env with
+/// `seed + i`); `on_episode` sees each episode's figures as it ends (for progress).
+pub fn run_with(
+    kind: ControllerKind,
+    object: ObjectShape,
+    episodes: usize,
+    seed: u64,
+    options: &RolloutOptions,
+    mut on_episode: impl FnMut(usize, &EpisodeStats),
+) -> Result<RolloutSummary, SimError> {
+    if episodes == 0 {
+        return Err(SimError::InvalidConfig("a rollout needs at least one episode".to_owned()));
+    }
+    let mut env_config = options.env.clone();
+    env_config.object = ObjectConfig { shape: object, ..env_config.object };
+    let mut cs = options.cs;
+    cs.control_period_s = env_config.control_dt_s();
+    let mut controller = kind.build(&env_config, options.igm, cs);
+    let mut env = Env::new(env_config)?;
+    let (mut ret, mut rot, mut max_rot, mut contacts, mut steps, mut drops, mut no_action) =
+        (0.0f64, 0.0f64, 0.0f32, 0.0f64, 0usize, 0usize, 0usize);
+    let mut costs = Vec::new();
+    for i in 0..episodes {
+        let stats = run_episode(&mut env, controller.as_mut(), seed.wrapping_add(i as u64), |_, _| {})?;
+        ret += f64::from(stats.episode_return);
+        rot += f64::from(stats.rotation_rad);
+        max_rot = max_rot.max(stats.rotation_rad.abs());
+        contacts += f64::from(stats.mean_contacts) * stats.steps as f64;
+        steps += stats.steps;
+        drops += usize::from(stats.dropped);
+        no_action += stats.no_action_steps;
+        costs.extend_from_slice(&stats.controller_s);
+        on_episode(i, &stats);
+    }
+    costs.sort_by(f64::total_cmp);
+    let n = episodes as f64;
+    Ok(RolloutSummary {
+        kind,
+        object,
+        episodes,
+        seed,
+        mean_return: (ret / n) as f32,
+        mean_rotation_rad: (rot / n) as f32,
+        max_abs_rotation_rad: max_rot,
+        mean_contacts: (contacts / steps.max(1) as f64) as f32,
+        drops,
+        mean_steps: (steps as f64 / n) as f32,
+        no_action_fraction: (no_action as f64 / steps.max(1) as f64) as f32,
+        controller_median_us: percentile(&costs, 0.5) * 1e6,
+        controller_p90_us: percentile(&costs, 0.9) * 1e6,
+    })
+}
+
+/// [`run_with`] without progress.
+pub fn run(
+    kind: ControllerKind,
+    object: ObjectShape,
+    episodes: usize,
+    seed: u64,
+    options: &RolloutOptions,
+) -> Result<RolloutSummary, SimError> {
+    run_with(kind, object, episodes, seed, options, |_, _| {})
+}
