@@ -15,6 +15,10 @@ pub mod emulator;
 #[cfg(feature = "std")]
 pub mod hand_state;
 #[cfg(feature = "std")]
+pub mod policy_runner;
+#[cfg(feature = "std")]
+pub mod report;
+#[cfg(feature = "std")]
 pub mod safety;
 #[cfg(feature = "std")]
 pub mod sim_hand;

@@ -1,42 +1,131 @@
-//! `vge-bridge`: the deployment side of vge.
+//! `vge-bridge`: the deployment side of vge. Runs an exported policy file at a fixed control
+//! rate against the simulator or a hand's joint controllers over SocketCAN.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
 use std::time::Duration;
 
-use anyhow::Context;
-use clap::{Parser, Subcommand};
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner};
 use vge_bridge::emulator::{JointControllerEmulator, serve};
-use vge_bridge::transport::SocketCanTransport;
+use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
+use vge_bridge::report::json_line;
+use vge_bridge::sim_hand::{self, SimHand, SimHandSummary};
+use vge_bridge::transport::{InProcessTransport, SocketCanTransport};
+use vge_sim::observation::OBS_DIM;
+use vge_sim::{EnvConfig, NUM_JOINTS, ObjectShape};
 
 /// Runs exported vge policies against the simulator or a real hand over SocketCAN.
+///
+/// The hand protocol (frames, units, bus load) is in docs/can-protocol.md. On a kernel
+/// without CAN, run any of these inside a guest that has vcan0 with
+/// `scripts/canvm/run.sh target/release/vge-bridge ...`.
 #[derive(Debug, Parser)]
-#[command(version, about, long_about = None)]
+#[command(version, about, long_about)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Backend {
+    /// The simulated hand, in lockstep over the protocol (in-process).
+    Sim,
+    /// Joint controllers on a SocketCAN interface (`--iface`).
+    Can,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum NodeModel {
+    /// The rapier simulation of the hand and object.
+    Sim,
+    /// Joints that move a fixed fraction towards their targets per command; no object.
+    Lag,
+}
+
+#[derive(Debug, Args)]
+struct LoopArgs {
+    /// Control rate in Hz (default: the rate the policy was trained at).
+    #[arg(long)]
+    rate: Option<f64>,
+    /// Seconds to run; 0 runs until Ctrl-C.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    /// Largest joint-target change per step (rad), enforced whatever the policy says.
+    #[arg(long, default_value_t = EnvConfig::default().max_action_rad)]
+    max_delta_rad: f32,
+    /// Periods without fresh joint state before the watchdog holds and stops.
+    #[arg(long, default_value_t = 5)]
+    watchdog_periods: u32,
+    /// Print one JSON line of statistics instead of a summary.
+    #[arg(long)]
+    json: bool,
+}
+
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Emulate the hand's five joint-controller nodes on a CAN interface.
+    /// Run a policy file at a fixed rate.
     ///
-    /// Answers every joint command frame (id 0x100 + finger) with a joint position frame
-    /// (id 0x180 + finger), moving each joint part of the way to its target. Use it to try
-    /// the bridge without hardware: `ip link add dev vcan0 type vcan && ip link set up vcan0`
-    /// (or scripts/canvm/run.sh on a kernel without CAN), then `vge-bridge emulate`.
-    Emulate {
-        /// CAN interface to serve on.
+    /// Each period: read the hand's state, build the observation exactly as the simulator
+    /// does, run the policy on vge-runtime, clamp the change and the joint limits, send the
+    /// targets. Stops after --duration, on Ctrl-C (hold, then disable), when the hand falls
+    /// silent (watchdog) or when a node reports a fault. Prints rate, jitter, deadline
+    /// misses and frame counts, and the object's rotation with the sim backend.
+    Run {
+        /// Policy file written by `vge export` or `vge train`.
+        #[arg(long)]
+        policy: PathBuf,
+        #[arg(long, value_enum, default_value_t = Backend::Sim)]
+        backend: Backend,
+        /// CAN interface (backend can).
         #[arg(long, default_value = "vcan0")]
         iface: String,
-        /// Stop after answering this many commands.
-        #[arg(long, default_value_t = u64::MAX)]
-        max_commands: u64,
+        /// Object in the simulated hand (backend sim).
+        #[arg(long, default_value_t = ObjectShape::Cube)]
+        object: ObjectShape,
+        /// Seed of the simulated episode (backend sim).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[command(flatten)]
+        loop_args: LoopArgs,
+    },
+    /// Emulate the hand's five finger nodes (joint controllers and fingertip sensors) on a
+    /// CAN interface, in real time, speaking the protocol.
+    ///
+    /// With --model sim (default) the nodes are the simulated hand holding --object: every
+    /// full set of enabled joint commands advances the simulation one control period.
+    Emulate {
+        #[arg(long, default_value = "vcan0")]
+        iface: String,
+        #[arg(long, value_enum, default_value_t = NodeModel::Sim)]
+        model: NodeModel,
+        #[arg(long, default_value_t = ObjectShape::Cube)]
+        object: ObjectShape,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
         /// Stop after this many seconds without a frame.
         #[arg(long, default_value_t = 10.0)]
         idle_timeout_s: f64,
-        /// Fraction of the position error each command removes, in [0, 1].
-        #[arg(long, default_value_t = 0.2)]
-        response: f32,
+        /// Print one JSON line when done.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Loop timing on this host: the control loop against emulated nodes over the
+    /// in-process transport (no CAN, no simulator), so only the loop's own timing shows.
+    Bench {
+        /// Policy file to run each period (default: hold, i.e. zero change).
+        #[arg(long)]
+        policy: Option<PathBuf>,
+        #[arg(long, default_value_t = 1000.0)]
+        rate: f64,
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -50,25 +139,224 @@ fn main() -> ExitCode {
     }
 }
 
+/// A flag raised by Ctrl-C or SIGTERM, so loops stop cleanly (hold, then disable).
+fn stop_on_signal() -> anyhow::Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
+}
+
+fn positive_seconds(name: &str, s: f64, zero_ok: bool) -> anyhow::Result<Option<Duration>> {
+    if !s.is_finite() || s < 0.0 || (s == 0.0 && !zero_ok) {
+        bail!("--{name} must be a positive number of seconds, got {s}");
+    }
+    Ok((s > 0.0).then(|| Duration::from_secs_f64(s)))
+}
+
+fn loop_config(args: &LoopArgs, policy_hz: f32) -> anyhow::Result<LoopConfig> {
+    let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
+    anyhow::ensure!(rate_hz.is_finite() && rate_hz > 0.0, "--rate must be a positive number of Hz");
+    if (rate_hz - f64::from(policy_hz)).abs() > 1e-3 {
+        eprintln!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
+    }
+    anyhow::ensure!(
+        args.max_delta_rad.is_finite() && args.max_delta_rad > 0.0,
+        "--max-delta-rad must be positive"
+    );
+    Ok(LoopConfig {
+        rate_hz,
+        duration: positive_seconds("duration", args.duration, true)?,
+        watchdog_periods: args.watchdog_periods.max(1),
+        startup_timeout: Duration::from_secs(5),
+        halt_hold_periods: 3,
+        max_delta_rad: args.max_delta_rad,
+        limits: EnvConfig::default().hand.joint_limits(),
+        spin: Duration::from_micros(200),
+    })
+}
+
+fn read_policy(path: &PathBuf) -> anyhow::Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("reading policy file {}", path.display()))
+}
+
+fn print_report(
+    json: bool,
+    extra: &[(&str, String)],
+    cfg: &LoopConfig,
+    r: &LoopReport,
+    sim: Option<&SimHandSummary>,
+) {
+    if json {
+        println!("{}", json_line(extra, cfg.rate_hz, r, sim));
+        return;
+    }
+    println!("stopped: {:?} after {} steps", r.stop_reason, r.steps);
+    println!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, cfg.rate_hz);
+    println!(
+        "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {}",
+        r.wake_jitter.p50_us, r.wake_jitter.p99_us, r.wake_jitter.max_us, r.deadline_misses
+    );
+    println!(
+        "loop:    p50 {:.1} us, p99 {:.1} us, max {:.1} us",
+        r.loop_time.p50_us, r.loop_time.p99_us, r.loop_time.max_us
+    );
+    println!("frames:  {} in, {} out, {} bad", r.frames_in, r.frames_out, r.bad_frames);
+    println!(
+        "safety:  {} NaN holds, {} delta clamps, {} limit clamps",
+        r.safety.non_finite_holds, r.safety.delta_clamps, r.safety.limit_clamps
+    );
+    if let Some(s) = sim {
+        println!(
+            "object:  turned {:.3} rad about z in {} sim steps; return {:.3}; {:.2} fingertip contacts on average{}",
+            s.rotation_rad,
+            s.steps,
+            s.total_reward,
+            s.mean_tip_contacts,
+            if s.terminated { "; the episode terminated (drop or lost contacts)" } else { "" }
+        );
+    }
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Emulate { iface, max_commands, idle_timeout_s, response } => {
-            anyhow::ensure!(
-                idle_timeout_s.is_finite() && idle_timeout_s > 0.0,
-                "--idle-timeout-s must be a positive number of seconds, got {idle_timeout_s}"
-            );
-            anyhow::ensure!((0.0..=1.0).contains(&response), "--response must be in [0, 1], got {response}");
-            let mut emulator = JointControllerEmulator::new(response);
+        Command::Run { policy, backend, iface, object, seed, loop_args } => {
+            let bytes = read_policy(&policy)?;
+            let mut storage = storage_for(&bytes).with_context(|| format!("loading {}", policy.display()))?;
+            let mut runner = RuntimePolicy::load(&bytes, &mut storage)
+                .with_context(|| format!("loading {}", policy.display()))?;
+            let cfg = loop_config(&loop_args, runner.control_hz())?;
+            let stop = stop_on_signal()?;
+            match backend {
+                Backend::Can => {
+                    let mut transport = SocketCanTransport::open(&iface)
+                        .with_context(|| format!("opening CAN interface {iface}"))?;
+                    let report = control_loop::run(&mut transport, &mut runner, &cfg, &stop)?;
+                    print_report(loop_args.json, &[("backend", "\"can\"".into())], &cfg, &report, None);
+                }
+                Backend::Sim => {
+                    let (report, summary) = run_against_sim(&mut runner, &cfg, object, seed, &stop)?;
+                    let extra = [("backend", "\"sim\"".into()), ("object", format!("\"{object}\""))];
+                    print_report(loop_args.json, &extra, &cfg, &report, Some(&summary));
+                }
+            }
+            Ok(())
+        }
+        Command::Emulate { iface, model, object, seed, idle_timeout_s, json } => {
+            let idle = positive_seconds("idle-timeout-s", idle_timeout_s, false)?.unwrap_or(Duration::MAX);
+            let stop = stop_on_signal()?;
             let mut transport =
                 SocketCanTransport::open(&iface).with_context(|| format!("opening CAN interface {iface}"))?;
-            let stats =
-                serve(&mut transport, &mut emulator, max_commands, Duration::from_secs_f64(idle_timeout_s))
-                    .with_context(|| format!("emulating joint controllers on {iface}"))?;
-            eprintln!(
-                "vge-bridge: answered {} commands, ignored {} other frames",
-                stats.commands, stats.ignored
+            match model {
+                NodeModel::Lag => {
+                    let stats =
+                        serve(&mut transport, &mut JointControllerEmulator::new(0.2), u64::MAX, idle)?;
+                    eprintln!(
+                        "vge-bridge: answered {} commands, ignored {} other frames",
+                        stats.commands, stats.ignored
+                    );
+                }
+                NodeModel::Sim => {
+                    let mut config = EnvConfig::default();
+                    config.object.shape = object;
+                    let mut hand = SimHand::new(config, seed)?;
+                    eprintln!("vge-bridge: emulating the hand holding a {object} on {iface}");
+                    let stats = sim_hand::serve(&mut transport, &mut hand, idle, &stop)?;
+                    let s = hand.summary();
+                    if json {
+                        println!(
+                            "{{\"frames_in\":{},\"frames_out\":{},\"bad_frames\":{},\"sim_steps\":{},\"rotation_rad\":{:.4},\"terminated\":{}}}",
+                            stats.frames_in,
+                            stats.frames_out,
+                            stats.bad_frames,
+                            s.steps,
+                            s.rotation_rad,
+                            s.terminated
+                        );
+                    } else {
+                        println!(
+                            "frames {} in, {} out, {} bad; {} sim steps; object turned {:.3} rad",
+                            stats.frames_in, stats.frames_out, stats.bad_frames, s.steps, s.rotation_rad
+                        );
+                    }
+                }
+            }
+            Ok(())
+        }
+        Command::Bench { policy, rate, duration, json } => {
+            let loop_args =
+                LoopArgs { rate: Some(rate), duration, max_delta_rad: 0.05, watchdog_periods: 50, json };
+            anyhow::ensure!(duration > 0.0, "--duration must be positive");
+            let stop = stop_on_signal()?;
+            let (bridge_end, nodes_end) = InProcessTransport::pair();
+            let nodes = thread::spawn(move || {
+                let mut end = nodes_end;
+                serve(&mut end, &mut JointControllerEmulator::new(0.5), u64::MAX, Duration::from_secs(1))
+            });
+            let mut bridge_end = bridge_end;
+            let (report, cfg, name) = match &policy {
+                Some(path) => {
+                    let bytes = read_policy(path)?;
+                    let mut storage = storage_for(&bytes)?;
+                    let mut runner = RuntimePolicy::load(&bytes, &mut storage)?;
+                    let cfg = loop_config(&loop_args, rate as f32)?;
+                    (
+                        control_loop::run(&mut bridge_end, &mut runner, &cfg, &stop)?,
+                        cfg,
+                        format!("\"{}\"", path.display()),
+                    )
+                }
+                None => {
+                    let cfg = loop_config(&loop_args, rate as f32)?;
+                    (control_loop::run(&mut bridge_end, &mut Hold, &cfg, &stop)?, cfg, "\"hold\"".to_owned())
+                }
+            };
+            drop(bridge_end);
+            let _ = nodes.join();
+            print_report(
+                json,
+                &[("bench", "\"loop\"".into()), ("transport", "\"in-process\"".into()), ("policy", name)],
+                &cfg,
+                &report,
+                None,
             );
             Ok(())
         }
     }
+}
+
+/// The bench's default policy: no change.
+struct Hold;
+
+impl PolicyRunner for Hold {
+    type Error = std::convert::Infallible;
+    fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; NUM_JOINTS], Self::Error> {
+        Ok([0.0; NUM_JOINTS])
+    }
+}
+
+/// Runs the loop against the simulated hand on a thread of its own, over the protocol.
+fn run_against_sim<P: PolicyRunner>(
+    runner: &mut P,
+    cfg: &LoopConfig,
+    object: ObjectShape,
+    seed: u64,
+    stop: &Arc<AtomicBool>,
+) -> anyhow::Result<(LoopReport, SimHandSummary)> {
+    let mut env = EnvConfig::default();
+    env.object.shape = object;
+    let (mut bridge_end, mut nodes_end) = InProcessTransport::pair();
+    let nodes_stop = Arc::new(AtomicBool::new(false));
+    let nodes_flag = nodes_stop.clone();
+    let hand = SimHand::new(env, seed).context("building the simulated hand")?;
+    let nodes = thread::spawn(move || {
+        let mut hand = hand;
+        sim_hand::serve(&mut nodes_end, &mut hand, Duration::from_secs(5), &nodes_flag)
+            .map(|_| hand.summary())
+    });
+    let report = control_loop::run(&mut bridge_end, runner, cfg, stop);
+    nodes_stop.store(true, Ordering::Relaxed);
+    let summary = nodes.join().map_err(|_| anyhow::anyhow!("the simulated hand's thread panicked"))??;
+    Ok((report?, summary))
 }

@@ -44,6 +44,24 @@ impl ObjectShape {
     }
 }
 
+impl std::str::FromStr for ObjectShape {
+    type Err = String;
+
+    /// Parses a lower-case name as [`ObjectShape::name`] gives it.
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|o| o.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Self::ALL.iter().map(|o| o.name()).collect();
+            format!("unknown object `{s}` (one of: {})", names.join(", "))
+        })
+    }
+}
+
+impl std::fmt::Display for ObjectShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Object parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObjectConfig {

@@ -1,0 +1,52 @@
+//! An exported policy file on vge-runtime, as the control loop's policy.
+
+use thiserror::Error;
+use vge_runtime::{HandPolicy, PolicyError, policy};
+use vge_sim::NUM_JOINTS;
+use vge_sim::observation::OBS_DIM;
+
+use crate::control_loop::PolicyRunner;
+
+#[derive(Debug, Error)]
+pub enum LoadError {
+    #[error("invalid policy file")]
+    Invalid(#[from] PolicyError),
+    #[error("the policy maps {obs} observations to {act} actions; the hand needs {OBS_DIM} -> {NUM_JOINTS}")]
+    WrongDims { obs: usize, act: usize },
+}
+
+/// Weight storage for a policy file: the runtime decodes weights into caller memory.
+pub fn storage_for(bytes: &[u8]) -> Result<Vec<f32>, LoadError> {
+    let info = policy::inspect(bytes)?;
+    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
+        return Err(LoadError::WrongDims { obs: info.obs_dim, act: info.act_dim });
+    }
+    Ok(vec![0.0; info.storage_len])
+}
+
+/// A loaded hand policy (65 observations -> 15 joint-target changes).
+#[derive(Debug)]
+pub struct RuntimePolicy<'a> {
+    pub policy: HandPolicy<'a>,
+}
+
+impl<'a> RuntimePolicy<'a> {
+    /// Loads `bytes` into `storage` (from [`storage_for`]).
+    pub fn load(bytes: &'a [u8], storage: &'a mut [f32]) -> Result<Self, LoadError> {
+        Ok(Self { policy: HandPolicy::load(bytes, storage)? })
+    }
+
+    pub fn control_hz(&self) -> f32 {
+        self.policy.info().control_hz
+    }
+}
+
+impl PolicyRunner for RuntimePolicy<'_> {
+    type Error = PolicyError;
+
+    fn act(&mut self, obs: &[f32; OBS_DIM]) -> Result<[f32; NUM_JOINTS], PolicyError> {
+        let mut action = [0.0; NUM_JOINTS];
+        self.policy.forward(obs, &mut action)?;
+        Ok(action)
+    }
+}
