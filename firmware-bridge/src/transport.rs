@@ -12,7 +12,7 @@ use crate::socketcan_io::{FrameError, standard_id_and_data, to_can_frame};
 
 #[derive(Debug, Error)]
 pub enum TransportError {
-    #[error("CAN socket: {0}")]
+    #[error("CAN socket")]
     Io(#[from] std::io::Error),
     #[error(transparent)]
     Frame(#[from] FrameError),

@@ -66,16 +66,23 @@ fn roll_ramp_turns_the_cube_in_grasp() {
         action[vge_sim::kinematics::joint_index(f, 0)] = per_step;
     }
     let mut min_contacts = NUM_FINGERS;
+    let mut integrated_reward_rad = 0.0;
     for _ in 0..n + steps_for(&env, 0.5) {
         let r = env.step(&action).expect("step");
         action = if r.info.step >= n { [0.0; NUM_JOINTS] } else { action };
         min_contacts = min_contacts.min(r.info.num_tip_contacts);
+        integrated_reward_rad += r.reward * env.config().control_dt_s();
         assert!(!r.terminated, "terminated: {:?}", r.info);
     }
     let yaw = env.privileged().expect("state").object.yaw_rad() - yaw0;
-    println!("cube turned {yaw:.3} rad, min contacts {min_contacts}");
+    println!(
+        "cube turned {yaw:.3} rad, reward integrates to {integrated_reward_rad:.3} rad, min contacts {min_contacts}"
+    );
     assert!(yaw > 0.3, "turned only {yaw} rad");
     assert!(min_contacts >= 3);
+    // The reward is the period-averaged angular velocity: over the ramp it integrates to the
+    // rotation (the yaw of a cube held level is its rotation about z).
+    assert!((integrated_reward_rad - yaw).abs() < 0.1 * yaw, "reward {integrated_reward_rad} vs yaw {yaw}");
 }
 
 /// At rest the contact normal and friction forces on the object balance its weight.
