@@ -7,7 +7,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use tch::{Device, nn};
 use vge_export::Provenance;
-use vge_sim::EnvConfig;
+use vge_sim::{EnvConfig, ObjectShape};
+use vge_trainer::controllers::rollout::{self, ControllerKind, RolloutOptions};
 use vge_trainer::nets::{GaussianActor, NetSpec};
 use vge_trainer::{bench_update, policy_export};
 
@@ -34,9 +35,39 @@ enum Command {
         /// The policy file.
         file: PathBuf,
     },
+    /// Roll out one sub-skill controller alone on the simulated hand.
+    ///
+    /// IGM (in-grasp manipulation: contact-force QP + rotation), CS (contact switching: a
+    /// detach/re-attach trajectory of one finger) or FG (both). Prints mean return,
+    /// mean_rotation_rad (object rotation about z per episode), mean fingertip contacts,
+    /// drops (episodes ended early) and the controller's cost per call.
+    Controller {
+        #[arg(long, value_parser = parse_controller_kind)]
+        kind: ControllerKind,
+        #[arg(long, default_value_t = ObjectShape::Cube)]
+        object: ObjectShape,
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Episode length in seconds of sim time.
+        #[arg(long, default_value_t = 10.0)]
+        episode_s: f32,
+        /// Randomise the initial grasp per episode (pose noise, rad); 0 starts every
+        /// episode from the same grasp.
+        #[arg(long, default_value_t = 0.02)]
+        grasp_noise_rad: f32,
+        /// Print one JSON line instead of a summary.
+        #[arg(long)]
+        json: bool,
+    },
     /// Measure vge's hot paths on this machine.
     #[command(subcommand)]
     Bench(Bench),
+}
+
+fn parse_controller_kind(s: &str) -> Result<ControllerKind, String> {
+    s.parse().map_err(|_| format!("unknown controller `{s}` (one of: igm, cs, fg)"))
 }
 
 #[derive(Debug, Args)]
@@ -125,6 +156,35 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{report}");
             if !report.is_valid() {
                 bail!("{} is not a valid policy file", file.display());
+            }
+            Ok(())
+        }
+        Command::Controller { kind, object, episodes, seed, episode_s, grasp_noise_rad, json } => {
+            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+            anyhow::ensure!(
+                grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0,
+                "--grasp-noise-rad must be >= 0"
+            );
+            let mut options = RolloutOptions::default();
+            options.env.episode_length_steps = (episode_s * options.env.control_hz).round().max(1.0) as usize;
+            options.env.grasp.pose_noise_rad = grasp_noise_rad;
+            let summary = rollout::run_with(kind, object, episodes, seed, &options, |i, e| {
+                if !json {
+                    eprintln!(
+                        "episode {}/{episodes}: return {:.3}, rotation {:.3} rad, {:.2} contacts{}",
+                        i + 1,
+                        e.episode_return,
+                        e.rotation_rad,
+                        e.mean_contacts,
+                        if e.dropped { ", ended early" } else { "" }
+                    );
+                }
+            })?;
+            if json {
+                println!("{}", summary.to_json_line());
+            } else {
+                println!("{summary}");
             }
             Ok(())
         }
