@@ -1,43 +1,44 @@
 //! vge-runtime on a Cortex-M4F, emulated by `qemu-system-arm -machine mps2-an386`.
 //!
-//! Embeds a policy (see `build.rs`) in flash with `include_bytes!`, evaluates it with
-//! `vge_runtime::Mlp` on fixed observations without copying the weights, prints every
-//! observation and action over semihosting as IEEE-754 bit patterns (exact; the host test
-//! parses them) plus decimals, and exits through semihosting: status 0 on success, 1 on error.
+//! Embeds a policy file (`.vgep`, see `build.rs`) in flash with `include_bytes!`, loads it
+//! with `vge_runtime::Policy::load` into a static weight storage sized from the file at build
+//! time, evaluates it on fixed observations, prints every observation and action over
+//! semihosting as IEEE-754 bit patterns (exact; the host test parses them) plus decimals, and
+//! exits through semihosting: status 0 on success, 1 on error (e.g. a corrupted file).
 //!
 //! ```text
-//! cd runtime/firmware-m4 && cargo run --release
+//! cd runtime/firmware-m4 && VGE_POLICY=/path/to/actor.vgep cargo run --release
 //! ```
 #![no_std]
 #![no_main]
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hprint, hprintln};
-use vge_runtime::{Activation, Layer, PolicyMlp};
+use vge_runtime::{Policy, PolicyError};
 
-/// Layer sizes of the embedded policy: obs 65 -> 256 -> 256 -> 15 actions.
-const DIMS: [usize; 4] = [65, 256, 256, 15];
-const N_LAYERS: usize = DIMS.len() - 1;
-const OBS_DIM: usize = DIMS[0];
-const ACT_DIM: usize = DIMS[N_LAYERS];
+// STORAGE_LEN, MAX_LAYERS, MAX_WIDTH: from the embedded file, see build.rs.
+include!(concat!(env!("OUT_DIR"), "/policy_sizes.rs"));
+
+/// The policy file, in flash. `Policy::load` needs no alignment: it decodes each `f32` once
+/// into the storage below and borrows everything else (names, provenance) from here.
+static POLICY: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/policy.vgep"));
+
 /// Number of fixed observations evaluated.
 const N_CASES: usize = 8;
 
-/// Forces 4-byte alignment on the embedded bytes so they can be viewed as `f32`s in place.
-#[repr(C, align(4))]
-struct Aligned<T: ?Sized>(T);
-
-static POLICY: &Aligned<[u8]> = &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/policy.bin")));
-
 #[entry]
 fn main() -> ! {
+    // cortex-m-rt's `#[entry]` turns a `static mut` declared here into a `&'static mut` that
+    // only this never-returning call can reach, so this needs no `unsafe`. Zero-initialised:
+    // it lives in .bss, not in flash.
+    static mut STORAGE: [f32; STORAGE_LEN] = [0.0; STORAGE_LEN];
     let window = paint_stack();
-    let result = run();
+    let result = run(STORAGE);
     hprintln!("stack_peak_bytes {}", stack_peak(window));
     let status = match result {
         Ok(()) => debug::EXIT_SUCCESS,
-        Err(msg) => {
-            hprintln!("error: {}", msg);
+        Err(e) => {
+            hprintln!("error: {:?}: {}", e, e);
             debug::EXIT_FAILURE
         }
     };
@@ -46,44 +47,41 @@ fn main() -> ! {
     loop {}
 }
 
-fn run() -> Result<(), &'static str> {
-    let floats: &[f32] =
-        bytemuck::try_cast_slice(&POLICY.0).map_err(|_| "policy blob is not a whole number of f32s")?;
-    hprintln!("vge-firmware-m4: policy {} bytes, {:?}", POLICY.0.len(), DIMS);
-
-    // Borrow each layer's weights and biases straight from flash.
-    let mut rest = floats;
-    let mut layers =
-        [Layer { in_dim: 1, out_dim: 1, weights: &[], bias: &[], activation: Activation::Identity };
-            N_LAYERS];
-    for (i, layer) in layers.iter_mut().enumerate() {
-        let (n_in, n_out) = (DIMS[i], DIMS[i + 1]);
-        let (w, r) = rest.split_at_checked(n_in * n_out).ok_or("policy blob too short")?;
-        let (b, r) = r.split_at_checked(n_out).ok_or("policy blob too short")?;
-        rest = r;
-        let activation = if i + 1 == N_LAYERS { Activation::Tanh } else { Activation::Relu };
-        *layer = Layer { in_dim: n_in, out_dim: n_out, weights: w, bias: b, activation };
-    }
-    if !rest.is_empty() {
-        return Err("policy blob too long");
-    }
-    let mlp = PolicyMlp::new(&layers).map_err(|_| "invalid policy")?;
+fn run(storage: &'static mut [f32]) -> Result<(), PolicyError> {
+    hprintln!("vge-firmware-m4: policy file {} bytes, storage {} f32", POLICY.len(), storage.len());
+    let policy = Policy::<MAX_LAYERS, MAX_WIDTH>::load(POLICY, storage)?;
+    let info = policy.info();
+    hprintln!(
+        "loaded: format {}, crc32 {:08x}, {} -> {} in {} layers, {} params, vge {}, seed {}",
+        info.format_version,
+        info.checksum,
+        info.obs_dim,
+        info.act_dim,
+        info.num_layers,
+        info.num_params,
+        info.provenance.vge_version,
+        info.provenance.seed
+    );
 
     let mut rng = 0x1234_5678_u32;
+    let mut obs_buf = [0.0f32; MAX_WIDTH];
+    let mut act_buf = [0.0f32; MAX_WIDTH];
+    // `load` checked obs_dim, act_dim <= MAX_WIDTH.
+    let obs = &mut obs_buf[..policy.obs_dim()];
+    let action = &mut act_buf[..policy.act_dim()];
     for case in 0..N_CASES {
-        let obs = observation(case, &mut rng);
-        let mut action = [0.0f32; ACT_DIM];
-        mlp.forward(&obs, &mut action).map_err(|_| "forward failed")?;
+        observation(case, &mut rng, obs);
+        policy.forward(obs, action)?;
         hprint!("obs {}", case);
-        for x in obs {
+        for x in obs.iter() {
             hprint!(" {:08x}", x.to_bits());
         }
         hprint!("\nact {}", case);
-        for a in action {
+        for a in action.iter() {
             hprint!(" {:08x}", a.to_bits());
         }
         hprint!("\nact_dec {}", case);
-        for a in action {
+        for a in action.iter() {
             hprint!(" {:+.6}", a);
         }
         hprintln!();
@@ -94,10 +92,10 @@ fn run() -> Result<(), &'static str> {
 
 /// Fixed observations: all zeros, then xorshift32 values in [-3, 3), then one large-magnitude
 /// case (±50) that saturates the tanh head.
-fn observation(case: usize, rng: &mut u32) -> [f32; OBS_DIM] {
-    let mut obs = [0.0f32; OBS_DIM];
+fn observation(case: usize, rng: &mut u32, obs: &mut [f32]) {
     if case == 0 {
-        return obs;
+        obs.fill(0.0);
+        return;
     }
     let scale = if case == N_CASES - 1 { 50.0 } else { 3.0 };
     for x in obs.iter_mut() {
@@ -106,12 +104,11 @@ fn observation(case: usize, rng: &mut u32) -> [f32; OBS_DIM] {
         *rng ^= *rng << 5;
         *x = ((*rng >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0) * scale;
     }
-    obs
 }
 
 /// Stack high-water mark: [`paint_stack`] fills `PAINT_BYTES` below the current stack pointer
 /// with a pattern, [`stack_peak`] finds the lowest overwritten word. The only `unsafe` in the
-/// firmware; the runtime itself has none.
+/// firmware (besides reading the linker symbol's address); the runtime itself has none.
 const PAINT_BYTES: u32 = 32 * 1024;
 const PAINT: u32 = 0xDEAD_BEEF;
 
