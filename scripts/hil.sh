@@ -11,4 +11,7 @@ export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUNNER="$repo/scripts/canvm/run.sh"
 # The DBC test decodes frames with cantools: scripts/test.sh puts it in .deps/py.
 if [[ -z ${VGE_PYTHON:-} && -x $repo/.deps/py/bin/python ]]; then export VGE_PYTHON=$repo/.deps/py/bin/python; fi
 # --workspace (not -p) keeps feature unification identical to the main test build: no rebuild.
-exec cargo test --release --workspace --test hil -- --ignored "$@"
+# The HIL tests run the vge and vge-bridge binaries as separate processes on vcan0.
+cargo build --release --workspace --bins
+# One test at a time: they share the bus, and each checks what it sees on it.
+exec cargo test --release --workspace --test hil -- --ignored --test-threads=1 "$@"

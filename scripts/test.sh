@@ -18,7 +18,8 @@ unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION
 step "system packages"
 # user-mode-linux: a CAN-capable guest for HIL tests where this kernel has no vcan.
 # kmod/iproute2: insmod and ip inside that guest.
-packages=(user-mode-linux kmod iproute2 gcc python3 python3-venv)
+# qemu-system-arm: runs the Cortex-M4F firmware (mps2-an386) in the export tests.
+packages=(user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm)
 missing=()
 for p in "${packages[@]}"; do dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p"); done
 if ((${#missing[@]})); then
