@@ -17,6 +17,8 @@ pub mod hand_state;
 #[cfg(feature = "std")]
 pub mod policy_runner;
 #[cfg(feature = "std")]
+pub mod realtime;
+#[cfg(feature = "std")]
 pub mod report;
 #[cfg(feature = "std")]
 pub mod safety;

@@ -64,6 +64,42 @@ struct LoopArgs {
     /// Print one JSON line of statistics instead of a summary.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    realtime: RealtimeArgs,
+}
+
+#[derive(Debug, Clone, Copy, Args)]
+struct RealtimeArgs {
+    /// Run the loop under SCHED_FIFO at this priority (1-99) where permitted (root or
+    /// CAP_SYS_NICE); without permission a warning is printed and the loop runs as usual.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    realtime_priority: Option<i32>,
+    /// Pin the loop thread to this CPU.
+    #[arg(long)]
+    cpu: Option<usize>,
+}
+
+impl RealtimeArgs {
+    fn apply(self) {
+        if self.realtime_priority.is_none() && self.cpu.is_none() {
+            return;
+        }
+        let outcome =
+            vge_bridge::realtime::make_current_thread_realtime(self.realtime_priority.unwrap_or(1), self.cpu);
+        if self.realtime_priority.is_some() {
+            match outcome.fifo {
+                Ok(p) => eprintln!("vge-bridge: SCHED_FIFO priority {p}"),
+                Err(e) => {
+                    eprintln!("vge-bridge: warning: SCHED_FIFO refused ({e}); running with normal scheduling")
+                }
+            }
+        }
+        match outcome.pinned {
+            Some(Ok(cpu)) => eprintln!("vge-bridge: pinned to CPU {cpu}"),
+            Some(Err(e)) => eprintln!("vge-bridge: warning: pinning refused ({e})"),
+            None => {}
+        }
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -126,6 +162,8 @@ enum Command {
         duration: f64,
         #[arg(long)]
         json: bool,
+        #[command(flatten)]
+        realtime: RealtimeArgs,
     },
 }
 
@@ -228,6 +266,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .with_context(|| format!("loading {}", policy.display()))?;
             let cfg = loop_config(&loop_args, runner.control_hz())?;
             let stop = stop_on_signal()?;
+            loop_args.realtime.apply();
             match backend {
                 Backend::Can => {
                     let mut transport = SocketCanTransport::open(&iface)
@@ -284,9 +323,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Bench { policy, rate, duration, json } => {
-            let loop_args =
-                LoopArgs { rate: Some(rate), duration, max_delta_rad: 0.05, watchdog_periods: 50, json };
+        Command::Bench { policy, rate, duration, json, realtime } => {
+            let loop_args = LoopArgs {
+                rate: Some(rate),
+                duration,
+                max_delta_rad: 0.05,
+                watchdog_periods: 50,
+                json,
+                realtime,
+            };
             anyhow::ensure!(duration > 0.0, "--duration must be positive");
             let stop = stop_on_signal()?;
             let (bridge_end, nodes_end) = InProcessTransport::pair();
@@ -295,6 +340,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 serve(&mut end, &mut JointControllerEmulator::new(0.5), u64::MAX, Duration::from_secs(1))
             });
             let mut bridge_end = bridge_end;
+            realtime.apply();
             let (report, cfg, name) = match &policy {
                 Some(path) => {
                     let bytes = read_policy(path)?;
