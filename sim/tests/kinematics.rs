@@ -219,26 +219,8 @@ fn stacked_jacobian_has_finger_blocks_and_zeros_elsewhere() {
     assert_eq!(empty.shape(), (0, NUM_JOINTS));
 }
 
-/// Equal flexion `s` on both flexion joints (roll 0) at which the fingertip sphere just
-/// touches the nearest face of the axis-aligned nominal cube centred at the origin.
 fn touching_flexion(hand: &HandModel, finger: usize) -> f32 {
-    let half = f64::from(NOMINAL_CUBE_SIDE_M) / 2.0;
-    let radius = f64::from(hand.fingers[finger].tip_radius_m);
-    let gap = |s: f64| {
-        let tip = hand.fingers[finger].fingertip_position_m(&[0.0, s, s]).expect("finite");
-        tip.x.abs().max(tip.y.abs()) - (half + radius)
-    };
-    let (mut lo, mut hi) = (0.0, 1.2);
-    assert!(gap(lo) > 0.0 && gap(hi) < 0.0, "no bracket for finger {finger}");
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if gap(mid) > 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    (0.5 * (lo + hi)) as f32
+    hand.flexion_touching_nominal_cube(finger).expect("valid finger").expect("the finger reaches the cube")
 }
 
 #[test]

@@ -137,25 +137,8 @@ fn qp_cost_per_call() {
 
 // ---------------------------------------------------------------- hand at a grasp
 
-/// Equal flexion on both flexion joints (roll 0) at which finger `finger`'s tip sphere just
-/// touches the nearest face of the nominal cube at the origin (bisection, as in sim's tests).
 fn touching_flexion(hand: &HandModel, finger: usize) -> f32 {
-    let half = f64::from(NOMINAL_CUBE_SIDE_M) / 2.0;
-    let radius = f64::from(hand.fingers[finger].tip_radius_m);
-    let gap = |s: f64| {
-        let tip = hand.fingers[finger].fingertip_position_m(&[0.0, s, s]).expect("finite");
-        tip.x.abs().max(tip.y.abs()) - (half + radius)
-    };
-    let (mut lo, mut hi) = (0.0, 1.2);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if gap(mid) > 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    (0.5 * (lo + hi)) as f32
+    hand.flexion_touching_nominal_cube(finger).expect("valid finger").expect("the finger reaches the cube")
 }
 
 struct Grasp {

@@ -169,6 +169,33 @@ impl Default for HandModel {
 }
 
 impl HandModel {
+    /// Equal flexion `s` on both flexion joints (roll 0) at which `finger`'s tip sphere just
+    /// touches the nearest face of the axis-aligned nominal cube centred at the origin, by
+    /// bisection on the kinematics alone; `None` if it does not touch within [0, 1.2] rad.
+    /// Builds grasp configurations for tests and controllers without a physics world.
+    pub fn flexion_touching_nominal_cube(&self, finger: usize) -> Result<Option<f32>, KinematicsError> {
+        let model = self.finger(finger)?;
+        let half = f64::from(NOMINAL_CUBE_SIDE_M) / 2.0;
+        let radius = f64::from(model.tip_radius_m);
+        let gap = |s: f64| -> Result<f64, KinematicsError> {
+            let tip = model.fingertip_position_m(&[0.0, s, s])?;
+            Ok(tip.x.abs().max(tip.y.abs()) - (half + radius))
+        };
+        let (mut lo, mut hi) = (0.0, 1.2);
+        if gap(lo)? <= 0.0 || gap(hi)? > 0.0 {
+            return Ok(None);
+        }
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if gap(mid)? > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Ok(Some((0.5 * (lo + hi)) as f32))
+    }
+
     /// The finger at `finger`, or an error when out of range.
     pub fn finger(&self, finger: usize) -> Result<&FingerModel, KinematicsError> {
         self.fingers
