@@ -49,6 +49,7 @@ fn random_batch(spec: &NetSpec, batch: i64) -> Batch {
         reward: Tensor::randn([batch, 1], opts),
         next_obs: Tensor::randn([batch, spec.obs_dim], opts),
         done: Tensor::zeros([batch, 1], opts),
+        bc: None,
     }
 }
 

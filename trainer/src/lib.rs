@@ -1,8 +1,14 @@
 //! vge-trainer: Soft Actor-Critic in tch with value-guided exploration (VGE) for
 //! finger-gaiting, and the `vge` command.
 
+pub mod behaviour;
 pub mod bench_update;
+pub mod config;
 pub mod controllers;
+pub mod eval;
 pub mod nets;
 pub mod policy_export;
+pub mod replay;
 pub mod sac;
+pub mod toy;
+pub mod train;

@@ -82,12 +82,43 @@ impl GaussianActor {
     /// Reparameterised sample a = tanh(μ + σ ε) · scale and log π(a|s), summed over dimensions.
     pub fn sample(&self, obs: &Tensor) -> PolicySample {
         let (mean, log_std) = self.distribution(obs);
+        self.sample_from(&mean, &log_std, None)
+    }
+
+    /// [`Self::sample`] with given standard-normal noise ε (`[batch, act_dim]`) instead of
+    /// libtorch's global generator (which other threads may draw from).
+    pub fn sample_with(&self, obs: &Tensor, eps: Option<&Tensor>) -> PolicySample {
+        let (mean, log_std) = self.distribution(obs);
+        self.sample_from(&mean, &log_std, eps)
+    }
+
+    /// A sample for `obs` and log π(a|s) of given actions `action` (e.g. replayed ones), from
+    /// one pass of the trunk. Actions are clamped just inside ±scale before `atanh`.
+    pub fn sample_and_log_prob_of(
+        &self,
+        obs: &Tensor,
+        action: &Tensor,
+        eps: Option<&Tensor>,
+    ) -> (PolicySample, Tensor) {
+        let (mean, log_std) = self.distribution(obs);
+        let sample = self.sample_from(&mean, &log_std, eps);
+        let y = (action / &self.action_scale).clamp(-1.0 + 1e-6, 1.0 - 1e-6);
+        let u = y.atanh();
+        let z = (u - &mean) * (-&log_std).exp();
+        let log_normal = z.square() * -0.5 - &log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let one_minus_y2: Tensor = 1.0 - y.square();
+        let log_det = (&self.action_scale * one_minus_y2 + 1e-6).log();
+        let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);
+        (sample, log_prob)
+    }
+
+    fn sample_from(&self, mean: &Tensor, log_std: &Tensor, eps: Option<&Tensor>) -> PolicySample {
         let std = log_std.exp();
-        let eps = mean.randn_like();
-        let u = &mean + &std * &eps;
+        let eps = eps.map_or_else(|| mean.randn_like(), Tensor::shallow_clone);
+        let u = mean + &std * &eps;
         let y = u.tanh();
         // log N(u; μ, σ) = -ε²/2 - log σ - log √(2π); then the Jacobian of a = tanh(u)·scale.
-        let log_normal = eps.square() * -0.5 - &log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let log_normal = eps.square() * -0.5 - log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
         let one_minus_y2: Tensor = 1.0 - y.square();
         let log_det = (&self.action_scale * one_minus_y2 + 1e-6).log();
         let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);

@@ -3,7 +3,11 @@
 //! entropy coefficient α that is either fixed (0 allowed, as VGE uses) or tuned to a target
 //! entropy.
 
-use tch::nn::{self, OptimizerConfig};
+use std::path::Path;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tch::nn;
 use tch::{Device, Kind, Tensor};
 
 use crate::nets::{GaussianActor, NetSpec, TwinCritic};
@@ -44,6 +48,22 @@ impl SacConfig {
     }
 }
 
+/// The value-weighted behaviour-cloning term of a batch (the paper's Eq. for L_BC):
+/// `L_BC = -beta * mean_batch(mask * Q(s,a) * log pi(a|s))`, with Q = min of the twins,
+/// detached (a weight, not a path for gradients).
+///
+/// Sign: the paper writes `sum beta log pi(a|s) Q(s,a)` and the step `theta <- theta -
+/// grad L_BC`; taken literally that *lowers* the likelihood of high-value controller actions,
+/// the opposite of cloning them. Cloning (raising log pi of valuable actions) needs the
+/// minus sign, as in advantage/value-weighted regression; that is what is minimised here.
+/// The sum is normalised by the batch size, so beta does not depend on it.
+#[derive(Debug)]
+pub struct BcTerm {
+    pub beta: f64,
+    /// `[batch, 1]`: 1 on the rows that are cloned (actions that were not the learner's).
+    pub mask: Tensor,
+}
+
 /// One minibatch of transitions; rewards and `done` are `[batch, 1]`.
 #[derive(Debug)]
 pub struct Batch {
@@ -53,6 +73,15 @@ pub struct Batch {
     pub next_obs: Tensor,
     /// 1 where the episode terminated (no bootstrap), 0 otherwise (including truncation).
     pub done: Tensor,
+    /// The BC term, when the method uses it.
+    pub bc: Option<BcTerm>,
+}
+
+impl Batch {
+    /// A batch without a BC term.
+    pub fn new(obs: Tensor, action: Tensor, reward: Tensor, next_obs: Tensor, done: Tensor) -> Self {
+        Self { obs, action, reward, next_obs, done, bc: None }
+    }
 }
 
 /// Losses and diagnostics of one update.
@@ -60,8 +89,83 @@ pub struct Batch {
 pub struct UpdateStats {
     pub critic_loss: f64,
     pub actor_loss: f64,
+    /// The BC part of the actor loss (0 without a BC term).
+    pub bc_loss: f64,
     pub alpha: f64,
     pub mean_q: f64,
+}
+
+/// Adam (Kingma & Ba; PyTorch's defaults β = (0.9, 0.999), ε = 1e-8) whose state is plain
+/// tensors, so that checkpoints can save and restore it (tch's `nn::Optimizer` keeps its
+/// state inside libtorch with no way to read it).
+#[derive(Debug)]
+pub struct Adam {
+    params: Vec<Tensor>,
+    m: Vec<Tensor>,
+    v: Vec<Tensor>,
+    step: i64,
+    lr: f64,
+}
+
+impl Adam {
+    const BETA1: f64 = 0.9;
+    const BETA2: f64 = 0.999;
+    const EPS: f64 = 1e-8;
+
+    pub fn new(params: Vec<Tensor>, lr: f64) -> Self {
+        let m = params.iter().map(Tensor::zeros_like).collect();
+        let v = params.iter().map(Tensor::zeros_like).collect();
+        Self { params, m, v, step: 0, lr }
+    }
+
+    /// Gradients of `loss` with respect to the parameters only (no `.grad` accumulation,
+    /// so no zeroing), then one Adam step.
+    pub fn backward_step(&mut self, loss: &Tensor) {
+        let grads = Tensor::run_backward(&[loss], &self.params, false, false);
+        self.step += 1;
+        let t = self.step as i32;
+        let bc1 = 1.0 - Self::BETA1.powi(t);
+        let bc2 = 1.0 - Self::BETA2.powi(t);
+        let step_size = -self.lr / bc1;
+        let inv_sqrt_bc2 = 1.0 / bc2.sqrt();
+        tch::no_grad(|| {
+            for (((p, g), m), v) in self.params.iter_mut().zip(&grads).zip(&mut self.m).zip(&mut self.v) {
+                let _ = m.lerp_(g, 1.0 - Self::BETA1);
+                let _ = v.lerp_(&g.square(), 1.0 - Self::BETA2);
+                let mut denom = v.sqrt();
+                let _ = denom.g_mul_scalar_(inv_sqrt_bc2);
+                let _ = denom.g_add_scalar_(Self::EPS);
+                let _ = p.addcdiv_(&(&*m * step_size), &denom);
+            }
+        });
+    }
+
+    fn state(&self, prefix: &str) -> Vec<(String, Tensor)> {
+        let mut out = vec![(format!("{prefix}.step"), Tensor::from_slice(&[self.step]))];
+        for (i, (m, v)) in self.m.iter().zip(&self.v).enumerate() {
+            out.push((format!("{prefix}.m{i}"), m.shallow_clone()));
+            out.push((format!("{prefix}.v{i}"), v.shallow_clone()));
+        }
+        out
+    }
+
+    fn restore(
+        &mut self,
+        prefix: &str,
+        named: &std::collections::HashMap<String, Tensor>,
+    ) -> Result<(), tch::TchError> {
+        let get = |k: String| {
+            named.get(&k).ok_or_else(|| tch::TchError::FileFormat(format!("optimiser state lacks {k}")))
+        };
+        self.step = get(format!("{prefix}.step"))?.int64_value(&[0]);
+        tch::no_grad(|| -> Result<(), tch::TchError> {
+            for (i, (m, v)) in self.m.iter_mut().zip(&mut self.v).enumerate() {
+                m.f_copy_(get(format!("{prefix}.m{i}"))?)?;
+                v.f_copy_(get(format!("{prefix}.v{i}"))?)?;
+            }
+            Ok(())
+        })
+    }
 }
 
 #[derive(Debug)]
@@ -71,13 +175,43 @@ pub struct Sac {
     pub actor: GaussianActor,
     critic_vs: nn::VarStore,
     critic: TwinCritic,
-    /// Kept alive for the target's variables; updated through `target`'s tensors.
-    _target_vs: nn::VarStore,
+    target_vs: nn::VarStore,
     target: TwinCritic,
-    actor_opt: nn::Optimizer,
-    critic_opt: nn::Optimizer,
-    log_alpha: Option<(Tensor, nn::Optimizer, f64)>,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    log_alpha: Option<(Tensor, Adam, f64)>,
     alpha: f64,
+    /// Updates done; with [`Self::set_seed`], update `k` draws its noise from a generator
+    /// seeded by (seed, k), so a run is reproducible and resumable without any RNG state
+    /// of libtorch's, and independent of other threads using libtorch.
+    updates: u64,
+    seed: Option<u64>,
+}
+
+/// A `[rows, cols]` tensor of standard normal draws from `rng` (Box-Muller), so that
+/// sampling does not depend on libtorch's process-wide generator.
+pub fn standard_normal(rng: &mut ChaCha8Rng, rows: i64, cols: i64) -> Tensor {
+    let n = (rows * cols).max(0) as usize;
+    let mut v = Vec::with_capacity(n + 1);
+    while v.len() < n {
+        let u1: f64 = 1.0 - rng.random::<f64>();
+        let u2: f64 = rng.random::<f64>();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
+        v.push((r * c) as f32);
+        v.push((r * s) as f32);
+    }
+    v.truncate(n);
+    Tensor::from_slice(&v).view([rows, cols])
+}
+
+/// A 64-bit mix (SplitMix64's finaliser) of a seed and a counter, for per-update seeds.
+pub fn mix_seed(seed: u64, counter: u64, salt: u64) -> i64 {
+    let mut z = seed ^ salt.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ counter.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z >> 1) as i64
 }
 
 impl Sac {
@@ -90,14 +224,14 @@ impl Sac {
         let target = TwinCritic::new(&target_vs.root(), &config.net);
         target_vs.copy(&critic_vs)?;
         target_vs.freeze();
-        let actor_opt = nn::Adam::default().build(&actor_vs, config.actor_lr)?;
-        let critic_opt = nn::Adam::default().build(&critic_vs, config.critic_lr)?;
+        let actor_opt = Adam::new(sorted_trainables(&actor_vs), config.actor_lr);
+        let critic_opt = Adam::new(critic.parameters().collect(), config.critic_lr);
         let (log_alpha, alpha) = match config.entropy {
             EntropyCoef::Fixed(alpha) => (None, alpha),
             EntropyCoef::Auto { target_entropy, initial } => {
-                let alpha_vs = nn::VarStore::new(device);
-                let log_alpha = alpha_vs.root().var("log_alpha", &[1], nn::Init::Const(initial.ln()));
-                let opt = nn::Adam::default().build(&alpha_vs, config.critic_lr)?;
+                let log_alpha =
+                    Tensor::from_slice(&[initial.ln() as f32]).to_device(device).set_requires_grad(true);
+                let opt = Adam::new(vec![log_alpha.shallow_clone()], config.critic_lr);
                 (Some((log_alpha, opt, target_entropy)), initial)
             }
         };
@@ -107,17 +241,65 @@ impl Sac {
             actor,
             critic_vs,
             critic,
-            _target_vs: target_vs,
+            target_vs,
             target,
             actor_opt,
             critic_opt,
             log_alpha,
             alpha,
+            updates: 0,
+            seed: None,
         })
+    }
+
+    /// [`Self::new`] with every network parameter drawn from a generator seeded by `seed`
+    /// (PyTorch's `nn.Linear` bounds, U(±1/√fan_in)), not from libtorch's global generator,
+    /// and with [`Self::set_seed`] applied: the whole learner is a function of `seed`.
+    pub fn new_seeded(config: SacConfig, device: Device, seed: u64) -> Result<Self, tch::TchError> {
+        let mut sac = Self::new(config, device)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0, 0x1417) as u64);
+        for vs in [&sac.actor_vs, &sac.critic_vs] {
+            let mut named: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
+            named.sort_by(|a, b| a.0.cmp(&b.0));
+            let fan_in = |name: &str| -> Option<i64> {
+                // actor.X.weight [out, in]; critic.wI [2, in, out]. Biases use their weight's.
+                let weight = if let Some(base) = name.strip_suffix(".bias") {
+                    format!("{base}.weight")
+                } else if let Some(i) = name.strip_prefix("critic.b") {
+                    format!("critic.w{i}")
+                } else {
+                    name.to_owned()
+                };
+                let t = &named.iter().find(|(n, _)| *n == weight)?.1;
+                Some(t.size()[1])
+            };
+            for (name, t) in &named {
+                let bound = 1.0 / (fan_in(name).unwrap_or(1) as f64).sqrt();
+                let n = t.numel();
+                let values: Vec<f32> = (0..n).map(|_| rng.random_range(-bound..bound) as f32).collect();
+                let src = Tensor::from_slice(&values).view(t.size().as_slice()).to_device(device);
+                let mut t = t.shallow_clone();
+                tch::no_grad(|| t.f_copy_(&src))?;
+            }
+        }
+        sac.target_vs.copy(&sac.critic_vs)?;
+        sac.set_seed(seed);
+        Ok(sac)
     }
 
     pub fn alpha(&self) -> f64 {
         self.alpha
+    }
+
+    /// Updates done so far.
+    pub fn updates(&self) -> u64 {
+        self.updates
+    }
+
+    /// Makes every later update draw its noise from a generator seeded by
+    /// `(seed, update index)` instead of libtorch's global one.
+    pub fn set_seed(&mut self, seed: u64) {
+        self.seed = Some(seed);
     }
 
     /// Q-values min(Q₁, Q₂) of given actions, without gradients (for behaviour-policy choice).
@@ -125,14 +307,28 @@ impl Sac {
         tch::no_grad(|| self.critic.min_q(obs, action))
     }
 
-    /// One gradient step of the critics, the actor and α, then the target update.
+    /// One gradient step of the critics, the actor (plus the BC term when the batch has one)
+    /// and α, then the target update.
     pub fn update(&mut self, batch: &Batch) -> UpdateStats {
+        let rows = batch.obs.size()[0];
+        let act = self.config.net.act_dim;
+        let (eps_next, eps_pi) = match self.seed {
+            Some(seed) => {
+                let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, self.updates, 0x5ac) as u64);
+                (Some(standard_normal(&mut rng, rows, act)), Some(standard_normal(&mut rng, rows, act)))
+            }
+            None => (None, None),
+        };
+        self.updates += 1;
         let gamma = self.config.gamma;
         let alpha = self.alpha;
 
         let y: Tensor = tch::no_grad(|| {
-            let next = self.actor.sample(&batch.next_obs);
-            let q_next = self.target.min_q(&batch.next_obs, &next.action) - alpha * next.log_prob;
+            let next = self.actor.sample_with(&batch.next_obs, eps_next.as_ref());
+            let mut q_next = self.target.min_q(&batch.next_obs, &next.action);
+            if alpha != 0.0 {
+                q_next -= alpha * next.log_prob;
+            }
             let not_done: Tensor = 1.0 - &batch.done;
             &batch.reward + not_done * gamma * q_next
         });
@@ -140,12 +336,31 @@ impl Sac {
         // Sum over the twins of each one's mean squared error, as two separate critics would.
         let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
         self.critic_opt.backward_step(&critic_loss);
+        let q = q.detach();
 
         // The actor's loss needs gradients through the critic's input, not its weights.
         self.critic_vs.freeze();
-        let pi = self.actor.sample(&batch.obs);
+        let (pi, bc_loss) = match &batch.bc {
+            Some(bc) if bc.beta > 0.0 => {
+                let (pi, log_prob_data) =
+                    self.actor.sample_and_log_prob_of(&batch.obs, &batch.action, eps_pi.as_ref());
+                // Q(s, a) of the replayed action: the critic's value before this step.
+                let weight = q.amin(0, false) * &bc.mask;
+                let bc_loss = (weight * log_prob_data).mean(Kind::Float) * -bc.beta;
+                (pi, Some(bc_loss))
+            }
+            _ => (self.actor.sample_with(&batch.obs, eps_pi.as_ref()), None),
+        };
         let q_pi = self.critic.min_q(&batch.obs, &pi.action);
-        let actor_loss = (alpha * &pi.log_prob - &q_pi).mean(Kind::Float);
+        let rl_loss = if alpha != 0.0 {
+            (alpha * &pi.log_prob - &q_pi).mean(Kind::Float)
+        } else {
+            -q_pi.mean(Kind::Float)
+        };
+        let actor_loss = match &bc_loss {
+            Some(bc) => &rl_loss + bc,
+            None => rl_loss.shallow_clone(),
+        };
         self.actor_opt.backward_step(&actor_loss);
         self.critic_vs.unfreeze();
 
@@ -159,7 +374,8 @@ impl Sac {
         self.soft_update_target();
         UpdateStats {
             critic_loss: critic_loss.double_value(&[]),
-            actor_loss: actor_loss.double_value(&[]),
+            actor_loss: rl_loss.double_value(&[]),
+            bc_loss: bc_loss.map_or(0.0, |t| t.double_value(&[])),
             alpha,
             mean_q: q.mean(Kind::Float).double_value(&[]),
         }
@@ -174,4 +390,52 @@ impl Sac {
             }
         });
     }
+
+    /// Saves networks, optimiser states, α and the update counter under `dir`
+    /// (`actor.ot`, `critic.ot`, `target.ot`, `optim.ot`).
+    pub fn save(&self, dir: &Path) -> Result<(), tch::TchError> {
+        self.actor_vs.save(dir.join("actor.ot"))?;
+        self.critic_vs.save(dir.join("critic.ot"))?;
+        self.target_vs.save(dir.join("target.ot"))?;
+        let mut named = self.actor_opt.state("actor_opt");
+        named.extend(self.critic_opt.state("critic_opt"));
+        named.push(("updates".to_owned(), Tensor::from_slice(&[self.updates as i64])));
+        if let Some((log_alpha, opt, _)) = &self.log_alpha {
+            named.push(("log_alpha".to_owned(), log_alpha.detach()));
+            named.extend(opt.state("alpha_opt"));
+        }
+        Tensor::save_multi(&named, dir.join("optim.ot"))
+    }
+
+    /// Restores what [`Self::save`] wrote (same configuration).
+    pub fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+        self.actor_vs.load(dir.join("actor.ot"))?;
+        self.critic_vs.load(dir.join("critic.ot"))?;
+        self.target_vs.load(dir.join("target.ot"))?;
+        let named: std::collections::HashMap<String, Tensor> =
+            Tensor::load_multi(dir.join("optim.ot"))?.into_iter().collect();
+        self.actor_opt.restore("actor_opt", &named)?;
+        self.critic_opt.restore("critic_opt", &named)?;
+        let updates = named
+            .get("updates")
+            .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks updates".to_owned()))?;
+        self.updates = updates.int64_value(&[0]) as u64;
+        if let Some((log_alpha, opt, _)) = &mut self.log_alpha {
+            let saved = named
+                .get("log_alpha")
+                .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks log_alpha".to_owned()))?;
+            tch::no_grad(|| log_alpha.f_copy_(saved))?;
+            opt.restore("alpha_opt", &named)?;
+            self.alpha = log_alpha.exp().double_value(&[0]);
+        }
+        Ok(())
+    }
+}
+
+/// A var store's trainable variables in name order (HashMap order is not stable, and the
+/// optimiser state is saved by position).
+fn sorted_trainables(vs: &nn::VarStore) -> Vec<Tensor> {
+    let mut named: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
+    named.sort_by(|a, b| a.0.cmp(&b.0));
+    named.into_iter().filter(|(_, t)| t.requires_grad()).map(|(_, t)| t).collect()
 }

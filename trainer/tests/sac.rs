@@ -87,6 +87,7 @@ fn fixed_batch(spec: &NetSpec) -> Batch {
         reward: Tensor::randn([128, 1], opts),
         next_obs: Tensor::randn([128, spec.obs_dim], opts),
         done: Tensor::ones([128, 1], opts),
+        bc: None,
     }
 }
 

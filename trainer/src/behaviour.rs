@@ -1,0 +1,285 @@
+//! The behaviour policies of the paper's five methods: which action each env takes, the
+//! learner's or the controller's.
+//!
+//! - RL, RL+BC: the learner's action, always; the controller is never queried.
+//! - FGE: every H steps an env draws its source: the controller with probability
+//!   [`fge_probability`] (a fixed decay in training steps, independent of the state), else
+//!   the learner, and follows it for H steps. The controller is queried only when chosen.
+//! - VGE, VGE+BC: every H steps an env queries the controller for `a_psi` and computes
+//!   `p_psi = exp(Q(s,a_psi)) / (exp(Q(s,a_pi)) + exp(Q(s,a_psi)))` with Q = min of the twin
+//!   critics (the pessimistic estimate SAC itself trusts), evaluated as the logistic of the
+//!   difference `sigmoid(Q(s,a_psi) - Q(s,a_pi))` (the same number, without overflow), draws
+//!   the source and follows it for H steps.
+//!
+//! From the hard stop on, the controller is never queried again (all methods). When the
+//! controller has no action on a step (too few contacts, QP failure) the learner's action is
+//! taken for that step and recorded as the learner's; the segment goes on.
+
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+use vge_sim::{NUM_JOINTS, OBS_DIM};
+
+use crate::config::{BcSection, Config, FgeSection, Method};
+use crate::controllers::{Controller, ControllerInput};
+use crate::replay::Source;
+
+/// FGE's probability of following the controller at training step `step`: `p_start` until
+/// `decay_start`, linear to `p_end` at `decay_end`, `p_end` after.
+pub fn fge_probability(fge: &FgeSection, step: u64) -> f64 {
+    if step <= fge.decay_start {
+        return fge.p_start;
+    }
+    if step >= fge.decay_end {
+        return fge.p_end;
+    }
+    let f = (step - fge.decay_start) as f64 / (fge.decay_end - fge.decay_start) as f64;
+    fge.p_start + f * (fge.p_end - fge.p_start)
+}
+
+/// BC's β at training step `step`: `beta_start` at 0, linear to 0 at `beta_zero_step`, 0 after.
+pub fn bc_beta(bc: &BcSection, step: u64) -> f64 {
+    if bc.beta_zero_step == 0 || step >= bc.beta_zero_step {
+        return 0.0;
+    }
+    bc.beta_start * (1.0 - step as f64 / bc.beta_zero_step as f64)
+}
+
+/// `p_psi` of the paper, as a numerically stable two-way softmax.
+pub fn p_controller(q_learner: f64, q_controller: f64) -> f64 {
+    let d = q_controller - q_learner;
+    if d >= 0.0 {
+        1.0 / (1.0 + (-d).exp())
+    } else {
+        let e = d.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// Counters since the start of training (or a reset of the counters).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BehaviourStats {
+    /// Env steps decided.
+    pub steps: u64,
+    /// Steps whose action was the controller's.
+    pub controller_steps: u64,
+    /// Calls of `Controller::act`.
+    pub controller_queries: u64,
+    /// Calls that returned no action.
+    pub controller_no_action: u64,
+    /// Source draws.
+    pub selections: u64,
+    /// Draws that chose the controller.
+    pub controller_selected: u64,
+    /// Sum of p_psi over the VGE draws (mean = sum / selections).
+    pub p_psi_sum: f64,
+}
+
+impl BehaviourStats {
+    /// Share of steps that followed the controller.
+    pub fn controller_share(&self) -> f64 {
+        if self.steps == 0 { 0.0 } else { self.controller_steps as f64 / self.steps as f64 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Segment {
+    source: Source,
+    remaining: usize,
+    /// The controller's state is stale (it was not followed last step, or a new episode).
+    controller_stale: bool,
+}
+
+const FRESH: Segment = Segment { source: Source::Learner, remaining: 0, controller_stale: true };
+
+/// Min-twin Q-values of `(obs, action)` rows, one per row.
+pub type QFn<'a> = dyn FnMut(&[[f32; OBS_DIM]], &[[f32; NUM_JOINTS]]) -> Vec<f32> + 'a;
+
+/// What the behaviour policy needs to know at one step.
+#[derive(Debug)]
+pub struct StepContext<'a> {
+    /// Training step (env transitions so far, all envs together).
+    pub step: u64,
+    /// Observations, one per env.
+    pub obs: &'a [[f32; OBS_DIM]],
+    /// The learner's (behaviour) action per env.
+    pub learner: &'a [[f32; NUM_JOINTS]],
+    /// The controllers' view of each env (privileged state); `None` if unavailable.
+    pub inputs: &'a [Option<ControllerInput>],
+}
+
+/// The behaviour policy over a vector of envs.
+#[derive(Debug)]
+pub struct Behaviour {
+    method: Method,
+    horizon: usize,
+    hard_stop: u64,
+    fge: FgeSection,
+    segments: Vec<Segment>,
+    pub stats: BehaviourStats,
+}
+
+impl Behaviour {
+    pub fn new(method: Method, horizon: usize, hard_stop: u64, fge: FgeSection, num_envs: usize) -> Self {
+        Self {
+            method,
+            horizon: horizon.max(1),
+            hard_stop,
+            fge,
+            segments: vec![FRESH; num_envs],
+            stats: BehaviourStats::default(),
+        }
+    }
+
+    pub fn from_config(config: &Config) -> Self {
+        Self::new(
+            config.method,
+            config.vge.horizon,
+            config.vge.hard_stop,
+            config.fge.clone(),
+            config.num_envs,
+        )
+    }
+
+    /// A new episode in env `i`: the next step draws a source afresh.
+    pub fn episode_reset(&mut self, i: usize) {
+        if let Some(s) = self.segments.get_mut(i) {
+            *s = FRESH;
+        }
+    }
+
+    /// Whether the controller may be queried at `step`.
+    pub fn controller_active(&self, step: u64) -> bool {
+        self.method.uses_controller() && step < self.hard_stop
+    }
+
+    /// The action of every env and who chose it. `q(obs, actions)` returns min-twin Q-values
+    /// row by row (only called by VGE, once per step, for the envs drawing a source, learner
+    /// rows first then controller rows). `ctl_rngs[i]` is controller `i`'s generator; every
+    /// source draw comes from `rng`, env by env.
+    #[allow(clippy::too_many_arguments)]
+    pub fn act(
+        &mut self,
+        ctx: &StepContext<'_>,
+        controllers: &mut [Box<dyn Controller + Send>],
+        ctl_rngs: &mut [ChaCha8Rng],
+        q: &mut QFn<'_>,
+        rng: &mut ChaCha8Rng,
+    ) -> Vec<([f32; NUM_JOINTS], Source)> {
+        let n = ctx.obs.len();
+        let mut out: Vec<([f32; NUM_JOINTS], Source)> =
+            ctx.learner.iter().map(|a| (*a, Source::Learner)).collect();
+        self.stats.steps += n as u64;
+        if !self.controller_active(ctx.step) {
+            return out;
+        }
+        let vge = matches!(self.method, Method::Vge | Method::VgeBc);
+        // Envs drawing a source this step, and for VGE the controller's proposal.
+        let mut drawing: Vec<(usize, Option<[f32; NUM_JOINTS]>)> = Vec::new();
+        for i in 0..n.min(self.segments.len()) {
+            if self.segments[i].remaining > 0 {
+                continue;
+            }
+            let proposal = if vge { self.query(i, ctx, controllers, ctl_rngs) } else { None };
+            drawing.push((i, proposal));
+        }
+        // p_psi per drawing env.
+        let probs: Vec<f64> = if vge {
+            let rows: Vec<usize> = drawing.iter().filter(|d| d.1.is_some()).map(|d| d.0).collect();
+            let mut values = Vec::new();
+            if !rows.is_empty() {
+                let mut obs: Vec<[f32; OBS_DIM]> = rows.iter().map(|&i| ctx.obs[i]).collect();
+                obs.extend_from_within(..);
+                let mut acts: Vec<[f32; NUM_JOINTS]> = rows.iter().map(|&i| ctx.learner[i]).collect();
+                acts.extend(drawing.iter().filter_map(|d| d.1));
+                values = q(&obs, &acts);
+            }
+            let k = rows.len();
+            let mut next = 0;
+            drawing
+                .iter()
+                .map(|d| {
+                    if d.1.is_none() {
+                        return 0.0;
+                    }
+                    let (ql, qc) = (values.get(next).copied(), values.get(k + next).copied());
+                    next += 1;
+                    match (ql, qc) {
+                        (Some(ql), Some(qc)) if ql.is_finite() && qc.is_finite() => {
+                            p_controller(f64::from(ql), f64::from(qc))
+                        }
+                        _ => 0.0,
+                    }
+                })
+                .collect()
+        } else {
+            let p = fge_probability(&self.fge, ctx.step);
+            drawing.iter().map(|_| p).collect()
+        };
+        for (&(i, proposal), &p) in drawing.iter().zip(&probs) {
+            let u: f64 = rng.random();
+            self.stats.selections += 1;
+            if vge {
+                self.stats.p_psi_sum += p;
+            }
+            let chose_controller = u < p;
+            let seg = &mut self.segments[i];
+            seg.remaining = self.horizon;
+            if chose_controller {
+                self.stats.controller_selected += 1;
+                seg.source = Source::Controller;
+                // VGE already has this step's controller action; FGE asks now.
+                let action = if vge { proposal } else { self.query(i, ctx, controllers, ctl_rngs) };
+                if let Some(a) = action {
+                    out[i] = (a, Source::Controller);
+                }
+            } else {
+                seg.source = Source::Learner;
+                seg.controller_stale = true;
+            }
+            self.segments[i].remaining -= 1;
+        }
+        // Envs continuing a segment.
+        #[allow(clippy::needless_range_loop)]
+        for i in 0..n.min(self.segments.len()) {
+            if drawing.iter().any(|d| d.0 == i) {
+                continue;
+            }
+            let seg = self.segments[i];
+            if seg.source == Source::Controller
+                && let Some(a) = self.query(i, ctx, controllers, ctl_rngs)
+            {
+                out[i] = (a, Source::Controller);
+            }
+            self.segments[i].remaining -= 1;
+        }
+        self.stats.controller_steps += out.iter().filter(|o| o.1 == Source::Controller).count() as u64;
+        out
+    }
+
+    /// Queries controller `i` (resetting it first when its state is stale).
+    fn query(
+        &mut self,
+        i: usize,
+        ctx: &StepContext<'_>,
+        controllers: &mut [Box<dyn Controller + Send>],
+        ctl_rngs: &mut [ChaCha8Rng],
+    ) -> Option<[f32; NUM_JOINTS]> {
+        let (Some(ctl), Some(r), Some(Some(input))) =
+            (controllers.get_mut(i), ctl_rngs.get_mut(i), ctx.inputs.get(i))
+        else {
+            return None;
+        };
+        if self.segments[i].controller_stale {
+            ctl.reset(r);
+            self.segments[i].controller_stale = false;
+        }
+        self.stats.controller_queries += 1;
+        match ctl.act(input, r) {
+            Ok(a) if a.iter().all(|v| v.is_finite()) => Some(a),
+            _ => {
+                self.stats.controller_no_action += 1;
+                None
+            }
+        }
+    }
+}

@@ -1,0 +1,564 @@
+//! One TOML file per experiment ([`Config`]), with `--set key.path=value` overrides applied
+//! to the TOML value before deserialising ([`load_config`], [`apply_override`]) and
+//! validation with clear messages ([`Config::validate`]).
+//!
+//! Every section has defaults, so a file names only what differs; unknown keys are errors
+//! (a typo must not silently train the default).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use vge_sim::{EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig};
+
+use crate::controllers::ControllerKind;
+use crate::nets::NetSpec;
+use crate::sac::{EntropyCoef, SacConfig};
+
+/// A configuration that cannot be read, overridden or used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    #[error("reading config {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("parsing config {path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("override {0:?}: expected key.path=value")]
+    OverrideSyntax(String),
+    #[error("override {key}: {message}")]
+    Override { key: String, message: String },
+    #[error("invalid config: {0}")]
+    Invalid(String),
+}
+
+/// The behaviour policy and loss (the paper's five methods).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Learner only.
+    Rl,
+    /// Learner only, plus the value-weighted BC loss.
+    RlBc,
+    /// Fixed guided exploration: follow the controller with a state-independent probability
+    /// decaying with training steps.
+    Fge,
+    /// Value-guided exploration.
+    Vge,
+    /// VGE plus the value-weighted BC loss.
+    VgeBc,
+}
+
+impl Method {
+    pub const ALL: [Self; 5] = [Self::Rl, Self::RlBc, Self::Fge, Self::Vge, Self::VgeBc];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rl => "rl",
+            Self::RlBc => "rl-bc",
+            Self::Fge => "fge",
+            Self::Vge => "vge",
+            Self::VgeBc => "vge-bc",
+        }
+    }
+
+    /// Whether the behaviour policy ever follows a controller.
+    pub fn uses_controller(self) -> bool {
+        matches!(self, Self::Fge | Self::Vge | Self::VgeBc)
+    }
+
+    /// Whether the actor gets the BC loss.
+    pub fn uses_bc(self) -> bool {
+        matches!(self, Self::RlBc | Self::VgeBc)
+    }
+}
+
+/// Controller kind as it appears in configs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerName {
+    Igm,
+    Cs,
+    Fg,
+}
+
+impl ControllerName {
+    pub fn kind(self) -> ControllerKind {
+        match self {
+            Self::Igm => ControllerKind::Igm,
+            Self::Cs => ControllerKind::Cs,
+            Self::Fg => ControllerKind::Fg,
+        }
+    }
+}
+
+/// Object names as they appear in configs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObjectName {
+    Cube,
+    Sphere,
+    Cylinder,
+    Dodecahedron,
+    Icosahedron,
+}
+
+impl ObjectName {
+    pub fn shape(self) -> ObjectShape {
+        match self {
+            Self::Cube => ObjectShape::Cube,
+            Self::Sphere => ObjectShape::Sphere,
+            Self::Cylinder => ObjectShape::Cylinder,
+            Self::Dodecahedron => ObjectShape::Dodecahedron,
+            Self::Icosahedron => ObjectShape::Icosahedron,
+        }
+    }
+}
+
+/// The environment. Env `i` of the vector gets `objects[i % objects.len()]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EnvSection {
+    pub objects: Vec<ObjectName>,
+    pub control_hz: f32,
+    pub episode_length: usize,
+    pub max_action_rad: f32,
+    /// Randomise the initial grasp (one non-thumb finger open with probability 0.5).
+    pub randomize_fingers: bool,
+    /// Uniform noise on the initial grasp pose (rad).
+    pub grasp_pose_noise_rad: f32,
+    pub noise_q_std_rad: f32,
+    pub noise_normal_std_frac: f32,
+    pub noise_position_std_m: f32,
+    pub perturb_force_std_n: f32,
+    pub perturb_change_probability: f32,
+}
+
+impl Default for EnvSection {
+    fn default() -> Self {
+        let env = EnvConfig::default();
+        Self {
+            objects: vec![ObjectName::Cube],
+            control_hz: env.control_hz,
+            episode_length: env.episode_length_steps,
+            max_action_rad: env.max_action_rad,
+            randomize_fingers: env.grasp.randomize_fingers,
+            grasp_pose_noise_rad: env.grasp.pose_noise_rad,
+            noise_q_std_rad: 0.0,
+            noise_normal_std_frac: 0.0,
+            noise_position_std_m: 0.0,
+            perturb_force_std_n: 0.0,
+            perturb_change_probability: 0.0,
+        }
+    }
+}
+
+impl EnvSection {
+    /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length).
+    pub fn env_config(&self, index: usize) -> EnvConfig {
+        let mut env = EnvConfig::default();
+        let object = self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectName::Cube);
+        env.object = ObjectConfig::of(object.shape());
+        env.control_hz = self.control_hz;
+        env.episode_length_steps = self.episode_length;
+        env.max_action_rad = self.max_action_rad;
+        env.grasp.randomize_fingers = self.randomize_fingers;
+        env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
+        env.noise = NoiseConfig {
+            q_std_rad: self.noise_q_std_rad,
+            normal_std_frac: self.noise_normal_std_frac,
+            position_std_m: self.noise_position_std_m,
+        };
+        env.perturbation = PerturbationConfig {
+            force_std_n: self.perturb_force_std_n,
+            change_probability: self.perturb_change_probability,
+        };
+        env
+    }
+}
+
+/// SAC. `alpha = "auto"` tunes α to `target_entropy` (default -act_dim); a number fixes it
+/// (the paper: 0).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SacSection {
+    pub hidden: Vec<i64>,
+    pub actor_lr: f64,
+    pub critic_lr: f64,
+    pub batch: usize,
+    pub gamma: f64,
+    pub tau: f64,
+    pub alpha: Alpha,
+    pub initial_alpha: f64,
+    pub target_entropy: Option<f64>,
+    pub buffer_size: usize,
+    /// Gradient updates per environment transition.
+    pub utd: f64,
+    /// Transitions collected with uniform random learner actions before updates start.
+    pub warmup: u64,
+    /// libtorch intra-op threads (0: leave libtorch's default).
+    pub threads: i32,
+}
+
+/// α: a fixed number or `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Alpha {
+    Fixed(f64),
+    Named(AlphaName),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AlphaName {
+    Auto,
+}
+
+impl Default for SacSection {
+    fn default() -> Self {
+        Self {
+            hidden: vec![256, 256],
+            actor_lr: 3e-4,
+            critic_lr: 1e-3,
+            batch: 256,
+            gamma: 0.99,
+            tau: 0.005,
+            alpha: Alpha::Fixed(0.0),
+            initial_alpha: 0.1,
+            target_entropy: None,
+            buffer_size: 1_000_000,
+            utd: 1.0,
+            warmup: 10_000,
+            threads: 2,
+        }
+    }
+}
+
+/// VGE's selection horizon and the hard stop (also used by FGE).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VgeSection {
+    /// H: the source is chosen every `horizon` steps and followed for `horizon` steps.
+    pub horizon: usize,
+    /// Training step (env transitions) after which the controller is never queried again.
+    pub hard_stop: u64,
+}
+
+impl Default for VgeSection {
+    fn default() -> Self {
+        Self { horizon: 10, hard_stop: 4_000_000 }
+    }
+}
+
+/// FGE: the probability of following the controller, linear from `p_start` at step
+/// `decay_start` to `p_end` at `decay_end`, constant outside.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FgeSection {
+    pub p_start: f64,
+    pub p_end: f64,
+    pub decay_start: u64,
+    pub decay_end: u64,
+}
+
+impl Default for FgeSection {
+    fn default() -> Self {
+        Self { p_start: 0.5, p_end: 0.0, decay_start: 0, decay_end: 4_000_000 }
+    }
+}
+
+/// Which replayed actions the BC loss clones.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BcOn {
+    /// Actions that did not come from the learner (the controller's), as the paper's
+    /// `a != a_pi`; the default for VGE+BC.
+    NonLearner,
+    /// Every replayed action (each came from an older learner, so `a != a_pi` of the current
+    /// one): the only non-empty reading for RL+BC, whose behaviour policy is the learner.
+    All,
+}
+
+/// BC: β linear from `beta_start` at step 0 to 0 at `beta_zero_step`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BcSection {
+    pub beta_start: f64,
+    pub beta_zero_step: u64,
+    /// Default: `non-learner` for vge-bc, `all` for rl-bc.
+    pub on: Option<BcOn>,
+}
+
+impl Default for BcSection {
+    fn default() -> Self {
+        Self { beta_start: 0.1, beta_zero_step: 4_000_000, on: None }
+    }
+}
+
+/// Bookkeeping: logging, checkpoints, evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunSection {
+    /// One metrics row every this many env steps.
+    pub log_interval: u64,
+    /// Checkpoint every this many env steps (0: only at the end / on stop).
+    pub checkpoint_interval: u64,
+    /// Save the replay buffer with checkpoints (needed for an exact resume).
+    pub save_replay: bool,
+    /// Deterministic evaluation of the actor every this many env steps (0: never).
+    pub eval_interval: u64,
+    pub eval_episodes: usize,
+}
+
+impl Default for RunSection {
+    fn default() -> Self {
+        Self {
+            log_interval: 10_000,
+            checkpoint_interval: 200_000,
+            save_replay: true,
+            eval_interval: 0,
+            eval_episodes: 5,
+        }
+    }
+}
+
+/// One experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub name: String,
+    pub seed: u64,
+    /// Env transitions to train for (all envs together).
+    pub total_steps: u64,
+    pub num_envs: usize,
+    pub method: Method,
+    /// Required for fge, vge, vge-bc.
+    pub controller: Option<ControllerName>,
+    pub env: EnvSection,
+    pub sac: SacSection,
+    pub vge: VgeSection,
+    pub fge: FgeSection,
+    pub bc: BcSection,
+    pub run: RunSection,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            name: "run".to_owned(),
+            seed: 0,
+            total_steps: 6_000_000,
+            num_envs: 8,
+            method: Method::Vge,
+            controller: Some(ControllerName::Fg),
+            env: EnvSection::default(),
+            sac: SacSection::default(),
+            vge: VgeSection::default(),
+            fge: FgeSection::default(),
+            bc: BcSection::default(),
+            run: RunSection::default(),
+        }
+    }
+}
+
+fn invalid(msg: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid(msg.into())
+}
+
+impl Config {
+    /// Parses TOML text (no overrides).
+    pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
+        parse_with_overrides(text, "<string>", &[])
+    }
+
+    /// The canonical TOML of this configuration (what a run directory stores).
+    pub fn to_toml_string(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| invalid(format!("cannot serialise: {e}")))
+    }
+
+    /// FNV-1a 64 of the canonical TOML, as 16 hex digits.
+    pub fn hash_hex(&self) -> String {
+        let text = self.to_toml_string().unwrap_or_default();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        format!("{h:016x}")
+    }
+
+    /// The effective BC target set (`bc.on`, or the method's default).
+    pub fn bc_on(&self) -> BcOn {
+        self.bc.on.unwrap_or(if self.method == Method::RlBc { BcOn::All } else { BcOn::NonLearner })
+    }
+
+    /// SAC's configuration for the hand (obs 65, action 15).
+    pub fn sac_config(&self) -> SacConfig {
+        let act = vge_sim::NUM_JOINTS as i64;
+        let entropy = match self.sac.alpha {
+            Alpha::Fixed(a) => EntropyCoef::Fixed(a),
+            Alpha::Named(AlphaName::Auto) => EntropyCoef::Auto {
+                target_entropy: self.sac.target_entropy.unwrap_or(-(act as f64)),
+                initial: self.sac.initial_alpha,
+            },
+        };
+        SacConfig {
+            net: NetSpec { obs_dim: vge_sim::OBS_DIM as i64, act_dim: act, hidden: self.sac.hidden.clone() },
+            action_scale: vec![self.env.max_action_rad; act as usize],
+            gamma: self.sac.gamma,
+            tau: self.sac.tau,
+            actor_lr: self.sac.actor_lr,
+            critic_lr: self.sac.critic_lr,
+            entropy,
+        }
+    }
+
+    /// Checks every field; the message names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let c = self;
+        if c.num_envs == 0 {
+            return Err(invalid("num_envs must be at least 1"));
+        }
+        if c.total_steps == 0 {
+            return Err(invalid("total_steps must be at least 1"));
+        }
+        if c.method.uses_controller() && c.controller.is_none() {
+            return Err(invalid(format!(
+                "method {:?} follows a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
+                c.method.name()
+            )));
+        }
+        if c.env.objects.is_empty() {
+            return Err(invalid("env.objects must name at least one object"));
+        }
+        for i in 0..c.env.objects.len() {
+            c.env.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
+        }
+        if c.env.max_action_rad.is_nan() || c.env.max_action_rad <= 0.0 {
+            return Err(invalid("env.max_action_rad must be > 0"));
+        }
+        let s = &c.sac;
+        if s.hidden.is_empty() || s.hidden.iter().any(|&h| h <= 0) {
+            return Err(invalid(format!("sac.hidden must be non-empty positive widths, got {:?}", s.hidden)));
+        }
+        for (key, v) in [("sac.actor_lr", s.actor_lr), ("sac.critic_lr", s.critic_lr), ("sac.utd", s.utd)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(format!("{key} must be a positive number, got {v}")));
+            }
+        }
+        if !(s.gamma > 0.0 && s.gamma <= 1.0) {
+            return Err(invalid(format!("sac.gamma must be in (0, 1], got {}", s.gamma)));
+        }
+        if !(s.tau > 0.0 && s.tau <= 1.0) {
+            return Err(invalid(format!("sac.tau must be in (0, 1], got {}", s.tau)));
+        }
+        match s.alpha {
+            Alpha::Fixed(a) if !(a.is_finite() && a >= 0.0) => {
+                return Err(invalid(format!("sac.alpha must be >= 0 or \"auto\", got {a}")));
+            }
+            Alpha::Named(_) if !(s.initial_alpha.is_finite() && s.initial_alpha > 0.0) => {
+                return Err(invalid("sac.initial_alpha must be > 0 with alpha = \"auto\""));
+            }
+            _ => {}
+        }
+        if s.batch == 0 {
+            return Err(invalid("sac.batch must be at least 1"));
+        }
+        if s.buffer_size < s.batch {
+            return Err(invalid(format!(
+                "sac.buffer_size {} is smaller than sac.batch {}",
+                s.buffer_size, s.batch
+            )));
+        }
+        if s.threads < 0 {
+            return Err(invalid("sac.threads must be >= 0"));
+        }
+        if c.vge.horizon == 0 {
+            return Err(invalid("vge.horizon (H) must be at least 1"));
+        }
+        let f = &c.fge;
+        for (key, p) in [("fge.p_start", f.p_start), ("fge.p_end", f.p_end)] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(invalid(format!("{key} must be a probability, got {p}")));
+            }
+        }
+        if f.decay_end < f.decay_start {
+            return Err(invalid("fge.decay_end must not be before fge.decay_start"));
+        }
+        if !(c.bc.beta_start.is_finite() && c.bc.beta_start >= 0.0) {
+            return Err(invalid(format!("bc.beta_start must be >= 0, got {}", c.bc.beta_start)));
+        }
+        if c.method == Method::RlBc && c.bc.on == Some(BcOn::NonLearner) {
+            return Err(invalid(
+                "bc.on = \"non-learner\" with method rl-bc clones nothing (all actions are the learner's)",
+            ));
+        }
+        if c.run.log_interval == 0 {
+            return Err(invalid("run.log_interval must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Reads `path`, applies `overrides` (`"sac.batch=128"`), deserialises and validates.
+pub fn load_config(path: &Path, overrides: &[String]) -> Result<Config, ConfigError> {
+    let shown = path.display().to_string();
+    let text =
+        std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: shown.clone(), source })?;
+    let config = parse_with_overrides(&text, &shown, overrides)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
+pub fn parse_with_overrides(text: &str, origin: &str, overrides: &[String]) -> Result<Config, ConfigError> {
+    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
+        path: origin.to_owned(),
+        message: e.to_string(),
+    })?;
+    for o in overrides {
+        apply_override_table(&mut table, o)?;
+    }
+    Config::deserialize(toml::Value::Table(table))
+        .map_err(|e| ConfigError::Parse { path: origin.to_owned(), message: e.to_string() })
+}
+
+/// Applies one `key.path=value` override to a config (through its TOML form, so that the
+/// value is parsed exactly as in a file), then re-validates the field types.
+pub fn apply_override(config: &mut Config, assignment: &str) -> Result<(), ConfigError> {
+    let value = toml::Value::try_from(&*config).map_err(|e| invalid(format!("cannot serialise: {e}")))?;
+    let toml::Value::Table(mut table) = value else {
+        return Err(invalid("config is not a table"));
+    };
+    apply_override_table(&mut table, assignment)?;
+    *config = Config::deserialize(toml::Value::Table(table))
+        .map_err(|e| ConfigError::Override { key: assignment.to_owned(), message: e.to_string() })?;
+    Ok(())
+}
+
+/// The value text as TOML (`128`, `"fg"`, `[256, 256]`, `true`); a bare word that is not
+/// valid TOML is taken as a string (`method=vge`).
+fn parse_value(text: &str) -> toml::Value {
+    let doc = format!("v = {text}");
+    match doc.parse::<toml::Table>() {
+        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(text.to_owned())),
+        Err(_) => toml::Value::String(text.to_owned()),
+    }
+}
+
+fn apply_override_table(table: &mut toml::Table, assignment: &str) -> Result<(), ConfigError> {
+    let (key, value) =
+        assignment.split_once('=').ok_or_else(|| ConfigError::OverrideSyntax(assignment.to_owned()))?;
+    let key = key.trim();
+    let parts: Vec<&str> = key.split('.').collect();
+    if key.is_empty() || parts.iter().any(|p| p.is_empty()) {
+        return Err(ConfigError::OverrideSyntax(assignment.to_owned()));
+    }
+    let err = |message: String| ConfigError::Override { key: key.to_owned(), message };
+    let mut node = table;
+    for part in &parts[..parts.len() - 1] {
+        let entry = node.entry((*part).to_owned()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        node = entry.as_table_mut().ok_or_else(|| err(format!("{part:?} is not a table")))?;
+    }
+    let last = parts[parts.len() - 1];
+    node.insert(last.to_owned(), parse_value(value.trim()));
+    Ok(())
+}

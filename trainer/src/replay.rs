@@ -1,0 +1,252 @@
+//! A preallocated f32 ring buffer of transitions, sampled uniformly with a seeded generator
+//! into a [`Batch`]. Besides SAC's fields each transition records whether its action came
+//! from the learner ([`Source::Learner`]) or a controller; the BC loss uses that flag.
+
+use std::io::{Read, Write};
+use std::path::Path;
+
+use rand::RngExt;
+use tch::{Kind, Tensor};
+use thiserror::Error;
+
+use crate::sac::{Batch, BcTerm};
+
+/// Who chose a transition's action.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    Learner,
+    Controller,
+}
+
+#[derive(Debug, Error)]
+pub enum ReplayError {
+    #[error("replay buffer: {0}")]
+    Shape(String),
+    #[error("replay buffer file {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("replay buffer file {path}: {message}")]
+    Format { path: String, message: String },
+}
+
+/// The ring buffer. Rows are contiguous `obs_dim` / `act_dim` runs of f32.
+#[derive(Debug, Clone)]
+pub struct ReplayBuffer {
+    obs_dim: usize,
+    act_dim: usize,
+    capacity: usize,
+    len: usize,
+    next: usize,
+    obs: Vec<f32>,
+    action: Vec<f32>,
+    reward: Vec<f32>,
+    next_obs: Vec<f32>,
+    done: Vec<f32>,
+    /// 1.0 when the learner chose the action.
+    learner: Vec<f32>,
+}
+
+const MAGIC: &[u8; 8] = b"VGERPLY1";
+
+impl ReplayBuffer {
+    pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> Result<Self, ReplayError> {
+        if capacity == 0 || obs_dim == 0 || act_dim == 0 {
+            return Err(ReplayError::Shape(format!("capacity {capacity}, obs {obs_dim}, act {act_dim}")));
+        }
+        Ok(Self {
+            obs_dim,
+            act_dim,
+            capacity,
+            len: 0,
+            next: 0,
+            obs: vec![0.0; capacity * obs_dim],
+            action: vec![0.0; capacity * act_dim],
+            reward: vec![0.0; capacity],
+            next_obs: vec![0.0; capacity * obs_dim],
+            done: vec![0.0; capacity],
+            learner: vec![0.0; capacity],
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Stores one transition, overwriting the oldest when full. `done` is termination only
+    /// (a truncated episode bootstraps).
+    pub fn push(
+        &mut self,
+        obs: &[f32],
+        action: &[f32],
+        reward: f32,
+        next_obs: &[f32],
+        done: bool,
+        source: Source,
+    ) -> Result<(), ReplayError> {
+        if obs.len() != self.obs_dim || next_obs.len() != self.obs_dim || action.len() != self.act_dim {
+            return Err(ReplayError::Shape(format!(
+                "transition of obs {} / next {} / action {}, expected {} / {}",
+                obs.len(),
+                next_obs.len(),
+                action.len(),
+                self.obs_dim,
+                self.act_dim
+            )));
+        }
+        let i = self.next;
+        let (o, a) = (self.obs_dim, self.act_dim);
+        self.obs[i * o..(i + 1) * o].copy_from_slice(obs);
+        self.next_obs[i * o..(i + 1) * o].copy_from_slice(next_obs);
+        self.action[i * a..(i + 1) * a].copy_from_slice(action);
+        self.reward[i] = reward;
+        self.done[i] = if done { 1.0 } else { 0.0 };
+        self.learner[i] = if source == Source::Learner { 1.0 } else { 0.0 };
+        self.next = (i + 1) % self.capacity;
+        self.len = (self.len + 1).min(self.capacity);
+        Ok(())
+    }
+
+    /// Whether the action of stored row `i` came from the learner.
+    pub fn source(&self, i: usize) -> Option<Source> {
+        (i < self.len).then(|| if self.learner[i] > 0.5 { Source::Learner } else { Source::Controller })
+    }
+
+    /// Indices of a uniform sample with replacement (one draw per row from `rng`).
+    pub fn sample_indices<R: rand::Rng + ?Sized>(&self, batch: usize, rng: &mut R) -> Vec<usize> {
+        (0..batch).map(|_| rng.random_range(0..self.len.max(1))).collect()
+    }
+
+    /// A minibatch of `batch` rows drawn uniformly with replacement. With `bc = Some(beta)`,
+    /// the batch carries a BC term whose mask is 1 on rows not chosen by the learner (or on
+    /// every row with `bc_all`).
+    pub fn sample<R: rand::Rng + ?Sized>(
+        &self,
+        batch: usize,
+        rng: &mut R,
+        bc: Option<(f64, bool)>,
+    ) -> Result<Batch, ReplayError> {
+        if self.len == 0 {
+            return Err(ReplayError::Shape("sampling an empty buffer".to_owned()));
+        }
+        let idx = self.sample_indices(batch, rng);
+        Ok(self.gather(&idx, bc))
+    }
+
+    /// The rows `idx` as a batch (see [`Self::sample`]).
+    pub fn gather(&self, idx: &[usize], bc: Option<(f64, bool)>) -> Batch {
+        let (o, a, n) = (self.obs_dim, self.act_dim, idx.len());
+        let mut obs = Vec::with_capacity(n * o);
+        let mut next_obs = Vec::with_capacity(n * o);
+        let mut action = Vec::with_capacity(n * a);
+        let mut reward = Vec::with_capacity(n);
+        let mut done = Vec::with_capacity(n);
+        let mut mask = Vec::with_capacity(n);
+        for &i in idx {
+            obs.extend_from_slice(&self.obs[i * o..(i + 1) * o]);
+            next_obs.extend_from_slice(&self.next_obs[i * o..(i + 1) * o]);
+            action.extend_from_slice(&self.action[i * a..(i + 1) * a]);
+            reward.push(self.reward[i]);
+            done.push(self.done[i]);
+            mask.push(1.0 - self.learner[i]);
+        }
+        let n = n as i64;
+        let t = |v: &[f32], cols: usize| Tensor::from_slice(v).view([n, cols as i64]);
+        let bc = bc.map(|(beta, all)| BcTerm {
+            beta,
+            mask: if all { Tensor::ones([n, 1], (Kind::Float, tch::Device::Cpu)) } else { t(&mask, 1) },
+        });
+        Batch {
+            obs: t(&obs, o),
+            action: t(&action, a),
+            reward: t(&reward, 1),
+            next_obs: t(&next_obs, o),
+            done: t(&done, 1),
+            bc,
+        }
+    }
+
+    /// Writes the filled part (raw little-endian f32 after a small header).
+    pub fn save(&self, path: &Path) -> Result<(), ReplayError> {
+        let shown = path.display().to_string();
+        let io = |source| ReplayError::Io { path: shown.clone(), source };
+        let file = std::fs::File::create(path).map_err(io)?;
+        let mut w = std::io::BufWriter::new(file);
+        let mut header = Vec::with_capacity(48);
+        header.extend_from_slice(MAGIC);
+        for v in [self.obs_dim, self.act_dim, self.capacity, self.len, self.next] {
+            header.extend_from_slice(&(v as u64).to_le_bytes());
+        }
+        w.write_all(&header).map_err(io)?;
+        let n = self.len;
+        let (o, a) = (self.obs_dim, self.act_dim);
+        for (v, cols) in [
+            (&self.obs, o),
+            (&self.action, a),
+            (&self.reward, 1),
+            (&self.next_obs, o),
+            (&self.done, 1),
+            (&self.learner, 1),
+        ] {
+            let mut bytes = Vec::with_capacity(n * cols * 4);
+            for x in &v[..n * cols] {
+                bytes.extend_from_slice(&x.to_le_bytes());
+            }
+            w.write_all(&bytes).map_err(io)?;
+        }
+        w.flush().map_err(io)
+    }
+
+    /// Reads a buffer written by [`Self::save`]; its shape must match this one's.
+    pub fn load(&mut self, path: &Path) -> Result<(), ReplayError> {
+        let shown = path.display().to_string();
+        let io = |source| ReplayError::Io { path: shown.clone(), source };
+        let fmt = |message: String| ReplayError::Format { path: shown.clone(), message };
+        let mut bytes = Vec::new();
+        std::fs::File::open(path).map_err(io)?.read_to_end(&mut bytes).map_err(io)?;
+        if bytes.len() < 48 || &bytes[..8] != MAGIC {
+            return Err(fmt("not a replay buffer file".to_owned()));
+        }
+        let word = |k: usize| {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&bytes[8 + 8 * k..16 + 8 * k]);
+            u64::from_le_bytes(b) as usize
+        };
+        let (o, a, cap, len, next) = (word(0), word(1), word(2), word(3), word(4));
+        if (o, a, cap) != (self.obs_dim, self.act_dim, self.capacity) || len > cap || next >= cap {
+            return Err(fmt(format!(
+                "shape obs {o} act {a} capacity {cap} (len {len}) does not match obs {} act {} capacity {}",
+                self.obs_dim, self.act_dim, self.capacity
+            )));
+        }
+        let expected = 48 + len * (2 * o + a + 3) * 4;
+        if bytes.len() != expected {
+            return Err(fmt(format!("{} bytes, expected {expected}", bytes.len())));
+        }
+        let mut at = 48;
+        for (v, cols) in [
+            (&mut self.obs, o),
+            (&mut self.action, a),
+            (&mut self.reward, 1),
+            (&mut self.next_obs, o),
+            (&mut self.done, 1),
+            (&mut self.learner, 1),
+        ] {
+            for x in &mut v[..len * cols] {
+                let mut b = [0u8; 4];
+                b.copy_from_slice(&bytes[at..at + 4]);
+                *x = f32::from_le_bytes(b);
+                at += 4;
+            }
+        }
+        self.len = len;
+        self.next = next;
+        Ok(())
+    }
+}

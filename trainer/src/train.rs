@@ -1,0 +1,661 @@
+//! The training loop: N envs stepped in parallel (rayon, as `vge_sim::VecEnv` does, but each
+//! env may hold its own object), the behaviour policy ([`crate::behaviour`]), the replay
+//! buffer, `utd` SAC updates per transition, a metrics CSV written as it goes, checkpoints,
+//! resume, a stop flag, and the final actor exported as `DIR/policy.vgep`.
+//!
+//! Output directory:
+//! - `config.toml`: the effective configuration;
+//! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
+//! - `eval.csv`: deterministic evaluations of the actor every `run.eval_interval` steps;
+//! - `checkpoint/`: `state.toml` (counters, generator state, metric window), `actor.ot`,
+//!   `critic.ot`, `target.ot`, `optim.ot` (Adam moments, α), `replay.bin` (optional). It is
+//!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole;
+//! - `policy.vgep`: the exported actor at the end.
+//!
+//! Determinism and resume: every random draw comes from the run's ChaCha8 generator (env
+//! reset seeds, controller generators, source draws, warm-up actions, replay indices) or
+//! from libtorch's generator reseeded from (seed, counter) before each use (behaviour
+//! samples per step, updates per update index), so libtorch's generator state need not be
+//! saved. Physics state cannot be saved, so a checkpoint ends every env's episode (a
+//! truncation: bootstrapped, not terminal) and all envs reset from the generator right after
+//! it, in an uninterrupted run exactly as in a resumed one. Resuming from a periodic
+//! checkpoint therefore reproduces the uninterrupted run bit for bit (tested). A stop
+//! (Ctrl-C) checkpoints at the current step: the resumed run is then the run whose
+//! checkpoint boundary fell at that step.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+use thiserror::Error;
+use vge_export::Provenance;
+use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
+
+use crate::behaviour::{Behaviour, BehaviourStats, StepContext, bc_beta};
+use crate::config::{BcOn, Config, ConfigError};
+use crate::controllers::{Controller, ControllerInput, CsConfig, IgmConfig};
+use crate::eval::{EpisodeOutcome, EvalError};
+use crate::policy_export::export_hand_actor;
+use crate::replay::{ReplayBuffer, ReplayError};
+use crate::sac::{Sac, UpdateStats, mix_seed, standard_normal};
+
+#[derive(Debug, Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("libtorch: {0}")]
+    Tch(#[from] tch::TchError),
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    #[error("export: {0}")]
+    Export(#[from] vge_export::ExportError),
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("resume: {0}")]
+    Resume(String),
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io { path: path.display().to_string(), source }
+}
+
+/// What the progress callback sees (every loop iteration, i.e. every `num_envs` steps).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    pub step: u64,
+    pub total_steps: u64,
+    /// Env steps per second since this session (start or resume) began.
+    pub steps_per_s: f64,
+    pub episodes: u64,
+    /// Of the last metrics window.
+    pub mean_return: f64,
+    pub mean_rotation_rad: f64,
+    pub controller_share: f64,
+    pub updates: u64,
+}
+
+/// How a call of [`train`] ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainSummary {
+    pub steps: u64,
+    pub updates: u64,
+    pub episodes: u64,
+    /// The stop flag ended it (checkpoint saved, no policy exported).
+    pub stopped: bool,
+    /// `DIR/policy.vgep` when training finished.
+    pub policy: Option<PathBuf>,
+    pub behaviour: BehaviourStats,
+}
+
+/// Sums over the current metrics window.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+struct Window {
+    episodes: u64,
+    ret: f64,
+    rotation: f64,
+    contacts: f64,
+    successes: u64,
+    updates: u64,
+    critic_loss: f64,
+    actor_loss: f64,
+    bc_loss: f64,
+    alpha: f64,
+    mean_q: f64,
+    steps: u64,
+    controller_steps: u64,
+    selections: u64,
+    p_psi_sum: f64,
+}
+
+/// Everything of a run that is not a tensor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct TrainState {
+    step: u64,
+    episodes: u64,
+    updates_due: f64,
+    rng_seed_hex: String,
+    rng_stream: u64,
+    rng_word_pos: String,
+    config_hash: String,
+    stats_steps: u64,
+    stats_controller_steps: u64,
+    stats_controller_queries: u64,
+    stats_controller_no_action: u64,
+    stats_selections: u64,
+    stats_controller_selected: u64,
+    stats_p_psi_sum: f64,
+    window: Window,
+    last_window: Window,
+    has_replay: bool,
+}
+
+fn rng_state(rng: &ChaCha8Rng) -> (String, u64, String) {
+    let seed: String = rng.get_seed().iter().map(|b| format!("{b:02x}")).collect();
+    (seed, rng.get_stream(), rng.get_word_pos().to_string())
+}
+
+fn rng_restore(seed_hex: &str, stream: u64, word_pos: &str) -> Result<ChaCha8Rng, TrainError> {
+    let bad = || TrainError::Resume("corrupt generator state in state.toml".to_owned());
+    if seed_hex.len() != 64 {
+        return Err(bad());
+    }
+    let mut seed = [0u8; 32];
+    for (i, b) in seed.iter_mut().enumerate() {
+        *b = u8::from_str_radix(&seed_hex[2 * i..2 * i + 2], 16).map_err(|_| bad())?;
+    }
+    let mut rng = ChaCha8Rng::from_seed(seed);
+    rng.set_stream(stream);
+    rng.set_word_pos(word_pos.parse::<u128>().map_err(|_| bad())?);
+    Ok(rng)
+}
+
+/// Per-env episode accumulators.
+#[derive(Debug, Clone, Copy, Default)]
+struct Running {
+    ret: f64,
+    rotation: f64,
+    contacts: u64,
+    length: u64,
+    yaw: f32,
+}
+
+fn wrap_pi(a: f32) -> f32 {
+    let tau = std::f32::consts::TAU;
+    a - tau * ((a + std::f32::consts::PI) / tau).floor()
+}
+
+const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,critic_loss,actor_loss,bc_loss,alpha,mean_q,beta,updates,steps_per_s";
+
+/// Salt of the behaviour-noise seeds.
+const SALT_ACT: u64 = 0xac7;
+
+/// The effective configuration stored in a run directory (for `--resume DIR`).
+pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
+    let path = dir.join("config.toml");
+    let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+    let config = Config::from_toml_str(&text)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// Trains `config` into `out_dir`. With `resume`, continues from `out_dir/checkpoint` (the
+/// config may raise `total_steps`; other changes make the run a different one). `stop` is
+/// polled every iteration: when set, a checkpoint is saved and the call returns with
+/// `stopped = true`. `progress` is called every iteration.
+pub fn train(
+    config: &Config,
+    out_dir: &Path,
+    resume: bool,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<TrainSummary, TrainError> {
+    config.validate()?;
+    std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
+    if config.sac.threads > 0 {
+        tch::set_num_threads(config.sac.threads);
+    }
+    let n = config.num_envs;
+    let seed = config.seed;
+    let env_configs: Vec<EnvConfig> = (0..n).map(|i| config.env.env_config(i)).collect();
+    let max_action = config.env.max_action_rad;
+
+    let mut sac = Sac::new_seeded(config.sac_config(), Device::Cpu, seed)?;
+    let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
+    let mut behaviour = Behaviour::from_config(config);
+    let mut controllers: Vec<Box<dyn Controller + Send>> = if config.method.uses_controller() {
+        let kind = config.controller.map(|c| c.kind());
+        env_configs
+            .iter()
+            .filter_map(|e| kind.map(|k| k.build(e, IgmConfig::default(), CsConfig::for_env(e))))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut step = 0u64;
+    let mut episodes = 0u64;
+    let mut updates_due = 0.0f64;
+    let mut window = Window::default();
+    let mut last_window = Window::default();
+    let ckpt_dir = out_dir.join("checkpoint");
+    let metrics_path = out_dir.join("metrics.csv");
+    let config_hash = config.hash_hex();
+
+    if resume {
+        let dir = if ckpt_dir.join("state.toml").exists() {
+            ckpt_dir.clone()
+        } else {
+            out_dir.join("checkpoint.old")
+        };
+        let state_path = dir.join("state.toml");
+        let text = std::fs::read_to_string(&state_path).map_err(io_err(&state_path))?;
+        let state: TrainState = toml::from_str(&text)
+            .map_err(|e| TrainError::Resume(format!("{}: {e}", state_path.display())))?;
+        sac.load(&dir)?;
+        if state.has_replay {
+            replay.load(&dir.join("replay.bin"))?;
+        }
+        rng = rng_restore(&state.rng_seed_hex, state.rng_stream, &state.rng_word_pos)?;
+        step = state.step;
+        episodes = state.episodes;
+        updates_due = state.updates_due;
+        window = state.window;
+        last_window = state.last_window;
+        behaviour.stats = BehaviourStats {
+            steps: state.stats_steps,
+            controller_steps: state.stats_controller_steps,
+            controller_queries: state.stats_controller_queries,
+            controller_no_action: state.stats_controller_no_action,
+            selections: state.stats_selections,
+            controller_selected: state.stats_controller_selected,
+            p_psi_sum: state.stats_p_psi_sum,
+        };
+        truncate_csv(&metrics_path, step)?;
+        truncate_csv(&out_dir.join("eval.csv"), step)?;
+    } else {
+        let text = config.to_toml_string()?;
+        let path = out_dir.join("config.toml");
+        std::fs::write(&path, text).map_err(io_err(&path))?;
+        let path = &metrics_path;
+        std::fs::write(path, format!("{METRICS_HEADER}\n")).map_err(io_err(path))?;
+    }
+    let mut metrics = BufWriter::new(
+        File::options().append(true).create(true).open(&metrics_path).map_err(io_err(&metrics_path))?,
+    );
+
+    let mut envs: Vec<Env> = env_configs.iter().map(|e| Env::new(e.clone())).collect::<Result<_, _>>()?;
+    let mut obs: Vec<[f32; OBS_DIM]> = vec![[0.0; OBS_DIM]; n];
+    let mut ctl_rngs: Vec<ChaCha8Rng> = (0..n).map(|_| ChaCha8Rng::seed_from_u64(0)).collect();
+    let mut running = vec![Running::default(); n];
+    let all: Vec<usize> = (0..n).collect();
+    reset_envs(&all, &mut envs, &mut obs, &mut ctl_rngs, &mut running, &mut behaviour, &mut rng)?;
+
+    let session_start = Instant::now();
+    let session_first_step = step;
+    let mut stopped = false;
+    let mut checkpointed_at = if resume { Some(step) } else { None };
+    let batch_size = config.sac.batch;
+    let bc_all = config.bc_on() == BcOn::All;
+    while step < config.total_steps {
+        if stop.load(Ordering::SeqCst) {
+            stopped = true;
+            break;
+        }
+        // The learner's behaviour actions.
+        let learner: Vec<[f32; NUM_JOINTS]> = if step < config.sac.warmup {
+            (0..n).map(|_| std::array::from_fn(|_| rng.random_range(-max_action..=max_action))).collect()
+        } else {
+            let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, step, SALT_ACT) as u64);
+            let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
+            let t = Tensor::from_slice(obs.as_flattened()).view([n as i64, OBS_DIM as i64]);
+            let a = tch::no_grad(|| sac.actor.sample_with(&t, Some(&eps)).action);
+            let v = Vec::<f32>::try_from(a.contiguous().view(-1))?;
+            v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect()
+        };
+        let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
+            envs.iter().map(|e| e.privileged().map(ControllerInput::from_privileged)).collect()
+        } else {
+            vec![None; n]
+        };
+        let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
+        let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
+            let rows = o.len() as i64;
+            let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
+            let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
+            Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).unwrap_or_default()
+        };
+        let stats_before = behaviour.stats;
+        let mut actions = behaviour.act(&ctx, &mut controllers, &mut ctl_rngs, &mut q, &mut rng);
+        for (a, _) in &mut actions {
+            for v in a.iter_mut() {
+                *v = if v.is_finite() { v.clamp(-max_action, max_action) } else { 0.0 };
+            }
+        }
+        let results: Vec<_> = envs
+            .par_iter_mut()
+            .zip(actions.par_iter())
+            .map(|(env, (a, _))| env.step(a))
+            .collect::<Result<Vec<_>, SimError>>()?;
+        let mut finished = Vec::new();
+        for (i, (r, (a, source))) in results.iter().zip(&actions).enumerate() {
+            replay.push(&obs[i], a, r.reward, &r.obs, r.terminated, *source)?;
+            let run = &mut running[i];
+            run.ret += f64::from(r.reward);
+            run.rotation += f64::from(wrap_pi(r.info.object_yaw_rad - run.yaw));
+            run.yaw = r.info.object_yaw_rad;
+            run.contacts += r.info.num_tip_contacts as u64;
+            run.length += 1;
+            obs[i] = r.obs;
+            if r.terminated || r.truncated {
+                let outcome = EpisodeOutcome {
+                    episode_return: run.ret,
+                    rotation_rad: run.rotation,
+                    terminated: r.terminated,
+                    mean_contacts: run.contacts as f64 / run.length.max(1) as f64,
+                    length: run.length as usize,
+                };
+                window.episodes += 1;
+                window.ret += outcome.episode_return;
+                window.rotation += outcome.rotation_rad;
+                window.contacts += outcome.mean_contacts;
+                window.successes += u64::from(outcome.success());
+                episodes += 1;
+                finished.push(i);
+            }
+        }
+        if !finished.is_empty() {
+            reset_envs(
+                &finished,
+                &mut envs,
+                &mut obs,
+                &mut ctl_rngs,
+                &mut running,
+                &mut behaviour,
+                &mut rng,
+            )?;
+        }
+        let s = behaviour.stats;
+        window.steps += s.steps - stats_before.steps;
+        window.controller_steps += s.controller_steps - stats_before.controller_steps;
+        window.selections += s.selections - stats_before.selections;
+        window.p_psi_sum += s.p_psi_sum - stats_before.p_psi_sum;
+        let prev_step = step;
+        step += n as u64;
+
+        // Updates.
+        let beta = if config.method.uses_bc() { bc_beta(&config.bc, step) } else { 0.0 };
+        if step >= config.sac.warmup && replay.len() >= batch_size {
+            updates_due += n as f64 * config.sac.utd;
+            while updates_due >= 1.0 {
+                updates_due -= 1.0;
+                let bc = (beta > 0.0).then_some((beta, bc_all));
+                let batch = replay.sample(batch_size, &mut rng, bc)?;
+                let st = sac.update(&batch);
+                add_stats(&mut window, &st);
+            }
+        }
+
+        let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
+        if crossed(config.run.log_interval) || step >= config.total_steps {
+            let elapsed = session_start.elapsed().as_secs_f64();
+            let sps = (step - session_first_step) as f64 / elapsed.max(1e-9);
+            write_metrics_row(&mut metrics, step, episodes, &window, beta, sac.updates(), sps)
+                .map_err(io_err(&metrics_path))?;
+            last_window = std::mem::take(&mut window);
+        }
+        if crossed(config.run.eval_interval) {
+            evaluate_actor(config, &sac, out_dir, step)?;
+        }
+        let elapsed = session_start.elapsed().as_secs_f64();
+        progress(&Progress {
+            step,
+            total_steps: config.total_steps,
+            steps_per_s: (step - session_first_step) as f64 / elapsed.max(1e-9),
+            episodes,
+            mean_return: last_window.ret / last_window.episodes.max(1) as f64,
+            mean_rotation_rad: last_window.rotation / last_window.episodes.max(1) as f64,
+            controller_share: last_window.controller_steps as f64 / last_window.steps.max(1) as f64,
+            updates: sac.updates(),
+        });
+        if crossed(config.run.checkpoint_interval) && step < config.total_steps {
+            let state = TrainState::new(
+                step,
+                episodes,
+                updates_due,
+                &rng,
+                &config_hash,
+                &behaviour.stats,
+                &window,
+                &last_window,
+                config.run.save_replay,
+            );
+            save_checkpoint(out_dir, &sac, &replay, &state)?;
+            checkpointed_at = Some(step);
+            // A checkpoint ends every episode (module docs).
+            reset_envs(&all, &mut envs, &mut obs, &mut ctl_rngs, &mut running, &mut behaviour, &mut rng)?;
+        }
+    }
+    metrics.flush().map_err(io_err(&metrics_path))?;
+    // A checkpoint taken at this very step holds the state before the env resets that
+    // followed it: keep it, so that a resume redoes those resets exactly.
+    if checkpointed_at != Some(step) {
+        let state = TrainState::new(
+            step,
+            episodes,
+            updates_due,
+            &rng,
+            &config_hash,
+            &behaviour.stats,
+            &window,
+            &last_window,
+            config.run.save_replay,
+        );
+        save_checkpoint(out_dir, &sac, &replay, &state)?;
+    }
+    let policy = if stopped {
+        None
+    } else {
+        let path = out_dir.join("policy.vgep");
+        let bytes = export_actor(config, &sac, step)?;
+        std::fs::write(&path, bytes).map_err(io_err(&path))?;
+        Some(path)
+    };
+    Ok(TrainSummary {
+        steps: step,
+        updates: sac.updates(),
+        episodes,
+        stopped,
+        policy,
+        behaviour: behaviour.stats,
+    })
+}
+
+impl TrainState {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        step: u64,
+        episodes: u64,
+        updates_due: f64,
+        rng: &ChaCha8Rng,
+        config_hash: &str,
+        s: &BehaviourStats,
+        window: &Window,
+        last_window: &Window,
+        has_replay: bool,
+    ) -> Self {
+        let (rng_seed_hex, rng_stream, rng_word_pos) = rng_state(rng);
+        Self {
+            step,
+            episodes,
+            updates_due,
+            rng_seed_hex,
+            rng_stream,
+            rng_word_pos,
+            config_hash: config_hash.to_owned(),
+            stats_steps: s.steps,
+            stats_controller_steps: s.controller_steps,
+            stats_controller_queries: s.controller_queries,
+            stats_controller_no_action: s.controller_no_action,
+            stats_selections: s.selections,
+            stats_controller_selected: s.controller_selected,
+            stats_p_psi_sum: s.p_psi_sum,
+            window: window.clone(),
+            last_window: last_window.clone(),
+            has_replay,
+        }
+    }
+}
+
+fn add_stats(w: &mut Window, st: &UpdateStats) {
+    w.updates += 1;
+    w.critic_loss += st.critic_loss;
+    w.actor_loss += st.actor_loss;
+    w.bc_loss += st.bc_loss;
+    w.alpha += st.alpha;
+    w.mean_q += st.mean_q;
+}
+
+fn write_metrics_row(
+    out: &mut impl Write,
+    step: u64,
+    episodes: u64,
+    w: &Window,
+    beta: f64,
+    updates: u64,
+    sps: f64,
+) -> std::io::Result<()> {
+    let e = w.episodes.max(1) as f64;
+    let u = w.updates.max(1) as f64;
+    let na = |x: f64, count: u64| if count == 0 { String::new() } else { format!("{x:.6}") };
+    writeln!(
+        out,
+        "{step},{episodes},{},{},{},{},{:.6},{},{},{},{},{},{},{beta:.6},{updates},{sps:.1}",
+        na(w.ret / e, w.episodes),
+        na(w.rotation / e, w.episodes),
+        na(w.contacts / e, w.episodes),
+        na(w.successes as f64 / e, w.episodes),
+        w.controller_steps as f64 / w.steps.max(1) as f64,
+        na(w.p_psi_sum / w.selections.max(1) as f64, w.selections),
+        na(w.critic_loss / u, w.updates),
+        na(w.actor_loss / u, w.updates),
+        na(w.bc_loss / u, w.updates),
+        na(w.alpha / u, w.updates),
+        na(w.mean_q / u, w.updates),
+    )?;
+    out.flush()
+}
+
+/// Resets envs `which`, drawing each one's env seed and controller seed from `rng` in order.
+fn reset_envs(
+    which: &[usize],
+    envs: &mut [Env],
+    obs: &mut [[f32; OBS_DIM]],
+    ctl_rngs: &mut [ChaCha8Rng],
+    running: &mut [Running],
+    behaviour: &mut Behaviour,
+    rng: &mut ChaCha8Rng,
+) -> Result<(), TrainError> {
+    let mut seeds = vec![None; envs.len()];
+    for &i in which {
+        seeds[i] = Some(rng.next_u64());
+        ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
+        behaviour.episode_reset(i);
+    }
+    let resets: Vec<Option<[f32; OBS_DIM]>> = envs
+        .par_iter_mut()
+        .zip(seeds.par_iter())
+        .map(|(env, s)| s.map(|s| env.reset(s).map(|(o, _)| o)).transpose())
+        .collect::<Result<_, SimError>>()?;
+    for (i, o) in resets.into_iter().enumerate() {
+        if let Some(o) = o {
+            obs[i] = o;
+            let yaw = envs[i].privileged().map_or(0.0, |p| p.object.yaw_rad());
+            running[i] = Running { yaw, ..Running::default() };
+        }
+    }
+    Ok(())
+}
+
+/// Keeps the header and the rows whose first field (step) is <= `step`.
+fn truncate_csv(path: &Path, step: u64) -> Result<(), TrainError> {
+    if !path.exists() {
+        return Ok(());
+    }
+    let file = File::open(path).map_err(io_err(path))?;
+    let mut kept = String::new();
+    for (k, line) in BufReader::new(file).lines().enumerate() {
+        let line = line.map_err(io_err(path))?;
+        let keep =
+            k == 0 || line.split(',').next().and_then(|s| s.parse::<u64>().ok()).is_some_and(|s| s <= step);
+        if keep {
+            kept.push_str(&line);
+            kept.push('\n');
+        }
+    }
+    std::fs::write(path, kept).map_err(io_err(path))
+}
+
+fn save_checkpoint(
+    out_dir: &Path,
+    sac: &Sac,
+    replay: &ReplayBuffer,
+    state: &TrainState,
+) -> Result<(), TrainError> {
+    let tmp = out_dir.join("checkpoint.tmp");
+    let dir = out_dir.join("checkpoint");
+    let old = out_dir.join("checkpoint.old");
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(io_err(&tmp))?;
+    }
+    std::fs::create_dir_all(&tmp).map_err(io_err(&tmp))?;
+    sac.save(&tmp)?;
+    if state.has_replay {
+        replay.save(&tmp.join("replay.bin"))?;
+    }
+    let text = toml::to_string(state).map_err(|e| TrainError::Resume(format!("serialising state: {e}")))?;
+    let path = tmp.join("state.toml");
+    std::fs::write(&path, text).map_err(io_err(&path))?;
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(io_err(&old))?;
+    }
+    if dir.exists() {
+        std::fs::rename(&dir, &old).map_err(io_err(&dir))?;
+    }
+    std::fs::rename(&tmp, &dir).map_err(io_err(&tmp))?;
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(io_err(&old))?;
+    }
+    Ok(())
+}
+
+/// The actor of `sac` encoded as a policy file (hand metadata from
+/// [`crate::policy_export`], provenance with the config hash, seed and steps).
+pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, TrainError> {
+    let hidden: Vec<usize> = config.sac.hidden.iter().map(|&h| h as usize).collect();
+    let provenance = Provenance {
+        vge_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config_hash: config.hash_hex(),
+        seed: config.seed,
+        steps,
+    };
+    Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
+}
+
+/// Deterministic evaluation of the tch actor (envs seeded from the config's seed only, so
+/// training is not perturbed); appends a row to `eval.csv`.
+fn evaluate_actor(config: &Config, sac: &Sac, out_dir: &Path, step: u64) -> Result<(), TrainError> {
+    let env = config.env.env_config(0);
+    let mut policy = |o: &[f32; OBS_DIM], a: &mut [f32; NUM_JOINTS]| -> Result<(), String> {
+        let t = Tensor::from_slice(o).view([1, OBS_DIM as i64]);
+        let out = tch::no_grad(|| sac.actor.deterministic(&t)).to_kind(Kind::Float);
+        let v = Vec::<f32>::try_from(out.view(-1)).map_err(|e| e.to_string())?;
+        a.copy_from_slice(&v[..NUM_JOINTS]);
+        Ok(())
+    };
+    let eval_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1);
+    let r = crate::eval::run_episodes(&env, config.run.eval_episodes.max(1), eval_seed, &mut policy)?;
+    let path = out_dir.join("eval.csv");
+    let new = !path.exists();
+    let mut f = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
+    let mut text = String::new();
+    if new {
+        text.push_str("step,episodes,return,rotation,success,drops,contacts\n");
+    }
+    text.push_str(&format!(
+        "{step},{},{:.6},{:.6},{:.4},{:.4},{:.4}\n",
+        r.episodes, r.mean_return, r.mean_rotation_rad, r.success_rate, r.drop_rate, r.mean_contacts
+    ));
+    f.write_all(text.as_bytes()).map_err(io_err(&path))?;
+    Ok(())
+}

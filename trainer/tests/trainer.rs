@@ -1,0 +1,489 @@
+//! The trainer: SAC on a toy task, the behaviour policies, BC, replay, configs, resume.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use tch::{Device, Kind, Tensor};
+use vge_sim::{NUM_JOINTS, OBS_DIM};
+use vge_trainer::behaviour::{Behaviour, QFn, StepContext, bc_beta, fge_probability, p_controller};
+use vge_trainer::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
+use vge_trainer::controllers::{Controller, ControllerError, ControllerInput};
+use vge_trainer::nets::NetSpec;
+use vge_trainer::replay::{ReplayBuffer, Source};
+use vge_trainer::sac::{BcTerm, EntropyCoef, Sac, SacConfig};
+use vge_trainer::toy::train_point_mass;
+use vge_trainer::train::train;
+
+// ---------------------------------------------------------------- SAC on the toy task
+
+#[test]
+fn sac_alpha_zero_drives_the_point_to_its_target() {
+    let r = train_point_mass(EntropyCoef::Fixed(0.0), 1, 3000).expect("train");
+    assert!(r.zero_return < -10.0, "zero action scores {}", r.zero_return);
+    assert!(r.eval_return > -3.0, "alpha 0: eval return {} (zero action {})", r.eval_return, r.zero_return);
+}
+
+#[test]
+fn sac_auto_alpha_drives_the_point_to_its_target() {
+    let r =
+        train_point_mass(EntropyCoef::Auto { target_entropy: -1.0, initial: 0.1 }, 2, 3000).expect("train");
+    assert!(
+        r.eval_return > -3.0,
+        "auto alpha: eval return {} (zero action {})",
+        r.eval_return,
+        r.zero_return
+    );
+}
+
+// ---------------------------------------------------------------- behaviour policies
+
+/// A controller that always proposes +0.05 rad on every joint and counts its calls.
+#[derive(Debug)]
+struct Constant {
+    calls: Arc<AtomicUsize>,
+}
+
+impl Controller for Constant {
+    fn name(&self) -> &'static str {
+        "constant"
+    }
+    fn reset(&mut self, _rng: &mut dyn rand::Rng) {}
+    fn act(
+        &mut self,
+        _input: &ControllerInput,
+        _rng: &mut dyn rand::Rng,
+    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+        self.calls.fetch_add(1, Ordering::SeqCst);
+        Ok([0.05; NUM_JOINTS])
+    }
+}
+
+fn dummy_input() -> ControllerInput {
+    ControllerInput {
+        q_rad: [0.0; NUM_JOINTS],
+        q_target_rad: [0.0; NUM_JOINTS],
+        contacts: [None; vge_sim::NUM_FINGERS],
+        object_position_m: nalgebra::Vector3::zeros(),
+        object_orientation: nalgebra::UnitQuaternion::identity(),
+    }
+}
+
+struct Rig {
+    calls: Arc<AtomicUsize>,
+    controllers: Vec<Box<dyn Controller + Send>>,
+    ctl_rngs: Vec<ChaCha8Rng>,
+    rng: ChaCha8Rng,
+}
+
+fn rig() -> Rig {
+    let calls = Arc::new(AtomicUsize::new(0));
+    Rig {
+        controllers: vec![Box::new(Constant { calls: calls.clone() })],
+        calls,
+        ctl_rngs: vec![ChaCha8Rng::seed_from_u64(1)],
+        rng: ChaCha8Rng::seed_from_u64(2),
+    }
+}
+
+const LEARNER: [f32; NUM_JOINTS] = [-0.05; NUM_JOINTS];
+
+fn step_once(b: &mut Behaviour, r: &mut Rig, step: u64, q: &mut QFn<'_>) -> Source {
+    let obs = [[0.0f32; OBS_DIM]];
+    let learner = [LEARNER];
+    let inputs = [Some(dummy_input())];
+    let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
+    let out = b.act(&ctx, &mut r.controllers, &mut r.ctl_rngs, q, &mut r.rng);
+    assert_eq!(out.len(), 1);
+    if out[0].1 == Source::Controller {
+        assert_eq!(out[0].0, [0.05; NUM_JOINTS]);
+    } else {
+        assert_eq!(out[0].0, LEARNER);
+    }
+    out[0].1
+}
+
+#[test]
+fn vge_follows_a_preferred_controller_for_exactly_h_steps() {
+    let h = 7;
+    let mut b = Behaviour::new(Method::Vge, h, 1_000_000, FgeSection::default(), 1);
+    let mut r = rig();
+    // Q = 100 * sum(a) on the first draw (the controller's +0.05s win by 150), then the
+    // learner's action wins by as much.
+    let draws = Arc::new(AtomicUsize::new(0));
+    let d = draws.clone();
+    let mut q = move |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
+        assert_eq!(o.len(), 2, "one learner row and one controller row");
+        assert_eq!(a[0], LEARNER, "learner rows first");
+        let sign = if d.fetch_add(1, Ordering::SeqCst) == 0 { 1.0 } else { -1.0 };
+        a.iter().map(|row| sign * 100.0 * row.iter().sum::<f32>()).collect()
+    };
+    let p = p_controller(f64::from(100.0 * -0.75f32), f64::from(100.0 * 0.75f32));
+    assert!(p > 0.5 && p <= 1.0, "p_psi {p}");
+    let sources: Vec<Source> = (0..2 * h as u64).map(|s| step_once(&mut b, &mut r, s, &mut q)).collect();
+    assert!(sources[..h].iter().all(|s| *s == Source::Controller), "{sources:?}");
+    assert!(sources[h..].iter().all(|s| *s == Source::Learner), "{sources:?}");
+    assert_eq!(draws.load(Ordering::SeqCst), 2, "one draw every H steps");
+    // The controller is queried at both draws and on the H-1 followed steps.
+    assert_eq!(r.calls.load(Ordering::SeqCst), h + 1);
+    assert_eq!(b.stats.controller_steps, h as u64);
+    assert_eq!(b.stats.selections, 2);
+}
+
+#[test]
+fn p_psi_is_a_stable_softmax() {
+    assert!((p_controller(0.0, 0.0) - 0.5).abs() < 1e-12);
+    assert!(p_controller(1.0, 2.0) > 0.5);
+    assert!(p_controller(2.0, 1.0) < 0.5);
+    let e = (1.0f64).exp();
+    assert!((p_controller(0.0, 1.0) - e / (1.0 + e)).abs() < 1e-12);
+    // exp(1000) overflows; the logistic form does not.
+    assert_eq!(p_controller(0.0, 1000.0), 1.0);
+    assert_eq!(p_controller(1000.0, 0.0), 0.0);
+    assert!(p_controller(-1e4, 1e4).is_finite());
+}
+
+#[test]
+fn after_the_hard_stop_the_controller_is_never_queried() {
+    for method in [Method::Vge, Method::VgeBc, Method::Fge] {
+        let hard_stop = 50;
+        let fge = FgeSection { p_start: 1.0, p_end: 1.0, decay_start: 0, decay_end: 0 };
+        let mut b = Behaviour::new(method, 3, hard_stop, fge, 1);
+        let mut r = rig();
+        let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
+            a.iter().map(|row| 100.0 * row.iter().sum::<f32>()).collect()
+        };
+        for s in 0..hard_stop {
+            step_once(&mut b, &mut r, s, &mut q);
+        }
+        let before = r.calls.load(Ordering::SeqCst);
+        assert!(before > 0, "{method:?} queried the controller before the stop");
+        for s in hard_stop..hard_stop + 500 {
+            assert_eq!(step_once(&mut b, &mut r, s, &mut q), Source::Learner);
+        }
+        assert_eq!(r.calls.load(Ordering::SeqCst), before, "{method:?} queried after the hard stop");
+    }
+}
+
+#[test]
+fn rl_never_queries_and_fge_follows_its_schedule() {
+    let mut r = rig();
+    let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> { vec![0.0; a.len()] };
+    for method in [Method::Rl, Method::RlBc] {
+        let mut b = Behaviour::new(method, 1, u64::MAX, FgeSection::default(), 1);
+        for s in 0..100 {
+            assert_eq!(step_once(&mut b, &mut r, s, &mut q), Source::Learner);
+        }
+    }
+    assert_eq!(r.calls.load(Ordering::SeqCst), 0);
+    let fge = FgeSection { p_start: 0.8, p_end: 0.2, decay_start: 100, decay_end: 300 };
+    assert_eq!(fge_probability(&fge, 0), 0.8);
+    assert!((fge_probability(&fge, 200) - 0.5).abs() < 1e-12);
+    assert_eq!(fge_probability(&fge, 10_000), 0.2);
+    // State-independent: the share of controller steps at p = 0.8 is about 0.8.
+    let mut b = Behaviour::new(Method::Fge, 1, u64::MAX, fge, 1);
+    let n = 4000;
+    let followed = (0..n).filter(|_| step_once(&mut b, &mut r, 0, &mut q) == Source::Controller).count();
+    let share = followed as f64 / n as f64;
+    assert!((share - 0.8).abs() < 0.03, "share {share}");
+    assert!((b.stats.controller_share() - share).abs() < 1e-12);
+}
+
+// ---------------------------------------------------------------- BC
+
+#[test]
+fn bc_beta_decays_linearly_to_zero() {
+    let bc = BcSection { beta_start: 0.4, beta_zero_step: 1000, on: None };
+    assert_eq!(bc_beta(&bc, 0), 0.4);
+    assert!((bc_beta(&bc, 250) - 0.3).abs() < 1e-12);
+    assert!((bc_beta(&bc, 500) - 0.2).abs() < 1e-12);
+    assert_eq!(bc_beta(&bc, 1000), 0.0);
+    assert_eq!(bc_beta(&bc, 5000), 0.0);
+}
+
+fn small_sac() -> Sac {
+    tch::manual_seed(3);
+    let config = SacConfig {
+        net: NetSpec { obs_dim: 4, act_dim: 2, hidden: vec![16, 16] },
+        action_scale: vec![0.5, 0.5],
+        gamma: 0.9,
+        tau: 0.05,
+        actor_lr: 1e-3,
+        critic_lr: 1e-3,
+        entropy: EntropyCoef::Fixed(0.0),
+    };
+    Sac::new(config, Device::Cpu).expect("sac")
+}
+
+#[test]
+fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
+    // A buffer of 8 transitions, rows 1, 4, 6 from the controller.
+    let mut replay = ReplayBuffer::new(16, 4, 2).expect("buffer");
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for i in 0..8 {
+        let o: Vec<f32> = (0..4).map(|k| ((i * 4 + k) as f32 * 0.37).sin()).collect();
+        let a = [0.3 * ((i as f32) * 0.9).cos(), -0.2 * ((i as f32) * 0.4).sin()];
+        let source = if [1, 4, 6].contains(&i) { Source::Controller } else { Source::Learner };
+        replay.push(&o, &a, 0.1 * i as f32, &o, false, source).expect("push");
+    }
+    let idx: Vec<usize> = (0..8).collect();
+    let beta = 0.7;
+    let batch = replay.gather(&idx, Some((beta, false)));
+    let mask = Vec::<f32>::try_from(batch.bc.as_ref().expect("bc").mask.view(-1)).expect("mask");
+    assert_eq!(mask, vec![0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
+    let _ = replay.sample(4, &mut rng, None).expect("sample");
+
+    let mut sac = small_sac();
+    // Expected: -beta * mean(mask * minQ(s,a) * log pi(a|s)), with Q and pi before the step.
+    let q = sac.q_of(&batch.obs, &batch.action);
+    let (_, log_prob) = tch::no_grad(|| sac.actor.sample_and_log_prob_of(&batch.obs, &batch.action, None));
+    let mask_t = Tensor::from_slice(&mask).view([8, 1]);
+    let expected = (&q * &log_prob * &mask_t).mean(Kind::Float).double_value(&[]) * -beta;
+    // The same rows with the learner's flags flipped give a different value: the weight is
+    // Q row by row, not a constant.
+    let flipped_mask: Tensor = 1.0 - &mask_t;
+    let flipped =
+        ((&q * &log_prob * flipped_mask).mean(Kind::Float).double_value(&[]) * -beta - expected).abs();
+    assert!(flipped > 1e-4, "the mask must select rows");
+    let stats = sac.update(&batch);
+    assert!(
+        (stats.bc_loss - expected).abs() < 1e-5 * (1.0 + expected.abs()),
+        "{} vs {expected}",
+        stats.bc_loss
+    );
+
+    // All-learner batch: no BC.
+    let mut sac = small_sac();
+    let mut learner_only = replay.gather(&[0, 2, 3, 5, 7], Some((beta, false)));
+    assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
+    // beta 0: none either.
+    learner_only.bc = Some(BcTerm { beta: 0.0, mask: Tensor::ones([5, 1], (Kind::Float, Device::Cpu)) });
+    assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
+}
+
+#[test]
+fn bc_raises_the_likelihood_of_valuable_controller_actions() {
+    // Critic's Q > 0 everywhere after fitting positive rewards; BC must then raise
+    // log pi(a_controller | s), i.e. minimise -beta * Q * log pi.
+    let mut sac = small_sac();
+    let obs = Tensor::randn([64, 4], (Kind::Float, Device::Cpu));
+    let action = Tensor::full([64, 2], 0.3, (Kind::Float, Device::Cpu));
+    let fit = vge_trainer::sac::Batch {
+        obs: obs.shallow_clone(),
+        action: action.shallow_clone(),
+        reward: Tensor::full([64, 1], 2.0, (Kind::Float, Device::Cpu)),
+        next_obs: obs.shallow_clone(),
+        done: Tensor::ones([64, 1], (Kind::Float, Device::Cpu)),
+        bc: None,
+    };
+    for _ in 0..200 {
+        sac.update(&fit);
+    }
+    let lp = |sac: &Sac| {
+        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&obs, &action, None).1)
+            .mean(Kind::Float)
+            .double_value(&[])
+    };
+    let before = lp(&sac);
+    let mut bc_batch = fit;
+    bc_batch.bc = Some(BcTerm { beta: 5.0, mask: Tensor::ones([64, 1], (Kind::Float, Device::Cpu)) });
+    for _ in 0..50 {
+        sac.update(&bc_batch);
+    }
+    let after = lp(&sac);
+    assert!(after > before + 0.5, "log pi of the cloned actions {before} -> {after}");
+}
+
+// ---------------------------------------------------------------- replay
+
+#[test]
+fn replay_sampling_is_deterministic_and_the_ring_wraps() {
+    let mut replay = ReplayBuffer::new(5, 3, 2).expect("buffer");
+    for i in 0..8 {
+        let v = i as f32;
+        replay.push(&[v; 3], &[v; 2], v, &[v + 1.0; 3], i % 3 == 0, Source::Learner).expect("push");
+    }
+    assert_eq!(replay.len(), 5);
+    let draw = |seed| {
+        let b = replay.sample(16, &mut ChaCha8Rng::seed_from_u64(seed), None).expect("sample");
+        Vec::<f32>::try_from(b.reward.view(-1)).expect("rewards")
+    };
+    assert_eq!(draw(9), draw(9));
+    assert_ne!(draw(9), draw(10));
+    // Rows 0..3 were overwritten by transitions 5, 6, 7: rewards 3..=7 remain.
+    assert!(draw(9).iter().all(|r| (3.0..=7.0).contains(r)), "{:?}", draw(9));
+    let b = replay.gather(&[0, 1, 2, 3, 4], None);
+    assert_eq!(Vec::<f32>::try_from(b.reward.view(-1)).expect("r"), vec![5.0, 6.0, 7.0, 3.0, 4.0]);
+    assert_eq!(Vec::<f32>::try_from(b.done.view(-1)).expect("d"), vec![0.0, 1.0, 0.0, 1.0, 0.0]);
+    assert_eq!(b.obs.size(), vec![5, 3]);
+    assert!(b.bc.is_none());
+    // Save and load round trip.
+    let dir = tempdir("replay");
+    let path = dir.join("r.bin");
+    replay.save(&path).expect("save");
+    let mut back = ReplayBuffer::new(5, 3, 2).expect("buffer");
+    back.load(&path).expect("load");
+    let d2 = Vec::<f32>::try_from(
+        back.sample(16, &mut ChaCha8Rng::seed_from_u64(9), None).expect("s").reward.view(-1),
+    )
+    .expect("r");
+    assert_eq!(d2, draw(9));
+    let mut wrong = ReplayBuffer::new(6, 3, 2).expect("buffer");
+    assert!(wrong.load(&path).is_err());
+}
+
+// ---------------------------------------------------------------- configs
+
+fn repo_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn every_shipped_config_loads_and_validates() {
+    let dir = repo_root().join("configs");
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(&dir).expect("configs/") {
+        let path = entry.expect("entry").path();
+        let c = load_config(&path, &[]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        names.push(c.name.clone());
+    }
+    for ctl in ["igm", "cs", "fg"] {
+        for m in Method::ALL {
+            assert!(names.contains(&format!("cube-{ctl}-{}", m.name())), "missing cube-{ctl}-{}", m.name());
+        }
+    }
+    assert!(names.contains(&"multi-object-fg-vge".to_owned()));
+    assert_eq!(names.len(), 16);
+}
+
+#[test]
+fn overrides_apply_and_bad_configs_are_refused_clearly() {
+    let path = repo_root().join("configs/cube-fg-vge.toml");
+    let c = load_config(
+        &path,
+        &[
+            "sac.batch=128".into(),
+            "method=fge".into(),
+            "sac.hidden=[64, 64]".into(),
+            "sac.alpha=\"auto\"".into(),
+        ],
+    )
+    .expect("overrides");
+    assert_eq!(c.sac.batch, 128);
+    assert_eq!(c.method, Method::Fge);
+    assert_eq!(c.sac.hidden, vec![64, 64]);
+    assert!(matches!(c.sac_config().entropy, EntropyCoef::Auto { .. }));
+    let mut d = Config::default();
+    apply_override(&mut d, "vge.horizon=3").expect("override");
+    assert_eq!(d.vge.horizon, 3);
+    assert!(apply_override(&mut d, "no_equals_sign").is_err());
+    let err = apply_override(&mut d, "sac.batchh=3").expect_err("unknown key");
+    assert!(err.to_string().contains("batchh"), "{err}");
+    assert!(apply_override(&mut d, "sac.batch=\"many\"").is_err());
+
+    let refuse = |o: &str, needle: &str| {
+        let e = load_config(&path, &[o.to_owned()]).expect_err(o);
+        assert!(e.to_string().contains(needle), "{o}: {e}");
+    };
+    refuse("vge.horizon=0", "vge.horizon");
+    refuse("sac.buffer_size=10", "buffer_size");
+    refuse("sac.gamma=1.5", "sac.gamma");
+    refuse("fge.p_start=2.0", "fge.p_start");
+    refuse("num_envs=0", "num_envs");
+    refuse("env.control_hz=7", "control");
+    let mut no_ctl = Config { controller: None, ..Config::default() };
+    assert!(no_ctl.validate().expect_err("vge needs a controller").to_string().contains("controller"));
+    no_ctl.method = Method::Rl;
+    no_ctl.validate().expect("rl needs no controller");
+}
+
+// ---------------------------------------------------------------- training, resume
+
+fn tempdir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vge-trainer-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+fn tiny_config(total: u64) -> Config {
+    let mut c = Config::default();
+    for o in [
+        "num_envs=2",
+        "method=vge-bc",
+        "controller=fg",
+        "env.episode_length=25",
+        "sac.hidden=[32, 32]",
+        "sac.batch=32",
+        "sac.warmup=40",
+        "sac.buffer_size=1000",
+        "sac.utd=0.5",
+        "vge.horizon=4",
+        "vge.hard_stop=100",
+        "bc.beta_zero_step=200",
+        "run.log_interval=20",
+        "run.checkpoint_interval=60",
+    ] {
+        apply_override(&mut c, o).expect(o);
+    }
+    c.total_steps = total;
+    c.validate().expect("valid");
+    c
+}
+
+fn metrics_without_speed(dir: &std::path::Path) -> Vec<String> {
+    let text = std::fs::read_to_string(dir.join("metrics.csv")).expect("metrics");
+    text.lines().map(|l| l.rsplit_once(',').map_or(l, |(a, _)| a).to_owned()).collect()
+}
+
+#[test]
+fn stop_and_resume_equals_an_uninterrupted_run() {
+    let never = AtomicBool::new(false);
+    let full_dir = tempdir("full");
+    let full = train(&tiny_config(140), &full_dir, false, &never, &mut |_| {}).expect("full run");
+    assert_eq!(full.steps, 140);
+    assert!(!full.stopped);
+    assert!(full.behaviour.controller_queries > 0);
+    assert!(full.updates > 0);
+    let full_policy = std::fs::read(full_dir.join("policy.vgep")).expect("policy");
+
+    // Interrupted by the stop flag at step 120 (a checkpoint boundary), then resumed.
+    let part_dir = tempdir("part");
+    let stop = AtomicBool::new(false);
+    let part = train(&tiny_config(140), &part_dir, false, &stop, &mut |p| {
+        if p.step >= 120 {
+            stop.store(true, Ordering::SeqCst);
+        }
+    })
+    .expect("interrupted run");
+    assert!(part.stopped);
+    assert_eq!(part.steps, 120);
+    assert!(!part_dir.join("policy.vgep").exists());
+    let resumed = train(&tiny_config(140), &part_dir, true, &never, &mut |_| {}).expect("resumed run");
+    assert_eq!(resumed.steps, 140);
+    assert_eq!(resumed.updates, full.updates);
+    assert_eq!(resumed.behaviour, full.behaviour);
+    assert_eq!(metrics_without_speed(&part_dir), metrics_without_speed(&full_dir));
+    let resumed_policy = std::fs::read(part_dir.join("policy.vgep")).expect("policy");
+    assert!(resumed_policy == full_policy, "resumed actor differs from the uninterrupted one");
+
+    // Same seed, same run; the exported policy runs on the runtime.
+    let again_dir = tempdir("again");
+    train(&tiny_config(140), &again_dir, false, &never, &mut |_| {}).expect("again");
+    assert!(std::fs::read(again_dir.join("policy.vgep")).expect("policy") == full_policy);
+    let report = vge_trainer::eval::eval_policy_file(
+        &full_dir.join("policy.vgep"),
+        &tiny_config(140).env.env_config(0),
+        1,
+        0,
+    )
+    .expect("eval");
+    assert_eq!(report.episodes, 1);
+    assert!(report.mean_return.is_finite());
+    assert!(report.to_json_line().starts_with("{\"episodes\":1,"));
+    for d in [full_dir, part_dir, again_dir] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
