@@ -23,6 +23,61 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Train a policy with SAC and the configured behaviour policy (RL, RL+BC, FGE, VGE,
+    /// VGE+BC) from a TOML config (see configs/).
+    ///
+    /// Writes DIR/config.toml, DIR/metrics.csv (step, return, rotation, contacts, controller
+    /// share, losses), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
+    /// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues.
+    Train {
+        /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.
+        #[arg(long, required_unless_present = "resume")]
+        config: Option<PathBuf>,
+        /// Output directory of the run.
+        #[arg(long, required_unless_present = "resume")]
+        out: Option<PathBuf>,
+        /// Continue the run in this directory from its last checkpoint (its config.toml).
+        #[arg(long, conflicts_with_all = ["config", "out"])]
+        resume: Option<PathBuf>,
+        /// Override the config's seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Override the config's total env steps.
+        #[arg(long)]
+        steps: Option<u64>,
+        /// Override any config field, e.g. `--set sac.batch=128 --set vge.horizon=20`.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+    },
+    /// Evaluate a policy file on vge-runtime in the simulator, deterministically: mean
+    /// return, rotation, and success rate (object turned >= 2 pi about z without a drop).
+    Eval {
+        #[arg(long)]
+        policy: PathBuf,
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        #[arg(long, default_value_t = ObjectShape::Cube)]
+        object: ObjectShape,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Episode length in seconds of sim time.
+        #[arg(long, default_value_t = 20.0)]
+        episode_s: f32,
+        /// Gaussian noise on observed joint positions (rad).
+        #[arg(long, default_value_t = 0.0)]
+        noise_q_rad: f32,
+        /// Noise on contact normals, as a fraction of their length.
+        #[arg(long, default_value_t = 0.0)]
+        noise_normal_frac: f32,
+        /// Gaussian noise on contact positions (m).
+        #[arg(long, default_value_t = 0.0)]
+        noise_position_m: f32,
+        /// Random external force on the object, std per axis (N).
+        #[arg(long, default_value_t = 0.0)]
+        perturb_force_n: f32,
+        #[arg(long)]
+        json: bool,
+    },
     /// Write a policy file (postcard, see docs/policy-format.md) from an actor.
     ///
     /// The file carries the actor's layers, the hand's observation and action layouts, the
@@ -159,6 +214,50 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Train { config, out, resume, seed, steps, overrides } => {
+            train(config, out, resume, seed, steps, &overrides)
+        }
+        Command::Eval {
+            policy,
+            episodes,
+            object,
+            seed,
+            episode_s,
+            noise_q_rad,
+            noise_normal_frac,
+            noise_position_m,
+            perturb_force_n,
+            json,
+        } => {
+            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+            for (name, v) in [
+                ("noise-q-rad", noise_q_rad),
+                ("noise-normal-frac", noise_normal_frac),
+                ("noise-position-m", noise_position_m),
+                ("perturb-force-n", perturb_force_n),
+            ] {
+                anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
+            }
+            let mut env = EnvConfig::default();
+            env.object.shape = object;
+            env.episode_length_steps = (episode_s * env.control_hz).round().max(1.0) as usize;
+            env.noise.q_std_rad = noise_q_rad;
+            env.noise.normal_std_frac = noise_normal_frac;
+            env.noise.position_std_m = noise_position_m;
+            env.perturbation.force_std_n = perturb_force_n;
+            if perturb_force_n > 0.0 && env.perturbation.change_probability == 0.0 {
+                env.perturbation.change_probability = 0.1;
+            }
+            let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
+                .with_context(|| format!("evaluating {}", policy.display()))?;
+            if json {
+                println!("{}", report.to_json_line());
+            } else {
+                println!("{report:#?}");
+            }
+            Ok(())
+        }
         Command::Controller { kind, object, episodes, seed, episode_s, grasp_noise_rad, json } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
@@ -283,6 +382,93 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                 println!("  speedup {:.1}x, max |diff| {:.2e}", r.tch_ns / r.runtime_ns, r.max_abs_diff);
             }
         }
+    }
+    Ok(())
+}
+
+fn train(
+    config: Option<PathBuf>,
+    out: Option<PathBuf>,
+    resume: Option<PathBuf>,
+    seed: Option<u64>,
+    steps: Option<u64>,
+    overrides: &[String],
+) -> anyhow::Result<()> {
+    use vge_trainer::{config as cfg, train as tr};
+    let mut overrides = overrides.to_vec();
+    if let Some(seed) = seed {
+        overrides.push(format!("seed={seed}"));
+    }
+    if let Some(steps) = steps {
+        overrides.push(format!("total_steps={steps}"));
+    }
+    let (config, out_dir, resuming) = match (resume, config, out) {
+        (Some(dir), _, _) => {
+            let text = std::fs::read_to_string(dir.join("config.toml"))
+                .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
+            let config =
+                cfg::parse_with_overrides(&text, &dir.join("config.toml").display().to_string(), &overrides)?;
+            config.validate()?;
+            (config, dir, true)
+        }
+        (None, Some(path), Some(out)) => {
+            if out.join("checkpoint").exists() {
+                bail!(
+                    "{} already holds a run: continue it with --resume {0} or choose another --out",
+                    out.display()
+                );
+            }
+            (cfg::load_config(&path, &overrides)?, out, false)
+        }
+        _ => bail!("give --config and --out, or --resume DIR"),
+    };
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+
+    let bar = indicatif::ProgressBar::new(config.total_steps);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} steps ({eta} left) {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    eprintln!(
+        "training {} ({:?} + {:?}, seed {}) into {}{}",
+        config.name,
+        config.method,
+        config.controller,
+        config.seed,
+        out_dir.display(),
+        if resuming { ", resuming" } else { "" }
+    );
+    let summary = tr::train(&config, &out_dir, resuming, &stop, &mut |p: &tr::Progress| {
+        bar.set_position(p.step);
+        bar.set_message(format!(
+            "{:.0} steps/s, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
+            p.steps_per_s,
+            p.mean_return,
+            p.mean_rotation_rad,
+            100.0 * p.controller_share,
+            p.episodes
+        ));
+    })?;
+    bar.finish();
+    if summary.stopped {
+        println!(
+            "stopped at step {}: checkpoint saved; continue with `vge train --resume {}`",
+            summary.steps,
+            out_dir.display()
+        );
+    } else if let Some(policy) = summary.policy {
+        println!(
+            "done: {} steps, {} updates; policy written to {}",
+            summary.steps,
+            summary.updates,
+            policy.display()
+        );
     }
     Ok(())
 }
