@@ -49,6 +49,30 @@ enum Command {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         overrides: Vec<String>,
     },
+    /// Train one config for several seeds, one run directory each (DIR/seed-N), one after
+    /// the other; a finished seed is skipped, an interrupted one resumed.
+    Sweep {
+        #[arg(long)]
+        config: PathBuf,
+        /// Seeds as a range `A..B` (B excluded), e.g. `0..10`.
+        #[arg(long, value_parser = parse_seed_range)]
+        seeds: std::ops::Range<u64>,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long)]
+        steps: Option<u64>,
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+    },
+    /// Plot training curves of run directories (mean and min-max over runs of the same
+    /// experiment) into a PNG, and print a markdown table of final success rates.
+    Plot {
+        /// Run directories (each with config.toml and metrics.csv).
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Evaluate a policy file on vge-runtime in the simulator, deterministically: mean
     /// return, rotation, and success rate (object turned >= 2 pi about z without a drop).
     Eval {
@@ -119,6 +143,16 @@ enum Command {
     /// Measure vge's hot paths on this machine.
     #[command(subcommand)]
     Bench(Bench),
+}
+
+fn parse_seed_range(s: &str) -> Result<std::ops::Range<u64>, String> {
+    let (a, b) = s.split_once("..").ok_or_else(|| format!("`{s}` is not a range like 0..10"))?;
+    let a: u64 = a.trim().parse().map_err(|_| format!("`{a}` is not a seed"))?;
+    let b: u64 = b.trim().parse().map_err(|_| format!("`{b}` is not a seed"))?;
+    if a >= b {
+        return Err(format!("empty seed range {s}"));
+    }
+    Ok(a..b)
 }
 
 fn parse_controller_kind(s: &str) -> Result<ControllerKind, String> {
@@ -215,7 +249,34 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Command::Train { config, out, resume, seed, steps, overrides } => {
-            train(config, out, resume, seed, steps, &overrides)
+            train(config, out, resume, seed, steps, &overrides, &*stop_on_signal()?).map(|_| ())
+        }
+        Command::Sweep { config, seeds, out, steps, overrides } => {
+            let stop = stop_on_signal()?;
+            for seed in seeds.clone() {
+                let dir = out.join(format!("seed-{seed}"));
+                if dir.join("policy.vgep").exists() {
+                    eprintln!("seed {seed}: done already ({})", dir.display());
+                    continue;
+                }
+                let stopped = if dir.join("checkpoint").exists() {
+                    train(None, None, Some(dir), Some(seed), steps, &overrides, &stop)?
+                } else {
+                    train(Some(config.clone()), Some(dir), None, Some(seed), steps, &overrides, &stop)?
+                };
+                if stopped {
+                    break;
+                }
+            }
+            Ok(())
+        }
+        Command::Plot { runs, out } => {
+            let curves =
+                runs.iter().map(|d| vge_trainer::plot::read_run(d)).collect::<Result<Vec<_>, _>>()?;
+            let table = vge_trainer::plot::plot(&curves, &out)?;
+            print!("{table}");
+            eprintln!("wrote {}", out.display());
+            Ok(())
         }
         Command::Eval {
             policy,
@@ -393,7 +454,8 @@ fn train(
     seed: Option<u64>,
     steps: Option<u64>,
     overrides: &[String],
-) -> anyhow::Result<()> {
+    stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<bool> {
     use vge_trainer::{config as cfg, train as tr};
     let mut overrides = overrides.to_vec();
     if let Some(seed) = seed {
@@ -422,11 +484,6 @@ fn train(
         }
         _ => bail!("give --config and --out, or --resume DIR"),
     };
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-
     let bar = indicatif::ProgressBar::new(config.total_steps);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
@@ -444,7 +501,7 @@ fn train(
         out_dir.display(),
         if resuming { ", resuming" } else { "" }
     );
-    let summary = tr::train(&config, &out_dir, resuming, &stop, &mut |p: &tr::Progress| {
+    let summary = tr::train(&config, &out_dir, resuming, stop, &mut |p: &tr::Progress| {
         bar.set_position(p.step);
         bar.set_message(format!(
             "{:.0} steps/s, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
@@ -470,5 +527,14 @@ fn train(
             policy.display()
         );
     }
-    Ok(())
+    Ok(summary.stopped)
+}
+
+/// A flag raised by Ctrl-C or SIGTERM: training saves a checkpoint and returns.
+fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
 }

@@ -1,0 +1,253 @@
+//! `vge plot`: training curves of runs grouped by experiment (mean and min-max spread over
+//! seeds), like the paper's figures, and a markdown table of final success rates, like its
+//! Table I.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum PlotError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Csv { path: PathBuf, message: String },
+    #[error("no run directories given")]
+    NoRuns,
+    #[error("no font for the plot's text: {0}")]
+    Font(String),
+    #[error("drawing: {0}")]
+    Draw(String),
+}
+
+/// One run's curves, from its `metrics.csv` and `eval.csv`.
+#[derive(Debug, Clone)]
+pub struct RunCurves {
+    pub dir: PathBuf,
+    /// The experiment, from the run's config (`name`): runs with one name are seeds of it.
+    pub experiment: String,
+    pub step: Vec<f64>,
+    pub mean_return: Vec<f64>,
+    pub rotation_rad: Vec<f64>,
+    pub controller_share: Vec<f64>,
+    /// Success rate of the last evaluation, if any.
+    pub final_success: Option<f64>,
+}
+
+fn read(path: &Path) -> Result<String, PlotError> {
+    std::fs::read_to_string(path).map_err(|source| PlotError::Io { path: path.to_owned(), source })
+}
+
+/// Columns of a CSV with a header row, by name. An empty field (a metrics window in which
+/// no episode ended) repeats the column's previous value (0 before any).
+fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
+    let text = read(path)?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let index: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            header
+                .iter()
+                .position(|h| h == n)
+                .ok_or_else(|| PlotError::Csv { path: path.to_owned(), message: format!("no column `{n}`") })
+        })
+        .collect::<Result<_, _>>()?;
+    let mut columns = vec![Vec::new(); names.len()];
+    for (row, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let fields: Vec<&str> = line.split(',').collect();
+        for (col, &i) in index.iter().enumerate() {
+            let field = fields.get(i).map(|f| f.trim()).unwrap_or("");
+            let value = if field.is_empty() {
+                columns[col].last().copied().unwrap_or(0.0)
+            } else {
+                field.parse::<f64>().map_err(|_| PlotError::Csv {
+                    path: path.to_owned(),
+                    message: format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]),
+                })?
+            };
+            columns[col].push(value);
+        }
+    }
+    Ok(columns)
+}
+
+/// Reads one run directory.
+pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
+    let config = read(&dir.join("config.toml"))?;
+    let experiment = config
+        .lines()
+        .find_map(|l| l.strip_prefix("name = ").map(|v| v.trim().trim_matches('"').to_owned()))
+        .unwrap_or_else(|| dir.display().to_string());
+    let cols = csv_columns(&dir.join("metrics.csv"), &["step", "return", "rotation", "controller_share"])?;
+    let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] = cols
+        .try_into()
+        .map_err(|_| PlotError::Csv { path: dir.join("metrics.csv"), message: "columns".into() })?;
+    let eval = dir.join("eval.csv");
+    let final_success = if eval.exists() {
+        csv_columns(&eval, &["success"])?.first().and_then(|c| c.last().copied())
+    } else {
+        None
+    };
+    Ok(RunCurves {
+        dir: dir.to_owned(),
+        experiment,
+        step,
+        mean_return,
+        rotation_rad,
+        controller_share,
+        final_success,
+    })
+}
+
+/// One point of a group's curve: step, mean, min and max over its runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SpreadPoint {
+    step: f64,
+    mean: f64,
+    min: f64,
+    max: f64,
+}
+
+/// `ys` at `x`, linearly interpolated between the logged steps `xs` (clamped at the ends).
+fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    let n = xs.len().min(ys.len());
+    match xs[..n].iter().position(|&xi| xi >= x) {
+        None => ys[n - 1],
+        Some(0) => ys[0],
+        Some(i) => {
+            let t = (x - xs[i - 1]) / (xs[i] - xs[i - 1]).max(f64::MIN_POSITIVE);
+            ys[i - 1] + t * (ys[i] - ys[i - 1])
+        }
+    }
+}
+
+/// Mean, min and max over runs of `series` at the logged steps of the run that ended
+/// earliest (runs may log at different intervals: the others are interpolated).
+fn spread(runs: &[&RunCurves], series: impl Fn(&RunCurves) -> &[f64]) -> Vec<SpreadPoint> {
+    let usable: Vec<&&RunCurves> =
+        runs.iter().filter(|r| !r.step.is_empty() && !series(r).is_empty()).collect();
+    let Some(grid) =
+        usable.iter().min_by(|a, b| a.step[a.step.len() - 1].total_cmp(&b.step[b.step.len() - 1]))
+    else {
+        return Vec::new();
+    };
+    grid.step
+        .iter()
+        .map(|&x| {
+            let values: Vec<f64> = usable.iter().map(|r| interpolate(&r.step, series(r), x)).collect();
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            SpreadPoint { step: x, mean, min, max }
+        })
+        .collect()
+}
+
+fn load_font() -> Result<(), PlotError> {
+    const CANDIDATES: [&str; 3] = [
+        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+        "/usr/share/fonts/TTF/DejaVuSans.ttf",
+        "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    ];
+    let bytes = CANDIDATES.iter().find_map(|p| std::fs::read(p).ok()).ok_or_else(|| {
+        PlotError::Font(format!("none of {CANDIDATES:?} (Debian: apt-get install fonts-dejavu-core)"))
+    })?;
+    // plotters keeps registered fonts for the process's lifetime.
+    let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+    plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+        .map_err(|_| PlotError::Font("DejaVuSans.ttf is not a usable font".into()))
+}
+
+/// Draws return, rotation and controller share against env steps for every experiment in
+/// `runs` into a PNG at `out`; returns the markdown success table.
+pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
+    if runs.is_empty() {
+        return Err(PlotError::NoRuns);
+    }
+    load_font()?;
+    let mut groups: BTreeMap<&str, Vec<&RunCurves>> = BTreeMap::new();
+    for r in runs {
+        groups.entry(r.experiment.as_str()).or_default().push(r);
+    }
+    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
+    let root = BitMapBackend::new(out, (1500, 450)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    let panels = root.split_evenly((1, 3));
+    type Series = fn(&RunCurves) -> &[f64];
+    let specs: [(&str, Series); 3] = [
+        ("episode return", |r| &r.mean_return),
+        ("rotation about z per episode (rad)", |r| &r.rotation_rad),
+        ("controller share", |r| &r.controller_share),
+    ];
+    for (panel, (title, series)) in panels.iter().zip(specs) {
+        let curves: Vec<(&str, Vec<SpreadPoint>)> =
+            groups.iter().map(|(name, rs)| (*name, spread(rs, series))).collect();
+        let x_max = curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
+        let (y_min, y_max) = curves
+            .iter()
+            .flat_map(|(_, c)| c.iter().flat_map(|p| [p.min, p.max]))
+            .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        let pad = 0.05 * (y_max - y_min).max(1e-3);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))
+            .map_err(|e| draw_err(&e))?;
+        chart.configure_mesh().x_desc("env steps").draw().map_err(|e| draw_err(&e))?;
+        for (i, (name, c)) in curves.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            chart
+                .draw_series(std::iter::once(Polygon::new(
+                    c.iter()
+                        .map(|p| (p.step, p.max))
+                        .chain(c.iter().rev().map(|p| (p.step, p.min)))
+                        .collect::<Vec<_>>(),
+                    color.mix(0.2),
+                )))
+                .map_err(|e| draw_err(&e))?;
+            chart
+                .draw_series(LineSeries::new(c.iter().map(|p| (p.step, p.mean)), color.stroke_width(2)))
+                .map_err(|e| draw_err(&e))?
+                .label(format!("{name} ({} runs)", groups[name].len()))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| draw_err(&e))?;
+    }
+    root.present().map_err(|e| draw_err(&e))?;
+
+    let mut table = String::from(
+        "| experiment | runs | final success rate (mean) | runs that succeed |\n|---|---|---|---|\n",
+    );
+    for (name, rs) in &groups {
+        let rates: Vec<f64> = rs.iter().filter_map(|r| r.final_success).collect();
+        let mean = if rates.is_empty() { f64::NAN } else { rates.iter().sum::<f64>() / rates.len() as f64 };
+        let succeeding = rates.iter().filter(|&&s| s > 0.0).count();
+        table.push_str(&format!("| {name} | {} | {mean:.2} | {succeeding}/{} |\n", rs.len(), rates.len()));
+    }
+    Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolates_between_logged_steps_and_clamps_outside() {
+        let xs = [0.0, 10.0, 20.0];
+        let ys = [0.0, 1.0, 3.0];
+        assert_eq!(interpolate(&xs, &ys, 5.0), 0.5);
+        assert_eq!(interpolate(&xs, &ys, 15.0), 2.0);
+        assert_eq!(interpolate(&xs, &ys, -1.0), 0.0);
+        assert_eq!(interpolate(&xs, &ys, 99.0), 3.0);
+    }
+}
