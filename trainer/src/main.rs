@@ -315,7 +315,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if json {
                 println!("{}", report.to_json_line());
             } else {
-                println!("{report:#?}");
+                println!(
+                    "{} episodes of {episode_s} s on the {object}, policy {}",
+                    report.episodes,
+                    policy.display()
+                );
+                println!("  mean return        {:.3}", report.mean_return);
+                println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
+                println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
+                println!("  ended early        {:.2} of episodes (drop or lost contacts)", report.drop_rate);
+                println!(
+                    "  mean contacts      {:.2}; mean length {:.0} steps",
+                    report.mean_contacts, report.mean_length
+                );
             }
             Ok(())
         }
