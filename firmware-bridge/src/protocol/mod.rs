@@ -114,6 +114,8 @@ mod tests {
     #[test]
     fn bus_load_at_the_default_rate_is_far_below_the_limit() {
         assert_eq!(WORST_CASE_FRAME_BITS, 135);
+        // 20 Hz (the default control rate): (20 * 30 + 60) frames/s * 135 bits = 8.9%.
+        assert!((bus_load(20.0, 1e6) - 0.0891).abs() < 1e-9);
         // 30 Hz: (30 * 30 + 60) frames/s * 135 bits = 129,600 bit/s = 13% of 1 Mbit/s.
         let load = bus_load(30.0, 1e6);
         assert!((load - 0.1296).abs() < 1e-9, "{load}");
