@@ -15,7 +15,7 @@ use vge_bridge::emulator::{JointControllerEmulator, serve};
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
 use vge_bridge::report::json_line;
 use vge_bridge::sim_hand::{self, SimHand, SimHandSummary};
-use vge_bridge::transport::{InProcessTransport, SocketCanTransport};
+use vge_bridge::transport::{FdSocketCanTransport, InProcessTransport, SocketCanTransport};
 use vge_sim::observation::OBS_DIM;
 use vge_sim::{EnvConfig, NUM_JOINTS, ObjectShape};
 
@@ -120,6 +120,10 @@ enum Command {
         /// CAN interface (backend can).
         #[arg(long, default_value = "vcan0")]
         iface: String,
+        /// Use the CAN FD option (backend can): one frame per node per step and one command
+        /// frame for the hand; the interface needs an FD MTU (72).
+        #[arg(long)]
+        fd: bool,
         /// Object in the simulated hand (backend sim).
         #[arg(long, default_value_t = ObjectShape::Cube)]
         object: ObjectShape,
@@ -139,6 +143,9 @@ enum Command {
         iface: String,
         #[arg(long, value_enum, default_value_t = NodeModel::Sim)]
         model: NodeModel,
+        /// Speak the CAN FD option (model sim): node states and hand commands as FD frames.
+        #[arg(long)]
+        fd: bool,
         #[arg(long, default_value_t = ObjectShape::Cube)]
         object: ObjectShape,
         #[arg(long, default_value_t = 0)]
@@ -259,7 +266,7 @@ fn print_report(
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Run { policy, backend, iface, object, seed, loop_args } => {
+        Command::Run { policy, backend, iface, fd, object, seed, loop_args } => {
             let bytes = read_policy(&policy)?;
             let mut storage = storage_for(&bytes).with_context(|| format!("loading {}", policy.display()))?;
             let mut runner = RuntimePolicy::load(&bytes, &mut storage)
@@ -269,10 +276,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             loop_args.realtime.apply();
             match backend {
                 Backend::Can => {
-                    let mut transport = SocketCanTransport::open(&iface)
-                        .with_context(|| format!("opening CAN interface {iface}"))?;
-                    let report = control_loop::run(&mut transport, &mut runner, &cfg, &stop)?;
-                    print_report(loop_args.json, &[("backend", "\"can\"".into())], &cfg, &report, None);
+                    let opening = || format!("opening CAN interface {iface}");
+                    let report = if fd {
+                        let mut transport = FdSocketCanTransport::open(&iface).with_context(opening)?;
+                        control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
+                    } else {
+                        let mut transport = SocketCanTransport::open(&iface).with_context(opening)?;
+                        control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
+                    };
+                    let backend = if fd { "\"can-fd\"" } else { "\"can\"" };
+                    print_report(loop_args.json, &[("backend", backend.into())], &cfg, &report, None);
                 }
                 Backend::Sim => {
                     let (report, summary) = run_against_sim(&mut runner, &cfg, object, seed, &stop)?;
@@ -282,13 +295,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Emulate { iface, model, object, seed, idle_timeout_s, json } => {
+        Command::Emulate { iface, model, fd, object, seed, idle_timeout_s, json } => {
             let idle = positive_seconds("idle-timeout-s", idle_timeout_s, false)?.unwrap_or(Duration::MAX);
             let stop = stop_on_signal()?;
-            let mut transport =
-                SocketCanTransport::open(&iface).with_context(|| format!("opening CAN interface {iface}"))?;
+            anyhow::ensure!(!(fd && model == NodeModel::Lag), "--fd needs --model sim");
+            let opening = || format!("opening CAN interface {iface}");
             match model {
                 NodeModel::Lag => {
+                    let mut transport = SocketCanTransport::open(&iface).with_context(opening)?;
                     let stats =
                         serve(&mut transport, &mut JointControllerEmulator::new(0.2), u64::MAX, idle)?;
                     eprintln!(
@@ -300,8 +314,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     let mut config = EnvConfig::default();
                     config.object.shape = object;
                     let mut hand = SimHand::new(config, seed)?;
-                    eprintln!("vge-bridge: emulating the hand holding a {object} on {iface}");
-                    let stats = sim_hand::serve(&mut transport, &mut hand, idle, &stop)?;
+                    eprintln!(
+                        "vge-bridge: emulating the hand holding a {object} on {iface}{}",
+                        if fd { " (CAN FD)" } else { "" }
+                    );
+                    let stats = if fd {
+                        sim_hand::serve(
+                            &mut FdSocketCanTransport::open(&iface).with_context(opening)?,
+                            &mut hand,
+                            idle,
+                            &stop,
+                        )?
+                    } else {
+                        sim_hand::serve(
+                            &mut SocketCanTransport::open(&iface).with_context(opening)?,
+                            &mut hand,
+                            idle,
+                            &stop,
+                        )?
+                    };
                     let s = hand.summary();
                     if json {
                         println!(

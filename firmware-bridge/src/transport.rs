@@ -1,13 +1,15 @@
 //! How frames reach the hand: SocketCAN on a real (or virtual) bus, or an in-process channel
 //! pair for unit tests and timing benchmarks.
 
+use std::collections::VecDeque;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError, channel};
 use std::time::Duration;
 
-use socketcan::{CanSocket, Socket};
+use socketcan::{CanAnyFrame, CanFdFrame, CanFdSocket, CanSocket, EmbeddedFrame, Frame, Socket, StandardId};
 use thiserror::Error;
 
-use crate::protocol::RawFrame;
+use crate::protocol::fd::{FdMessage, FdPacker};
+use crate::protocol::{Message, RawFrame};
 use crate::socketcan_io::{FrameError, standard_id_and_data, to_can_frame};
 
 #[derive(Debug, Error)]
@@ -82,6 +84,100 @@ impl Transport for SocketCanTransport {
                 Received::Malformed { id: frame.raw_id(), len: socketcan::EmbeddedFrame::dlc(&frame) }
             }
         }))
+    }
+}
+
+/// SocketCAN with the CAN FD option (`docs/can-protocol.md`): joint commands and each node's
+/// state travel packed in FD frames, everything else as classic frames. To the control loop
+/// and the emulators it looks like the classic transport: FD frames are sent once their
+/// classic parts are complete and unpacked into classic frames on receipt.
+#[derive(Debug)]
+pub struct FdSocketCanTransport {
+    socket: CanFdSocket,
+    packer: FdPacker,
+    inbox: VecDeque<Received>,
+}
+
+impl FdSocketCanTransport {
+    /// Opens `iface`, which must have an FD-capable MTU (72; vcan's default).
+    pub fn open(iface: &str) -> Result<Self, TransportError> {
+        Ok(Self { socket: CanFdSocket::open(iface)?, packer: FdPacker::default(), inbox: VecDeque::new() })
+    }
+
+    fn write_fd(&self, fd: &FdMessage) -> Result<(), TransportError> {
+        let raw = fd.encode().map_err(|_| FrameError::IdTooLarge(0))?;
+        let id = StandardId::new(raw.id).ok_or(FrameError::IdTooLarge(raw.id))?;
+        let frame = CanFdFrame::new(id, raw.payload()).ok_or(FrameError::IdTooLarge(raw.id))?;
+        self.socket.write_frame(&frame)?;
+        Ok(())
+    }
+}
+
+impl Transport for FdSocketCanTransport {
+    fn send(&mut self, frame: &RawFrame) -> Result<(), TransportError> {
+        match Message::decode_frame(frame) {
+            Ok(m) if FdPacker::carries(&m) => {
+                if let Some(fd) = self.packer.push(&m) {
+                    self.write_fd(&fd)?;
+                }
+                Ok(())
+            }
+            _ => {
+                self.socket.write_frame(&to_can_frame(frame)?)?;
+                Ok(())
+            }
+        }
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, TransportError> {
+        if let Some(r) = self.inbox.pop_front() {
+            return Ok(Some(r));
+        }
+        let result = if timeout.is_zero() {
+            self.socket.set_nonblocking(true)?;
+            let r = self.socket.read_frame();
+            self.socket.set_nonblocking(false)?;
+            r
+        } else {
+            self.socket.read_frame_timeout(timeout)
+        };
+        let frame = match result {
+            Ok(frame) => frame,
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                return Ok(None);
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let received = match frame {
+            CanAnyFrame::Fd(fd) => match (fd.id(), FdMessage::decode(standard_raw(&fd), fd.data())) {
+                (socketcan::Id::Standard(_), Ok(message)) => {
+                    for m in message.to_classic() {
+                        if let Ok(raw) = m.encode() {
+                            self.inbox.push_back(Received::Frame(raw));
+                        }
+                    }
+                    return Ok(self.inbox.pop_front());
+                }
+                _ => Received::Malformed { id: fd.raw_id(), len: fd.data().len() },
+            },
+            CanAnyFrame::Normal(f) => match (f.id(), <[u8; 8]>::try_from(f.data())) {
+                (socketcan::Id::Standard(id), Ok(data)) => {
+                    Received::Frame(RawFrame { id: id.as_raw(), data })
+                }
+                _ => Received::Malformed { id: f.raw_id(), len: f.data().len() },
+            },
+            CanAnyFrame::Remote(f) => Received::Malformed { id: f.raw_id(), len: 0 },
+            CanAnyFrame::Error(f) => Received::Malformed { id: f.raw_id(), len: 0 },
+        };
+        Ok(Some(received))
+    }
+}
+
+/// The 11-bit id of an FD frame (0 for extended ids, which the caller then rejects).
+fn standard_raw(frame: &CanFdFrame) -> u16 {
+    match frame.id() {
+        socketcan::Id::Standard(id) => id.as_raw(),
+        socketcan::Id::Extended(_) => 0,
     }
 }
 

@@ -270,9 +270,14 @@ fn exported_policy(seed: u64) -> std::path::PathBuf {
 }
 
 fn spawn_emulator(iface: &str, seed: u64, idle_timeout_s: f64) -> std::process::Child {
+    spawn_emulator_with(iface, seed, idle_timeout_s, &[])
+}
+
+fn spawn_emulator_with(iface: &str, seed: u64, idle_timeout_s: f64, extra: &[&str]) -> std::process::Child {
     std::process::Command::new(workspace_bin("vge-bridge"))
         .args(["emulate", "--iface", iface, "--model", "sim", "--json", "--seed", &seed.to_string()])
         .args(["--idle-timeout-s", &idle_timeout_s.to_string()])
+        .args(extra)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -298,23 +303,48 @@ fn wait_for_output(child: std::process::Child) -> String {
     String::from_utf8_lossy(&out.stdout).trim().to_owned()
 }
 
-#[test]
-#[ignore = "needs vcan0: run scripts/hil.sh"]
-fn closed_loop_over_can_turns_the_object_as_the_in_process_sim_does() {
+/// Emulator and bridge as processes on vcan0 (classic frames, or the FD option), against the
+/// same policy and seed run in-process; returns how many FD frames a third socket saw.
+fn closed_loop_matches_in_process(fd: bool) -> usize {
     let iface = hil_iface();
     let policy = exported_policy(3);
     let policy_arg = policy.to_str().expect("utf-8 temp path");
     let duration = "2.0";
 
-    let emulator = spawn_emulator(&iface, 5, 2.0);
+    // A third socket counts FD frames on the bus while the loop runs.
+    let capture = socketcan::CanFdSocket::open(&iface).expect("FD socket (vcan MTU 72)");
+    capture.set_read_timeout(Duration::from_millis(200)).expect("timeout");
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let counting = done.clone();
+    let counter = thread::spawn(move || {
+        let mut fd_frames = 0;
+        while !counting.load(std::sync::atomic::Ordering::Relaxed) {
+            if let Ok(socketcan::CanAnyFrame::Fd(_)) = capture.read_frame() {
+                fd_frames += 1;
+            }
+        }
+        fd_frames
+    });
+
+    let mut emulator_args = vec![];
+    let mut run_args =
+        vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", duration];
+    if fd {
+        emulator_args.push("--fd");
+        run_args.push("--fd");
+    }
+    let emulator = spawn_emulator_with(&iface, 5, 2.0, &emulator_args);
     thread::sleep(Duration::from_millis(500)); // the emulator resets the sim (grasp) first
-    let over_can =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", duration]);
+    let over_can = bridge_run(&run_args);
     let emulated = wait_for_output(emulator);
+    done.store(true, std::sync::atomic::Ordering::Relaxed);
+    let fd_frames = counter.join().expect("counter");
     let in_process =
         bridge_run(&["--policy", policy_arg, "--backend", "sim", "--seed", "5", "--duration", duration]);
     let _ = std::fs::remove_file(&policy);
-    eprintln!("over CAN: {over_can}\nemulator: {emulated}\nin-process: {in_process}");
+    eprintln!(
+        "over CAN (fd {fd}): {over_can}\nemulator: {emulated}\nin-process: {in_process}\nFD frames {fd_frames}"
+    );
 
     assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("duration"));
     assert_eq!(json_f64(&over_can, "bad_frames"), 0.0);
@@ -331,6 +361,21 @@ fn closed_loop_over_can_turns_the_object_as_the_in_process_sim_does() {
     // only settles: far below 0.01 rad. 10% of the rotation covers timing of the last step.
     let tolerance = 0.01 + 0.1 * rot_sim.abs();
     assert!((rot_can - rot_sim).abs() <= tolerance, "over CAN {rot_can} rad vs in-process {rot_sim} rad");
+    fd_frames
+}
+
+#[test]
+#[ignore = "needs vcan0: run scripts/hil.sh"]
+fn closed_loop_over_can_turns_the_object_as_the_in_process_sim_does() {
+    assert_eq!(closed_loop_matches_in_process(false), 0, "classic mode sends no FD frames");
+}
+
+#[test]
+#[ignore = "needs vcan0: run scripts/hil.sh"]
+fn closed_loop_over_can_fd_turns_the_object_as_the_in_process_sim_does() {
+    // 40 steps at 20 Hz: one hand command and five node states per step (plus start-up).
+    let fd_frames = closed_loop_matches_in_process(true);
+    assert!(fd_frames >= 6 * 38, "only {fd_frames} FD frames on the bus");
 }
 
 #[test]
