@@ -38,6 +38,26 @@ pub trait Transport: Send {
     fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, TransportError>;
 }
 
+/// The next frame within `timeout`, `None` if none came. A zero timeout polls: SocketCAN
+/// takes a zero read timeout as "block forever".
+fn read_frame<S: Socket>(socket: &S, timeout: Duration) -> Result<Option<S::FrameType>, TransportError> {
+    let result = if timeout.is_zero() {
+        socket.set_nonblocking(true)?;
+        let r = socket.read_frame();
+        socket.set_nonblocking(false)?;
+        r
+    } else {
+        socket.read_frame_timeout(timeout)
+    };
+    match result {
+        Ok(frame) => Ok(Some(frame)),
+        Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+            Ok(None)
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 /// SocketCAN (classic frames) on an interface such as `can0` or `vcan0`.
 #[derive(Debug)]
 pub struct SocketCanTransport {
@@ -58,22 +78,7 @@ impl Transport for SocketCanTransport {
     }
 
     fn recv(&mut self, timeout: Duration) -> Result<Option<Received>, TransportError> {
-        // A zero timeout on a SocketCAN read means "block forever": poll non-blocking instead.
-        let result = if timeout.is_zero() {
-            self.socket.set_nonblocking(true)?;
-            let r = self.socket.read_frame();
-            self.socket.set_nonblocking(false)?;
-            r
-        } else {
-            self.socket.read_frame_timeout(timeout)
-        };
-        let frame = match result {
-            Ok(frame) => frame,
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
-                return Ok(None);
-            }
-            Err(e) => return Err(e.into()),
-        };
+        let Some(frame) = read_frame(&self.socket, timeout)? else { return Ok(None) };
         Ok(Some(match standard_id_and_data(&frame) {
             Ok((id, data)) => match <[u8; 8]>::try_from(data) {
                 Ok(data) => Received::Frame(RawFrame { id, data }),
@@ -133,21 +138,7 @@ impl Transport for FdSocketCanTransport {
         if let Some(r) = self.inbox.pop_front() {
             return Ok(Some(r));
         }
-        let result = if timeout.is_zero() {
-            self.socket.set_nonblocking(true)?;
-            let r = self.socket.read_frame();
-            self.socket.set_nonblocking(false)?;
-            r
-        } else {
-            self.socket.read_frame_timeout(timeout)
-        };
-        let frame = match result {
-            Ok(frame) => frame,
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
-                return Ok(None);
-            }
-            Err(e) => return Err(e.into()),
-        };
+        let Some(frame) = read_frame(&self.socket, timeout)? else { return Ok(None) };
         let received = match frame {
             CanAnyFrame::Fd(fd) => match (fd.id(), FdMessage::decode(standard_raw(&fd), fd.data())) {
                 (socketcan::Id::Standard(_), Ok(message)) => {
