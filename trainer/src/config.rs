@@ -196,6 +196,11 @@ pub struct SacSection {
     pub warmup: u64,
     /// libtorch intra-op threads (0: leave libtorch's default).
     pub threads: i32,
+    /// Normalise observations by the mean and std of the warm-up data (fixed after that,
+    /// saved with the networks and exported in the policy file).
+    pub normalize_obs: bool,
+    /// Layer normalisation in the critics' hidden layers (against Q divergence).
+    pub critic_layer_norm: bool,
 }
 
 /// α: a fixed number or `"auto"`.
@@ -228,6 +233,8 @@ impl Default for SacSection {
             utd: 1.0,
             warmup: 10_000,
             threads: 2,
+            normalize_obs: true,
+            critic_layer_norm: true,
         }
     }
 }
@@ -408,6 +415,7 @@ impl Config {
             actor_lr: self.sac.actor_lr,
             critic_lr: self.sac.critic_lr,
             entropy,
+            critic_layer_norm: self.sac.critic_layer_norm,
         }
     }
 

@@ -11,6 +11,39 @@ use tch::{Kind, Tensor};
 pub const LOG_STD_MIN: f64 = -5.0;
 pub const LOG_STD_MAX: f64 = 2.0;
 
+/// Normalised observations are clamped to ±this many standard deviations (the policy file
+/// records the same clip, so the runtime computes exactly what the actor saw in training).
+pub const OBS_CLIP: f64 = 10.0;
+
+/// `clip((obs - mean) / std)` with statistics stored as non-trainable variables
+/// (`{path}.obs_mean`, `{path}.obs_std`), so checkpoints and exports carry them. They start
+/// as the identity and are set once, from the warm-up data ([`Self::set`]): raw contact
+/// positions vary by centimetres while forces reach tens of newtons, and a critic fed both
+/// unscaled diverges.
+#[derive(Debug)]
+pub struct ObsNormaliser {
+    mean: Tensor,
+    std: Tensor,
+}
+
+impl ObsNormaliser {
+    pub fn new(p: &nn::Path, obs_dim: i64) -> Self {
+        Self { mean: p.zeros_no_train("obs_mean", &[obs_dim]), std: p.ones_no_train("obs_std", &[obs_dim]) }
+    }
+
+    pub fn apply(&self, obs: &Tensor) -> Tensor {
+        ((obs - &self.mean) / &self.std).clamp(-OBS_CLIP, OBS_CLIP)
+    }
+
+    /// Copies `mean` and `std` (each `[obs_dim]`, std > 0) into the stored statistics.
+    pub fn set(&mut self, mean: &Tensor, std: &Tensor) {
+        tch::no_grad(|| {
+            self.mean.copy_(mean);
+            self.std.copy_(std);
+        });
+    }
+}
+
 /// Sizes shared by the actor and critics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetSpec {
@@ -39,6 +72,7 @@ pub struct GaussianActor {
     trunk: nn::Sequential,
     mean: nn::Linear,
     log_std: nn::Linear,
+    pub obs_norm: ObsNormaliser,
     /// Per-dimension half-range of the action (e.g. the max joint-target change per step).
     action_scale: Tensor,
 }
@@ -54,6 +88,7 @@ impl GaussianActor {
     pub fn new(root: &nn::Path, spec: &NetSpec, action_scale: &[f32]) -> Self {
         assert_eq!(action_scale.len() as i64, spec.act_dim, "one action scale per action dimension");
         let p = root / "actor";
+        let obs_norm = ObsNormaliser::new(&p, spec.obs_dim);
         let mut trunk = nn::seq();
         let mut width = spec.obs_dim;
         for (i, &h) in spec.hidden.iter().enumerate() {
@@ -63,17 +98,17 @@ impl GaussianActor {
         let mean = torch_linear(&p / "mean", width, spec.act_dim);
         let log_std = torch_linear(&p / "log_std", width, spec.act_dim);
         let action_scale = Tensor::from_slice(action_scale).to_device(root.device());
-        Self { trunk, mean, log_std, action_scale }
+        Self { trunk, mean, log_std, obs_norm, action_scale }
     }
 
     /// The deployed behaviour: tanh(mean) · scale, no noise.
     pub fn deterministic(&self, obs: &Tensor) -> Tensor {
-        self.mean.forward(&self.trunk.forward(obs)).tanh() * &self.action_scale
+        self.mean.forward(&self.trunk.forward(&self.obs_norm.apply(obs))).tanh() * &self.action_scale
     }
 
     /// Mean and log σ of the pre-tanh Gaussian.
     pub fn distribution(&self, obs: &Tensor) -> (Tensor, Tensor) {
-        let h = self.trunk.forward(obs);
+        let h = self.trunk.forward(&self.obs_norm.apply(obs));
         let log_std =
             LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (self.log_std.forward(&h).tanh() + 1.0);
         (self.mean.forward(&h), log_std)
@@ -132,13 +167,25 @@ impl GaussianActor {
 pub struct TwinCritic {
     weights: Vec<Tensor>,
     biases: Vec<Tensor>,
+    pub obs_norm: ObsNormaliser,
+    /// 1 / the actor's action scale: the critic sees actions in [-1, 1], as large as its
+    /// normalised observations (raw joint-target changes are a few hundredths of a radian).
+    inv_action_scale: Tensor,
+    /// Layer normalisation (no affine parameters) after each hidden layer's matmul: it
+    /// bounds the features the last layer extrapolates from, the remedy for Q divergence
+    /// under off-policy bootstrapping that Ball et al. (RLPD, 2023) measured.
+    layer_norm: bool,
 }
 
 impl TwinCritic {
     pub const TWINS: i64 = 2;
 
-    pub fn new(root: &nn::Path, spec: &NetSpec) -> Self {
+    pub fn new(root: &nn::Path, spec: &NetSpec, action_scale: &[f32], layer_norm: bool) -> Self {
+        assert_eq!(action_scale.len() as i64, spec.act_dim, "one action scale per action dimension");
         let p = root / "critic";
+        let obs_norm = ObsNormaliser::new(&p, spec.obs_dim);
+        let inv: Vec<f32> = action_scale.iter().map(|s| 1.0 / s).collect();
+        let inv_action_scale = Tensor::from_slice(&inv).to_device(root.device());
         let mut widths = vec![spec.obs_dim + spec.act_dim];
         widths.extend(&spec.hidden);
         widths.push(1);
@@ -150,18 +197,22 @@ impl TwinCritic {
             weights.push(p.var(&format!("w{i}"), &[Self::TWINS, fan_in, fan_out], init));
             biases.push(p.var(&format!("b{i}"), &[Self::TWINS, 1, fan_out], init));
         }
-        Self { weights, biases }
+        Self { weights, biases, obs_norm, inv_action_scale, layer_norm }
     }
 
     /// Q-values of both twins, shape `[2, batch, 1]`.
     pub fn q_values(&self, obs: &Tensor, action: &Tensor) -> Tensor {
-        let x = Tensor::cat(&[obs, action], -1);
+        let x = Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1);
         let batch = x.size()[0];
         let mut h = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
         let last = self.weights.len() - 1;
         for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
             h = b.baddbmm(&h, w, 1.0, 1.0);
             if i < last {
+                if self.layer_norm {
+                    let width = h.size()[2];
+                    h = h.layer_norm([width], None::<Tensor>, None::<Tensor>, 1e-5, false);
+                }
                 h = h.relu();
             }
         }

@@ -53,5 +53,22 @@ pub fn export_hand_actor(
     provenance: Provenance,
 ) -> Result<Vec<u8>, ExportError> {
     let spec = ActorSpec { obs_dim: OBS_DIM, hidden: hidden.to_vec(), act_dim: vge_sim::NUM_JOINTS };
-    export_policy(actor_vs, "actor", &spec, hand_policy_meta(env, provenance))
+    let mut meta = hand_policy_meta(env, provenance);
+    // The actor's normaliser (`nets::ObsNormaliser`), when it has one, goes into the file so
+    // the runtime normalises and clips exactly as the actor did in training.
+    let vars = actor_vs.variables();
+    if let (Some(mean), Some(std)) = (vars.get("actor.obs_mean"), vars.get("actor.obs_std")) {
+        let to_vec = |t: &tch::Tensor| Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).view(-1));
+        match (to_vec(mean), to_vec(std)) {
+            (Ok(mean), Ok(std)) if mean.len() == OBS_DIM && std.len() == OBS_DIM => {
+                meta.obs_norm = ObsNorm { mean, std, clip: Some(crate::nets::OBS_CLIP as f32) };
+            }
+            _ => {
+                return Err(ExportError::MissingVariable {
+                    name: "actor.obs_mean/obs_std of the observation size".to_owned(),
+                });
+            }
+        }
+    }
+    export_policy(actor_vs, "actor", &spec, meta)
 }

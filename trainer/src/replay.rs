@@ -113,6 +113,29 @@ impl ReplayBuffer {
         Ok(())
     }
 
+    /// Per-dimension mean and standard deviation of the stored observations (accumulated in
+    /// f64), each std raised to at least `min_std` so that a constant input (say, the normal
+    /// of a fingertip that never touched) is not divided by zero.
+    pub fn obs_stats(&self, min_std: f32) -> (Vec<f32>, Vec<f32>) {
+        let o = self.obs_dim;
+        let mut sum = vec![0.0f64; o];
+        let mut sum_sq = vec![0.0f64; o];
+        for row in self.obs[..self.len * o].chunks_exact(o) {
+            for (j, &x) in row.iter().enumerate() {
+                sum[j] += f64::from(x);
+                sum_sq[j] += f64::from(x) * f64::from(x);
+            }
+        }
+        let n = self.len.max(1) as f64;
+        let mean: Vec<f64> = sum.iter().map(|s| s / n).collect();
+        let std = sum_sq
+            .iter()
+            .zip(&mean)
+            .map(|(sq, m)| ((sq / n - m * m).max(0.0).sqrt() as f32).max(min_std))
+            .collect();
+        (mean.into_iter().map(|m| m as f32).collect(), std)
+    }
+
     /// Whether the action of stored row `i` came from the learner.
     pub fn source(&self, i: usize) -> Option<Source> {
         (i < self.len).then(|| if self.learner[i] > 0.5 { Source::Learner } else { Source::Controller })

@@ -31,6 +31,8 @@ pub struct SacConfig {
     pub actor_lr: f64,
     pub critic_lr: f64,
     pub entropy: EntropyCoef,
+    /// Layer normalisation in the critics' hidden layers (see [`TwinCritic`]).
+    pub critic_layer_norm: bool,
 }
 
 impl SacConfig {
@@ -44,6 +46,7 @@ impl SacConfig {
             actor_lr: 3e-4,
             critic_lr: 1e-3,
             entropy: EntropyCoef::Auto { target_entropy: -15.0, initial: 0.1 },
+            critic_layer_norm: true,
         }
     }
 }
@@ -219,9 +222,11 @@ impl Sac {
         let actor_vs = nn::VarStore::new(device);
         let actor = GaussianActor::new(&actor_vs.root(), &config.net, &config.action_scale);
         let critic_vs = nn::VarStore::new(device);
-        let critic = TwinCritic::new(&critic_vs.root(), &config.net);
+        let critic =
+            TwinCritic::new(&critic_vs.root(), &config.net, &config.action_scale, config.critic_layer_norm);
         let mut target_vs = nn::VarStore::new(device);
-        let target = TwinCritic::new(&target_vs.root(), &config.net);
+        let target =
+            TwinCritic::new(&target_vs.root(), &config.net, &config.action_scale, config.critic_layer_norm);
         target_vs.copy(&critic_vs)?;
         target_vs.freeze();
         let actor_opt = Adam::new(sorted_trainables(&actor_vs), config.actor_lr);
@@ -259,7 +264,9 @@ impl Sac {
         let mut sac = Self::new(config, device)?;
         let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0, 0x1417) as u64);
         for vs in [&sac.actor_vs, &sac.critic_vs] {
-            let mut named: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
+            // Trainable parameters only: the normalisers' statistics keep their identity start.
+            let mut named: Vec<(String, Tensor)> =
+                vs.variables().into_iter().filter(|(_, t)| t.requires_grad()).collect();
             named.sort_by(|a, b| a.0.cmp(&b.0));
             let fan_in = |name: &str| -> Option<i64> {
                 // actor.X.weight [out, in]; critic.wI [2, in, out]. Biases use their weight's.
@@ -289,6 +296,19 @@ impl Sac {
 
     pub fn alpha(&self) -> f64 {
         self.alpha
+    }
+
+    /// Sets the observation normalisation of the actor, the critics and the target critics
+    /// to `(obs - mean) / std`. Each slice has `obs_dim` entries; `std` entries must be > 0.
+    pub fn set_obs_normalisation(&mut self, mean: &[f32], std: &[f32]) {
+        let dim = self.config.net.obs_dim as usize;
+        assert!(mean.len() == dim && std.len() == dim, "normalisation of {dim} observations");
+        assert!(std.iter().all(|&s| s > 0.0 && s.is_finite()), "std must be positive and finite");
+        let device = self.actor_vs.device();
+        let (m, s) = (Tensor::from_slice(mean).to_device(device), Tensor::from_slice(std).to_device(device));
+        self.actor.obs_norm.set(&m, &s);
+        self.critic.obs_norm.set(&m, &s);
+        self.target.obs_norm.set(&m, &s);
     }
 
     /// Updates done so far.

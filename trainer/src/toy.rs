@@ -82,6 +82,7 @@ pub fn train_point_mass(
         actor_lr: 1e-3,
         critic_lr: 1e-3,
         entropy,
+        critic_layer_norm: true,
     };
     let mut sac = Sac::new_seeded(config, Device::Cpu, seed)?;
     let mut replay =

@@ -179,6 +179,9 @@ const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,con
 
 /// Salt of the behaviour-noise seeds.
 const SALT_ACT: u64 = 0xac7;
+/// Smallest std the observation normaliser divides by: a centimetre for contact positions,
+/// and nothing that never varied in the warm-up gets amplified more than 100x.
+const OBS_MIN_STD: f32 = 1e-2;
 
 /// The effective configuration stored in a run directory (for `--resume DIR`).
 pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
@@ -376,6 +379,12 @@ pub fn train(
         // Updates.
         let beta = if config.method.uses_bc() { bc_beta(&config.bc, step) } else { 0.0 };
         if step >= config.sac.warmup && replay.len() >= batch_size {
+            if sac.updates() == 0 && config.sac.normalize_obs {
+                // Once, before the first update; afterwards the statistics live in the
+                // networks' var stores and come back with a checkpoint.
+                let (mean, std) = replay.obs_stats(OBS_MIN_STD);
+                sac.set_obs_normalisation(&mean, &std);
+            }
             updates_due += n as f64 * config.sac.utd;
             while updates_due >= 1.0 {
                 updates_due -= 1.0;

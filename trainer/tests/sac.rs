@@ -55,14 +55,21 @@ fn actor_log_prob_matches_the_tanh_gaussian_density() {
 fn twin_critic_batched_pass_equals_two_separate_mlps() {
     let vs = nn::VarStore::new(Device::Cpu);
     let spec = small_spec();
-    let critic = TwinCritic::new(&vs.root(), &spec);
+    let scale = [0.5f32, 2.0, 1.0];
+    let mut critic = TwinCritic::new(&vs.root(), &spec, &scale, false);
+    let obs_mean = Tensor::from_slice(&[1.0f32, -2.0, 0.0, 0.5, 3.0, 0.0]);
+    let obs_std = Tensor::from_slice(&[2.0f32, 0.5, 1.0, 4.0, 1.0, 0.25]);
+    critic.obs_norm.set(&obs_mean, &obs_std);
     let obs = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
     let act = Tensor::randn([16, 3], (Kind::Float, Device::Cpu));
     let q = tch::no_grad(|| critic.q_values(&obs, &act));
     assert_eq!(q.size(), vec![2, 16, 1]);
 
+    // The critic sees normalised observations (clamped) and actions divided by their scale.
     let vars = vs.variables();
-    let x = Tensor::cat(&[&obs, &act], -1);
+    let obs_n =
+        ((&obs - &obs_mean) / &obs_std).clamp(-vge_trainer::nets::OBS_CLIP, vge_trainer::nets::OBS_CLIP);
+    let x = Tensor::cat(&[obs_n, &act / Tensor::from_slice(&scale)], -1);
     for twin in 0..2 {
         let mut h = x.shallow_clone();
         for layer in 0..3 {
@@ -100,6 +107,7 @@ fn config(entropy: EntropyCoef) -> SacConfig {
         actor_lr: 1e-3,
         critic_lr: 3e-3,
         entropy,
+        critic_layer_norm: false,
     }
 }
 

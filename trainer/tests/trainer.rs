@@ -213,6 +213,7 @@ fn small_sac() -> Sac {
         actor_lr: 1e-3,
         critic_lr: 1e-3,
         entropy: EntropyCoef::Fixed(0.0),
+        critic_layer_norm: false,
     };
     Sac::new(config, Device::Cpu).expect("sac")
 }
