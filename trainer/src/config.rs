@@ -13,7 +13,7 @@ use vge_sim::{EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationCon
 
 use crate::controllers::ControllerKind;
 use crate::nets::NetSpec;
-use crate::sac::{EntropyCoef, SacConfig};
+use crate::sac::{Algorithm, EntropyCoef, SacConfig};
 
 /// A configuration that cannot be read, overridden or used.
 #[derive(Debug, Error)]
@@ -239,6 +239,36 @@ impl Default for SacSection {
     }
 }
 
+/// The off-policy learner: SAC (the `[sac]` section) or TD3 (the `[sac]` section's sizes,
+/// rates, γ, τ, batch, buffer, UTD and warm-up, plus `[td3]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AlgorithmName {
+    Sac,
+    Td3,
+}
+
+/// TD3's noises (fractions of the action scale) and actor delay.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Td3Section {
+    pub explore_std: f64,
+    pub target_noise_std: f64,
+    pub target_noise_clip: f64,
+    pub policy_delay: u64,
+}
+
+impl Default for Td3Section {
+    fn default() -> Self {
+        match Algorithm::TD3 {
+            Algorithm::Td3 { explore_std, target_noise_std, target_noise_clip, policy_delay } => {
+                Self { explore_std, target_noise_std, target_noise_clip, policy_delay }
+            }
+            Algorithm::Sac => unreachable!("Algorithm::TD3 is TD3"),
+        }
+    }
+}
+
 /// VGE's selection horizon and the hard stop (also used by FGE).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -339,8 +369,10 @@ pub struct Config {
     pub method: Method,
     /// Required for fge, vge, vge-bc.
     pub controller: Option<ControllerName>,
+    pub algorithm: AlgorithmName,
     pub env: EnvSection,
     pub sac: SacSection,
+    pub td3: Td3Section,
     pub vge: VgeSection,
     pub fge: FgeSection,
     pub bc: BcSection,
@@ -356,8 +388,10 @@ impl Default for Config {
             num_envs: 8,
             method: Method::Vge,
             controller: Some(ControllerName::Fg),
+            algorithm: AlgorithmName::Sac,
             env: EnvSection::default(),
             sac: SacSection::default(),
+            td3: Td3Section::default(),
             vge: VgeSection::default(),
             fge: FgeSection::default(),
             bc: BcSection::default(),
@@ -407,7 +441,18 @@ impl Config {
                 initial: self.sac.initial_alpha,
             },
         };
+        let t = &self.td3;
+        let algorithm = match self.algorithm {
+            AlgorithmName::Sac => Algorithm::Sac,
+            AlgorithmName::Td3 => Algorithm::Td3 {
+                explore_std: t.explore_std,
+                target_noise_std: t.target_noise_std,
+                target_noise_clip: t.target_noise_clip,
+                policy_delay: t.policy_delay,
+            },
+        };
         SacConfig {
+            algorithm,
             net: NetSpec { obs_dim: vge_sim::OBS_DIM as i64, act_dim: act, hidden: self.sac.hidden.clone() },
             action_scale: vec![self.env.max_action_rad; act as usize],
             gamma: self.sac.gamma,
@@ -478,6 +523,26 @@ impl Config {
         }
         if s.threads < 0 {
             return Err(invalid("sac.threads must be >= 0"));
+        }
+        if c.algorithm == AlgorithmName::Td3 {
+            let t = &c.td3;
+            for (key, v) in [
+                ("td3.explore_std", t.explore_std),
+                ("td3.target_noise_std", t.target_noise_std),
+                ("td3.target_noise_clip", t.target_noise_clip),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(invalid(format!("{key} must be finite and >= 0, got {v}")));
+                }
+            }
+            if t.policy_delay == 0 {
+                return Err(invalid("td3.policy_delay must be at least 1"));
+            }
+            if c.sac.alpha != Alpha::Fixed(0.0) {
+                return Err(invalid(
+                    "sac.alpha is SAC's entropy coefficient: leave it at 0 with algorithm = \"td3\"",
+                ));
+            }
         }
         if c.vge.horizon == 0 {
             return Err(invalid("vge.horizon (H) must be at least 1"));

@@ -101,6 +101,11 @@ impl GaussianActor {
         Self { trunk, mean, log_std, obs_norm, action_scale }
     }
 
+    /// Per-dimension half-range of the actions, `[act_dim]`.
+    pub fn action_scale(&self) -> &Tensor {
+        &self.action_scale
+    }
+
     /// The deployed behaviour: tanh(mean) · scale, no noise.
     pub fn deterministic(&self, obs: &Tensor) -> Tensor {
         self.mean.forward(&self.trunk.forward(&self.obs_norm.apply(obs))).tanh() * &self.action_scale

@@ -1,7 +1,9 @@
-//! Soft Actor-Critic's update step (Haarnoja et al. 2018; CleanRL's `sac_continuous_action`
-//! layout): twin critics with a Polyak-averaged target, a reparameterised actor, and an
-//! entropy coefficient α that is either fixed (0 allowed, as VGE uses) or tuned to a target
-//! entropy.
+//! The learner's update step. Soft Actor-Critic (Haarnoja et al. 2018; CleanRL's
+//! `sac_continuous_action` layout): twin critics with a Polyak-averaged target, a
+//! reparameterised actor, and an entropy coefficient α that is either fixed (0 allowed, as
+//! VGE uses) or tuned to a target entropy. Or TD3 (Fujimoto et al. 2018; CleanRL's
+//! `td3_continuous_action`), the paper's second learner: the same twin critics, a
+//! deterministic actor (the mean head), target-policy smoothing and delayed actor updates.
 
 use std::path::Path;
 
@@ -21,8 +23,32 @@ pub enum EntropyCoef {
     Auto { target_entropy: f64, initial: f64 },
 }
 
+/// Which off-policy algorithm the learner runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Algorithm {
+    Sac,
+    /// TD3's noises are fractions of the action scale (CleanRL: 0.1, 0.2, 0.5 and delay 2).
+    Td3 {
+        /// Std of the Gaussian noise added to the deterministic action when acting.
+        explore_std: f64,
+        /// Std of the target-policy smoothing noise, clipped to ±`target_noise_clip`.
+        target_noise_std: f64,
+        target_noise_clip: f64,
+        /// The actor and the targets are updated once per this many critic updates.
+        policy_delay: u64,
+    },
+}
+
+impl Algorithm {
+    /// TD3 with CleanRL's defaults.
+    pub const TD3: Self =
+        Self::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 2 };
+}
+
+/// The learner's configuration (SAC or TD3, see [`Algorithm`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SacConfig {
+    pub algorithm: Algorithm,
     pub net: NetSpec,
     pub action_scale: Vec<f32>,
     pub gamma: f64,
@@ -39,6 +65,7 @@ impl SacConfig {
     /// The paper's sizes for the hand: obs 65, action 15, 256x256 networks.
     pub fn hand_default(max_delta_rad: f32) -> Self {
         Self {
+            algorithm: Algorithm::Sac,
             net: NetSpec { obs_dim: 65, act_dim: 15, hidden: vec![256, 256] },
             action_scale: vec![max_delta_rad; 15],
             gamma: 0.99,
@@ -133,6 +160,11 @@ impl Adam {
         let inv_sqrt_bc2 = 1.0 / bc2.sqrt();
         tch::no_grad(|| {
             for (((p, g), m), v) in self.params.iter_mut().zip(&grads).zip(&mut self.m).zip(&mut self.v) {
+                // A parameter the loss does not reach (TD3 never uses the log σ head) has an
+                // undefined gradient: leave it and its moments alone.
+                if !g.defined() {
+                    continue;
+                }
                 let _ = m.lerp_(g, 1.0 - Self::BETA1);
                 let _ = v.lerp_(&g.square(), 1.0 - Self::BETA2);
                 let mut denom = v.sqrt();
@@ -171,6 +203,35 @@ impl Adam {
     }
 }
 
+/// TD3's target actor: a frozen copy of the actor, and its trainable tensors paired by name
+/// with the online actor's for the Polyak update.
+#[derive(Debug)]
+struct TargetActor {
+    vs: nn::VarStore,
+    actor: GaussianActor,
+    pairs: Vec<(Tensor, Tensor)>,
+}
+
+impl TargetActor {
+    fn new(online: &nn::VarStore, config: &SacConfig) -> Result<Self, tch::TchError> {
+        let mut vs = nn::VarStore::new(online.device());
+        let actor = GaussianActor::new(&vs.root(), &config.net, &config.action_scale);
+        vs.copy(online)?;
+        let online_vars = online.variables();
+        let mut pairs: Vec<(String, Tensor, Tensor)> = vs
+            .variables()
+            .into_iter()
+            .filter_map(|(name, t)| {
+                let s = online_vars.get(&name)?;
+                s.requires_grad().then(|| (name, t, s.shallow_clone()))
+            })
+            .collect();
+        pairs.sort_by(|a, b| a.0.cmp(&b.0));
+        vs.freeze();
+        Ok(Self { vs, actor, pairs: pairs.into_iter().map(|(_, t, s)| (t, s)).collect() })
+    }
+}
+
 #[derive(Debug)]
 pub struct Sac {
     pub config: SacConfig,
@@ -184,6 +245,10 @@ pub struct Sac {
     critic_opt: Adam,
     log_alpha: Option<(Tensor, Adam, f64)>,
     alpha: f64,
+    /// TD3's target actor (Polyak-averaged like the target critics); None for SAC.
+    target_actor: Option<TargetActor>,
+    /// The last actor loss, reported on TD3's updates that skip the actor.
+    last_actor_loss: f64,
     /// Updates done; with [`Self::set_seed`], update `k` draws its noise from a generator
     /// seeded by (seed, k), so a run is reproducible and resumable without any RNG state
     /// of libtorch's, and independent of other threads using libtorch.
@@ -229,6 +294,10 @@ impl Sac {
             TwinCritic::new(&target_vs.root(), &config.net, &config.action_scale, config.critic_layer_norm);
         target_vs.copy(&critic_vs)?;
         target_vs.freeze();
+        let target_actor = match config.algorithm {
+            Algorithm::Sac => None,
+            Algorithm::Td3 { .. } => Some(TargetActor::new(&actor_vs, &config)?),
+        };
         let actor_opt = Adam::new(sorted_trainables(&actor_vs), config.actor_lr);
         let critic_opt = Adam::new(critic.parameters().collect(), config.critic_lr);
         let (log_alpha, alpha) = match config.entropy {
@@ -252,6 +321,8 @@ impl Sac {
             critic_opt,
             log_alpha,
             alpha,
+            target_actor,
+            last_actor_loss: 0.0,
             updates: 0,
             seed: None,
         })
@@ -290,6 +361,9 @@ impl Sac {
             }
         }
         sac.target_vs.copy(&sac.critic_vs)?;
+        if let Some(target) = &mut sac.target_actor {
+            target.vs.copy(&sac.actor_vs)?;
+        }
         sac.set_seed(seed);
         Ok(sac)
     }
@@ -309,6 +383,23 @@ impl Sac {
         self.actor.obs_norm.set(&m, &s);
         self.critic.obs_norm.set(&m, &s);
         self.target.obs_norm.set(&m, &s);
+        if let Some(target) = &mut self.target_actor {
+            target.actor.obs_norm.set(&m, &s);
+        }
+    }
+
+    /// The learner's exploratory actions for `obs` given standard-normal noise `eps`
+    /// (`[rows, act_dim]`): SAC samples its policy; TD3 adds `explore_std`-scaled noise to
+    /// its deterministic action and clips to the action range.
+    pub fn behaviour_action(&self, obs: &Tensor, eps: &Tensor) -> Tensor {
+        tch::no_grad(|| match self.config.algorithm {
+            Algorithm::Sac => self.actor.sample_with(obs, Some(eps)).action,
+            Algorithm::Td3 { explore_std, .. } => {
+                let scale = self.actor.action_scale();
+                let unit = self.actor.deterministic(obs) / scale + eps * explore_std;
+                unit.clamp(-1.0, 1.0) * scale
+            }
+        })
     }
 
     /// Updates done so far.
@@ -327,9 +418,19 @@ impl Sac {
         tch::no_grad(|| self.critic.min_q(obs, action))
     }
 
-    /// One gradient step of the critics, the actor (plus the BC term when the batch has one)
-    /// and α, then the target update.
+    /// One update of the configured algorithm (see [`Self::update_sac`], [`Self::update_td3`]).
     pub fn update(&mut self, batch: &Batch) -> UpdateStats {
+        match self.config.algorithm {
+            Algorithm::Sac => self.update_sac(batch),
+            Algorithm::Td3 { target_noise_std, target_noise_clip, policy_delay, .. } => {
+                self.update_td3(batch, target_noise_std, target_noise_clip, policy_delay)
+            }
+        }
+    }
+
+    /// SAC: one gradient step of the critics, the actor (plus the BC term when the batch has
+    /// one) and α, then the target update.
+    fn update_sac(&mut self, batch: &Batch) -> UpdateStats {
         let rows = batch.obs.size()[0];
         let act = self.config.net.act_dim;
         let (eps_next, eps_pi) = match self.seed {
@@ -401,12 +502,91 @@ impl Sac {
         }
     }
 
-    /// target ← target + τ (critic − target), in place, one lerp per parameter tensor.
+    /// TD3: one critic step towards `r + γ min Q'(s', clip(μ'(s') + clip(ε))`; every
+    /// `policy_delay` updates an actor step on `-Q₁(s, μ(s))` (plus the BC term) and the
+    /// Polyak update of both targets.
+    ///
+    /// BC for a deterministic actor: with a Gaussian of fixed σ around μ(s), `-log π(a|s)`
+    /// is `‖a − μ(s)‖² / 2σ²` up to a constant, so the value-weighted term becomes
+    /// `beta · mean(mask · Q(s,a) · ‖(a − μ(s)) / scale‖²)` (σ absorbed into beta).
+    fn update_td3(
+        &mut self,
+        batch: &Batch,
+        noise_std: f64,
+        noise_clip: f64,
+        policy_delay: u64,
+    ) -> UpdateStats {
+        let rows = batch.obs.size()[0];
+        let act = self.config.net.act_dim;
+        let eps = match self.seed {
+            Some(seed) => {
+                let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, self.updates, 0x7d3) as u64);
+                standard_normal(&mut rng, rows, act)
+            }
+            None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
+        };
+        self.updates += 1;
+        let gamma = self.config.gamma;
+        let scale = self.actor.action_scale().shallow_clone();
+        let target_actor = match &self.target_actor {
+            Some(target) => &target.actor,
+            None => unreachable!("TD3 learners are built with a target actor"),
+        };
+
+        let y: Tensor = tch::no_grad(|| {
+            let noise = (eps * noise_std).clamp(-noise_clip, noise_clip);
+            let next =
+                (target_actor.deterministic(&batch.next_obs) / &scale + noise).clamp(-1.0, 1.0) * &scale;
+            let q_next = self.target.min_q(&batch.next_obs, &next);
+            let not_done: Tensor = 1.0 - &batch.done;
+            &batch.reward + not_done * gamma * q_next
+        });
+        let q = self.critic.q_values(&batch.obs, &batch.action);
+        let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
+        self.critic_opt.backward_step(&critic_loss);
+        let q = q.detach();
+
+        let mut bc_value = 0.0;
+        if self.updates.is_multiple_of(policy_delay.max(1)) {
+            self.critic_vs.freeze();
+            let mu = self.actor.deterministic(&batch.obs);
+            let rl_loss = -self.critic.q_values(&batch.obs, &mu).get(0).mean(Kind::Float);
+            let actor_loss = match &batch.bc {
+                Some(bc) if bc.beta > 0.0 => {
+                    let weight = q.amin(0, false) * &bc.mask;
+                    let sq = ((&batch.action - &mu) / &scale).square().sum_dim_intlist(-1, true, Kind::Float);
+                    let bc_loss = (weight * sq).mean(Kind::Float) * bc.beta;
+                    bc_value = bc_loss.double_value(&[]);
+                    &rl_loss + bc_loss
+                }
+                _ => rl_loss.shallow_clone(),
+            };
+            self.actor_opt.backward_step(&actor_loss);
+            self.critic_vs.unfreeze();
+            self.last_actor_loss = rl_loss.double_value(&[]);
+            self.soft_update_target();
+        }
+        UpdateStats {
+            critic_loss: critic_loss.double_value(&[]),
+            actor_loss: self.last_actor_loss,
+            bc_loss: bc_value,
+            alpha: 0.0,
+            mean_q: q.mean(Kind::Float).double_value(&[]),
+        }
+    }
+
+    /// target ← target + τ (online − target), in place, one lerp per parameter tensor: the
+    /// critics, and TD3's actor.
     fn soft_update_target(&mut self) {
         let tau = self.config.tau;
         tch::no_grad(|| {
             for (mut t, s) in self.target.parameters().zip(self.critic.parameters()) {
                 let _ = t.lerp_(&s, tau);
+            }
+            if let Some(target) = &self.target_actor {
+                for (t, s) in &target.pairs {
+                    let _ = t.shallow_clone().lerp_(s, tau);
+                }
             }
         });
     }
@@ -417,9 +597,13 @@ impl Sac {
         self.actor_vs.save(dir.join("actor.ot"))?;
         self.critic_vs.save(dir.join("critic.ot"))?;
         self.target_vs.save(dir.join("target.ot"))?;
+        if let Some(target) = &self.target_actor {
+            target.vs.save(dir.join("target_actor.ot"))?;
+        }
         let mut named = self.actor_opt.state("actor_opt");
         named.extend(self.critic_opt.state("critic_opt"));
         named.push(("updates".to_owned(), Tensor::from_slice(&[self.updates as i64])));
+        named.push(("last_actor_loss".to_owned(), Tensor::from_slice(&[self.last_actor_loss])));
         if let Some((log_alpha, opt, _)) = &self.log_alpha {
             named.push(("log_alpha".to_owned(), log_alpha.detach()));
             named.extend(opt.state("alpha_opt"));
@@ -432,6 +616,9 @@ impl Sac {
         self.actor_vs.load(dir.join("actor.ot"))?;
         self.critic_vs.load(dir.join("critic.ot"))?;
         self.target_vs.load(dir.join("target.ot"))?;
+        if let Some(target) = &mut self.target_actor {
+            target.vs.load(dir.join("target_actor.ot"))?;
+        }
         let named: std::collections::HashMap<String, Tensor> =
             Tensor::load_multi(dir.join("optim.ot"))?.into_iter().collect();
         self.actor_opt.restore("actor_opt", &named)?;
@@ -440,6 +627,8 @@ impl Sac {
             .get("updates")
             .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks updates".to_owned()))?;
         self.updates = updates.int64_value(&[0]) as u64;
+        // Absent in checkpoints from before TD3; only a logged number depends on it.
+        self.last_actor_loss = named.get("last_actor_loss").map_or(0.0, |t| t.double_value(&[0]));
         if let Some((log_alpha, opt, _)) = &mut self.log_alpha {
             let saved = named
                 .get("log_alpha")

@@ -11,7 +11,7 @@ use tch::{Device, Tensor};
 
 use crate::nets::NetSpec;
 use crate::replay::{ReplayBuffer, Source};
-use crate::sac::{EntropyCoef, Sac, SacConfig, standard_normal};
+use crate::sac::{Algorithm, EntropyCoef, Sac, SacConfig, standard_normal};
 
 pub const EPISODE_STEPS: usize = 20;
 
@@ -70,11 +70,13 @@ fn evaluate(policy: &mut dyn FnMut(&[f32; 2]) -> f32, seed: u64) -> f64 {
 /// Trains SAC (64x64 networks, batch 64, UTD 1, 500 random warm-up steps) for `env_steps`
 /// steps on the point mass, seeded, and evaluates the deterministic actor.
 pub fn train_point_mass(
+    algorithm: Algorithm,
     entropy: EntropyCoef,
     seed: u64,
     env_steps: usize,
 ) -> Result<ToyResult, tch::TchError> {
     let config = SacConfig {
+        algorithm,
         net: NetSpec { obs_dim: 2, act_dim: 1, hidden: vec![64, 64] },
         action_scale: vec![1.0],
         gamma: 0.9,
@@ -84,6 +86,9 @@ pub fn train_point_mass(
         entropy,
         critic_layer_norm: true,
     };
+    // 64-wide layers gain nothing from a second intra-op thread, and a spinning pool thread
+    // fighting another process (or test) for the core slows this loop several-fold.
+    tch::set_num_threads(1);
     let mut sac = Sac::new_seeded(config, Device::Cpu, seed)?;
     let mut replay =
         ReplayBuffer::new(env_steps.max(1), 2, 1).map_err(|e| tch::TchError::Convert(e.to_string()))?;
@@ -97,7 +102,7 @@ pub fn train_point_mass(
         } else {
             let t = Tensor::from_slice(&obs).view([1, 2]);
             let eps = standard_normal(&mut rng, 1, 1);
-            tch::no_grad(|| sac.actor.sample_with(&t, Some(&eps)).action).double_value(&[0, 0]) as f32
+            sac.behaviour_action(&t, &eps).double_value(&[0, 0]) as f32
         };
         let (r, done) = env.step(a);
         replay

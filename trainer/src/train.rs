@@ -302,7 +302,7 @@ pub fn train(
             let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, step, SALT_ACT) as u64);
             let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
             let t = Tensor::from_slice(obs.as_flattened()).view([n as i64, OBS_DIM as i64]);
-            let a = tch::no_grad(|| sac.actor.sample_with(&t, Some(&eps)).action);
+            let a = sac.behaviour_action(&t, &eps);
             let v = Vec::<f32>::try_from(a.contiguous().view(-1))?;
             v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect()
         };

@@ -2,7 +2,7 @@
 
 use tch::{Device, Kind, Tensor, nn};
 use vge_trainer::nets::{GaussianActor, NetSpec, TwinCritic};
-use vge_trainer::sac::{Batch, EntropyCoef, Sac, SacConfig};
+use vge_trainer::sac::{Algorithm, Batch, EntropyCoef, Sac, SacConfig};
 
 fn small_spec() -> NetSpec {
     NetSpec { obs_dim: 6, act_dim: 3, hidden: vec![32, 32] }
@@ -100,6 +100,7 @@ fn fixed_batch(spec: &NetSpec) -> Batch {
 
 fn config(entropy: EntropyCoef) -> SacConfig {
     SacConfig {
+        algorithm: Algorithm::Sac,
         net: small_spec(),
         action_scale: vec![1.0; 3],
         gamma: 0.9,

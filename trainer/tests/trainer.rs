@@ -13,7 +13,7 @@ use vge_trainer::config::{BcSection, Config, FgeSection, Method, apply_override,
 use vge_trainer::controllers::{Controller, ControllerError, ControllerInput};
 use vge_trainer::nets::NetSpec;
 use vge_trainer::replay::{ReplayBuffer, Source};
-use vge_trainer::sac::{BcTerm, EntropyCoef, Sac, SacConfig};
+use vge_trainer::sac::{Algorithm, BcTerm, EntropyCoef, Sac, SacConfig};
 use vge_trainer::toy::train_point_mass;
 use vge_trainer::train::train;
 
@@ -21,7 +21,7 @@ use vge_trainer::train::train;
 
 #[test]
 fn sac_alpha_zero_drives_the_point_to_its_target() {
-    let r = train_point_mass(EntropyCoef::Fixed(0.0), 1, 3000).expect("train");
+    let r = train_point_mass(Algorithm::Sac, EntropyCoef::Fixed(0.0), 1, 3000).expect("train");
     assert!(r.zero_return < -10.0, "zero action scores {}", r.zero_return);
     assert!(r.eval_return > -3.0, "alpha 0: eval return {} (zero action {})", r.eval_return, r.zero_return);
 }
@@ -29,13 +29,20 @@ fn sac_alpha_zero_drives_the_point_to_its_target() {
 #[test]
 fn sac_auto_alpha_drives_the_point_to_its_target() {
     let r =
-        train_point_mass(EntropyCoef::Auto { target_entropy: -1.0, initial: 0.1 }, 2, 3000).expect("train");
+        train_point_mass(Algorithm::Sac, EntropyCoef::Auto { target_entropy: -1.0, initial: 0.1 }, 2, 3000)
+            .expect("train");
     assert!(
         r.eval_return > -3.0,
         "auto alpha: eval return {} (zero action {})",
         r.eval_return,
         r.zero_return
     );
+}
+
+#[test]
+fn td3_drives_the_point_to_its_target() {
+    let r = train_point_mass(Algorithm::TD3, EntropyCoef::Fixed(0.0), 3, 3000).expect("train");
+    assert!(r.eval_return > -3.0, "td3: eval return {} (zero action {})", r.eval_return, r.zero_return);
 }
 
 // ---------------------------------------------------------------- behaviour policies
@@ -206,6 +213,7 @@ fn bc_beta_decays_linearly_to_zero() {
 fn small_sac() -> Sac {
     tch::manual_seed(3);
     let config = SacConfig {
+        algorithm: Algorithm::Sac,
         net: NetSpec { obs_dim: 4, act_dim: 2, hidden: vec![16, 16] },
         action_scale: vec![0.5, 0.5],
         gamma: 0.9,
@@ -356,7 +364,8 @@ fn every_shipped_config_loads_and_validates() {
         }
     }
     assert!(names.contains(&"multi-object-fg-vge".to_owned()));
-    assert_eq!(names.len(), 16);
+    assert!(names.contains(&"cube-fg-vge-td3".to_owned()));
+    assert_eq!(names.len(), 17);
 }
 
 #[test]
@@ -394,6 +403,12 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     refuse("fge.p_start=2.0", "fge.p_start");
     refuse("num_envs=0", "num_envs");
     refuse("env.control_hz=7", "control");
+    refuse("algorithm=\"ppo\"", "algorithm");
+    let td3 = |o: &str| vec!["algorithm=\"td3\"".to_owned(), o.to_owned()];
+    let e = load_config(&path, &td3("td3.policy_delay=0")).expect_err("delay 0");
+    assert!(e.to_string().contains("td3.policy_delay"), "{e}");
+    let e = load_config(&path, &td3("sac.alpha=\"auto\"")).expect_err("td3 with an entropy coefficient");
+    assert!(e.to_string().contains("sac.alpha"), "{e}");
     let mut no_ctl = Config { controller: None, ..Config::default() };
     assert!(no_ctl.validate().expect_err("vge needs a controller").to_string().contains("controller"));
     no_ctl.method = Method::Rl;
@@ -409,7 +424,7 @@ fn tempdir(name: &str) -> PathBuf {
     dir
 }
 
-fn tiny_config(total: u64) -> Config {
+fn tiny_config_with(total: u64, extra: &[&str]) -> Config {
     let mut c = Config::default();
     for o in [
         "num_envs=2",
@@ -426,7 +441,10 @@ fn tiny_config(total: u64) -> Config {
         "bc.beta_zero_step=200",
         "run.log_interval=20",
         "run.checkpoint_interval=60",
-    ] {
+    ]
+    .iter()
+    .chain(extra)
+    {
         apply_override(&mut c, o).expect(o);
     }
     c.total_steps = total;
@@ -441,6 +459,17 @@ fn metrics_without_speed(dir: &std::path::Path) -> Vec<String> {
 
 #[test]
 fn stop_and_resume_equals_an_uninterrupted_run() {
+    check_stop_and_resume("sac", &[]);
+}
+
+#[test]
+fn td3_stop_and_resume_equals_an_uninterrupted_run() {
+    check_stop_and_resume("td3", &["algorithm=\"td3\""]);
+}
+
+fn check_stop_and_resume(name: &str, extra: &[&str]) {
+    let tiny_config = |total| tiny_config_with(total, extra);
+    let tempdir = |what: &str| tempdir(&format!("{name}-{what}"));
     let never = AtomicBool::new(false);
     let full_dir = tempdir("full");
     let full = train(&tiny_config(140), &full_dir, false, &never, &mut |_| {}).expect("full run");
@@ -449,6 +478,11 @@ fn stop_and_resume_equals_an_uninterrupted_run() {
     assert!(full.behaviour.controller_queries > 0);
     assert!(full.updates > 0);
     let full_policy = std::fs::read(full_dir.join("policy.vgep")).expect("policy");
+    // The warm-up statistics normalise the observations, and the file carries them.
+    let file = vge_export::PolicyFile::from_bytes(&full_policy).expect("policy file");
+    assert!(file.obs_std.iter().any(|&s| (s - 1.0).abs() > 1e-3), "obs std left at identity");
+    assert!(file.obs_std.iter().all(|&s| s >= 1e-2));
+    assert_eq!(file.obs_clip, Some(vge_trainer::nets::OBS_CLIP as f32));
 
     // Interrupted by the stop flag at step 120 (a checkpoint boundary), then resumed.
     let part_dir = tempdir("part");
