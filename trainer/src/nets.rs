@@ -147,7 +147,7 @@ impl GaussianActor {
         let z = (u - &mean) * (-&log_std).exp();
         let log_normal = z.square() * -0.5 - &log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
         let one_minus_y2: Tensor = 1.0 - y.square();
-        let log_det = (&self.action_scale * one_minus_y2 + 1e-6).log();
+        let log_det = (one_minus_y2 + 1e-6).log();
         let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);
         (sample, log_prob)
     }
@@ -157,10 +157,13 @@ impl GaussianActor {
         let eps = eps.map_or_else(|| mean.randn_like(), Tensor::shallow_clone);
         let u = mean + &std * &eps;
         let y = u.tanh();
-        // log N(u; μ, σ) = -ε²/2 - log σ - log √(2π); then the Jacobian of a = tanh(u)·scale.
+        // log N(u; μ, σ) = -ε²/2 - log σ - log √(2π); then the Jacobian of y = tanh(u).
+        // The density is that of the unit-range action y, not of y·scale: with the hand's
+        // 0.05 rad scale the latter is shifted by -15·ln 0.05 ≈ +45 nats, and an entropy
+        // target of -act_dim (CleanRL's) then drives α up without bound.
         let log_normal = eps.square() * -0.5 - log_std - 0.5 * (2.0 * std::f64::consts::PI).ln();
         let one_minus_y2: Tensor = 1.0 - y.square();
-        let log_det = (&self.action_scale * one_minus_y2 + 1e-6).log();
+        let log_det = (one_minus_y2 + 1e-6).log();
         let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);
         PolicySample { action: y * &self.action_scale, log_prob }
     }

@@ -156,8 +156,16 @@ impl Adam {
         let t = self.step as i32;
         let bc1 = 1.0 - Self::BETA1.powi(t);
         let bc2 = 1.0 - Self::BETA2.powi(t);
-        let step_size = -self.lr / bc1;
-        let inv_sqrt_bc2 = 1.0 / bc2.sqrt();
+        // p ← p − (lr / bc1) · m / (√(v / bc2) + ε), written as p ← p + m / d with
+        // d = √v · k + ε / c, c = −lr / bc1, k = 1 / (c √bc2): seven tensor ops and two
+        // temporaries per parameter; at these sizes each op's dispatch costs as much as
+        // its arithmetic.
+        if self.lr == 0.0 {
+            return;
+        }
+        let c = -self.lr / bc1;
+        let k = 1.0 / (c * bc2.sqrt());
+        let eps_over_c = Self::EPS / c;
         tch::no_grad(|| {
             for (((p, g), m), v) in self.params.iter_mut().zip(&grads).zip(&mut self.m).zip(&mut self.v) {
                 // A parameter the loss does not reach (TD3 never uses the log σ head) has an
@@ -167,10 +175,10 @@ impl Adam {
                 }
                 let _ = m.lerp_(g, 1.0 - Self::BETA1);
                 let _ = v.lerp_(&g.square(), 1.0 - Self::BETA2);
-                let mut denom = v.sqrt();
-                let _ = denom.g_mul_scalar_(inv_sqrt_bc2);
-                let _ = denom.g_add_scalar_(Self::EPS);
-                let _ = p.addcdiv_(&(&*m * step_size), &denom);
+                let mut d = v.sqrt();
+                let _ = d.g_mul_scalar_(k);
+                let _ = d.g_add_scalar_(eps_over_c);
+                let _ = p.addcdiv_(m, &d);
             }
         });
     }
