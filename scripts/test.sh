@@ -31,13 +31,14 @@ else
   echo "present: ${packages[*]}"
 fi
 
-step "python tools (cantools, in .deps/py)"
-# The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc.
-if ! .deps/py/bin/python -c 'import cantools' 2>/dev/null; then
+step "python tools (cantools, tensorboard, in .deps/py)"
+# The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
+# event files are read back with TensorBoard's own reader.
+if ! .deps/py/bin/python -c 'import cantools, tensorboard' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard
 fi
-echo "cantools $(.deps/py/bin/python -c 'import cantools; print(cantools.__version__)')"
+.deps/py/bin/python -c 'import cantools, tensorboard; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__)'
 
 step "rust components and targets"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done

@@ -11,5 +11,6 @@ pub mod plot;
 pub mod policy_export;
 pub mod replay;
 pub mod sac;
+pub mod tensorboard;
 pub mod toy;
 pub mod train;

@@ -23,12 +23,14 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Train a policy with SAC and the configured behaviour policy (RL, RL+BC, FGE, VGE,
-    /// VGE+BC) from a TOML config (see configs/).
+    /// Train a policy with SAC (or TD3: `algorithm = "td3"`) and the configured behaviour
+    /// policy (RL, RL+BC, FGE, VGE, VGE+BC) from a TOML config (see configs/).
     ///
     /// Writes DIR/config.toml, DIR/metrics.csv (step, return, rotation, contacts, controller
-    /// share, losses), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
-    /// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues.
+    /// share, losses), the same curves for TensorBoard in DIR/tensorboard (`tensorboard
+    /// --logdir DIR`), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
+    /// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues, also
+    /// after a kill (from the last periodic checkpoint).
     Train {
         /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.
         #[arg(long, required_unless_present = "resume")]

@@ -6,9 +6,12 @@
 //! Output directory:
 //! - `config.toml`: the effective configuration;
 //! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
+//! - `tensorboard/`: the metrics rows as TensorBoard scalars (`train/<column>`), one event
+//!   file per session (`tensorboard --logdir DIR`);
 //! - `eval.csv`: deterministic evaluations of the actor every `run.eval_interval` steps;
 //! - `checkpoint/`: `state.toml` (counters, generator state, metric window), `actor.ot`,
-//!   `critic.ot`, `target.ot`, `optim.ot` (Adam moments, α), `replay.bin` (optional). It is
+//!   `critic.ot`, `target.ot`, `target_actor.ot` (TD3), `optim.ot` (Adam moments, α),
+//!   `replay.bin` (optional). It is
 //!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole;
 //! - `policy.vgep`: the exported actor at the end.
 //!
@@ -45,6 +48,7 @@ use crate::eval::{EpisodeOutcome, EvalError};
 use crate::policy_export::export_hand_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::{Sac, UpdateStats, mix_seed, standard_normal};
+use crate::tensorboard::EventWriter;
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -273,6 +277,13 @@ pub fn train(
         let path = &metrics_path;
         std::fs::write(path, format!("{METRICS_HEADER}\n")).map_err(io_err(path))?;
     }
+    // A new event file per session; a resumed one starts with a session-start marker so that
+    // TensorBoard drops the interrupted session's points past the checkpoint.
+    let tb_dir = out_dir.join("tensorboard");
+    let mut events = EventWriter::create(&tb_dir, &format!(".s{step}")).map_err(io_err(&tb_dir))?;
+    if resume {
+        events.session_start(step).map_err(io_err(events.path()))?;
+    }
     let mut metrics = BufWriter::new(
         File::options().append(true).create(true).open(&metrics_path).map_err(io_err(&metrics_path))?,
     );
@@ -399,8 +410,13 @@ pub fn train(
         if crossed(config.run.log_interval) || step >= config.total_steps {
             let elapsed = session_start.elapsed().as_secs_f64();
             let sps = (step - session_first_step) as f64 / elapsed.max(1e-9);
-            write_metrics_row(&mut metrics, step, episodes, &window, beta, sac.updates(), sps)
-                .map_err(io_err(&metrics_path))?;
+            let values = metrics_values(episodes, &window, beta, sac.updates(), sps);
+            write_metrics_row(&mut metrics, step, &values).map_err(io_err(&metrics_path))?;
+            // TensorBoard gets the same numbers ("train/return", ...), the empty ones left out.
+            let scalars: Vec<(String, f64)> =
+                values.iter().filter_map(|(n, v)| v.map(|x| (format!("train/{n}"), x))).collect();
+            let scalars: Vec<(&str, f64)> = scalars.iter().map(|(n, x)| (n.as_str(), *x)).collect();
+            events.scalars(step, &scalars).map_err(io_err(events.path()))?;
             last_window = std::mem::take(&mut window);
         }
         if crossed(config.run.eval_interval) {
@@ -515,33 +531,50 @@ fn add_stats(w: &mut Window, st: &UpdateStats) {
     w.mean_q += st.mean_q;
 }
 
-fn write_metrics_row(
-    out: &mut impl Write,
-    step: u64,
+/// One metrics row: `(column, value)` in [`METRICS_HEADER`] order after `step`; `None`
+/// where the window had nothing to average (no finished episode, no update).
+fn metrics_values(
     episodes: u64,
     w: &Window,
     beta: f64,
     updates: u64,
     sps: f64,
-) -> std::io::Result<()> {
+) -> Vec<(&'static str, Option<f64>)> {
     let e = w.episodes.max(1) as f64;
     let u = w.updates.max(1) as f64;
-    let na = |x: f64, count: u64| if count == 0 { String::new() } else { format!("{x:.6}") };
-    writeln!(
-        out,
-        "{step},{episodes},{},{},{},{},{:.6},{},{},{},{},{},{},{beta:.6},{updates},{sps:.1}",
-        na(w.ret / e, w.episodes),
-        na(w.rotation / e, w.episodes),
-        na(w.contacts / e, w.episodes),
-        na(w.successes as f64 / e, w.episodes),
-        w.controller_steps as f64 / w.steps.max(1) as f64,
-        na(w.p_psi_sum / w.selections.max(1) as f64, w.selections),
-        na(w.critic_loss / u, w.updates),
-        na(w.actor_loss / u, w.updates),
-        na(w.bc_loss / u, w.updates),
-        na(w.alpha / u, w.updates),
-        na(w.mean_q / u, w.updates),
-    )?;
+    let per_episode = |x: f64| (w.episodes > 0).then_some(x / e);
+    let per_update = |x: f64| (w.updates > 0).then_some(x / u);
+    vec![
+        ("episodes", Some(episodes as f64)),
+        ("return", per_episode(w.ret)),
+        ("rotation", per_episode(w.rotation)),
+        ("contacts", per_episode(w.contacts)),
+        ("success", per_episode(w.successes as f64)),
+        ("controller_share", Some(w.controller_steps as f64 / w.steps.max(1) as f64)),
+        ("p_psi", (w.selections > 0).then(|| w.p_psi_sum / w.selections as f64)),
+        ("critic_loss", per_update(w.critic_loss)),
+        ("actor_loss", per_update(w.actor_loss)),
+        ("bc_loss", per_update(w.bc_loss)),
+        ("alpha", per_update(w.alpha)),
+        ("mean_q", per_update(w.mean_q)),
+        ("beta", Some(beta)),
+        ("updates", Some(updates as f64)),
+        ("steps_per_s", Some(sps)),
+    ]
+}
+
+fn write_metrics_row(out: &mut impl Write, step: u64, values: &[(&str, Option<f64>)]) -> std::io::Result<()> {
+    let mut line = step.to_string();
+    for (name, v) in values {
+        line.push(',');
+        match (*name, v) {
+            (_, None) => {}
+            ("episodes" | "updates", Some(x)) => line.push_str(&format!("{x:.0}")),
+            ("steps_per_s", Some(x)) => line.push_str(&format!("{x:.1}")),
+            (_, Some(x)) => line.push_str(&format!("{x:.6}")),
+        }
+    }
+    writeln!(out, "{line}")?;
     out.flush()
 }
 
@@ -667,4 +700,16 @@ fn evaluate_actor(config: &Config, sac: &Sac, out_dir: &Path, step: u64) -> Resu
     ));
     f.write_all(text.as_bytes()).map_err(io_err(&path))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_columns_match_the_csv_header() {
+        let names: Vec<&str> =
+            metrics_values(0, &Window::default(), 0.0, 0, 0.0).iter().map(|(n, _)| *n).collect();
+        assert_eq!(format!("step,{}", names.join(",")), METRICS_HEADER);
+    }
 }

@@ -1,0 +1,32 @@
+//! Helpers shared by the trainer's integration tests.
+#![allow(dead_code)] // each test binary uses its own subset
+
+use std::path::PathBuf;
+use std::process::Command;
+
+pub fn python() -> PathBuf {
+    if let Ok(p) = std::env::var("VGE_PYTHON") {
+        return p.into();
+    }
+    let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.deps/py/bin/python");
+    if venv.exists() { venv } else { "python3".into() }
+}
+
+/// `tag step value` lines for every scalar in `dir`, as TensorBoard reads them.
+pub fn tensorboard_scalars(dir: &std::path::Path) -> Vec<(String, u64, f64)> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/tb_read.py");
+    let out = Command::new(python())
+        .arg(script)
+        .arg(dir)
+        .output()
+        .expect("python runs (VGE_PYTHON, or .deps/py made by scripts/test.sh with tensorboard)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "TensorBoard could not read the events: {stderr}");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(' ').collect();
+            (f[0].to_owned(), f[1].parse().expect("step"), f[2].parse().expect("value"))
+        })
+        .collect()
+}
