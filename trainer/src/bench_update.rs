@@ -1,5 +1,5 @@
-//! `vge bench update`: full SAC updates per second at the paper's sizes, against the CPU's
-//! matmul throughput measured in the same run.
+//! `vge bench update`: full SAC (or TD3) updates per second at the paper's sizes, against
+//! the CPU's matmul throughput measured in the same run.
 
 use std::time::Instant;
 
@@ -53,10 +53,16 @@ fn random_batch(spec: &NetSpec, batch: i64) -> Batch {
     }
 }
 
-/// Runs `warmup` then `updates` SAC updates on random batches.
-pub fn run(batch: i64, warmup: usize, updates: usize, seed: i64) -> Result<UpdateBench, tch::TchError> {
+/// Runs `warmup` then `updates` updates of the learner `config` on random batches. The
+/// FLOP count is SAC's; TD3's actor step every second update does less.
+pub fn run(
+    config: SacConfig,
+    batch: i64,
+    warmup: usize,
+    updates: usize,
+    seed: i64,
+) -> Result<UpdateBench, tch::TchError> {
     tch::manual_seed(seed);
-    let config = SacConfig::hand_default(0.05);
     let spec = config.net.clone();
     let mut sac = Sac::new(config, Device::Cpu)?;
     let batches: Vec<Batch> = (0..8).map(|_| random_batch(&spec, batch)).collect();

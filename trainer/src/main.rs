@@ -186,7 +186,8 @@ struct ExportArgs {
 #[derive(Debug, Subcommand)]
 enum Bench {
     /// Full SAC updates per second: batch 256, 256x256 actor and twin critics, obs 65,
-    /// action 15; also the achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison.
+    /// action 15, alpha 0, critics with layer norm (the training defaults); also the
+    /// achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison.
     Update {
         /// Print one JSON line instead of a table.
         #[arg(long)]
@@ -200,6 +201,12 @@ enum Bench {
         /// Seed of the network initialisation and random batches.
         #[arg(long, default_value_t = 0)]
         seed: i64,
+        /// Learner: sac or td3 (TD3 updates the actor every second step).
+        #[arg(long, default_value = "sac", value_parser = ["sac", "td3"])]
+        algorithm: String,
+        /// Layer norm in the critics' hidden layers (`sac.critic_layer_norm`).
+        #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+        layer_norm: bool,
     },
     /// Simulator throughput: control steps per second of one world on one thread, and of N
     /// worlds stepped across all cores, at the default env rates.
@@ -398,13 +405,19 @@ fn export(args: ExportArgs) -> anyhow::Result<()> {
 
 fn run_bench(bench: Bench) -> anyhow::Result<()> {
     match bench {
-        Bench::Update { json, updates, batch, seed } => {
+        Bench::Update { json, updates, batch, seed, algorithm, layer_norm } => {
             anyhow::ensure!(updates > 0, "--updates must be at least 1");
             anyhow::ensure!(batch > 0, "--batch must be at least 1");
-            let r = bench_update::run(batch, 20, updates, seed)?;
+            let mut config = vge_trainer::sac::SacConfig::hand_default(0.05);
+            config.entropy = vge_trainer::sac::EntropyCoef::Fixed(0.0);
+            config.critic_layer_norm = layer_norm;
+            if algorithm == "td3" {
+                config.algorithm = vge_trainer::sac::Algorithm::TD3;
+            }
+            let r = bench_update::run(config, batch, 20, updates, seed)?;
             if json {
                 println!(
-                    "{{\"bench\":\"update\",\"updates_per_s\":{:.1},\"gflops\":{:.2},\"matmul_gflops\":{:.2},\"ratio_to_matmul\":{:.3},\"batch\":{},\"updates\":{},\"threads\":{}}}",
+                    "{{\"bench\":\"update\",\"algorithm\":\"{algorithm}\",\"layer_norm\":{layer_norm},\"updates_per_s\":{:.1},\"gflops\":{:.2},\"matmul_gflops\":{:.2},\"ratio_to_matmul\":{:.3},\"batch\":{},\"updates\":{},\"threads\":{}}}",
                     r.updates_per_s,
                     r.gflops,
                     r.matmul_gflops,
@@ -414,7 +427,13 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                     r.threads
                 );
             } else {
-                println!("SAC update, batch {}, {} threads, {} updates", r.batch, r.threads, r.updates);
+                println!(
+                    "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}",
+                    algorithm.to_uppercase(),
+                    r.batch,
+                    r.threads,
+                    r.updates
+                );
                 println!("  updates/s        {:>8.1}", r.updates_per_s);
                 println!("  achieved GFLOP/s {:>8.2}", r.gflops);
                 println!("  matmul GFLOP/s   {:>8.2}  (1024^3 f32 matmul, same run)", r.matmul_gflops);

@@ -77,11 +77,13 @@ pub struct GaussianActor {
     action_scale: Tensor,
 }
 
-/// An action drawn from the policy with its log-density (after the tanh change of variables).
+/// An action drawn from the policy with its log-density (after the tanh change of variables),
+/// when asked for: with α = 0 and no BC term SAC never reads it, and its ~10 tensor ops
+/// (twice, with their backward) are a noticeable share of an update.
 #[derive(Debug)]
 pub struct PolicySample {
     pub action: Tensor,
-    pub log_prob: Tensor,
+    pub log_prob: Option<Tensor>,
 }
 
 impl GaussianActor {
@@ -122,26 +124,33 @@ impl GaussianActor {
     /// Reparameterised sample a = tanh(μ + σ ε) · scale and log π(a|s), summed over dimensions.
     pub fn sample(&self, obs: &Tensor) -> PolicySample {
         let (mean, log_std) = self.distribution(obs);
-        self.sample_from(&mean, &log_std, None)
+        self.sample_from(&mean, &log_std, None, true)
     }
 
     /// [`Self::sample`] with given standard-normal noise ε (`[batch, act_dim]`) instead of
     /// libtorch's global generator (which other threads may draw from).
     pub fn sample_with(&self, obs: &Tensor, eps: Option<&Tensor>) -> PolicySample {
-        let (mean, log_std) = self.distribution(obs);
-        self.sample_from(&mean, &log_std, eps)
+        self.sample_opt(obs, eps, true)
     }
 
-    /// A sample for `obs` and log π(a|s) of given actions `action` (e.g. replayed ones), from
-    /// one pass of the trunk. Actions are clamped just inside ±scale before `atanh`.
+    /// [`Self::sample_with`], computing log π only when `with_log_prob`.
+    pub fn sample_opt(&self, obs: &Tensor, eps: Option<&Tensor>, with_log_prob: bool) -> PolicySample {
+        let (mean, log_std) = self.distribution(obs);
+        self.sample_from(&mean, &log_std, eps, with_log_prob)
+    }
+
+    /// A sample for `obs` (with its log π when `with_log_prob`) and log π(a|s) of given
+    /// actions `action` (e.g. replayed ones), from one pass of the trunk. Actions are clamped
+    /// just inside ±scale before `atanh`.
     pub fn sample_and_log_prob_of(
         &self,
         obs: &Tensor,
         action: &Tensor,
         eps: Option<&Tensor>,
+        with_log_prob: bool,
     ) -> (PolicySample, Tensor) {
         let (mean, log_std) = self.distribution(obs);
-        let sample = self.sample_from(&mean, &log_std, eps);
+        let sample = self.sample_from(&mean, &log_std, eps, with_log_prob);
         let y = (action / &self.action_scale).clamp(-1.0 + 1e-6, 1.0 - 1e-6);
         let u = y.atanh();
         let z = (u - &mean) * (-&log_std).exp();
@@ -152,11 +161,20 @@ impl GaussianActor {
         (sample, log_prob)
     }
 
-    fn sample_from(&self, mean: &Tensor, log_std: &Tensor, eps: Option<&Tensor>) -> PolicySample {
+    fn sample_from(
+        &self,
+        mean: &Tensor,
+        log_std: &Tensor,
+        eps: Option<&Tensor>,
+        with_log_prob: bool,
+    ) -> PolicySample {
         let std = log_std.exp();
         let eps = eps.map_or_else(|| mean.randn_like(), Tensor::shallow_clone);
         let u = mean + &std * &eps;
         let y = u.tanh();
+        if !with_log_prob {
+            return PolicySample { action: y * &self.action_scale, log_prob: None };
+        }
         // log N(u; μ, σ) = -ε²/2 - log σ - log √(2π); then the Jacobian of y = tanh(u).
         // The density is that of the unit-range action y, not of y·scale: with the hand's
         // 0.05 rad scale the latter is shifted by -15·ln 0.05 ≈ +45 nats, and an entropy
@@ -165,7 +183,7 @@ impl GaussianActor {
         let one_minus_y2: Tensor = 1.0 - y.square();
         let log_det = (one_minus_y2 + 1e-6).log();
         let log_prob = (log_normal - log_det).sum_dim_intlist(-1, true, Kind::Float);
-        PolicySample { action: y * &self.action_scale, log_prob }
+        PolicySample { action: y * &self.action_scale, log_prob: Some(log_prob) }
     }
 }
 

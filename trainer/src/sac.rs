@@ -125,14 +125,38 @@ pub struct UpdateStats {
     pub mean_q: f64,
 }
 
-/// Adam (Kingma & Ba; PyTorch's defaults β = (0.9, 0.999), ε = 1e-8) whose state is plain
-/// tensors, so that checkpoints can save and restore it (tch's `nn::Optimizer` keeps its
+/// Moves the data of `params` into one contiguous buffer and returns it. Each parameter
+/// stays the same leaf tensor (the var store's, saved and exported by name), but its data
+/// now aliases a slice of the buffer, so that one tensor op on the buffer updates them all:
+/// Adam's step and the Polyak averages become seven ops and one op per network instead of
+/// seven and one per weight and bias.
+pub fn flatten_storage(params: &[Tensor]) -> Tensor {
+    let total: i64 = params.iter().map(|p| p.numel() as i64).sum();
+    let device = params.first().map_or(Device::Cpu, Tensor::device);
+    let flat = Tensor::zeros([total], (Kind::Float, device));
+    let mut offset = 0;
+    tch::no_grad(|| {
+        for p in params {
+            let n = p.numel() as i64;
+            let mut view = flat.narrow(0, offset, n).view(p.size().as_slice());
+            view.copy_(p);
+            p.shallow_clone().set_data(&view);
+            offset += n;
+        }
+    });
+    flat
+}
+
+/// Adam (Kingma & Ba; PyTorch's defaults β = (0.9, 0.999), ε = 1e-8) over parameters whose
+/// data it keeps in one flat buffer ([`flatten_storage`]), with its moments as plain
+/// tensors, so that checkpoints can save and restore them (tch's `nn::Optimizer` keeps its
 /// state inside libtorch with no way to read it).
 #[derive(Debug)]
 pub struct Adam {
     params: Vec<Tensor>,
-    m: Vec<Tensor>,
-    v: Vec<Tensor>,
+    flat: Tensor,
+    m: Tensor,
+    v: Tensor,
     step: i64,
     lr: f64,
 }
@@ -142,10 +166,17 @@ impl Adam {
     const BETA2: f64 = 0.999;
     const EPS: f64 = 1e-8;
 
+    /// Takes over `params` (moving their data into one buffer, see [`flatten_storage`]).
     pub fn new(params: Vec<Tensor>, lr: f64) -> Self {
-        let m = params.iter().map(Tensor::zeros_like).collect();
-        let v = params.iter().map(Tensor::zeros_like).collect();
-        Self { params, m, v, step: 0, lr }
+        let flat = flatten_storage(&params);
+        let m = flat.zeros_like();
+        let v = flat.zeros_like();
+        Self { params, flat, m, v, step: 0, lr }
+    }
+
+    /// The parameters' data, one flat tensor (in the order given to [`Self::new`]).
+    pub fn flat(&self) -> &Tensor {
+        &self.flat
     }
 
     /// Gradients of `loss` with respect to the parameters only (no `.grad` accumulation,
@@ -153,43 +184,41 @@ impl Adam {
     pub fn backward_step(&mut self, loss: &Tensor) {
         let grads = Tensor::run_backward(&[loss], &self.params, false, false);
         self.step += 1;
+        if self.lr == 0.0 {
+            return;
+        }
         let t = self.step as i32;
         let bc1 = 1.0 - Self::BETA1.powi(t);
         let bc2 = 1.0 - Self::BETA2.powi(t);
         // p ← p − (lr / bc1) · m / (√(v / bc2) + ε), written as p ← p + m / d with
-        // d = √v · k + ε / c, c = −lr / bc1, k = 1 / (c √bc2): seven tensor ops and two
-        // temporaries per parameter; at these sizes each op's dispatch costs as much as
-        // its arithmetic.
-        if self.lr == 0.0 {
-            return;
-        }
+        // d = √v · k + ε / c, c = −lr / bc1, k = 1 / (c √bc2): seven ops, two temporaries.
         let c = -self.lr / bc1;
         let k = 1.0 / (c * bc2.sqrt());
         let eps_over_c = Self::EPS / c;
         tch::no_grad(|| {
-            for (((p, g), m), v) in self.params.iter_mut().zip(&grads).zip(&mut self.m).zip(&mut self.v) {
-                // A parameter the loss does not reach (TD3 never uses the log σ head) has an
-                // undefined gradient: leave it and its moments alone.
-                if !g.defined() {
-                    continue;
-                }
-                let _ = m.lerp_(g, 1.0 - Self::BETA1);
-                let _ = v.lerp_(&g.square(), 1.0 - Self::BETA2);
-                let mut d = v.sqrt();
-                let _ = d.g_mul_scalar_(k);
-                let _ = d.g_add_scalar_(eps_over_c);
-                let _ = p.addcdiv_(m, &d);
-            }
+            // A parameter the loss does not reach (TD3 never uses the log σ head) has an
+            // undefined gradient: it counts as zero, and with zero moments its step is 0.
+            let g: Vec<Tensor> = grads
+                .iter()
+                .zip(&self.params)
+                .map(|(g, p)| if g.defined() { g.reshape([-1]) } else { p.zeros_like().reshape([-1]) })
+                .collect();
+            let g = Tensor::cat(&g, 0);
+            let _ = self.m.lerp_(&g, 1.0 - Self::BETA1);
+            let _ = self.v.lerp_(&g.square(), 1.0 - Self::BETA2);
+            let mut d = self.v.sqrt();
+            let _ = d.g_mul_scalar_(k);
+            let _ = d.g_add_scalar_(eps_over_c);
+            let _ = self.flat.addcdiv_(&self.m, &d);
         });
     }
 
     fn state(&self, prefix: &str) -> Vec<(String, Tensor)> {
-        let mut out = vec![(format!("{prefix}.step"), Tensor::from_slice(&[self.step]))];
-        for (i, (m, v)) in self.m.iter().zip(&self.v).enumerate() {
-            out.push((format!("{prefix}.m{i}"), m.shallow_clone()));
-            out.push((format!("{prefix}.v{i}"), v.shallow_clone()));
-        }
-        out
+        vec![
+            (format!("{prefix}.step"), Tensor::from_slice(&[self.step])),
+            (format!("{prefix}.m"), self.m.shallow_clone()),
+            (format!("{prefix}.v"), self.v.shallow_clone()),
+        ]
     }
 
     fn restore(
@@ -202,22 +231,20 @@ impl Adam {
         };
         self.step = get(format!("{prefix}.step"))?.int64_value(&[0]);
         tch::no_grad(|| -> Result<(), tch::TchError> {
-            for (i, (m, v)) in self.m.iter_mut().zip(&mut self.v).enumerate() {
-                m.f_copy_(get(format!("{prefix}.m{i}"))?)?;
-                v.f_copy_(get(format!("{prefix}.v{i}"))?)?;
-            }
+            self.m.f_copy_(get(format!("{prefix}.m"))?)?;
+            self.v.f_copy_(get(format!("{prefix}.v"))?)?;
             Ok(())
         })
     }
 }
 
-/// TD3's target actor: a frozen copy of the actor, and its trainable tensors paired by name
-/// with the online actor's for the Polyak update.
+/// TD3's target actor: a frozen copy of the actor whose trainable tensors live in one flat
+/// buffer laid out as the actor optimiser's (both in name order), for a one-op Polyak update.
 #[derive(Debug)]
 struct TargetActor {
     vs: nn::VarStore,
     actor: GaussianActor,
-    pairs: Vec<(Tensor, Tensor)>,
+    flat: Tensor,
 }
 
 impl TargetActor {
@@ -226,17 +253,15 @@ impl TargetActor {
         let actor = GaussianActor::new(&vs.root(), &config.net, &config.action_scale);
         vs.copy(online)?;
         let online_vars = online.variables();
-        let mut pairs: Vec<(String, Tensor, Tensor)> = vs
+        let mut named: Vec<(String, Tensor)> = vs
             .variables()
             .into_iter()
-            .filter_map(|(name, t)| {
-                let s = online_vars.get(&name)?;
-                s.requires_grad().then(|| (name, t, s.shallow_clone()))
-            })
+            .filter(|(name, _)| online_vars.get(name).is_some_and(Tensor::requires_grad))
             .collect();
-        pairs.sort_by(|a, b| a.0.cmp(&b.0));
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        let flat = flatten_storage(&named.into_iter().map(|(_, t)| t).collect::<Vec<_>>());
         vs.freeze();
-        Ok(Self { vs, actor, pairs: pairs.into_iter().map(|(_, t, s)| (t, s)).collect() })
+        Ok(Self { vs, actor, flat })
     }
 }
 
@@ -249,6 +274,8 @@ pub struct Sac {
     critic: TwinCritic,
     target_vs: nn::VarStore,
     target: TwinCritic,
+    /// The target critics' parameters, one buffer laid out as the critic optimiser's.
+    target_flat: Tensor,
     actor_opt: Adam,
     critic_opt: Adam,
     log_alpha: Option<(Tensor, Adam, f64)>,
@@ -302,6 +329,7 @@ impl Sac {
             TwinCritic::new(&target_vs.root(), &config.net, &config.action_scale, config.critic_layer_norm);
         target_vs.copy(&critic_vs)?;
         target_vs.freeze();
+        let target_flat = flatten_storage(&target.parameters().collect::<Vec<_>>());
         let target_actor = match config.algorithm {
             Algorithm::Sac => None,
             Algorithm::Td3 { .. } => Some(TargetActor::new(&actor_vs, &config)?),
@@ -325,6 +353,7 @@ impl Sac {
             critic,
             target_vs,
             target,
+            target_flat,
             actor_opt,
             critic_opt,
             log_alpha,
@@ -452,11 +481,13 @@ impl Sac {
         let gamma = self.config.gamma;
         let alpha = self.alpha;
 
+        // log π is needed for a non-zero or tuned α only.
+        let with_log_prob = alpha != 0.0 || self.log_alpha.is_some();
         let y: Tensor = tch::no_grad(|| {
-            let next = self.actor.sample_with(&batch.next_obs, eps_next.as_ref());
+            let next = self.actor.sample_opt(&batch.next_obs, eps_next.as_ref(), with_log_prob);
             let mut q_next = self.target.min_q(&batch.next_obs, &next.action);
-            if alpha != 0.0 {
-                q_next -= alpha * next.log_prob;
+            if let Some(log_prob) = next.log_prob.filter(|_| alpha != 0.0) {
+                q_next -= alpha * log_prob;
             }
             let not_done: Tensor = 1.0 - &batch.done;
             &batch.reward + not_done * gamma * q_next
@@ -471,20 +502,23 @@ impl Sac {
         self.critic_vs.freeze();
         let (pi, bc_loss) = match &batch.bc {
             Some(bc) if bc.beta > 0.0 => {
-                let (pi, log_prob_data) =
-                    self.actor.sample_and_log_prob_of(&batch.obs, &batch.action, eps_pi.as_ref());
+                let (pi, log_prob_data) = self.actor.sample_and_log_prob_of(
+                    &batch.obs,
+                    &batch.action,
+                    eps_pi.as_ref(),
+                    with_log_prob,
+                );
                 // Q(s, a) of the replayed action: the critic's value before this step.
                 let weight = q.amin(0, false) * &bc.mask;
                 let bc_loss = (weight * log_prob_data).mean(Kind::Float) * -bc.beta;
                 (pi, Some(bc_loss))
             }
-            _ => (self.actor.sample_with(&batch.obs, eps_pi.as_ref()), None),
+            _ => (self.actor.sample_opt(&batch.obs, eps_pi.as_ref(), with_log_prob), None),
         };
         let q_pi = self.critic.min_q(&batch.obs, &pi.action);
-        let rl_loss = if alpha != 0.0 {
-            (alpha * &pi.log_prob - &q_pi).mean(Kind::Float)
-        } else {
-            -q_pi.mean(Kind::Float)
+        let rl_loss = match &pi.log_prob {
+            Some(log_prob) if alpha != 0.0 => (alpha * log_prob - &q_pi).mean(Kind::Float),
+            _ => -q_pi.mean(Kind::Float),
         };
         let actor_loss = match &bc_loss {
             Some(bc) => &rl_loss + bc,
@@ -493,8 +527,9 @@ impl Sac {
         self.actor_opt.backward_step(&actor_loss);
         self.critic_vs.unfreeze();
 
-        if let Some((log_alpha, opt, target_entropy)) = &mut self.log_alpha {
-            let log_prob = pi.log_prob.detach();
+        if let (Some((log_alpha, opt, target_entropy)), Some(log_prob)) = (&mut self.log_alpha, &pi.log_prob)
+        {
+            let log_prob = log_prob.detach();
             let alpha_loss = (-log_alpha.exp() * (log_prob + *target_entropy)).mean(Kind::Float);
             opt.backward_step(&alpha_loss);
             self.alpha = log_alpha.exp().double_value(&[0]);
@@ -583,18 +618,14 @@ impl Sac {
         }
     }
 
-    /// target ← target + τ (online − target), in place, one lerp per parameter tensor: the
-    /// critics, and TD3's actor.
+    /// target ← target + τ (online − target), in place: one lerp over the critics' flat
+    /// buffers, and one over TD3's actors'.
     fn soft_update_target(&mut self) {
         let tau = self.config.tau;
         tch::no_grad(|| {
-            for (mut t, s) in self.target.parameters().zip(self.critic.parameters()) {
-                let _ = t.lerp_(&s, tau);
-            }
-            if let Some(target) = &self.target_actor {
-                for (t, s) in &target.pairs {
-                    let _ = t.shallow_clone().lerp_(s, tau);
-                }
+            let _ = self.target_flat.lerp_(self.critic_opt.flat(), tau);
+            if let Some(target) = &mut self.target_actor {
+                let _ = target.flat.lerp_(self.actor_opt.flat(), tau);
             }
         });
     }

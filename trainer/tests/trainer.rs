@@ -247,7 +247,8 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     let mut sac = small_sac();
     // Expected: -beta * mean(mask * minQ(s,a) * log pi(a|s)), with Q and pi before the step.
     let q = sac.q_of(&batch.obs, &batch.action);
-    let (_, log_prob) = tch::no_grad(|| sac.actor.sample_and_log_prob_of(&batch.obs, &batch.action, None));
+    let (_, log_prob) =
+        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&batch.obs, &batch.action, None, false));
     let mask_t = Tensor::from_slice(&mask).view([8, 1]);
     let expected = (&q * &log_prob * &mask_t).mean(Kind::Float).double_value(&[]) * -beta;
     // The same rows with the learner's flags flipped give a different value: the weight is
@@ -291,7 +292,7 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
         sac.update(&fit);
     }
     let lp = |sac: &Sac| {
-        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&obs, &action, None).1)
+        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&obs, &action, None, false).1)
             .mean(Kind::Float)
             .double_value(&[])
     };
