@@ -222,7 +222,7 @@ impl Default for SacSection {
         Self {
             hidden: vec![256, 256],
             actor_lr: 3e-4,
-            critic_lr: 1e-3,
+            critic_lr: 3e-4,
             batch: 256,
             gamma: 0.99,
             tau: 0.005,

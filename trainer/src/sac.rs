@@ -71,7 +71,7 @@ impl SacConfig {
             gamma: 0.99,
             tau: 0.005,
             actor_lr: 3e-4,
-            critic_lr: 1e-3,
+            critic_lr: 3e-4,
             entropy: EntropyCoef::Auto { target_entropy: -15.0, initial: 0.1 },
             critic_layer_norm: true,
         }
