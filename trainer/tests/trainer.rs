@@ -211,9 +211,13 @@ fn bc_beta_decays_linearly_to_zero() {
 }
 
 fn small_sac() -> Sac {
+    small_learner(Algorithm::Sac)
+}
+
+fn small_learner(algorithm: Algorithm) -> Sac {
     tch::manual_seed(3);
     let config = SacConfig {
-        algorithm: Algorithm::Sac,
+        algorithm,
         net: NetSpec { obs_dim: 4, act_dim: 2, hidden: vec![16, 16] },
         action_scale: vec![0.5, 0.5],
         gamma: 0.9,
@@ -271,6 +275,22 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     // beta 0: none either.
     learner_only.bc = Some(BcTerm { beta: 0.0, mask: Tensor::ones([5, 1], (Kind::Float, Device::Cpu)) });
     assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
+
+    // TD3's deterministic actor: beta * mean(mask * minQ(s,a) * |(a - mu(s)) / scale|^2), on
+    // the updates that step the actor (every second one).
+    let mut td3 = small_learner(Algorithm::TD3);
+    assert_eq!(td3.update(&batch).bc_loss, 0.0, "no actor step on the first update");
+    let q = td3.q_of(&batch.obs, &batch.action);
+    let mu = tch::no_grad(|| td3.actor.deterministic(&batch.obs));
+    let sq = ((&batch.action - mu) / 0.5).square().sum_dim_intlist(-1, true, Kind::Float);
+    let expected = (&q * &sq * &mask_t).mean(Kind::Float).double_value(&[]) * beta;
+    assert!(expected.abs() > 1e-6);
+    let stats = td3.update(&batch);
+    assert!(
+        (stats.bc_loss - expected).abs() < 1e-5 * (1.0 + expected.abs()),
+        "{} vs {expected}",
+        stats.bc_loss
+    );
 }
 
 #[test]
