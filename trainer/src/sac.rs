@@ -478,25 +478,19 @@ impl Sac {
             None => (None, None),
         };
         self.updates += 1;
-        let gamma = self.config.gamma;
         let alpha = self.alpha;
 
         // log π is needed for a non-zero or tuned α only.
         let with_log_prob = alpha != 0.0 || self.log_alpha.is_some();
-        let y: Tensor = tch::no_grad(|| {
+        let q_next: Tensor = tch::no_grad(|| {
             let next = self.actor.sample_opt(&batch.next_obs, eps_next.as_ref(), with_log_prob);
-            let mut q_next = self.target.min_q(&batch.next_obs, &next.action);
-            if let Some(log_prob) = next.log_prob.filter(|_| alpha != 0.0) {
-                q_next -= alpha * log_prob;
+            let q_next = self.target.min_q(&batch.next_obs, &next.action);
+            match next.log_prob.filter(|_| alpha != 0.0) {
+                Some(log_prob) => q_next - alpha * log_prob,
+                None => q_next,
             }
-            let not_done: Tensor = 1.0 - &batch.done;
-            &batch.reward + not_done * gamma * q_next
         });
-        let q = self.critic.q_values(&batch.obs, &batch.action);
-        // Sum over the twins of each one's mean squared error, as two separate critics would.
-        let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
-        self.critic_opt.backward_step(&critic_loss);
-        let q = q.detach();
+        let (critic_loss, q) = self.critic_step(batch, &q_next);
 
         // The actor's loss needs gradients through the critic's input, not its weights.
         self.critic_vs.freeze();
@@ -545,6 +539,18 @@ impl Sac {
         }
     }
 
+    /// One gradient step of both critics towards `r + γ (1 − done) q_next`; returns the
+    /// loss and the twins' Q-values of the batch before the step (`[2, batch, 1]`, detached).
+    fn critic_step(&mut self, batch: &Batch, q_next: &Tensor) -> (Tensor, Tensor) {
+        let not_done: Tensor = 1.0 - &batch.done;
+        let y = &batch.reward + not_done * self.config.gamma * q_next;
+        let q = self.critic.q_values(&batch.obs, &batch.action);
+        // Sum over the twins of each one's mean squared error, as two separate critics would.
+        let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
+        self.critic_opt.backward_step(&critic_loss);
+        (critic_loss, q.detach())
+    }
+
     /// TD3: one critic step towards `r + γ min Q'(s', clip(μ'(s') + clip(ε))`; every
     /// `policy_delay` updates an actor step on `-Q₁(s, μ(s))` (plus the BC term) and the
     /// Polyak update of both targets.
@@ -569,25 +575,19 @@ impl Sac {
             None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
         };
         self.updates += 1;
-        let gamma = self.config.gamma;
         let scale = self.actor.action_scale().shallow_clone();
         let target_actor = match &self.target_actor {
             Some(target) => &target.actor,
             None => unreachable!("TD3 learners are built with a target actor"),
         };
 
-        let y: Tensor = tch::no_grad(|| {
+        let q_next: Tensor = tch::no_grad(|| {
             let noise = (eps * noise_std).clamp(-noise_clip, noise_clip);
             let next =
                 (target_actor.deterministic(&batch.next_obs) / &scale + noise).clamp(-1.0, 1.0) * &scale;
-            let q_next = self.target.min_q(&batch.next_obs, &next);
-            let not_done: Tensor = 1.0 - &batch.done;
-            &batch.reward + not_done * gamma * q_next
+            self.target.min_q(&batch.next_obs, &next)
         });
-        let q = self.critic.q_values(&batch.obs, &batch.action);
-        let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
-        self.critic_opt.backward_step(&critic_loss);
-        let q = q.detach();
+        let (critic_loss, q) = self.critic_step(batch, &q_next);
 
         let mut bc_value = 0.0;
         if self.updates.is_multiple_of(policy_delay.max(1)) {
