@@ -7,6 +7,7 @@ pub mod config;
 pub mod controllers;
 pub mod eval;
 pub mod nets;
+pub mod optim;
 pub mod plot;
 pub mod policy_export;
 pub mod replay;

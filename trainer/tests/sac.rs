@@ -150,7 +150,7 @@ fn adam_matches_libtorchs_adam_step_for_step() {
     let init = Tensor::randn([7, 5], (Kind::Float, Device::Cpu));
     let target = Tensor::randn([7, 5], (Kind::Float, Device::Cpu));
     let ours_p = init.copy().set_requires_grad(true);
-    let mut ours = vge_trainer::sac::Adam::new(vec![ours_p.shallow_clone()], 1e-2);
+    let mut ours = vge_trainer::optim::Adam::new(vec![ours_p.shallow_clone()], 1e-2);
     let vs = nn::VarStore::new(Device::Cpu);
     let theirs_p = vs.root().var_copy("p", &init);
     let mut theirs = nn::Adam::default().build(&vs, 1e-2).expect("adam");
