@@ -526,10 +526,11 @@ fn train(
         .progress_chars("=> "),
     );
     eprintln!(
-        "training {} ({:?} + {:?}, seed {}) into {}{}",
+        "training {} ({:?} + {:?}, {:?}, seed {}) into {}{}",
         config.name,
         config.method,
         config.controller,
+        config.algorithm,
         config.seed,
         out_dir.display(),
         if resuming { ", resuming" } else { "" }
@@ -546,6 +547,7 @@ fn train(
         ));
     })?;
     bar.finish();
+    println!("time this session: {}", summary.times);
     if summary.stopped {
         println!(
             "stopped at step {}: checkpoint saved; continue with `vge train --resume {}`",

@@ -100,6 +100,43 @@ pub struct TrainSummary {
     /// `DIR/policy.vgep` when training finished.
     pub policy: Option<PathBuf>,
     pub behaviour: BehaviourStats,
+    /// Where this session's wall time went.
+    pub times: PhaseTimes,
+}
+
+/// Wall-clock seconds per phase of the training loop, this session: what limits its speed.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// The actor's behaviour actions (one batched forward per step of all envs).
+    pub learner_s: f64,
+    /// The behaviour policy: controller calls (QP, kinematics) and the critic's Q queries.
+    pub behaviour_s: f64,
+    /// Physics: stepping the envs (in parallel), replay pushes, episode resets, logging.
+    pub sim_s: f64,
+    /// Gradient updates, with minibatch sampling.
+    pub update_s: f64,
+    /// Periodic deterministic evaluations.
+    pub eval_s: f64,
+    /// Checkpoints (networks, optimisers, replay buffer).
+    pub checkpoint_s: f64,
+    pub total_s: f64,
+}
+
+impl std::fmt::Display for PhaseTimes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let total = self.total_s.max(1e-9);
+        let parts = [
+            ("updates", self.update_s),
+            ("simulation", self.sim_s),
+            ("controllers + Q", self.behaviour_s),
+            ("actor", self.learner_s),
+            ("evaluation", self.eval_s),
+            ("checkpoints", self.checkpoint_s),
+        ];
+        let shown: Vec<String> =
+            parts.iter().map(|(name, t)| format!("{name} {t:.1} s ({:.0}%)", 100.0 * t / total)).collect();
+        write!(f, "{:.1} s: {}", self.total_s, shown.join(", "))
+    }
 }
 
 /// Sums over the current metrics window.
@@ -301,6 +338,14 @@ pub fn train(
     let mut checkpointed_at = if resume { Some(step) } else { None };
     let batch_size = config.sac.batch;
     let bc_all = config.bc_on() == BcOn::All;
+    let mut times = PhaseTimes::default();
+    let mut clock = Instant::now();
+    // Adds the time since the last call to one phase.
+    let mut lap = |phase: &mut f64| {
+        let now = Instant::now();
+        *phase += (now - clock).as_secs_f64();
+        clock = now;
+    };
     while step < config.total_steps {
         if stop.load(Ordering::SeqCst) {
             stopped = true;
@@ -317,6 +362,7 @@ pub fn train(
             let v = Vec::<f32>::try_from(a.contiguous().view(-1))?;
             v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect()
         };
+        lap(&mut times.learner_s);
         let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
             envs.iter().map(|e| e.privileged().map(ControllerInput::from_privileged)).collect()
         } else {
@@ -336,6 +382,7 @@ pub fn train(
                 *v = if v.is_finite() { v.clamp(-max_action, max_action) } else { 0.0 };
             }
         }
+        lap(&mut times.behaviour_s);
         let results: Vec<_> = envs
             .par_iter_mut()
             .zip(actions.par_iter())
@@ -387,6 +434,8 @@ pub fn train(
         let prev_step = step;
         step += n as u64;
 
+        lap(&mut times.sim_s);
+
         // Updates.
         let beta = if config.method.uses_bc() { bc_beta(&config.bc, step) } else { 0.0 };
         if step >= config.sac.warmup && replay.len() >= batch_size {
@@ -405,6 +454,7 @@ pub fn train(
                 add_stats(&mut window, &st);
             }
         }
+        lap(&mut times.update_s);
 
         let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
         if crossed(config.run.log_interval) || step >= config.total_steps {
@@ -420,7 +470,9 @@ pub fn train(
             last_window = std::mem::take(&mut window);
         }
         if crossed(config.run.eval_interval) {
+            lap(&mut times.sim_s);
             evaluate_actor(config, &sac, out_dir, step)?;
+            lap(&mut times.eval_s);
         }
         let elapsed = session_start.elapsed().as_secs_f64();
         progress(&Progress {
@@ -445,11 +497,14 @@ pub fn train(
                 &last_window,
                 config.run.save_replay,
             );
+            lap(&mut times.sim_s);
             save_checkpoint(out_dir, &sac, &replay, &state)?;
+            lap(&mut times.checkpoint_s);
             checkpointed_at = Some(step);
             // A checkpoint ends every episode (module docs).
             reset_envs(&all, &mut envs, &mut obs, &mut ctl_rngs, &mut running, &mut behaviour, &mut rng)?;
         }
+        lap(&mut times.sim_s);
     }
     metrics.flush().map_err(io_err(&metrics_path))?;
     // A checkpoint taken at this very step holds the state before the env resets that
@@ -483,6 +538,7 @@ pub fn train(
         stopped,
         policy,
         behaviour: behaviour.stats,
+        times: PhaseTimes { total_s: session_start.elapsed().as_secs_f64(), ..times },
     })
 }
 

@@ -498,6 +498,11 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert!(!full.stopped);
     assert!(full.behaviour.controller_queries > 0);
     assert!(full.updates > 0);
+    // The time breakdown covers the phases that ran and adds up to no more than the total.
+    let t = full.times;
+    assert!(t.update_s > 0.0 && t.sim_s > 0.0 && t.behaviour_s > 0.0 && t.learner_s > 0.0, "{t}");
+    let parts = t.learner_s + t.behaviour_s + t.sim_s + t.update_s + t.eval_s + t.checkpoint_s;
+    assert!(parts <= t.total_s * 1.001 && parts > 0.5 * t.total_s, "{t}");
     let full_policy = std::fs::read(full_dir.join("policy.vgep")).expect("policy");
     // The warm-up statistics normalise the observations, and the file carries them.
     let file = vge_export::PolicyFile::from_bytes(&full_policy).expect("policy file");
