@@ -77,10 +77,15 @@ fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> 
 /// Reads one run directory.
 pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
     let config = read(&dir.join("config.toml"))?;
-    let experiment = config
-        .lines()
-        .find_map(|l| l.strip_prefix("name = ").map(|v| v.trim().trim_matches('"').to_owned()))
-        .unwrap_or_else(|| dir.display().to_string());
+    let field = |key: &str| {
+        config.lines().find_map(|l| l.strip_prefix(key).map(|v| v.trim().trim_matches('"').to_owned()))
+    };
+    let mut experiment = field("name = ").unwrap_or_else(|| dir.display().to_string());
+    // A run of a SAC config switched to TD3 (`--set algorithm="td3"`) is another experiment.
+    if let Some(algorithm) = field("algorithm = ").filter(|a| a != "sac" && !experiment.contains(a.as_str()))
+    {
+        experiment = format!("{experiment} ({algorithm})");
+    }
     let cols = csv_columns(&dir.join("metrics.csv"), &["step", "return", "rotation", "controller_share"])?;
     let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] = cols
         .try_into()
