@@ -362,6 +362,7 @@ fn replay_sampling_is_deterministic_and_the_ring_wraps() {
     assert_eq!(d2, draw(9));
     let mut wrong = ReplayBuffer::new(6, 3, 2).expect("buffer");
     assert!(wrong.load(&path).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 // ---------------------------------------------------------------- configs
