@@ -203,7 +203,17 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
             .y_label_area_size(55)
             .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))
             .map_err(|e| draw_err(&e))?;
-        chart.configure_mesh().x_desc("env steps").draw().map_err(|e| draw_err(&e))?;
+        // Steps in thousands or millions: full numbers run into each other on the axis.
+        let steps_label = |x: &f64| {
+            if x_max >= 2e6 { format!("{:.1}M", x / 1e6) } else { format!("{:.0}k", x / 1e3) }
+        };
+        chart
+            .configure_mesh()
+            .x_desc("env steps")
+            .x_labels(6)
+            .x_label_formatter(&steps_label)
+            .draw()
+            .map_err(|e| draw_err(&e))?;
         for (i, (name, c)) in curves.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
