@@ -84,6 +84,8 @@ enum Command {
         episodes: usize,
         #[arg(long, default_value_t = ObjectShape::Cube)]
         object: ObjectShape,
+        /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
+        /// without noise or perturbation every episode (and every seed) is the same.
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Episode length in seconds of sim time.
@@ -129,6 +131,8 @@ enum Command {
         object: ObjectShape,
         #[arg(long, default_value_t = 10)]
         episodes: usize,
+        /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
+        /// without noise or perturbation every episode (and every seed) is the same.
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Episode length in seconds of sim time.
