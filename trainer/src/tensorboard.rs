@@ -56,11 +56,11 @@ impl EventWriter {
 
     /// One event holding `values` (tag, value) at `step`; flushed, so a killed run loses
     /// nothing it logged.
-    pub fn scalars(&mut self, step: u64, values: &[(&str, f64)]) -> std::io::Result<()> {
+    pub fn scalars<S: AsRef<str>>(&mut self, step: u64, values: &[(S, f64)]) -> std::io::Result<()> {
         let mut summary = Vec::new();
         for (tag, value) in values {
             let mut v = Vec::new();
-            put_bytes(&mut v, 1, tag.as_bytes());
+            put_bytes(&mut v, 1, tag.as_ref().as_bytes());
             v.push((2 << 3) | 5); // simple_value: float, fixed32
             v.extend_from_slice(&(*value as f32).to_le_bytes());
             put_bytes(&mut summary, 1, &v);

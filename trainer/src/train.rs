@@ -338,6 +338,23 @@ pub fn train(
     let mut checkpointed_at = if resume { Some(step) } else { None };
     let batch_size = config.sac.batch;
     let bc_all = config.bc_on() == BcOn::All;
+    // The checkpoint state of the loop's counters, generator and windows right now. A macro,
+    // because a closure would hold borrows of them across the loop that mutates them.
+    macro_rules! train_state {
+        () => {
+            TrainState::new(
+                step,
+                episodes,
+                updates_due,
+                &rng,
+                &config_hash,
+                &behaviour.stats,
+                &window,
+                &last_window,
+                config.run.save_replay,
+            )
+        };
+    }
     let mut times = PhaseTimes::default();
     let mut clock = Instant::now();
     // Adds the time since the last call to one phase.
@@ -465,7 +482,6 @@ pub fn train(
             // TensorBoard gets the same numbers ("train/return", ...), the empty ones left out.
             let scalars: Vec<(String, f64)> =
                 values.iter().filter_map(|(n, v)| v.map(|x| (format!("train/{n}"), x))).collect();
-            let scalars: Vec<(&str, f64)> = scalars.iter().map(|(n, x)| (n.as_str(), *x)).collect();
             events.scalars(step, &scalars).map_err(io_err(events.path()))?;
             last_window = std::mem::take(&mut window);
         }
@@ -486,17 +502,7 @@ pub fn train(
             updates: sac.updates(),
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
-            let state = TrainState::new(
-                step,
-                episodes,
-                updates_due,
-                &rng,
-                &config_hash,
-                &behaviour.stats,
-                &window,
-                &last_window,
-                config.run.save_replay,
-            );
+            let state = train_state!();
             lap(&mut times.sim_s);
             save_checkpoint(out_dir, &sac, &replay, &state)?;
             lap(&mut times.checkpoint_s);
@@ -510,17 +516,7 @@ pub fn train(
     // A checkpoint taken at this very step holds the state before the env resets that
     // followed it: keep it, so that a resume redoes those resets exactly.
     if checkpointed_at != Some(step) {
-        let state = TrainState::new(
-            step,
-            episodes,
-            updates_due,
-            &rng,
-            &config_hash,
-            &behaviour.stats,
-            &window,
-            &last_window,
-            config.run.save_replay,
-        );
+        let state = train_state!();
         save_checkpoint(out_dir, &sac, &replay, &state)?;
     }
     let policy = if stopped {
