@@ -11,7 +11,8 @@
 //!   for a step at several rad/s, a spike that says nothing about gaiting and would
 //!   dominate the critic's targets. No other penalty is added.
 //! - Terminated: the object centre fell more than [`EnvConfig::drop_height_m`] below its
-//!   height after the grasp, or fewer than [`EnvConfig::min_contacts`] fingertips touch it.
+//!   height after the grasp (a drop, the paper's only end besides the time limit), or,
+//!   when [`EnvConfig::min_contacts`] > 0, fewer than that many fingertips touch it.
 //! - Truncated: [`EnvConfig::episode_length_steps`] control steps without termination.
 //!
 //! Every random draw (grasp randomisation, noise, perturbation forces) comes from the
@@ -101,7 +102,8 @@ pub struct EnvConfig {
     pub max_action_rad: f32,
     /// Episode length in control steps (truncation).
     pub episode_length_steps: usize,
-    /// Terminate when fewer fingertips than this touch the object.
+    /// Terminate when fewer fingertips than this touch the object (0: never; the paper ends
+    /// episodes on a drop or the time limit only).
     pub min_contacts: usize,
     /// Reward is paid only while at least this many fingertips touch the object.
     pub reward_min_contacts: usize,
@@ -126,7 +128,7 @@ impl Default for EnvConfig {
             control_hz: 20.0,
             max_action_rad: 0.05,
             episode_length_steps: 400,
-            min_contacts: 3,
+            min_contacts: 0,
             reward_min_contacts: 3,
             drop_height_m: 0.03,
             max_reward_rad_per_s: 3.0,
@@ -219,6 +221,9 @@ pub struct ResetInfo {
 pub struct StepInfo {
     /// Fingertips touching the object.
     pub num_tip_contacts: usize,
+    /// Which fingertips touch the object, in finger order (contact switches are read off
+    /// these).
+    pub tip_contacts: [bool; NUM_FINGERS],
     /// Object angular velocity about world z (rad/s) at the end of the step, unclipped.
     pub object_angvel_z_rad_per_s: f32,
     /// Object yaw (rad).
@@ -499,6 +504,7 @@ impl Env {
         let truncated = !terminated && self.steps >= cfg.episode_length_steps;
         let info = StepInfo {
             num_tip_contacts: n_contacts,
+            tip_contacts: state.contacts.map(|c| c.is_some()),
             object_angvel_z_rad_per_s: wz,
             object_yaw_rad: state.object.yaw_rad(),
             object_height_m: height,
