@@ -1,15 +1,32 @@
 //! Evaluation: an exported policy file on the `no_std` runtime (deterministic) in the sim,
 //! for N episodes with the env's optional noise and perturbations.
 //!
-//! Success: the object turned at least 2π about z (unwrapped rotation at the end of the
-//! episode) and the episode was not terminated (no drop, never fewer than the env's minimum
-//! contacts), the same notion of drop as `vge controller`.
+//! **The success test** (`vge eval`'s defaults, training's periodic and final evaluation):
+//! [`SUCCESS_TEST_EPISODES`] episodes of [`SUCCESS_TEST_EPISODE_S`] from initial grasps
+//! randomised by [`SUCCESS_TEST_GRASP_NOISE_RAD`] (so the deterministic policy meets a
+//! different state in each). An episode succeeds when the object turned at least 2π about z
+//! (unwrapped rotation at the end of the episode) and the episode was not terminated (no
+//! drop), the same notion of drop as `vge controller`. Each episode also reports its
+//! fingertip contact switches ([`crate::gait`]): the evidence that it gaits. A training
+//! seed *learns* when its final policy succeeds in at least [`LEARNED_SUCCESS_RATE`] of the
+//! episodes.
 
 use std::path::Path;
 
+use rayon::prelude::*;
+use serde::Serialize;
 use thiserror::Error;
 use vge_runtime::Policy;
 use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
+
+/// Episodes of the success test.
+pub const SUCCESS_TEST_EPISODES: usize = 20;
+/// Length of a success-test episode (s).
+pub const SUCCESS_TEST_EPISODE_S: f32 = 30.0;
+/// Uniform noise (±rad) on the roll and closing angles of the initial grasp.
+pub const SUCCESS_TEST_GRASP_NOISE_RAD: f32 = 0.02;
+/// Success rate of a final policy at which its seed counts as having learned.
+pub const LEARNED_SUCCESS_RATE: f64 = 0.5;
 
 /// Largest network the evaluator loads: layers and width.
 pub const EVAL_MAX_LAYERS: usize = 8;
@@ -28,7 +45,7 @@ pub enum EvalError {
 }
 
 /// Figures over the evaluated episodes.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvalReport {
     pub episodes: usize,
     pub mean_return: f64,
@@ -39,37 +56,39 @@ pub struct EvalReport {
     /// Share of episodes the env terminated (drop or too few contacts).
     pub drop_rate: f64,
     pub mean_contacts: f64,
+    /// Fingertip contact switches per episode ([`crate::gait`]).
+    pub mean_contact_switches: f64,
     pub mean_length: f64,
+    /// Every episode, in order.
+    pub per_episode: Vec<EpisodeOutcome>,
 }
 
 impl EvalReport {
     /// One JSON object on one line.
     pub fn to_json_line(&self) -> String {
-        format!(
-            "{{\"episodes\":{},\"mean_return\":{:.6},\"mean_rotation_rad\":{:.6},\"success_rate\":{:.4},\"drop_rate\":{:.4},\"mean_contacts\":{:.4},\"mean_length\":{:.2}}}",
-            self.episodes,
-            self.mean_return,
-            self.mean_rotation_rad,
-            self.success_rate,
-            self.drop_rate,
-            self.mean_contacts,
-            self.mean_length
-        )
+        serde_json::to_string(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+    }
+
+    /// Whether a final policy with this report counts as having learned.
+    pub fn learned(&self) -> bool {
+        self.success_rate >= LEARNED_SUCCESS_RATE
     }
 }
 
-fn wrap_pi(a: f32) -> f32 {
+/// Angle wrapped to [-π, π).
+pub fn wrap_pi(a: f32) -> f32 {
     let tau = std::f32::consts::TAU;
     a - tau * ((a + std::f32::consts::PI) / tau).floor()
 }
 
 /// One episode's figures.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct EpisodeOutcome {
     pub episode_return: f64,
     pub rotation_rad: f64,
     pub terminated: bool,
     pub mean_contacts: f64,
+    pub contact_switches: u32,
     pub length: usize,
 }
 
@@ -79,45 +98,69 @@ impl EpisodeOutcome {
     }
 }
 
-/// A policy: fills the action for an observation.
-pub type PolicyFn<'a> = dyn FnMut(&[f32; OBS_DIM], &mut [f32; NUM_JOINTS]) -> Result<(), String> + 'a;
+/// A policy: fills the action for an observation (shared by the episodes run side by side).
+pub type PolicyFn<'a> = dyn Fn(&[f32; OBS_DIM], &mut [f32; NUM_JOINTS]) -> Result<(), String> + Sync + 'a;
 
-/// Runs `episodes` episodes (env seeds `seed`, `seed + 1`, ...) with `policy(obs, action)`.
+/// The success test's env: `env` with episodes of `episode_s` and initial grasps randomised
+/// by `grasp_noise_rad`.
+#[must_use]
+pub fn success_test_env(env: &EnvConfig, episode_s: f32, grasp_noise_rad: f32) -> EnvConfig {
+    let mut env = env.clone();
+    env.episode_length_steps = (episode_s * env.control_hz).round().max(1.0) as usize;
+    env.grasp.pose_noise_rad = grasp_noise_rad;
+    env
+}
+
+/// Runs `episodes` episodes (env seeds `seed`, `seed + 1`, ...) with `policy(obs, action)`,
+/// side by side on rayon's threads (each episode depends on its seed only).
 pub fn run_episodes(
     env_config: &EnvConfig,
     episodes: usize,
     seed: u64,
-    policy: &mut PolicyFn<'_>,
+    policy: &PolicyFn<'_>,
 ) -> Result<EvalReport, EvalError> {
     if episodes == 0 {
         return Err(EvalError::NoEpisodes);
     }
-    let mut env = Env::new(env_config.clone())?;
-    let mut outcomes = Vec::with_capacity(episodes);
-    for e in 0..episodes {
-        let (mut obs, _) = env.reset(seed.wrapping_add(e as u64))?;
-        let mut yaw = env.privileged().ok_or(SimError::NotReset)?.object.yaw_rad();
-        let mut out = EpisodeOutcome::default();
-        let mut contacts = 0usize;
-        let mut action = [0.0f32; NUM_JOINTS];
-        loop {
-            policy(&obs, &mut action).map_err(EvalError::Policy)?;
-            let r = env.step(&action)?;
-            out.episode_return += f64::from(r.reward);
-            out.rotation_rad += f64::from(wrap_pi(r.info.object_yaw_rad - yaw));
-            yaw = r.info.object_yaw_rad;
-            contacts += r.info.num_tip_contacts;
-            out.length += 1;
-            obs = r.obs;
-            if r.terminated || r.truncated {
-                out.terminated = r.terminated;
-                break;
-            }
-        }
-        out.mean_contacts = contacts as f64 / out.length.max(1) as f64;
-        outcomes.push(out);
-    }
+    let outcomes = (0..episodes)
+        .into_par_iter()
+        .map(|e| run_episode(env_config, seed.wrapping_add(e as u64), policy))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(summarise(&outcomes))
+}
+
+/// One episode from env seed `seed`.
+pub fn run_episode(
+    env_config: &EnvConfig,
+    seed: u64,
+    policy: &PolicyFn<'_>,
+) -> Result<EpisodeOutcome, EvalError> {
+    let mut env = Env::new(env_config.clone())?;
+    let (mut obs, _) = env.reset(seed)?;
+    let start = env.privileged().ok_or(SimError::NotReset)?;
+    let mut yaw = start.object.yaw_rad();
+    let mut switches = crate::gait::ContactSwitches::new(start.contacts.map(|c| c.is_some()));
+    let mut out = EpisodeOutcome::default();
+    let mut contacts = 0usize;
+    let mut action = [0.0f32; NUM_JOINTS];
+    loop {
+        policy(&obs, &mut action).map_err(EvalError::Policy)?;
+        let r = env.step(&action)?;
+        out.episode_return += f64::from(r.reward);
+        out.rotation_rad += f64::from(wrap_pi(r.info.object_yaw_rad - yaw));
+        yaw = r.info.object_yaw_rad;
+        contacts += r.info.num_tip_contacts;
+        switches.update(r.info.tip_contacts);
+        out.length += 1;
+        obs = r.obs;
+        if r.terminated || r.truncated {
+            out.terminated = r.terminated;
+            break;
+        }
+    }
+    out.mean_contacts = contacts as f64 / out.length.max(1) as f64;
+    out.contact_switches = switches.count;
+    Ok(out)
 }
 
 /// Means over episode outcomes.
@@ -131,7 +174,9 @@ pub fn summarise(outcomes: &[EpisodeOutcome]) -> EvalReport {
         success_rate: mean(&|o| f64::from(u8::from(o.success()))),
         drop_rate: mean(&|o| f64::from(u8::from(o.terminated))),
         mean_contacts: mean(&|o| o.mean_contacts),
+        mean_contact_switches: mean(&|o| f64::from(o.contact_switches)),
         mean_length: mean(&|o| o.length as f64),
+        per_episode: outcomes.to_vec(),
     }
 }
 
@@ -151,13 +196,14 @@ pub fn eval_policy_bytes(
         )));
     }
     let mut env = env.clone();
+    // Same episode duration at the policy's rate.
+    let duration_s = env.episode_length_steps as f32 / env.control_hz;
     env.control_hz = info.control_hz;
+    env.episode_length_steps = (duration_s * env.control_hz).round().max(1.0) as usize;
     let mut storage = vec![0.0f32; info.storage_len];
     let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(bytes, &mut storage)
         .map_err(|e| EvalError::Policy(format!("{e:?}")))?;
-    run_episodes(&env, episodes, seed, &mut |obs, action| {
-        policy.forward(obs, action).map_err(|e| format!("{e:?}"))
-    })
+    run_episodes(&env, episodes, seed, &|obs, action| policy.forward(obs, action).map_err(|e| format!("{e:?}")))
 }
 
 /// [`eval_policy_bytes`] of the file at `path`.

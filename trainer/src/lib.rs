@@ -6,6 +6,7 @@ pub mod bench_update;
 pub mod config;
 pub mod controllers;
 pub mod eval;
+pub mod gait;
 pub mod nets;
 pub mod optim;
 pub mod plot;

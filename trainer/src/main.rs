@@ -75,22 +75,31 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Evaluate a policy file on vge-runtime in the simulator, deterministically: mean
-    /// return, rotation, and success rate (object turned >= 2 pi about z without a drop).
+    /// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
+    /// return, rotation, contact switches, drops and success rate.
+    ///
+    /// The defaults are the success test that training's evaluations and `vge plot` use:
+    /// 20 episodes of 30 s from initial grasps randomised by +-0.02 rad; an episode succeeds
+    /// when the object turns >= 2 pi about z without a drop, and a seed has learned when its
+    /// policy succeeds in >= 50% of them. Episodes run side by side on all cores.
     Eval {
         #[arg(long)]
         policy: PathBuf,
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
         episodes: usize,
         #[arg(long, default_value_t = ObjectShape::Cube)]
         object: ObjectShape,
-        /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
-        /// without noise or perturbation every episode (and every seed) is the same.
+        /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Episode length in seconds of sim time.
-        #[arg(long, default_value_t = 20.0)]
+        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODE_S)]
         episode_s: f32,
+        /// Uniform noise (+-rad) on the initial grasp's roll and closing angles; 0 starts
+        /// every episode from the same grasp (then, without sensor noise or perturbations,
+        /// all episodes are the same).
+        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
+        grasp_noise_rad: f32,
         /// Gaussian noise on observed joint positions (rad).
         #[arg(long, default_value_t = 0.0)]
         noise_q_rad: f32,
@@ -297,6 +306,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             object,
             seed,
             episode_s,
+            grasp_noise_rad,
             noise_q_rad,
             noise_normal_frac,
             noise_position_m,
@@ -310,12 +320,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 ("noise-normal-frac", noise_normal_frac),
                 ("noise-position-m", noise_position_m),
                 ("perturb-force-n", perturb_force_n),
+                ("grasp-noise-rad", grasp_noise_rad),
             ] {
                 anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
             }
             let mut env = EnvConfig::default();
             env.object.shape = object;
-            env.episode_length_steps = (episode_s * env.control_hz).round().max(1.0) as usize;
+            let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
             env.noise.q_std_rad = noise_q_rad;
             env.noise.normal_std_frac = noise_normal_frac;
             env.noise.position_std_m = noise_position_m;
@@ -336,10 +347,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("  mean return        {:.3}", report.mean_return);
                 println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
                 println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
-                println!("  ended early        {:.2} of episodes (drop or lost contacts)", report.drop_rate);
+                println!("  dropped            {:.2} of episodes", report.drop_rate);
+                println!("  contact switches   {:.1} per episode (a fingertip let go and touched again)", report.mean_contact_switches);
                 println!(
                     "  mean contacts      {:.2}; mean length {:.0} steps",
                     report.mean_contacts, report.mean_length
+                );
+                let verdict = if report.learned() { "learned" } else { "not learned" };
+                println!(
+                    "  verdict            {verdict} (success >= {:.0}% of episodes)",
+                    100.0 * vge_trainer::eval::LEARNED_SUCCESS_RATE
                 );
             }
             Ok(())
