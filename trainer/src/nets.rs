@@ -75,6 +75,8 @@ pub struct GaussianActor {
     pub obs_norm: ObsNormaliser,
     /// Per-dimension half-range of the action (e.g. the max joint-target change per step).
     action_scale: Tensor,
+    /// Lower end of log σ's range (default [`LOG_STD_MIN`]).
+    log_std_min: f64,
 }
 
 /// An action drawn from the policy with its log-density (after the tanh change of variables),
@@ -100,7 +102,21 @@ impl GaussianActor {
         let mean = torch_linear(&p / "mean", width, spec.act_dim);
         let log_std = torch_linear(&p / "log_std", width, spec.act_dim);
         let action_scale = Tensor::from_slice(action_scale).to_device(root.device());
-        Self { trunk, mean, log_std, obs_norm, action_scale }
+        Self { trunk, mean, log_std, obs_norm, action_scale, log_std_min: LOG_STD_MIN }
+    }
+
+    /// Raises the floor of σ to `min_std` (pre-tanh, unit action range; values at or below
+    /// `exp(LOG_STD_MIN)` keep the default). With α = 0 nothing else keeps σ from collapsing,
+    /// and then SAC's target `Q(s', a')` is that of a point action the actor optimised
+    /// against the critic's errors: on the hand its mean Q rose past the largest Monte-Carlo
+    /// return in the data. A floor makes the target an average over a ball of actions, as
+    /// TD3's target smoothing does.
+    #[must_use]
+    pub fn with_min_std(mut self, min_std: f64) -> Self {
+        if min_std > LOG_STD_MIN.exp() {
+            self.log_std_min = min_std.ln().min(LOG_STD_MAX);
+        }
+        self
     }
 
     /// Per-dimension half-range of the actions, `[act_dim]`.
@@ -116,8 +132,8 @@ impl GaussianActor {
     /// Mean and log σ of the pre-tanh Gaussian.
     pub fn distribution(&self, obs: &Tensor) -> (Tensor, Tensor) {
         let h = self.trunk.forward(&self.obs_norm.apply(obs));
-        let log_std =
-            LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (self.log_std.forward(&h).tanh() + 1.0);
+        let min = self.log_std_min;
+        let log_std = min + 0.5 * (LOG_STD_MAX - min) * (self.log_std.forward(&h).tanh() + 1.0);
         (self.mean.forward(&h), log_std)
     }
 

@@ -60,6 +60,9 @@ pub struct SacConfig {
     pub entropy: EntropyCoef,
     /// Layer normalisation in the critics' hidden layers (see [`TwinCritic`]).
     pub critic_layer_norm: bool,
+    /// SAC: floor of the policy's pre-tanh σ (unit action range); 0 keeps CleanRL's
+    /// `exp(LOG_STD_MIN)`. See [`crate::nets::GaussianActor::with_min_std`].
+    pub min_policy_std: f64,
 }
 
 impl SacConfig {
@@ -75,13 +78,15 @@ impl SacConfig {
             critic_lr: 3e-4,
             entropy: EntropyCoef::Auto { target_entropy: -15.0, initial: 0.1 },
             critic_layer_norm: true,
+            min_policy_std: 0.0,
         }
     }
 }
 
 /// The value-weighted behaviour-cloning term of a batch (the paper's Eq. for L_BC):
-/// `L_BC = -beta * mean_batch(mask * Q(s,a) * log pi(a|s))`, with Q = min of the twins,
-/// detached (a weight, not a path for gradients).
+/// `L_BC = -beta * mean_batch(mask * Q(s,a) * log pi(a|s))`, with `a` the controller's
+/// action at `s` ([`Self::action`]) and Q = min of the twins, detached (a weight, not a path
+/// for gradients).
 ///
 /// Sign: the paper writes `sum beta log pi(a|s) Q(s,a)` and the step `theta <- theta -
 /// grad L_BC`; taken literally that *lowers* the likelihood of high-value controller actions,
@@ -91,9 +96,17 @@ impl SacConfig {
 #[derive(Debug)]
 pub struct BcTerm {
     pub beta: f64,
-    /// `[batch, 1]`: 1 on the rows that are cloned (actions that were not the learner's).
+    /// `[batch, 1]`: 1 on the rows that are cloned (those with a controller action).
     pub mask: Tensor,
+    /// `[batch, act_dim]`: the controller's action at each row's state (any value where the
+    /// mask is 0).
+    pub action: Tensor,
 }
+
+/// Controller actions at the action bound are cloned as this fraction of it: the tanh
+/// policy reaches ±1 only at infinite pre-squash values, and the log-density of a point that
+/// close to the bound (atanh(1 - 1e-6) = 7.3, tens of σ away) swamps the gradient.
+pub const BC_TARGET_MAX_UNIT: f64 = 0.995;
 
 /// One minibatch of transitions; rewards and `done` are `[batch, 1]`.
 #[derive(Debug)]
@@ -106,6 +119,11 @@ pub struct Batch {
     pub done: Tensor,
     /// The BC term, when the method uses it.
     pub bc: Option<BcTerm>,
+}
+
+/// The BC term's controller actions, pulled inside `±BC_TARGET_MAX_UNIT` of the bound.
+fn bc_target(bc: &BcTerm, scale: &Tensor) -> Tensor {
+    (&bc.action / scale).clamp(-BC_TARGET_MAX_UNIT, BC_TARGET_MAX_UNIT) * scale
 }
 
 impl Batch {
@@ -208,7 +226,8 @@ pub fn mix_seed(seed: u64, counter: u64, salt: u64) -> i64 {
 impl Sac {
     pub fn new(config: SacConfig, device: Device) -> Result<Self, tch::TchError> {
         let actor_vs = nn::VarStore::new(device);
-        let actor = GaussianActor::new(&actor_vs.root(), &config.net, &config.action_scale);
+        let actor = GaussianActor::new(&actor_vs.root(), &config.net, &config.action_scale)
+            .with_min_std(config.min_policy_std);
         let critic_vs = nn::VarStore::new(device);
         let critic =
             TwinCritic::new(&critic_vs.root(), &config.net, &config.action_scale, config.critic_layer_norm);
@@ -367,6 +386,7 @@ impl Sac {
         };
         self.updates += 1;
         let alpha = self.alpha;
+        let bc_weight = self.bc_weight(batch);
 
         // log π is needed for a non-zero or tuned α only.
         let with_log_prob = alpha != 0.0 || self.log_alpha.is_some();
@@ -382,16 +402,14 @@ impl Sac {
 
         // The actor's loss needs gradients through the critic's input, not its weights.
         self.critic_vs.freeze();
-        let (pi, bc_loss) = match &batch.bc {
-            Some(bc) if bc.beta > 0.0 => {
+        let (pi, bc_loss) = match (&batch.bc, &bc_weight) {
+            (Some(bc), Some(weight)) => {
                 let (pi, log_prob_data) = self.actor.sample_and_log_prob_of(
                     &batch.obs,
-                    &batch.action,
+                    &bc_target(bc, self.actor.action_scale()),
                     eps_pi.as_ref(),
                     with_log_prob,
                 );
-                // Q(s, a) of the replayed action: the critic's value before this step.
-                let weight = q.amin(0, false) * &bc.mask;
                 let bc_loss = (weight * log_prob_data).mean(Kind::Float) * -bc.beta;
                 (pi, Some(bc_loss))
             }
@@ -463,6 +481,7 @@ impl Sac {
             None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
         };
         self.updates += 1;
+        let bc_weight = self.bc_weight(batch);
         let scale = self.actor.action_scale().shallow_clone();
         let target_actor = match &self.target_actor {
             Some(target) => &target.actor,
@@ -482,10 +501,9 @@ impl Sac {
             self.critic_vs.freeze();
             let mu = self.actor.deterministic(&batch.obs);
             let rl_loss = -self.critic.q_values(&batch.obs, &mu).get(0).mean(Kind::Float);
-            let actor_loss = match &batch.bc {
-                Some(bc) if bc.beta > 0.0 => {
-                    let weight = q.amin(0, false) * &bc.mask;
-                    let sq = ((&batch.action - &mu) / &scale).square().sum_dim_intlist(-1, true, Kind::Float);
+            let actor_loss = match (&batch.bc, &bc_weight) {
+                (Some(bc), Some(weight)) => {
+                    let sq = ((bc_target(bc, &scale) - &mu) / &scale).square().sum_dim_intlist(-1, true, Kind::Float);
                     let bc_loss = (weight * sq).mean(Kind::Float) * bc.beta;
                     bc_value = bc_loss.double_value(&[]);
                     &rl_loss + bc_loss
@@ -504,6 +522,12 @@ impl Sac {
             alpha: 0.0,
             mean_q: q.mean(Kind::Float).double_value(&[]),
         }
+    }
+
+    /// The BC term's weights `mask · min Q(s, a_controller)` from the critics before this
+    /// update's step (None without an active BC term).
+    fn bc_weight(&self, batch: &Batch) -> Option<Tensor> {
+        batch.bc.as_ref().filter(|bc| bc.beta > 0.0).map(|bc| self.q_of(&batch.obs, &bc.action) * &bc.mask)
     }
 
     /// target ← target + τ (online − target), in place: one lerp over the critics' flat

@@ -85,6 +85,7 @@ pub fn train_point_mass(
         critic_lr: 1e-3,
         entropy,
         critic_layer_norm: true,
+        min_policy_std: 0.0,
     };
     // 64-wide layers gain nothing from a second intra-op thread, and a spinning pool thread
     // fighting another process (or test) for the core slows this loop several-fold.
@@ -106,7 +107,7 @@ pub fn train_point_mass(
         };
         let (r, done) = env.step(a);
         replay
-            .push(&obs, &[a], r, &env.obs(), false, Source::Learner)
+            .push(&obs, &[a], r, &env.obs(), false, Source::Learner, None)
             .map_err(|e| tch::TchError::Convert(e.to_string()))?;
         if done {
             env = PointMass::reset(&mut rng);

@@ -110,6 +110,7 @@ fn config(entropy: EntropyCoef) -> SacConfig {
         critic_lr: 3e-3,
         entropy,
         critic_layer_norm: false,
+        min_policy_std: 0.0,
     }
 }
 
