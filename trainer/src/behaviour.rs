@@ -1,7 +1,10 @@
 //! The behaviour policies of the paper's five methods: which action each env takes, the
 //! learner's or the controller's.
 //!
-//! - RL, RL+BC: the learner's action, always; the controller is never queried.
+//! - RL: the learner's action, always; the controller is never queried.
+//! - RL+BC: the learner's action, always; the controller is queried on every visited state
+//!   (until the hard stop) and its action is returned beside the learner's as the BC target,
+//!   never executed.
 //! - FGE: every H steps an env draws its source: the controller with probability
 //!   [`fge_probability`] (a fixed decay in training steps, independent of the state), else
 //!   the learner, and follows it for H steps. The controller is queried only when chosen.
@@ -11,12 +14,20 @@
 //!   difference `sigmoid(Q(s,a_psi) - Q(s,a_pi))` (the same number, without overflow), draws
 //!   the source and follows it for H steps.
 //!
+//! H is also the length of the contact-switching trajectory (config: `vge.horizon`), and a
+//! controller picked at a draw starts afresh, so one controller segment runs one whole
+//! detach and re-attach.
+//!
 //! From the hard stop on, the controller is never queried again (all methods). When the
 //! controller has no action on a step (too few contacts, QP failure) the learner's action is
 //! taken for that step and recorded as the learner's; the segment goes on.
+//!
+//! A Q query that fails or returns a non-finite value is an error ([`BehaviourError`]): VGE
+//! must not quietly fall back to the learner.
 
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
+use thiserror::Error;
 use vge_sim::{NUM_JOINTS, OBS_DIM};
 
 use crate::config::{BcSection, Config, FgeSection, Method};
@@ -92,7 +103,28 @@ struct Segment {
 const FRESH: Segment = Segment { source: Source::Learner, remaining: 0, controller_stale: true };
 
 /// Min-twin Q-values of `(obs, action)` rows, one per row.
-pub type QFn<'a> = dyn FnMut(&[[f32; OBS_DIM]], &[[f32; NUM_JOINTS]]) -> Vec<f32> + 'a;
+pub type QFn<'a> = dyn FnMut(&[[f32; OBS_DIM]], &[[f32; NUM_JOINTS]]) -> Result<Vec<f32>, String> + 'a;
+
+/// Why the behaviour policy cannot decide.
+#[derive(Debug, Error, PartialEq)]
+pub enum BehaviourError {
+    #[error("training step {step}: the critic's Q query failed: {message}")]
+    QQuery { step: u64, message: String },
+    #[error("training step {step}: the critic returned {got} Q-values for {expected} rows")]
+    QCount { step: u64, got: usize, expected: usize },
+    #[error("training step {step}: non-finite Q (learner {learner}, controller {controller}) in env {env}")]
+    QNonFinite { step: u64, env: usize, learner: f32, controller: f32 },
+}
+
+/// One env's decision: the action to execute, who chose it, and the controller action the
+/// BC loss clones at this state (VGE+BC: the executed controller action; RL+BC: the
+/// controller's proposal; otherwise none).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decision {
+    pub action: [f32; NUM_JOINTS],
+    pub source: Source,
+    pub bc_target: Option<[f32; NUM_JOINTS]>,
+}
 
 /// What the behaviour policy needs to know at one step.
 #[derive(Debug)]
@@ -149,13 +181,13 @@ impl Behaviour {
 
     /// Whether the controller may be queried at `step`.
     pub fn controller_active(&self, step: u64) -> bool {
-        self.method.uses_controller() && step < self.hard_stop
+        self.method.queries_controller() && step < self.hard_stop
     }
 
-    /// The action of every env and who chose it. `q(obs, actions)` returns min-twin Q-values
-    /// row by row (only called by VGE, once per step, for the envs drawing a source, learner
-    /// rows first then controller rows). `ctl_rngs[i]` is controller `i`'s generator; every
-    /// source draw comes from `rng`, env by env.
+    /// The decision of every env. `q(obs, actions)` returns min-twin Q-values row by row
+    /// (only called by VGE, once per step, for the envs drawing a source, learner rows first
+    /// then controller rows). `ctl_rngs[i]` is controller `i`'s generator; every source draw
+    /// comes from `rng`, env by env.
     #[allow(clippy::too_many_arguments)]
     pub fn act(
         &mut self,
@@ -164,13 +196,23 @@ impl Behaviour {
         ctl_rngs: &mut [ChaCha8Rng],
         q: &mut QFn<'_>,
         rng: &mut ChaCha8Rng,
-    ) -> Vec<([f32; NUM_JOINTS], Source)> {
+    ) -> Result<Vec<Decision>, BehaviourError> {
         let n = ctx.obs.len();
-        let mut out: Vec<([f32; NUM_JOINTS], Source)> =
-            ctx.learner.iter().map(|a| (*a, Source::Learner)).collect();
+        let mut out: Vec<Decision> = ctx
+            .learner
+            .iter()
+            .map(|a| Decision { action: *a, source: Source::Learner, bc_target: None })
+            .collect();
         self.stats.steps += n as u64;
         if !self.controller_active(ctx.step) {
-            return out;
+            return Ok(out);
+        }
+        if self.method == Method::RlBc {
+            // The learner acts; the controller only labels the visited states.
+            for (i, d) in out.iter_mut().enumerate() {
+                d.bc_target = self.query(i, ctx, controllers, ctl_rngs);
+            }
+            return Ok(out);
         }
         let vge = matches!(self.method, Method::Vge | Method::VgeBc);
         // Envs drawing a source this step, and for VGE the controller's proposal.
@@ -179,38 +221,17 @@ impl Behaviour {
             if self.segments[i].remaining > 0 {
                 continue;
             }
-            let proposal = if vge { self.query(i, ctx, controllers, ctl_rngs) } else { None };
+            let proposal = if vge {
+                // A draw starts a fresh controller segment (a whole switch of H steps).
+                self.segments[i].controller_stale = true;
+                self.query(i, ctx, controllers, ctl_rngs)
+            } else {
+                None
+            };
             drawing.push((i, proposal));
         }
-        // p_psi per drawing env.
-        let probs: Vec<f64> = if vge {
-            let rows: Vec<usize> = drawing.iter().filter(|d| d.1.is_some()).map(|d| d.0).collect();
-            let mut values = Vec::new();
-            if !rows.is_empty() {
-                let mut obs: Vec<[f32; OBS_DIM]> = rows.iter().map(|&i| ctx.obs[i]).collect();
-                obs.extend_from_within(..);
-                let mut acts: Vec<[f32; NUM_JOINTS]> = rows.iter().map(|&i| ctx.learner[i]).collect();
-                acts.extend(drawing.iter().filter_map(|d| d.1));
-                values = q(&obs, &acts);
-            }
-            let k = rows.len();
-            let mut next = 0;
-            drawing
-                .iter()
-                .map(|d| {
-                    if d.1.is_none() {
-                        return 0.0;
-                    }
-                    let (ql, qc) = (values.get(next).copied(), values.get(k + next).copied());
-                    next += 1;
-                    match (ql, qc) {
-                        (Some(ql), Some(qc)) if ql.is_finite() && qc.is_finite() => {
-                            p_controller(f64::from(ql), f64::from(qc))
-                        }
-                        _ => 0.0,
-                    }
-                })
-                .collect()
+        let probs = if vge {
+            self.vge_probabilities(ctx, &drawing, q)?
         } else {
             let p = fge_probability(&self.fge, ctx.step);
             drawing.iter().map(|_| p).collect()
@@ -221,16 +242,21 @@ impl Behaviour {
             if vge {
                 self.stats.p_psi_sum += p;
             }
-            let chose_controller = u < p;
             let seg = &mut self.segments[i];
             seg.remaining = self.horizon;
-            if chose_controller {
+            if u < p {
                 self.stats.controller_selected += 1;
                 seg.source = Source::Controller;
-                // VGE already has this step's controller action; FGE asks now.
-                let action = if vge { proposal } else { self.query(i, ctx, controllers, ctl_rngs) };
+                // VGE already has this step's controller action; FGE asks now, afresh.
+                let action = if vge {
+                    proposal
+                } else {
+                    seg.controller_stale = true;
+                    self.query(i, ctx, controllers, ctl_rngs)
+                };
                 if let Some(a) = action {
-                    out[i] = (a, Source::Controller);
+                    out[i].action = a;
+                    out[i].source = Source::Controller;
                 }
             } else {
                 seg.source = Source::Learner;
@@ -248,12 +274,58 @@ impl Behaviour {
             if seg.source == Source::Controller
                 && let Some(a) = self.query(i, ctx, controllers, ctl_rngs)
             {
-                out[i] = (a, Source::Controller);
+                out[i].action = a;
+                out[i].source = Source::Controller;
             }
             self.segments[i].remaining -= 1;
         }
-        self.stats.controller_steps += out.iter().filter(|o| o.1 == Source::Controller).count() as u64;
-        out
+        let bc = self.method.uses_bc();
+        for d in &mut out {
+            if d.source == Source::Controller {
+                self.stats.controller_steps += 1;
+                if bc {
+                    d.bc_target = Some(d.action);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// `p_psi` of each drawing env (0 where the controller had no action), from one Q query.
+    fn vge_probabilities(
+        &self,
+        ctx: &StepContext<'_>,
+        drawing: &[(usize, Option<[f32; NUM_JOINTS]>)],
+        q: &mut QFn<'_>,
+    ) -> Result<Vec<f64>, BehaviourError> {
+        let rows: Vec<usize> = drawing.iter().filter(|d| d.1.is_some()).map(|d| d.0).collect();
+        let k = rows.len();
+        let mut values = Vec::new();
+        if k > 0 {
+            let mut obs: Vec<[f32; OBS_DIM]> = rows.iter().map(|&i| ctx.obs[i]).collect();
+            obs.extend_from_within(..);
+            let mut acts: Vec<[f32; NUM_JOINTS]> = rows.iter().map(|&i| ctx.learner[i]).collect();
+            acts.extend(drawing.iter().filter_map(|d| d.1));
+            values = q(&obs, &acts).map_err(|message| BehaviourError::QQuery { step: ctx.step, message })?;
+            if values.len() != 2 * k {
+                return Err(BehaviourError::QCount { step: ctx.step, got: values.len(), expected: 2 * k });
+            }
+        }
+        let mut next = 0;
+        drawing
+            .iter()
+            .map(|&(env, proposal)| {
+                if proposal.is_none() {
+                    return Ok(0.0);
+                }
+                let (learner, controller) = (values[next], values[k + next]);
+                next += 1;
+                if !(learner.is_finite() && controller.is_finite()) {
+                    return Err(BehaviourError::QNonFinite { step: ctx.step, env, learner, controller });
+                }
+                Ok(p_controller(f64::from(learner), f64::from(controller)))
+            })
+            .collect()
     }
 
     /// Queries controller `i` (resetting it first when its state is stale).

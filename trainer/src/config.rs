@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use vge_sim::{EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig};
 
-use crate::controllers::ControllerKind;
+use crate::controllers::{ControllerKind, CsConfig};
 use crate::nets::NetSpec;
 use crate::sac::{Algorithm, EntropyCoef, SacConfig};
 
@@ -63,6 +63,12 @@ impl Method {
     /// Whether the behaviour policy ever follows a controller.
     pub fn uses_controller(self) -> bool {
         matches!(self, Self::Fge | Self::Vge | Self::VgeBc)
+    }
+
+    /// Whether the controller is queried during training: to be followed (FGE, VGE, VGE+BC)
+    /// or only to label the learner's states with its action (RL+BC).
+    pub fn queries_controller(self) -> bool {
+        self.uses_controller() || self == Self::RlBc
     }
 
     /// Whether the actor gets the BC loss.
@@ -121,6 +127,10 @@ pub struct EnvSection {
     pub control_hz: f32,
     pub episode_length: usize,
     pub max_action_rad: f32,
+    /// End an episode as soon as fewer than this many fingertips touch the object (0: never).
+    /// The paper ends episodes only on a drop or at the time limit, which is the default;
+    /// the reward is paid only while >= 3 fingertips touch the object either way.
+    pub terminate_below_contacts: usize,
     /// Randomise the initial grasp (one non-thumb finger open with probability 0.5).
     pub randomize_fingers: bool,
     /// Uniform noise on the initial grasp pose (rad).
@@ -140,6 +150,7 @@ impl Default for EnvSection {
             control_hz: env.control_hz,
             episode_length: env.episode_length_steps,
             max_action_rad: env.max_action_rad,
+            terminate_below_contacts: env.min_contacts,
             randomize_fingers: env.grasp.randomize_fingers,
             grasp_pose_noise_rad: env.grasp.pose_noise_rad,
             noise_q_std_rad: 0.0,
@@ -160,6 +171,7 @@ impl EnvSection {
         env.control_hz = self.control_hz;
         env.episode_length_steps = self.episode_length;
         env.max_action_rad = self.max_action_rad;
+        env.min_contacts = self.terminate_below_contacts;
         env.grasp.randomize_fingers = self.randomize_fingers;
         env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
         env.noise = NoiseConfig {
@@ -201,6 +213,10 @@ pub struct SacSection {
     pub normalize_obs: bool,
     /// Layer normalisation in the critics' hidden layers (against Q divergence).
     pub critic_layer_norm: bool,
+    /// SAC only: floor of the policy's pre-tanh σ, as a fraction of the action range (0:
+    /// CleanRL's exp(-5) = 0.007). With alpha = 0 nothing else keeps σ up; see
+    /// `GaussianActor::with_min_std`.
+    pub min_policy_std: f64,
 }
 
 /// α: a fixed number or `"auto"`.
@@ -235,6 +251,7 @@ impl Default for SacSection {
             threads: 2,
             normalize_obs: true,
             critic_layer_norm: true,
+            min_policy_std: 0.0,
         }
     }
 }
@@ -269,11 +286,14 @@ impl Default for Td3Section {
     }
 }
 
-/// VGE's selection horizon and the hard stop (also used by FGE).
+/// VGE's selection horizon and the hard stop (also used by FGE and RL+BC).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VgeSection {
-    /// H: the source is chosen every `horizon` steps and followed for `horizon` steps.
+    /// H (the paper's Algorithm 2): the source is chosen every `horizon` steps and followed
+    /// for `horizon` steps, and it is also the length of the contact-switching trajectory
+    /// `dq_switch(h), h = 1..H`, so that one controller pick runs one whole detach and
+    /// re-attach.
     pub horizon: usize,
     /// Training step (env transitions) after which the controller is never queried again.
     pub hard_stop: u64,
@@ -281,7 +301,9 @@ pub struct VgeSection {
 
 impl Default for VgeSection {
     fn default() -> Self {
-        Self { horizon: 10, hard_stop: 4_000_000 }
+        // 50 steps (2.5 s at 20 Hz): the switch length at which CS broke and remade the
+        // contact most reliably (controllers::cs::CsConfig).
+        Self { horizon: 50, hard_stop: 4_000_000 }
     }
 }
 
@@ -302,31 +324,19 @@ impl Default for FgeSection {
     }
 }
 
-/// Which replayed actions the BC loss clones.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum BcOn {
-    /// Actions that did not come from the learner (the controller's), as the paper's
-    /// `a != a_pi`; the default for VGE+BC.
-    NonLearner,
-    /// Every replayed action (each came from an older learner, so `a != a_pi` of the current
-    /// one): the only non-empty reading for RL+BC, whose behaviour policy is the learner.
-    All,
-}
-
-/// BC: β linear from `beta_start` at step 0 to 0 at `beta_zero_step`.
+/// BC: β linear from `beta_start` at step 0 to 0 at `beta_zero_step`. What is cloned is
+/// the controller's action at a replayed state: the executed one for VGE+BC (the paper's
+/// `a != a_pi`), the one queried but not executed for RL+BC (the learner alone acts).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BcSection {
     pub beta_start: f64,
     pub beta_zero_step: u64,
-    /// Default: `non-learner` for vge-bc, `all` for rl-bc.
-    pub on: Option<BcOn>,
 }
 
 impl Default for BcSection {
     fn default() -> Self {
-        Self { beta_start: 0.1, beta_zero_step: 4_000_000, on: None }
+        Self { beta_start: 0.1, beta_zero_step: 4_000_000 }
     }
 }
 
@@ -340,9 +350,16 @@ pub struct RunSection {
     pub checkpoint_interval: u64,
     /// Save the replay buffer with checkpoints (needed for an exact resume).
     pub save_replay: bool,
-    /// Deterministic evaluation of the actor every this many env steps (0: never).
+    /// Evaluation of the exported actor on the runtime every this many env steps (0: never),
+    /// with the success test of `vge eval` ([`crate::eval`]).
     pub eval_interval: u64,
+    /// Episodes per evaluation (periodic and final).
     pub eval_episodes: usize,
+    /// Length of an evaluation episode (s).
+    pub eval_episode_s: f32,
+    /// Uniform noise on the initial grasp pose of evaluation episodes (rad; 0 makes every
+    /// deterministic episode the same).
+    pub eval_grasp_noise_rad: f32,
 }
 
 impl Default for RunSection {
@@ -352,7 +369,9 @@ impl Default for RunSection {
             checkpoint_interval: 200_000,
             save_replay: true,
             eval_interval: 0,
-            eval_episodes: 5,
+            eval_episodes: crate::eval::SUCCESS_TEST_EPISODES,
+            eval_episode_s: crate::eval::SUCCESS_TEST_EPISODE_S,
+            eval_grasp_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
         }
     }
 }
@@ -426,9 +445,10 @@ impl Config {
         format!("{h:016x}")
     }
 
-    /// The effective BC target set (`bc.on`, or the method's default).
-    pub fn bc_on(&self) -> BcOn {
-        self.bc.on.unwrap_or(if self.method == Method::RlBc { BcOn::All } else { BcOn::NonLearner })
+    /// CS's configuration on `env`: its trajectory is H = `vge.horizon` steps long, the
+    /// paper's one H (see [`VgeSection::horizon`]).
+    pub fn cs_config(&self, env: &EnvConfig) -> CsConfig {
+        CsConfig { horizon_steps: self.vge.horizon, ..CsConfig::for_env(env) }
     }
 
     /// SAC's configuration for the hand (obs 65, action 15).
@@ -461,6 +481,7 @@ impl Config {
             critic_lr: self.sac.critic_lr,
             entropy,
             critic_layer_norm: self.sac.critic_layer_norm,
+            min_policy_std: self.sac.min_policy_std,
         }
     }
 
@@ -473,9 +494,9 @@ impl Config {
         if c.total_steps == 0 {
             return Err(invalid("total_steps must be at least 1"));
         }
-        if c.method.uses_controller() && c.controller.is_none() {
+        if c.method.queries_controller() && c.controller.is_none() {
             return Err(invalid(format!(
-                "method {:?} follows a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
+                "method {:?} queries a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
                 c.method.name()
             )));
         }
@@ -558,11 +579,6 @@ impl Config {
         }
         if !(c.bc.beta_start.is_finite() && c.bc.beta_start >= 0.0) {
             return Err(invalid(format!("bc.beta_start must be >= 0, got {}", c.bc.beta_start)));
-        }
-        if c.method == Method::RlBc && c.bc.on == Some(BcOn::NonLearner) {
-            return Err(invalid(
-                "bc.on = \"non-learner\" with method rl-bc clones nothing (all actions are the learner's)",
-            ));
         }
         if c.run.log_interval == 0 {
             return Err(invalid("run.log_interval must be at least 1"));

@@ -1,12 +1,14 @@
 //! A preallocated f32 ring buffer of transitions, sampled uniformly with a seeded generator
 //! into a [`Batch`]. Besides SAC's fields each transition records whether its action came
-//! from the learner ([`Source::Learner`]) or a controller; the BC loss uses that flag.
+//! from the learner ([`Source::Learner`]) or a controller, and, where the method clones a
+//! controller, the controller's action at that state (the BC target: the executed action
+//! for VGE+BC, the queried but not executed one for RL+BC).
 
 use std::io::{Read, Write};
 use std::path::Path;
 
 use rand::RngExt;
-use tch::{Kind, Tensor};
+use tch::Tensor;
 use thiserror::Error;
 
 use crate::sac::{Batch, BcTerm};
@@ -43,9 +45,13 @@ pub struct ReplayBuffer {
     done: Vec<f32>,
     /// 1.0 when the learner chose the action.
     learner: Vec<f32>,
+    /// The controller's action to clone (zeros where there is none).
+    bc_action: Vec<f32>,
+    /// 1.0 where `bc_action` holds a controller action.
+    bc_mask: Vec<f32>,
 }
 
-const MAGIC: &[u8; 8] = b"VGERPLY1";
+const MAGIC: &[u8; 8] = b"VGERPLY2";
 
 impl ReplayBuffer {
     pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> Result<Self, ReplayError> {
@@ -64,6 +70,8 @@ impl ReplayBuffer {
             next_obs: vec![0.0; capacity * obs_dim],
             done: vec![0.0; capacity],
             learner: vec![0.0; capacity],
+            bc_action: vec![0.0; capacity * act_dim],
+            bc_mask: vec![0.0; capacity],
         })
     }
 
@@ -80,7 +88,9 @@ impl ReplayBuffer {
     }
 
     /// Stores one transition, overwriting the oldest when full. `done` is termination only
-    /// (a truncated episode bootstraps).
+    /// (a truncated episode bootstraps). `bc_target` is the controller action the BC loss
+    /// clones at `obs`, if any.
+    #[allow(clippy::too_many_arguments)]
     pub fn push(
         &mut self,
         obs: &[f32],
@@ -89,8 +99,13 @@ impl ReplayBuffer {
         next_obs: &[f32],
         done: bool,
         source: Source,
+        bc_target: Option<&[f32]>,
     ) -> Result<(), ReplayError> {
-        if obs.len() != self.obs_dim || next_obs.len() != self.obs_dim || action.len() != self.act_dim {
+        if obs.len() != self.obs_dim
+            || next_obs.len() != self.obs_dim
+            || action.len() != self.act_dim
+            || bc_target.is_some_and(|b| b.len() != self.act_dim)
+        {
             return Err(ReplayError::Shape(format!(
                 "transition of obs {} / next {} / action {}, expected {} / {}",
                 obs.len(),
@@ -108,6 +123,12 @@ impl ReplayBuffer {
         self.reward[i] = reward;
         self.done[i] = if done { 1.0 } else { 0.0 };
         self.learner[i] = if source == Source::Learner { 1.0 } else { 0.0 };
+        let bc_row = &mut self.bc_action[i * a..(i + 1) * a];
+        match bc_target {
+            Some(b) => bc_row.copy_from_slice(b),
+            None => bc_row.fill(0.0),
+        }
+        self.bc_mask[i] = if bc_target.is_some() { 1.0 } else { 0.0 };
         self.next = (i + 1) % self.capacity;
         self.len = (self.len + 1).min(self.capacity);
         Ok(())
@@ -146,14 +167,20 @@ impl ReplayBuffer {
         (0..batch).map(|_| rng.random_range(0..self.len.max(1))).collect()
     }
 
+    /// The BC target of stored row `i`, if it has one.
+    pub fn bc_target(&self, i: usize) -> Option<&[f32]> {
+        let a = self.act_dim;
+        (i < self.len && self.bc_mask[i] > 0.5).then(|| &self.bc_action[i * a..(i + 1) * a])
+    }
+
     /// A minibatch of `batch` rows drawn uniformly with replacement. With `bc = Some(beta)`,
-    /// the batch carries a BC term whose mask is 1 on rows not chosen by the learner (or on
-    /// every row with `bc_all`).
+    /// the batch carries a BC term: the stored controller actions, masked to the rows that
+    /// have one.
     pub fn sample<R: rand::Rng + ?Sized>(
         &self,
         batch: usize,
         rng: &mut R,
-        bc: Option<(f64, bool)>,
+        bc: Option<f64>,
     ) -> Result<Batch, ReplayError> {
         if self.len == 0 {
             return Err(ReplayError::Shape("sampling an empty buffer".to_owned()));
@@ -163,7 +190,7 @@ impl ReplayBuffer {
     }
 
     /// The rows `idx` as a batch (see [`Self::sample`]).
-    pub fn gather(&self, idx: &[usize], bc: Option<(f64, bool)>) -> Batch {
+    pub fn gather(&self, idx: &[usize], bc: Option<f64>) -> Batch {
         let (o, a, n) = (self.obs_dim, self.act_dim, idx.len());
         let mut obs = Vec::with_capacity(n * o);
         let mut next_obs = Vec::with_capacity(n * o);
@@ -171,20 +198,21 @@ impl ReplayBuffer {
         let mut reward = Vec::with_capacity(n);
         let mut done = Vec::with_capacity(n);
         let mut mask = Vec::with_capacity(n);
+        let mut bc_action = Vec::with_capacity(if bc.is_some() { n * a } else { 0 });
         for &i in idx {
             obs.extend_from_slice(&self.obs[i * o..(i + 1) * o]);
             next_obs.extend_from_slice(&self.next_obs[i * o..(i + 1) * o]);
             action.extend_from_slice(&self.action[i * a..(i + 1) * a]);
             reward.push(self.reward[i]);
             done.push(self.done[i]);
-            mask.push(1.0 - self.learner[i]);
+            mask.push(self.bc_mask[i]);
+            if bc.is_some() {
+                bc_action.extend_from_slice(&self.bc_action[i * a..(i + 1) * a]);
+            }
         }
         let n = n as i64;
         let t = |v: &[f32], cols: usize| Tensor::from_slice(v).view([n, cols as i64]);
-        let bc = bc.map(|(beta, all)| BcTerm {
-            beta,
-            mask: if all { Tensor::ones([n, 1], (Kind::Float, tch::Device::Cpu)) } else { t(&mask, 1) },
-        });
+        let bc = bc.map(|beta| BcTerm { beta, mask: t(&mask, 1), action: t(&bc_action, a) });
         Batch {
             obs: t(&obs, o),
             action: t(&action, a),
@@ -216,6 +244,8 @@ impl ReplayBuffer {
             (&self.next_obs, o),
             (&self.done, 1),
             (&self.learner, 1),
+            (&self.bc_action, a),
+            (&self.bc_mask, 1),
         ] {
             let mut bytes = Vec::with_capacity(n * cols * 4);
             for x in &v[..n * cols] {
@@ -248,7 +278,7 @@ impl ReplayBuffer {
                 self.obs_dim, self.act_dim, self.capacity
             )));
         }
-        let expected = 48 + len * (2 * o + a + 3) * 4;
+        let expected = 48 + len * (2 * o + 2 * a + 4) * 4;
         if bytes.len() != expected {
             return Err(fmt(format!("{} bytes, expected {expected}", bytes.len())));
         }
@@ -260,6 +290,8 @@ impl ReplayBuffer {
             (&mut self.next_obs, o),
             (&mut self.done, 1),
             (&mut self.learner, 1),
+            (&mut self.bc_action, a),
+            (&mut self.bc_mask, 1),
         ] {
             for x in &mut v[..len * cols] {
                 let mut b = [0u8; 4];

@@ -36,15 +36,16 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use tch::{Device, Kind, Tensor};
+use tch::{Device, Tensor};
 use thiserror::Error;
 use vge_export::Provenance;
 use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
 
-use crate::behaviour::{Behaviour, BehaviourStats, StepContext, bc_beta};
-use crate::config::{BcOn, Config, ConfigError};
-use crate::controllers::{Controller, ControllerInput, CsConfig, IgmConfig};
-use crate::eval::{EpisodeOutcome, EvalError};
+use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, StepContext, bc_beta};
+use crate::config::{Config, ConfigError};
+use crate::controllers::{Controller, ControllerInput, IgmConfig};
+use crate::eval::{EpisodeOutcome, EvalError, EvalReport};
+use crate::gait::ContactSwitches;
 use crate::policy_export::export_hand_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::{Sac, UpdateStats, mix_seed, standard_normal};
@@ -68,6 +69,10 @@ pub enum TrainError {
     Io { path: String, source: std::io::Error },
     #[error("resume: {0}")]
     Resume(String),
+    #[error("behaviour policy: {0}")]
+    Behaviour(#[from] BehaviourError),
+    #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
+    NonFiniteAction { step: u64, env: usize, value: f32 },
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
@@ -141,6 +146,7 @@ impl std::fmt::Display for PhaseTimes {
 
 /// Sums over the current metrics window.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 struct Window {
     episodes: u64,
     ret: f64,
@@ -157,6 +163,13 @@ struct Window {
     controller_steps: u64,
     selections: u64,
     p_psi_sum: f64,
+    /// Fingertip contact switches completed ([`crate::gait`]).
+    switches: u64,
+    /// Discounted Monte-Carlo returns of the visited states of the finished episodes (sum,
+    /// count, largest): what the critic's mean Q should stay within.
+    mc_return_sum: f64,
+    mc_return_count: u64,
+    mc_return_max: Option<f64>,
 }
 
 /// Everything of a run that is not a tensor.
@@ -179,6 +192,9 @@ struct TrainState {
     window: Window,
     last_window: Window,
     has_replay: bool,
+    /// Wall time of the sessions up to this checkpoint (s).
+    #[serde(default)]
+    wall_s: f64,
 }
 
 fn rng_state(rng: &ChaCha8Rng) -> (String, u64, String) {
@@ -202,21 +218,34 @@ fn rng_restore(seed_hex: &str, stream: u64, word_pos: &str) -> Result<ChaCha8Rng
 }
 
 /// Per-env episode accumulators.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct Running {
     ret: f64,
     rotation: f64,
     contacts: u64,
     length: u64,
     yaw: f32,
+    switches: ContactSwitches,
+    /// The episode's rewards so far (for its discounted Monte-Carlo returns).
+    rewards: Vec<f32>,
 }
 
-fn wrap_pi(a: f32) -> f32 {
-    let tau = std::f32::consts::TAU;
-    a - tau * ((a + std::f32::consts::PI) / tau).floor()
+/// Sum, count and largest of the discounted returns `G_t = r_t + γ G_{t+1}` of every step
+/// of an episode (no bootstrap past its end).
+fn discounted_returns(rewards: &[f32], gamma: f64) -> (f64, u64, Option<f64>) {
+    let mut g = 0.0f64;
+    let (mut sum, mut max) = (0.0f64, None::<f64>);
+    for &r in rewards.iter().rev() {
+        g = f64::from(r) + gamma * g;
+        sum += g;
+        max = Some(max.map_or(g, |m| m.max(g)));
+    }
+    (sum, rewards.len() as u64, max)
 }
 
-const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,critic_loss,actor_loss,bc_loss,alpha,mean_q,beta,updates,steps_per_s";
+use crate::eval::wrap_pi;
+
+const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,beta,updates,steps_per_s";
 
 /// Salt of the behaviour-noise seeds.
 const SALT_ACT: u64 = 0xac7;
@@ -257,11 +286,11 @@ pub fn train(
     let mut sac = Sac::new_seeded(config.sac_config(), Device::Cpu, seed)?;
     let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
     let mut behaviour = Behaviour::from_config(config);
-    let mut controllers: Vec<Box<dyn Controller + Send>> = if config.method.uses_controller() {
+    let mut controllers: Vec<Box<dyn Controller + Send>> = if config.method.queries_controller() {
         let kind = config.controller.map(|c| c.kind());
         env_configs
             .iter()
-            .filter_map(|e| kind.map(|k| k.build(e, IgmConfig::default(), CsConfig::for_env(e))))
+            .filter_map(|e| kind.map(|k| k.build(e, IgmConfig::default(), config.cs_config(e))))
             .collect()
     } else {
         Vec::new()
@@ -272,6 +301,7 @@ pub fn train(
     let mut updates_due = 0.0f64;
     let mut window = Window::default();
     let mut last_window = Window::default();
+    let mut previous_wall_s = 0.0f64;
     let ckpt_dir = out_dir.join("checkpoint");
     let metrics_path = out_dir.join("metrics.csv");
     let config_hash = config.hash_hex();
@@ -296,6 +326,7 @@ pub fn train(
         updates_due = state.updates_due;
         window = state.window;
         last_window = state.last_window;
+        previous_wall_s = state.wall_s;
         behaviour.stats = BehaviourStats {
             steps: state.stats_steps,
             controller_steps: state.stats_controller_steps,
@@ -337,7 +368,6 @@ pub fn train(
     let mut stopped = false;
     let mut checkpointed_at = if resume { Some(step) } else { None };
     let batch_size = config.sac.batch;
-    let bc_all = config.bc_on() == BcOn::All;
     // The checkpoint state of the loop's counters, generator and windows right now. A macro,
     // because a closure would hold borrows of them across the loop that mutates them.
     macro_rules! train_state {
@@ -352,6 +382,7 @@ pub fn train(
                 &window,
                 &last_window,
                 config.run.save_replay,
+                previous_wall_s + session_start.elapsed().as_secs_f64(),
             )
         };
     }
@@ -386,34 +417,40 @@ pub fn train(
             vec![None; n]
         };
         let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
-        let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
+        let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
             let rows = o.len() as i64;
             let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
             let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
-            Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).unwrap_or_default()
+            Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
         };
         let stats_before = behaviour.stats;
-        let mut actions = behaviour.act(&ctx, &mut controllers, &mut ctl_rngs, &mut q, &mut rng);
-        for (a, _) in &mut actions {
-            for v in a.iter_mut() {
-                *v = if v.is_finite() { v.clamp(-max_action, max_action) } else { 0.0 };
+        let mut decisions = behaviour.act(&ctx, &mut controllers, &mut ctl_rngs, &mut q, &mut rng)?;
+        for (i, d) in decisions.iter_mut().enumerate() {
+            if let Some(&value) = d.action.iter().find(|v| !v.is_finite()) {
+                return Err(TrainError::NonFiniteAction { step, env: i, value });
+            }
+            for v in &mut d.action {
+                *v = v.clamp(-max_action, max_action);
             }
         }
         lap(&mut times.behaviour_s);
         let results: Vec<_> = envs
             .par_iter_mut()
-            .zip(actions.par_iter())
-            .map(|(env, (a, _))| env.step(a))
+            .zip(decisions.par_iter())
+            .map(|(env, d)| env.step(&d.action))
             .collect::<Result<Vec<_>, SimError>>()?;
         let mut finished = Vec::new();
-        for (i, (r, (a, source))) in results.iter().zip(&actions).enumerate() {
-            replay.push(&obs[i], a, r.reward, &r.obs, r.terminated, *source)?;
+        for (i, (r, d)) in results.iter().zip(&decisions).enumerate() {
+            let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
+            replay.push(&obs[i], &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
             let run = &mut running[i];
             run.ret += f64::from(r.reward);
             run.rotation += f64::from(wrap_pi(r.info.object_yaw_rad - run.yaw));
             run.yaw = r.info.object_yaw_rad;
             run.contacts += r.info.num_tip_contacts as u64;
             run.length += 1;
+            run.rewards.push(r.reward);
+            window.switches += u64::from(run.switches.update(r.info.tip_contacts));
             obs[i] = r.obs;
             if r.terminated || r.truncated {
                 let outcome = EpisodeOutcome {
@@ -421,6 +458,7 @@ pub fn train(
                     rotation_rad: run.rotation,
                     terminated: r.terminated,
                     mean_contacts: run.contacts as f64 / run.length.max(1) as f64,
+                    contact_switches: run.switches.count,
                     length: run.length as usize,
                 };
                 window.episodes += 1;
@@ -428,6 +466,13 @@ pub fn train(
                 window.rotation += outcome.rotation_rad;
                 window.contacts += outcome.mean_contacts;
                 window.successes += u64::from(outcome.success());
+                let (sum, count, max) = discounted_returns(&run.rewards, config.sac.gamma);
+                window.mc_return_sum += sum;
+                window.mc_return_count += count;
+                window.mc_return_max = match (window.mc_return_max, max) {
+                    (Some(a), Some(b)) => Some(a.max(b)),
+                    (a, b) => a.or(b),
+                };
                 episodes += 1;
                 finished.push(i);
             }
@@ -465,7 +510,7 @@ pub fn train(
             updates_due += n as f64 * config.sac.utd;
             while updates_due >= 1.0 {
                 updates_due -= 1.0;
-                let bc = (beta > 0.0).then_some((beta, bc_all));
+                let bc = (beta > 0.0).then_some(beta);
                 let batch = replay.sample(batch_size, &mut rng, bc)?;
                 let st = sac.update(&batch);
                 add_stats(&mut window, &st);
@@ -487,7 +532,8 @@ pub fn train(
         }
         if crossed(config.run.eval_interval) {
             lap(&mut times.sim_s);
-            evaluate_actor(config, &sac, out_dir, step)?;
+            let report = evaluate_actor(config, &sac, step)?;
+            append_eval_row(out_dir, step, &report)?;
             lap(&mut times.eval_s);
         }
         let elapsed = session_start.elapsed().as_secs_f64();
@@ -525,6 +571,9 @@ pub fn train(
         let path = out_dir.join("policy.vgep");
         let bytes = export_actor(config, &sac, step)?;
         std::fs::write(&path, bytes).map_err(io_err(&path))?;
+        let report = evaluate_actor(config, &sac, step)?;
+        let wall_s = previous_wall_s + session_start.elapsed().as_secs_f64();
+        write_final_eval(out_dir, config, &report, step, wall_s)?;
         Some(path)
     };
     Ok(TrainSummary {
@@ -550,6 +599,7 @@ impl TrainState {
         window: &Window,
         last_window: &Window,
         has_replay: bool,
+        wall_s: f64,
     ) -> Self {
         let (rng_seed_hex, rng_stream, rng_word_pos) = rng_state(rng);
         Self {
@@ -570,6 +620,7 @@ impl TrainState {
             window: window.clone(),
             last_window: last_window.clone(),
             has_replay,
+            wall_s,
         }
     }
 }
@@ -604,11 +655,14 @@ fn metrics_values(
         ("success", per_episode(w.successes as f64)),
         ("controller_share", Some(w.controller_steps as f64 / w.steps.max(1) as f64)),
         ("p_psi", (w.selections > 0).then(|| w.p_psi_sum / w.selections as f64)),
+        ("switches_per_1k", Some(1000.0 * w.switches as f64 / w.steps.max(1) as f64)),
         ("critic_loss", per_update(w.critic_loss)),
         ("actor_loss", per_update(w.actor_loss)),
         ("bc_loss", per_update(w.bc_loss)),
         ("alpha", per_update(w.alpha)),
         ("mean_q", per_update(w.mean_q)),
+        ("mc_return", (w.mc_return_count > 0).then(|| w.mc_return_sum / w.mc_return_count as f64)),
+        ("mc_return_max", w.mc_return_max),
         ("beta", Some(beta)),
         ("updates", Some(updates as f64)),
         ("steps_per_s", Some(sps)),
@@ -654,8 +708,10 @@ fn reset_envs(
     for (i, o) in resets.into_iter().enumerate() {
         if let Some(o) = o {
             obs[i] = o;
-            let yaw = envs[i].privileged().map_or(0.0, |p| p.object.yaw_rad());
-            running[i] = Running { yaw, ..Running::default() };
+            let start = envs[i].privileged();
+            let yaw = start.map_or(0.0, |p| p.object.yaw_rad());
+            let touching = start.map_or([false; vge_sim::NUM_FINGERS], |p| p.contacts.map(|c| c.is_some()));
+            running[i] = Running { yaw, switches: ContactSwitches::new(touching), ..Running::default() };
         }
     }
     Ok(())
@@ -726,32 +782,85 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
     Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
 }
 
-/// Deterministic evaluation of the tch actor (envs seeded from the config's seed only, so
-/// training is not perturbed); appends a row to `eval.csv`.
-fn evaluate_actor(config: &Config, sac: &Sac, out_dir: &Path, step: u64) -> Result<(), TrainError> {
-    let env = config.env.env_config(0);
-    let mut policy = |o: &[f32; OBS_DIM], a: &mut [f32; NUM_JOINTS]| -> Result<(), String> {
-        let t = Tensor::from_slice(o).view([1, OBS_DIM as i64]);
-        let out = tch::no_grad(|| sac.actor.deterministic(&t)).to_kind(Kind::Float);
-        let v = Vec::<f32>::try_from(out.view(-1)).map_err(|e| e.to_string())?;
-        a.copy_from_slice(&v[..NUM_JOINTS]);
-        Ok(())
-    };
+/// The success test ([`crate::eval`]) of the actor exported as it is now, on the runtime:
+/// `run.eval_episodes` episodes of `run.eval_episode_s` from grasps randomised by
+/// `run.eval_grasp_noise_rad`, seeded from the config's seed only (training is not
+/// perturbed).
+fn evaluate_actor(config: &Config, sac: &Sac, step: u64) -> Result<EvalReport, TrainError> {
+    let run = &config.run;
+    let env = crate::eval::success_test_env(&config.env.env_config(0), run.eval_episode_s, run.eval_grasp_noise_rad);
+    let bytes = export_actor(config, sac, step)?;
     let eval_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1);
-    let r = crate::eval::run_episodes(&env, config.run.eval_episodes.max(1), eval_seed, &mut policy)?;
+    Ok(crate::eval::eval_policy_bytes(&bytes, &env, run.eval_episodes.max(1), eval_seed)?)
+}
+
+const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
+
+/// Appends one evaluation to `eval.csv`.
+fn append_eval_row(out_dir: &Path, step: u64, r: &EvalReport) -> Result<(), TrainError> {
     let path = out_dir.join("eval.csv");
     let new = !path.exists();
     let mut f = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
     let mut text = String::new();
     if new {
-        text.push_str("step,episodes,return,rotation,success,drops,contacts\n");
+        text.push_str(EVAL_HEADER);
+        text.push('\n');
     }
     text.push_str(&format!(
-        "{step},{},{:.6},{:.6},{:.4},{:.4},{:.4}\n",
-        r.episodes, r.mean_return, r.mean_rotation_rad, r.success_rate, r.drop_rate, r.mean_contacts
+        "{step},{},{:.6},{:.6},{:.4},{:.4},{:.4},{:.4}\n",
+        r.episodes,
+        r.mean_return,
+        r.mean_rotation_rad,
+        r.success_rate,
+        r.drop_rate,
+        r.mean_contacts,
+        r.mean_contact_switches
     ));
-    f.write_all(text.as_bytes()).map_err(io_err(&path))?;
-    Ok(())
+    f.write_all(text.as_bytes()).map_err(io_err(&path))
+}
+
+/// What `final-eval.json` holds: the final policy's success test, and what it cost.
+#[derive(Debug, Serialize)]
+struct FinalEval<'a> {
+    /// Whether the seed learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`]).
+    learned: bool,
+    success_rate: f64,
+    episodes: usize,
+    episode_s: f32,
+    grasp_noise_rad: f32,
+    mean_return: f64,
+    mean_rotation_rad: f64,
+    drop_rate: f64,
+    mean_contact_switches: f64,
+    env_steps: u64,
+    wall_s: f64,
+    per_episode: &'a [EpisodeOutcome],
+}
+
+fn write_final_eval(
+    out_dir: &Path,
+    config: &Config,
+    r: &EvalReport,
+    env_steps: u64,
+    wall_s: f64,
+) -> Result<(), TrainError> {
+    let path = out_dir.join("final-eval.json");
+    let doc = FinalEval {
+        learned: r.learned(),
+        success_rate: r.success_rate,
+        episodes: r.episodes,
+        episode_s: config.run.eval_episode_s,
+        grasp_noise_rad: config.run.eval_grasp_noise_rad,
+        mean_return: r.mean_return,
+        mean_rotation_rad: r.mean_rotation_rad,
+        drop_rate: r.drop_rate,
+        mean_contact_switches: r.mean_contact_switches,
+        env_steps,
+        wall_s,
+        per_episode: &r.per_episode,
+    };
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
+    std::fs::write(&path, text + "\n").map_err(io_err(&path))
 }
 
 #[cfg(test)]

@@ -102,14 +102,14 @@ fn step_once(b: &mut Behaviour, r: &mut Rig, step: u64, q: &mut QFn<'_>) -> Sour
     let learner = [LEARNER];
     let inputs = [Some(dummy_input())];
     let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
-    let out = b.act(&ctx, &mut r.controllers, &mut r.ctl_rngs, q, &mut r.rng);
+    let out = b.act(&ctx, &mut r.controllers, &mut r.ctl_rngs, q, &mut r.rng).expect("decide");
     assert_eq!(out.len(), 1);
-    if out[0].1 == Source::Controller {
-        assert_eq!(out[0].0, [0.05; NUM_JOINTS]);
+    if out[0].source == Source::Controller {
+        assert_eq!(out[0].action, [0.05; NUM_JOINTS]);
     } else {
-        assert_eq!(out[0].0, LEARNER);
+        assert_eq!(out[0].action, LEARNER);
     }
-    out[0].1
+    out[0].source
 }
 
 #[test]
@@ -121,11 +121,11 @@ fn vge_follows_a_preferred_controller_for_exactly_h_steps() {
     // learner's action wins by as much.
     let draws = Arc::new(AtomicUsize::new(0));
     let d = draws.clone();
-    let mut q = move |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
+    let mut q = move |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
         assert_eq!(o.len(), 2, "one learner row and one controller row");
         assert_eq!(a[0], LEARNER, "learner rows first");
         let sign = if d.fetch_add(1, Ordering::SeqCst) == 0 { 1.0 } else { -1.0 };
-        a.iter().map(|row| sign * 100.0 * row.iter().sum::<f32>()).collect()
+        Ok(a.iter().map(|row| sign * 100.0 * row.iter().sum::<f32>()).collect())
     };
     let p = p_controller(f64::from(100.0 * -0.75f32), f64::from(100.0 * 0.75f32));
     assert!(p > 0.5 && p <= 1.0, "p_psi {p}");
@@ -159,8 +159,8 @@ fn after_the_hard_stop_the_controller_is_never_queried() {
         let fge = FgeSection { p_start: 1.0, p_end: 1.0, decay_start: 0, decay_end: 0 };
         let mut b = Behaviour::new(method, 3, hard_stop, fge, 1);
         let mut r = rig();
-        let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> {
-            a.iter().map(|row| 100.0 * row.iter().sum::<f32>()).collect()
+        let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+            Ok(a.iter().map(|row| 100.0 * row.iter().sum::<f32>()).collect())
         };
         for s in 0..hard_stop {
             step_once(&mut b, &mut r, s, &mut q);
@@ -177,12 +177,12 @@ fn after_the_hard_stop_the_controller_is_never_queried() {
 #[test]
 fn rl_never_queries_and_fge_follows_its_schedule() {
     let mut r = rig();
-    let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Vec<f32> { vec![0.0; a.len()] };
-    for method in [Method::Rl, Method::RlBc] {
-        let mut b = Behaviour::new(method, 1, u64::MAX, FgeSection::default(), 1);
-        for s in 0..100 {
-            assert_eq!(step_once(&mut b, &mut r, s, &mut q), Source::Learner);
-        }
+    let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+        Ok(vec![0.0; a.len()])
+    };
+    let mut b = Behaviour::new(Method::Rl, 1, u64::MAX, FgeSection::default(), 1);
+    for s in 0..100 {
+        assert_eq!(step_once(&mut b, &mut r, s, &mut q), Source::Learner);
     }
     assert_eq!(r.calls.load(Ordering::SeqCst), 0);
     let fge = FgeSection { p_start: 0.8, p_end: 0.2, decay_start: 100, decay_end: 300 };
@@ -202,7 +202,7 @@ fn rl_never_queries_and_fge_follows_its_schedule() {
 
 #[test]
 fn bc_beta_decays_linearly_to_zero() {
-    let bc = BcSection { beta_start: 0.4, beta_zero_step: 1000, on: None };
+    let bc = BcSection { beta_start: 0.4, beta_zero_step: 1000 };
     assert_eq!(bc_beta(&bc, 0), 0.4);
     assert!((bc_beta(&bc, 250) - 0.3).abs() < 1e-12);
     assert!((bc_beta(&bc, 500) - 0.2).abs() < 1e-12);
@@ -226,6 +226,7 @@ fn small_learner(algorithm: Algorithm) -> Sac {
         critic_lr: 1e-3,
         entropy: EntropyCoef::Fixed(0.0),
         critic_layer_norm: false,
+        min_policy_std: 0.0,
     };
     Sac::new(config, Device::Cpu).expect("sac")
 }
@@ -239,11 +240,12 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
         let o: Vec<f32> = (0..4).map(|k| ((i * 4 + k) as f32 * 0.37).sin()).collect();
         let a = [0.3 * ((i as f32) * 0.9).cos(), -0.2 * ((i as f32) * 0.4).sin()];
         let source = if [1, 4, 6].contains(&i) { Source::Controller } else { Source::Learner };
-        replay.push(&o, &a, 0.1 * i as f32, &o, false, source).expect("push");
+        let bc_target = (source == Source::Controller).then_some(&a[..]);
+        replay.push(&o, &a, 0.1 * i as f32, &o, false, source, bc_target).expect("push");
     }
     let idx: Vec<usize> = (0..8).collect();
     let beta = 0.7;
-    let batch = replay.gather(&idx, Some((beta, false)));
+    let batch = replay.gather(&idx, Some(beta));
     let mask = Vec::<f32>::try_from(batch.bc.as_ref().expect("bc").mask.view(-1)).expect("mask");
     assert_eq!(mask, vec![0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0]);
     let _ = replay.sample(4, &mut rng, None).expect("sample");
@@ -270,10 +272,14 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
 
     // All-learner batch: no BC.
     let mut sac = small_sac();
-    let mut learner_only = replay.gather(&[0, 2, 3, 5, 7], Some((beta, false)));
+    let mut learner_only = replay.gather(&[0, 2, 3, 5, 7], Some(beta));
     assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
     // beta 0: none either.
-    learner_only.bc = Some(BcTerm { beta: 0.0, mask: Tensor::ones([5, 1], (Kind::Float, Device::Cpu)) });
+    learner_only.bc = Some(BcTerm {
+        beta: 0.0,
+        mask: Tensor::ones([5, 1], (Kind::Float, Device::Cpu)),
+        action: learner_only.action.shallow_clone(),
+    });
     assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
 
     // TD3's deterministic actor: beta * mean(mask * minQ(s,a) * |(a - mu(s)) / scale|^2), on
@@ -318,7 +324,11 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
     };
     let before = lp(&sac);
     let mut bc_batch = fit;
-    bc_batch.bc = Some(BcTerm { beta: 5.0, mask: Tensor::ones([64, 1], (Kind::Float, Device::Cpu)) });
+    bc_batch.bc = Some(BcTerm {
+        beta: 5.0,
+        mask: Tensor::ones([64, 1], (Kind::Float, Device::Cpu)),
+        action: action.shallow_clone(),
+    });
     for _ in 0..50 {
         sac.update(&bc_batch);
     }
@@ -333,7 +343,9 @@ fn replay_sampling_is_deterministic_and_the_ring_wraps() {
     let mut replay = ReplayBuffer::new(5, 3, 2).expect("buffer");
     for i in 0..8 {
         let v = i as f32;
-        replay.push(&[v; 3], &[v; 2], v, &[v + 1.0; 3], i % 3 == 0, Source::Learner).expect("push");
+        let ctl = [0.1 * v; 2];
+        let bc_target = (i % 2 == 1).then_some(&ctl[..]);
+        replay.push(&[v; 3], &[v; 2], v, &[v + 1.0; 3], i % 3 == 0, Source::Learner, bc_target).expect("push");
     }
     assert_eq!(replay.len(), 5);
     let draw = |seed| {
@@ -360,6 +372,11 @@ fn replay_sampling_is_deterministic_and_the_ring_wraps() {
     )
     .expect("r");
     assert_eq!(d2, draw(9));
+    // The BC targets come back too: rows 0..5 hold transitions 5, 6, 7, 3, 4.
+    for (row, transition) in [5u8, 6, 7, 3, 4].into_iter().enumerate() {
+        let expected = (transition % 2 == 1).then(|| vec![0.1 * f32::from(transition); 2]);
+        assert_eq!(back.bc_target(row).map(<[f32]>::to_vec), expected, "row {row}");
+    }
     let mut wrong = ReplayBuffer::new(6, 3, 2).expect("buffer");
     assert!(wrong.load(&path).is_err());
     let _ = std::fs::remove_dir_all(&dir);
