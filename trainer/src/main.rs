@@ -200,6 +200,7 @@ struct SweepArgs {
     /// = seed), and submit it with sbatch. Each task resumes its seed when its folder holds a
     /// checkpoint, and checkpoints and exits on SIGTERM (scancel, preemption, and 120 s
     /// before --time runs out), so submitting again continues where the tasks stopped.
+    /// See docs/cluster.md.
     #[arg(long)]
     slurm: bool,
     /// Slurm partition of the tasks (default: the cluster's default partition).

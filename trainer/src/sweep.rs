@@ -440,9 +440,12 @@ pub fn sbatch_script(
     line("#SBATCH --open-mode=append".into());
     // A requeued task (preemption, node failure) runs this script again and resumes.
     line("#SBATCH --requeue".into());
-    line(format!("# SIGTERM to vge (the batch shell execs it) {SIGNAL_LEAD_S} s before the time limit:"));
-    line("# vge writes a checkpoint and exits; scancel and preemption send SIGTERM too.".into());
-    line(format!("#SBATCH --signal=B:TERM@{SIGNAL_LEAD_S}"));
+    // vge runs as a job step (srun) so that every way Slurm stops a task reaches it as
+    // SIGTERM: scancel (with or without --signal=TERM), preemption, and this warning.
+    line(format!(
+        "# SIGTERM to vge {SIGNAL_LEAD_S} s before the time limit: it writes a checkpoint and exits."
+    ));
+    line(format!("#SBATCH --signal=TERM@{SIGNAL_LEAD_S}"));
     line("set -euo pipefail".into());
     line("seed=$SLURM_ARRAY_TASK_ID".into());
     line(format!("run={d}/seed-$seed"));
@@ -451,12 +454,14 @@ pub fn sbatch_script(
     line("echo \"== slurm job ${SLURM_ARRAY_JOB_ID}_${seed} on $(hostname) at $(date -u +%FT%TZ), restart ${SLURM_RESTART_COUNT:-0}\"".into());
     line("# rayon (env stepping) would start one thread per core of the node, not of the task.".into());
     line("export RAYON_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}".into());
+    // srun's own --cpus-per-task: a step does not inherit the batch's (Slurm >= 22.05).
+    let srun = "srun --ntasks=1 --cpus-per-task=\"${SLURM_CPUS_PER_TASK:-1}\"";
     line("if [[ -f $run/policy.vgep ]]; then".into());
     line("  echo \"seed $seed: done already\"".into());
     line("elif [[ -d $run/checkpoint || -d $run/checkpoint.old ]]; then".into());
-    line(format!("  exec {vge} train --resume \"$run\" --seed \"$seed\" {args}"));
+    line(format!("  exec {srun} {vge} train --resume \"$run\" --seed \"$seed\" {args}"));
     line("else".into());
-    line(format!("  exec {vge} train --config {config} --out \"$run\" --seed \"$seed\" {args}"));
+    line(format!("  exec {srun} {vge} train --config {config} --out \"$run\" --seed \"$seed\" {args}"));
     line("fi".into());
     s
 }

@@ -122,6 +122,9 @@ fn sweep_jobs_trains_seeds_side_by_side_and_names_the_failed_seed() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// How the job script starts vge: as a job step, so that scancel's SIGTERM reaches it.
+const SRUN: &str = "srun --ntasks=1 --cpus-per-task=\"${SLURM_CPUS_PER_TASK:-1}\"";
+
 fn sbatch_dry_run(config: &Path, dir: &Path) -> Output {
     let (config, dir) = (config.to_str().expect("utf-8"), dir.to_str().expect("utf-8"));
     let args = [
@@ -169,29 +172,37 @@ fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
         "#SBATCH --time=01:00:00".to_owned(),
         "#SBATCH --cpus-per-task=2".to_owned(),
         "#SBATCH --requeue".to_owned(),
-        "#SBATCH --signal=B:TERM@120".to_owned(),
+        "#SBATCH --signal=TERM@120".to_owned(),
         format!("#SBATCH --output={}/slurm/%A_%a.out", dir.display()),
         "seed=$SLURM_ARRAY_TASK_ID".to_owned(),
         "elif [[ -d $run/checkpoint || -d $run/checkpoint.old ]]; then".to_owned(),
         format!(
-            "  exec {} train --resume \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
+            "  exec {SRUN} {} train --resume \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
             vge_bin.display()
         ),
         format!(
-            "  exec {} train --config {} --out \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
+            "  exec {SRUN} {} train --config {} --out \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
             vge_bin.display(),
             copied.display()
         ),
     ] {
         assert!(script.lines().any(|l| l == line), "no line `{line}` in\n{script}");
     }
-    // The script's branches, run by bash as a task would run them (no Slurm needed): seed 1
-    // is skipped, seed 2 takes `--resume` (and fails: its checkpoint is empty).
+    // The script's branches, run by bash as a task would run them, with an `srun` that only
+    // drops its options (no Slurm needed): seed 1 is skipped, seed 2 takes `--resume` (and
+    // fails: its checkpoint is empty).
+    let bin = root.join("bin");
+    std::fs::create_dir_all(&bin).expect("dir");
+    std::fs::write(bin.join("srun"), "#!/bin/bash\nwhile [[ $1 == -* ]]; do shift; done\nexec \"$@\"\n")
+        .expect("srun");
+    Command::new("chmod").arg("+x").arg(bin.join("srun")).status().expect("chmod");
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
     for (seed, expect) in [(1, "seed 1: done already"), (2, "seed-2 is not a vge run directory")] {
         let status = Command::new("bash")
             .arg(dir.join("sweep.sbatch"))
             .env("SLURM_ARRAY_TASK_ID", seed.to_string())
             .env("SLURM_ARRAY_JOB_ID", "7")
+            .env("PATH", &path)
             .status()
             .expect("bash");
         let log = std::fs::read_to_string(dir.join(format!("seed-{seed}/train.log"))).expect("train.log");
