@@ -467,7 +467,8 @@ pub fn sbatch_script(
 }
 
 /// Copies the config into the sweep's directory (or checks that the copy there is the same),
-/// writes `DIR/sweep.sbatch` for the seeds not yet done and returns its path and those seeds.
+/// writes `DIR/sweep.sbatch` for the seeds not yet done (none: no file) and returns its path
+/// and those seeds.
 /// `vge` is the absolute path of the binary the tasks run.
 pub fn write_sbatch(vge: &Path, sweep: &Sweep, slurm: &Slurm) -> Result<(PathBuf, Vec<u64>), SweepError> {
     slurm.validate()?;
@@ -486,8 +487,11 @@ pub fn write_sbatch(vge: &Path, sweep: &Sweep, slurm: &Slurm) -> Result<(PathBuf
         sweep.seeds.clone().filter(|&s| seed_state(&sweep.seed_dir(s)) != SeedState::Done).collect();
     let name = sweep.config.file_stem().map_or_else(|| "sweep".into(), |s| s.to_string_lossy());
     let path = dir.join(SBATCH_FILE);
-    let text = sbatch_script(vge, &dir, &name, &seeds, sweep, slurm);
-    std::fs::write(&path, text).map_err(io_err(&path))?;
+    // Every seed done: an array of no tasks is no job, and the last script stays as it was.
+    if !seeds.is_empty() {
+        let text = sbatch_script(vge, &dir, &name, &seeds, sweep, slurm);
+        std::fs::write(&path, text).map_err(io_err(&path))?;
+    }
     Ok((path, seeds))
 }
 
