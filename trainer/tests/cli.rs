@@ -235,3 +235,41 @@ fn sweep_slurm_refuses_jobs_a_missing_sbatch_and_another_config() {
     assert!(text(&run.stderr).contains("holds a sweep of another config"), "{}", text(&run.stderr));
     let _ = std::fs::remove_dir_all(&root);
 }
+
+#[test]
+fn sweep_jobs_forwards_sigterm_so_every_running_seed_checkpoints() {
+    let root = temp_root("sweep-jobs-term");
+    let config = common::config("cube-fg-vge.toml");
+    let out = root.join("sweep");
+    let (config, dir) = (config.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let sweep = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args([
+            "sweep", "--config", config, "--seeds", "0..3", "--out", dir, "--steps", "1000000", "--jobs", "2",
+        ])
+        .args(common::tiny_args())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("vge sweep");
+    let started = std::time::Instant::now();
+    let checkpointed =
+        |seed: u64| vge_trainer::sweep::checkpoint_step(&out.join(format!("seed-{seed}"))).is_some();
+    while !(checkpointed(0) && checkpointed(1)) {
+        assert!(started.elapsed().as_secs() < 120, "no periodic checkpoints of seeds 0 and 1");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(sweep.id()).expect("pid"));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
+    let end = sweep.wait_with_output().expect("vge sweep ends");
+    let stdout = text(&end.stdout);
+    assert!(end.status.success(), "{stdout}{}", text(&end.stderr));
+    for seed in [0, 1] {
+        let run = out.join(format!("seed-{seed}"));
+        let log = std::fs::read_to_string(run.join("train.log")).expect("train.log");
+        let step = vge_trainer::sweep::checkpoint_step(&run).expect("checkpoint");
+        assert!(log.contains(&format!("stopped at step {step}: checkpoint saved")), "{log}");
+        assert!(stdout.contains(&format!("seed {seed}: stopped at step {step}")), "{stdout}");
+    }
+    assert!(stdout.contains("seed 2: not started"), "{stdout}");
+    let _ = std::fs::remove_dir_all(&root);
+}
