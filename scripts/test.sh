@@ -4,7 +4,8 @@
 # On first use it installs what it needs (Debian packages, the thumbv7em rustup target,
 # libtorch from PyPI wheels); later runs find them in place and go straight to the checks:
 #   formatting, clippy (-D warnings), the no_std runtime built for a Cortex-M4F,
-#   the workspace tests in release, and the hardware-in-the-loop tests on vcan0.
+#   the workspace tests in release, the hardware-in-the-loop tests on vcan0, and
+#   `vge sweep --slurm` on a one-node Slurm cluster started on localhost.
 set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
@@ -71,5 +72,10 @@ echo "exit status 7 came back"
 
 step "hardware-in-the-loop tests on vcan0 (scripts/hil.sh)"
 scripts/hil.sh
+
+step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
+# Installs slurmctld, slurmd, slurm-client and munge when missing, starts a throw-away
+# cluster, runs trainer/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
+scripts/slurm/test.sh
 
 step "all checks passed in $((SECONDS - t0)) s"

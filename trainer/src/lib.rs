@@ -13,6 +13,7 @@ pub mod plot;
 pub mod policy_export;
 pub mod replay;
 pub mod sac;
+pub mod sweep;
 pub mod tensorboard;
 pub mod toy;
 pub mod train;

@@ -1,6 +1,10 @@
-//! The `vge` command's machine-readable outputs.
+//! The `vge` command's machine-readable outputs, and `vge sweep`'s parallel jobs and Slurm
+//! job script (trainer/tests/slurm.rs runs that script on a real Slurm).
 
-use std::process::Command;
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
 
 #[test]
 fn bench_update_prints_one_json_line_per_learner() {
@@ -67,5 +71,205 @@ fn plot_groups_runs_by_experiment_and_learner_and_tabulates_success() {
     assert!(table.contains("| cube (td3) | 1 |"), "the TD3 run apart:\n{table}");
     let bytes = std::fs::read(&png).expect("png written");
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+fn vge(args: &[&str], extra: &[String]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vge")).args(args).args(extra).output().expect("vge runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn temp_root(name: &str) -> std::path::PathBuf {
+    let root = std::env::temp_dir().join(format!("vge-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).expect("temp dir");
+    root
+}
+
+#[test]
+fn sweep_jobs_trains_seeds_side_by_side_and_names_the_failed_seed() {
+    let root = temp_root("sweep-jobs");
+    let config = common::config("cube-fg-vge.toml");
+    let out = root.join("sweep");
+    // A seed folder whose checkpoint is garbage: its `train --resume` fails.
+    std::fs::create_dir_all(out.join("seed-2")).expect("dir");
+    std::fs::write(out.join("seed-2/checkpoint"), "garbage").expect("write");
+    let (config, dir) = (config.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let args =
+        ["sweep", "--config", config, "--seeds", "0..3", "--out", dir, "--steps", "300", "--jobs", "2"];
+    let run = vge(&args, &common::tiny_args());
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(!run.status.success(), "a failed seed fails the sweep\n{stdout}{stderr}");
+    let log2 = out.join("seed-2/train.log");
+    assert!(stderr.contains(&format!("seed 2 (log {})", log2.display())), "{stderr}");
+    assert!(stdout.contains("seed 2: FAILED"), "{stdout}");
+    for seed in [0, 1] {
+        let run_dir = out.join(format!("seed-{seed}"));
+        assert!(run_dir.join("policy.vgep").exists(), "seed {seed}\n{stdout}{stderr}");
+        assert!(stdout.contains(&format!("seed {seed}: done, 300 steps")), "{stdout}");
+        let log = std::fs::read_to_string(run_dir.join("train.log")).expect("train.log");
+        assert!(log.contains("policy written to"), "{log}");
+        // One libtorch thread per job unless --set says otherwise.
+        let cfg = std::fs::read_to_string(run_dir.join("config.toml")).expect("config.toml");
+        assert!(cfg.contains("threads = 1"), "{cfg}");
+    }
+    let again = vge(&["sweep", "--config", config, "--seeds", "0..2", "--out", dir, "--jobs", "2"], &[]);
+    assert!(again.status.success(), "{}", text(&again.stderr));
+    assert!(text(&again.stdout).contains("seed 1: done already"), "{}", text(&again.stdout));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// How the job script starts vge: as a job step, so that scancel's SIGTERM reaches it.
+const SRUN: &str = "srun --ntasks=1 --cpus-per-task=\"${SLURM_CPUS_PER_TASK:-1}\"";
+
+fn sbatch_dry_run(config: &Path, dir: &Path) -> Output {
+    let (config, dir) = (config.to_str().expect("utf-8"), dir.to_str().expect("utf-8"));
+    let args = [
+        "sweep",
+        "--config",
+        config,
+        "--seeds",
+        "0..4",
+        "--out",
+        dir,
+        "--slurm",
+        "--dry-run",
+        "--partition",
+        "p1",
+        "--time",
+        "01:00:00",
+        "--cpus-per-task",
+        "2",
+        "--steps",
+        "500",
+        "--set",
+        "name=\"a b\"",
+    ];
+    vge(&args, &[])
+}
+
+#[test]
+fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
+    let root = temp_root("sweep-sbatch");
+    let dir = root.join("sweep");
+    std::fs::create_dir_all(dir.join("seed-1")).expect("dir");
+    std::fs::write(dir.join("seed-1/policy.vgep"), "done").expect("write");
+    std::fs::create_dir_all(dir.join("seed-2/checkpoint")).expect("dir");
+    let config = common::config("cube-fg-vge.toml");
+    let run = sbatch_dry_run(&config, &dir);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let dir = dir.canonicalize().expect("dir");
+    let script = std::fs::read_to_string(dir.join("sweep.sbatch")).expect("sweep.sbatch");
+    let vge_bin = Path::new(env!("CARGO_BIN_EXE_vge")).canonicalize().expect("vge");
+    let copied = dir.join("sweep-config.toml");
+    assert_eq!(std::fs::read(&copied).expect("copied config"), std::fs::read(&config).expect("config"));
+    for line in [
+        "#SBATCH --array=0,2-3".to_owned(), // seed 1 is done
+        "#SBATCH --partition=p1".to_owned(),
+        "#SBATCH --time=01:00:00".to_owned(),
+        "#SBATCH --cpus-per-task=2".to_owned(),
+        "#SBATCH --requeue".to_owned(),
+        "#SBATCH --signal=TERM@120".to_owned(),
+        format!("#SBATCH --output={}/slurm/%A_%a.out", dir.display()),
+        "seed=$SLURM_ARRAY_TASK_ID".to_owned(),
+        "elif [[ -d $run/checkpoint || -d $run/checkpoint.old ]]; then".to_owned(),
+        format!(
+            "  exec {SRUN} {} train --resume \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
+            vge_bin.display()
+        ),
+        format!(
+            "  exec {SRUN} {} train --config {} --out \"$run\" --seed \"$seed\" --steps 500 --set 'name=\"a b\"' --set sac.threads=2",
+            vge_bin.display(),
+            copied.display()
+        ),
+    ] {
+        assert!(script.lines().any(|l| l == line), "no line `{line}` in\n{script}");
+    }
+    // The script's branches, run by bash as a task would run them, with an `srun` that only
+    // drops its options (no Slurm needed): seed 1 is skipped, seed 2 takes `--resume` (and
+    // fails: its checkpoint is empty).
+    let bin = root.join("bin");
+    std::fs::create_dir_all(&bin).expect("dir");
+    std::fs::write(bin.join("srun"), "#!/bin/bash\nwhile [[ $1 == -* ]]; do shift; done\nexec \"$@\"\n")
+        .expect("srun");
+    Command::new("chmod").arg("+x").arg(bin.join("srun")).status().expect("chmod");
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    for (seed, expect) in [(1, "seed 1: done already"), (2, "seed-2 is not a vge run directory")] {
+        let status = Command::new("bash")
+            .arg(dir.join("sweep.sbatch"))
+            .env("SLURM_ARRAY_TASK_ID", seed.to_string())
+            .env("SLURM_ARRAY_JOB_ID", "7")
+            .env("PATH", &path)
+            .status()
+            .expect("bash");
+        let log = std::fs::read_to_string(dir.join(format!("seed-{seed}/train.log"))).expect("train.log");
+        assert!(log.contains(expect), "seed {seed} ({status}):\n{log}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn sweep_slurm_refuses_jobs_a_missing_sbatch_and_another_config() {
+    let root = temp_root("sweep-slurm-errors");
+    let config = common::config("cube-fg-vge.toml");
+    let (c, d) = (config.to_str().expect("utf-8"), root.join("s"));
+    let d = d.to_str().expect("utf-8");
+    let both = vge(&["sweep", "--config", c, "--seeds", "0..2", "--out", d, "--slurm", "--jobs", "2"], &[]);
+    assert!(!both.status.success());
+    assert!(text(&both.stderr).contains("'--slurm' cannot be used with '--jobs"), "{}", text(&both.stderr));
+    let no_sbatch = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args(["sweep", "--config", c, "--seeds", "0..2", "--out", d, "--slurm"])
+        .env("PATH", root.as_os_str())
+        .output()
+        .expect("vge runs");
+    assert!(!no_sbatch.status.success());
+    assert!(text(&no_sbatch.stderr).contains("`sbatch` is not on PATH"), "{}", text(&no_sbatch.stderr));
+    assert!(!root.join("s/sweep.sbatch").exists(), "nothing written when it cannot be submitted");
+    assert!(sbatch_dry_run(&config, Path::new(d)).status.success());
+    let other = common::config("cube-fg-rl.toml");
+    let run = sbatch_dry_run(&other, Path::new(d));
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("holds a sweep of another config"), "{}", text(&run.stderr));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn sweep_jobs_forwards_sigterm_so_every_running_seed_checkpoints() {
+    let root = temp_root("sweep-jobs-term");
+    let config = common::config("cube-fg-vge.toml");
+    let out = root.join("sweep");
+    let (config, dir) = (config.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let sweep = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args([
+            "sweep", "--config", config, "--seeds", "0..3", "--out", dir, "--steps", "1000000", "--jobs", "2",
+        ])
+        .args(common::tiny_args())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("vge sweep");
+    let started = std::time::Instant::now();
+    let checkpointed =
+        |seed: u64| vge_trainer::sweep::checkpoint_step(&out.join(format!("seed-{seed}"))).is_some();
+    while !(checkpointed(0) && checkpointed(1)) {
+        assert!(started.elapsed().as_secs() < 120, "no periodic checkpoints of seeds 0 and 1");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(sweep.id()).expect("pid"));
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
+    let end = sweep.wait_with_output().expect("vge sweep ends");
+    let stdout = text(&end.stdout);
+    assert!(end.status.success(), "{stdout}{}", text(&end.stderr));
+    for seed in [0, 1] {
+        let run = out.join(format!("seed-{seed}"));
+        let log = std::fs::read_to_string(run.join("train.log")).expect("train.log");
+        let step = vge_trainer::sweep::checkpoint_step(&run).expect("checkpoint");
+        assert!(log.contains(&format!("stopped at step {step}: checkpoint saved")), "{log}");
+        assert!(stdout.contains(&format!("seed {seed}: stopped at step {step}")), "{stdout}");
+    }
+    assert!(stdout.contains("seed 2: not started"), "{stdout}");
     let _ = std::fs::remove_dir_all(&root);
 }

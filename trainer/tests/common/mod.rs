@@ -30,3 +30,30 @@ pub fn tensorboard_scalars(dir: &std::path::Path) -> Vec<(String, u64, f64)> {
         })
         .collect()
 }
+
+/// `--set` overrides that make `configs/cube-fg-vge.toml` a run of seconds: two envs, short
+/// episodes, small nets and batches, a short warm-up, a log row every 50 steps and a
+/// checkpoint every 200.
+pub const TINY: &[&str] = &[
+    "num_envs=2",
+    "env.episode_length=25",
+    "sac.hidden=[32, 32]",
+    "sac.batch=32",
+    "sac.warmup=40",
+    "sac.buffer_size=5000",
+    "sac.utd=0.5",
+    "vge.horizon=4",
+    "run.log_interval=50",
+    "run.checkpoint_interval=200",
+    "run.eval_interval=0",
+];
+
+/// The repository's `configs/` file `name`.
+pub fn config(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../configs").join(name)
+}
+
+/// `TINY` as `--set k=v` arguments.
+pub fn tiny_args() -> Vec<String> {
+    TINY.iter().flat_map(|o| ["--set".to_owned(), (*o).to_owned()]).collect()
+}
