@@ -26,11 +26,11 @@ bridge=target/release/vge-bridge
 
 echo "==> train: VGE + FG on the cube, $steps env steps, into $out"
 "$vge" train --config configs/cube-fg-vge.toml --out "$out" --steps "$steps" \
-  --set sac.warmup=2000 --set run.log_interval=2000 --set run.eval_interval=10000 --set run.eval_episodes=2 \
+  --set sac.warmup=2000 --set run.log_interval=2000 --set run.eval_interval=10000 --set run.eval_episodes=4 --set run.eval_episode_s=10 \
   --set run.checkpoint_interval=10000 --set run.save_replay=false
 echo "==> the exported policy file"
 "$vge" inspect "$out/policy.vgep" | head -8
-echo "==> evaluate it on vge-runtime (deterministic, 3 episodes of 20 s)"
-"$vge" eval --policy "$out/policy.vgep" --episodes 3
+echo "==> evaluate it on vge-runtime (the success test: 20 episodes of 30 s from randomised grasps)"
+"$vge" eval --policy "$out/policy.vgep"
 echo "==> run it through vge-bridge against the simulated hand, 10 s at its control rate"
 "$bridge" run --policy "$out/policy.vgep" --backend sim --duration 10

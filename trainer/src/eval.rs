@@ -203,7 +203,9 @@ pub fn eval_policy_bytes(
     let mut storage = vec![0.0f32; info.storage_len];
     let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(bytes, &mut storage)
         .map_err(|e| EvalError::Policy(format!("{e:?}")))?;
-    run_episodes(&env, episodes, seed, &|obs, action| policy.forward(obs, action).map_err(|e| format!("{e:?}")))
+    run_episodes(&env, episodes, seed, &|obs, action| {
+        policy.forward(obs, action).map_err(|e| format!("{e:?}"))
+    })
 }
 
 /// [`eval_policy_bytes`] of the file at `path`.

@@ -33,9 +33,8 @@ impl ContactSwitches {
     /// A counter for an episode whose first contacts are `touching`.
     #[must_use]
     pub fn new(touching: [bool; NUM_FINGERS]) -> Self {
-        let mut c = Self::default();
-        c.fingers = touching.map(|t| if t { Finger::Touching } else { Finger::NeverTouched });
-        c
+        let fingers = touching.map(|t| if t { Finger::Touching } else { Finger::NeverTouched });
+        Self { fingers, count: 0 }
     }
 
     /// Feeds one step's fingertip contacts; returns the switches completed on this step.

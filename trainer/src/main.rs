@@ -70,12 +70,19 @@ enum Command {
     Sweep(SweepArgs),
     /// Plot training curves of run directories (mean and min-max over runs of the same
     /// experiment) into a PNG, and print a markdown table of final success rates.
+    ///
+    /// Panels: episode return, rotation, controller share, and the critic's mean Q beside the
+    /// discounted Monte-Carlo returns of its data (a sound critic stays within them). A run
+    /// learned when its final-eval.json success rate is >= 50% (`vge eval`'s success test).
     Plot {
         /// Run directories (each with config.toml and metrics.csv).
         #[arg(required = true)]
         runs: Vec<PathBuf>,
         #[arg(long)]
         out: PathBuf,
+        /// Also write one row per run (learned, success rate, env steps, wall time) here.
+        #[arg(long)]
+        success_csv: Option<PathBuf>,
     },
     /// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
     /// return, rotation, contact switches, drops and success rate.
@@ -326,12 +333,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             train(config, out, resume, seed, steps, &overrides, &*stop_on_signal()?).map(|_| ())
         }
         Command::Sweep(args) => sweep(args),
-        Command::Plot { runs, out } => {
+        Command::Plot { runs, out, success_csv } => {
             let curves =
                 runs.iter().map(|d| vge_trainer::plot::read_run(d)).collect::<Result<Vec<_>, _>>()?;
             let table = vge_trainer::plot::plot(&curves, &out)?;
             print!("{table}");
             eprintln!("wrote {}", out.display());
+            if let Some(path) = success_csv {
+                std::fs::write(&path, vge_trainer::plot::success_csv(&curves))
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("wrote {}", path.display());
+            }
             Ok(())
         }
         Command::Eval {
@@ -382,7 +394,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
                 println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
                 println!("  dropped            {:.2} of episodes", report.drop_rate);
-                println!("  contact switches   {:.1} per episode (a fingertip let go and touched again)", report.mean_contact_switches);
+                println!(
+                    "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
+                    report.mean_contact_switches
+                );
                 println!(
                     "  mean contacts      {:.2}; mean length {:.0} steps",
                     report.mean_contacts, report.mean_length

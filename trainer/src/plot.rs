@@ -1,6 +1,9 @@
 //! `vge plot`: training curves of runs grouped by experiment (mean and min-max spread over
-//! seeds), like the paper's figures, and a markdown table of final success rates, like its
-//! Table I.
+//! seeds), like the paper's figures, the critic's mean Q beside the discounted Monte-Carlo
+//! returns of the data it learns from, and a markdown table of final success rates, like its
+//! Table I. A run's final success is that of its `final-eval.json` (the success test of
+//! [`crate::eval`]) or else its last periodic evaluation; a run *learned* when it reaches
+//! [`crate::eval::LEARNED_SUCCESS_RATE`].
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -32,8 +35,31 @@ pub struct RunCurves {
     pub mean_return: Vec<f64>,
     pub rotation_rad: Vec<f64>,
     pub controller_share: Vec<f64>,
-    /// Success rate of the last evaluation, if any.
+    /// The critic's mean Q on replayed batches (empty in runs that predate the column).
+    pub mean_q: Vec<f64>,
+    /// Mean discounted Monte-Carlo return of the visited states (empty when not logged).
+    pub mc_return: Vec<f64>,
+    /// Success rate of the final evaluation (`final-eval.json`), else of the last periodic
+    /// one, if any.
     pub final_success: Option<f64>,
+    /// Env steps and wall time of the finished run (from `final-eval.json`).
+    pub env_steps: Option<u64>,
+    pub wall_s: Option<f64>,
+}
+
+impl RunCurves {
+    /// Whether the run learned by the success test's definition (None: not evaluated).
+    pub fn learned(&self) -> Option<bool> {
+        self.final_success.map(|s| s >= crate::eval::LEARNED_SUCCESS_RATE)
+    }
+}
+
+/// The fields of `final-eval.json` that the plot reads.
+#[derive(Debug, serde::Deserialize)]
+struct FinalEvalFields {
+    success_rate: f64,
+    env_steps: u64,
+    wall_s: f64,
 }
 
 fn read(path: &Path) -> Result<String, PlotError> {
@@ -90,11 +116,25 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
     let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] = cols
         .try_into()
         .map_err(|_| PlotError::Csv { path: dir.join("metrics.csv"), message: "columns".into() })?;
-    let eval = dir.join("eval.csv");
-    let final_success = if eval.exists() {
-        csv_columns(&eval, &["success"])?.first().and_then(|c| c.last().copied())
+    let metrics = dir.join("metrics.csv");
+    let optional = |name: &str| csv_columns(&metrics, &[name]).ok().and_then(|c| c.into_iter().next());
+    let (mean_q, mc_return) =
+        (optional("mean_q").unwrap_or_default(), optional("mc_return").unwrap_or_default());
+    let final_path = dir.join("final-eval.json");
+    let final_eval: Option<FinalEvalFields> = if final_path.exists() {
+        let text = read(&final_path)?;
+        Some(
+            serde_json::from_str(&text)
+                .map_err(|e| PlotError::Csv { path: final_path, message: e.to_string() })?,
+        )
     } else {
         None
+    };
+    let eval = dir.join("eval.csv");
+    let final_success = match &final_eval {
+        Some(f) => Some(f.success_rate),
+        None if eval.exists() => csv_columns(&eval, &["success"])?.first().and_then(|c| c.last().copied()),
+        None => None,
     };
     Ok(RunCurves {
         dir: dir.to_owned(),
@@ -103,7 +143,11 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         mean_return,
         rotation_rad,
         controller_share,
+        mean_q,
+        mc_return,
         final_success,
+        env_steps: final_eval.as_ref().map(|f| f.env_steps),
+        wall_s: final_eval.as_ref().map(|f| f.wall_s),
     })
 }
 
@@ -178,22 +222,28 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
         groups.entry(r.experiment.as_str()).or_default().push(r);
     }
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
-    let root = BitMapBackend::new(out, (1500, 450)).into_drawing_area();
+    let root = BitMapBackend::new(out, (2000, 450)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    let panels = root.split_evenly((1, 3));
+    let panels = root.split_evenly((1, 4));
     type Series = fn(&RunCurves) -> &[f64];
-    let specs: [(&str, Series); 3] = [
-        ("episode return", |r| &r.mean_return),
-        ("rotation about z per episode (rad)", |r| &r.rotation_rad),
-        ("controller share", |r| &r.controller_share),
+    // Each panel: a title and its series (a second one, e.g. Monte-Carlo returns beside
+    // mean Q, is drawn dashed in the same colour).
+    let specs: [(&str, Series, Option<Series>); 4] = [
+        ("episode return", |r| &r.mean_return, None),
+        ("rotation about z per episode (rad)", |r| &r.rotation_rad, None),
+        ("controller share", |r| &r.controller_share, None),
+        ("mean Q (solid) vs Monte-Carlo return (dashed)", |r| &r.mean_q, Some(|r| &r.mc_return)),
     ];
-    for (panel, (title, series)) in panels.iter().zip(specs) {
-        let curves: Vec<(&str, Vec<SpreadPoint>)> =
-            groups.iter().map(|(name, rs)| (*name, spread(rs, series))).collect();
-        let x_max = curves.iter().flat_map(|(_, c)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
+    for (panel, (title, series, second)) in panels.iter().zip(specs) {
+        let mut curves: Vec<(&str, Vec<SpreadPoint>, bool)> =
+            groups.iter().map(|(name, rs)| (*name, spread(rs, series), false)).collect();
+        if let Some(second) = second {
+            curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
+        }
+        let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
         let (y_min, y_max) = curves
             .iter()
-            .flat_map(|(_, c)| c.iter().flat_map(|p| [p.min, p.max]))
+            .flat_map(|(_, c, _)| c.iter().flat_map(|p| [p.min, p.max]))
             .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
         let pad = 0.05 * (y_max - y_min).max(1e-3);
         let mut chart = ChartBuilder::on(panel)
@@ -214,8 +264,19 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
             .x_label_formatter(&steps_label)
             .draw()
             .map_err(|e| draw_err(&e))?;
-        for (i, (name, c)) in curves.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
+        for (i, (name, c, dashed)) in curves.iter().enumerate() {
+            let color = Palette99::pick(i % groups.len()).to_rgba();
+            if *dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        c.iter().map(|p| (p.step, p.mean)),
+                        8,
+                        5,
+                        color.stroke_width(2),
+                    ))
+                    .map_err(|e| draw_err(&e))?;
+                continue;
+            }
             chart
                 .draw_series(std::iter::once(Polygon::new(
                     c.iter()
@@ -241,15 +302,37 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
     root.present().map_err(|e| draw_err(&e))?;
 
     let mut table = String::from(
-        "| experiment | runs | final success rate (mean) | runs that succeed |\n|---|---|---|---|\n",
+        "| experiment | runs | final success rate (mean) | runs that learned |\n|---|---|---|---|\n",
     );
     for (name, rs) in &groups {
         let rates: Vec<f64> = rs.iter().filter_map(|r| r.final_success).collect();
         let mean = if rates.is_empty() { f64::NAN } else { rates.iter().sum::<f64>() / rates.len() as f64 };
-        let succeeding = rates.iter().filter(|&&s| s > 0.0).count();
-        table.push_str(&format!("| {name} | {} | {mean:.2} | {succeeding}/{} |\n", rs.len(), rates.len()));
+        let learned = rs.iter().filter(|r| r.learned() == Some(true)).count();
+        table.push_str(&format!("| {name} | {} | {mean:.2} | {learned}/{} |\n", rs.len(), rates.len()));
     }
     Ok(table)
+}
+
+/// One row per run: `run,experiment,learned,success_rate,env_steps,wall_s` (empty fields
+/// where a run has no final evaluation).
+pub fn success_csv(runs: &[RunCurves]) -> String {
+    let mut text = String::from("run,experiment,learned,success_rate,env_steps,wall_s\n");
+    let opt = |v: Option<String>| v.unwrap_or_default();
+    for r in runs {
+        let run = r
+            .dir
+            .file_name()
+            .map_or_else(|| r.dir.display().to_string(), |n| n.to_string_lossy().into_owned());
+        text.push_str(&format!(
+            "{run},{},{},{},{},{}\n",
+            r.experiment,
+            opt(r.learned().map(|l| l.to_string())),
+            opt(r.final_success.map(|s| format!("{s:.4}"))),
+            opt(r.env_steps.map(|s| s.to_string())),
+            opt(r.wall_s.map(|s| format!("{s:.0}"))),
+        ));
+    }
+    text
 }
 
 #[cfg(test)]

@@ -503,7 +503,11 @@ impl Sac {
             let rl_loss = -self.critic.q_values(&batch.obs, &mu).get(0).mean(Kind::Float);
             let actor_loss = match (&batch.bc, &bc_weight) {
                 (Some(bc), Some(weight)) => {
-                    let sq = ((bc_target(bc, &scale) - &mu) / &scale).square().sum_dim_intlist(-1, true, Kind::Float);
+                    let sq = ((bc_target(bc, &scale) - &mu) / &scale).square().sum_dim_intlist(
+                        -1,
+                        true,
+                        Kind::Float,
+                    );
                     let bc_loss = (weight * sq).mean(Kind::Float) * bc.beta;
                     bc_value = bc_loss.double_value(&[]);
                     &rl_loss + bc_loss

@@ -571,7 +571,9 @@ pub fn train(
         let path = out_dir.join("policy.vgep");
         let bytes = export_actor(config, &sac, step)?;
         std::fs::write(&path, bytes).map_err(io_err(&path))?;
+        let eval_start = Instant::now();
         let report = evaluate_actor(config, &sac, step)?;
+        times.eval_s += eval_start.elapsed().as_secs_f64();
         let wall_s = previous_wall_s + session_start.elapsed().as_secs_f64();
         write_final_eval(out_dir, config, &report, step, wall_s)?;
         Some(path)
@@ -788,7 +790,11 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
 /// perturbed).
 fn evaluate_actor(config: &Config, sac: &Sac, step: u64) -> Result<EvalReport, TrainError> {
     let run = &config.run;
-    let env = crate::eval::success_test_env(&config.env.env_config(0), run.eval_episode_s, run.eval_grasp_noise_rad);
+    let env = crate::eval::success_test_env(
+        &config.env.env_config(0),
+        run.eval_episode_s,
+        run.eval_grasp_noise_rad,
+    );
     let bytes = export_actor(config, sac, step)?;
     let eval_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1);
     Ok(crate::eval::eval_policy_bytes(&bytes, &env, run.eval_episodes.max(1), eval_seed)?)

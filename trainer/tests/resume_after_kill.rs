@@ -31,6 +31,8 @@ fn config_file(dir: &Path) -> PathBuf {
         "run.log_interval=50",
         "run.checkpoint_interval=400",
         "run.eval_interval=0",
+        "run.eval_episodes=2",
+        "run.eval_episode_s=1.0",
     ] {
         apply_override(&mut c, o).expect(o);
     }

@@ -345,7 +345,9 @@ fn replay_sampling_is_deterministic_and_the_ring_wraps() {
         let v = i as f32;
         let ctl = [0.1 * v; 2];
         let bc_target = (i % 2 == 1).then_some(&ctl[..]);
-        replay.push(&[v; 3], &[v; 2], v, &[v + 1.0; 3], i % 3 == 0, Source::Learner, bc_target).expect("push");
+        replay
+            .push(&[v; 3], &[v; 2], v, &[v + 1.0; 3], i % 3 == 0, Source::Learner, bc_target)
+            .expect("push");
     }
     assert_eq!(replay.len(), 5);
     let draw = |seed| {
@@ -480,6 +482,8 @@ fn tiny_config_with(total: u64, extra: &[&str]) -> Config {
         "bc.beta_zero_step=200",
         "run.log_interval=20",
         "run.checkpoint_interval=60",
+        "run.eval_episodes=2",
+        "run.eval_episode_s=1.0",
     ]
     .iter()
     .chain(extra)

@@ -46,6 +46,8 @@ pub const TINY: &[&str] = &[
     "run.log_interval=50",
     "run.checkpoint_interval=200",
     "run.eval_interval=0",
+    "run.eval_episodes=2",
+    "run.eval_episode_s=1.0",
 ];
 
 /// The repository's `configs/` file `name`.
