@@ -418,6 +418,7 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
             "sac.batch=128".into(),
             "method=fge".into(),
             "sac.hidden=[64, 64]".into(),
+            "algorithm=\"sac\"".into(),
             "sac.alpha=\"auto\"".into(),
         ],
     )
