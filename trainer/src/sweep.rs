@@ -181,6 +181,8 @@ pub fn run_parallel(
     let mut running: Vec<Job> = Vec::new();
     let mut forwarded = false;
     let mut next_report = Instant::now() + opts.report_every;
+    // The last line printed per seed: a seed whose metrics did not move is not repeated.
+    let mut last_said: std::collections::HashMap<u64, String> = std::collections::HashMap::new();
     loop {
         if stop.load(Ordering::Relaxed) {
             if !forwarded {
@@ -204,7 +206,13 @@ pub fn run_parallel(
         }
         outcomes.extend(reap(&mut running, sweep));
         if Instant::now() >= next_report {
-            running.iter().for_each(|j| say(progress_line(&sweep.seed_dir(j.seed), j.seed, sweep.steps)));
+            for j in &running {
+                let line = progress_line(&sweep.seed_dir(j.seed), j.seed, sweep.steps);
+                if last_said.get(&j.seed) != Some(&line) {
+                    say(line.clone());
+                    last_said.insert(j.seed, line);
+                }
+            }
             next_report = Instant::now() + opts.report_every;
         }
         std::thread::sleep(Duration::from_millis(200));
