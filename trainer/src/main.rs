@@ -92,8 +92,10 @@ enum Command {
     /// when the object turns >= 2 pi about z without a drop, and a seed has learned when its
     /// policy succeeds in >= 50% of them. Episodes run side by side on all cores.
     Eval {
+        /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
         #[arg(long)]
         policy: PathBuf,
+        /// Episodes to run (the success test uses 20).
         #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
         episodes: usize,
         #[arg(long, default_value_t = ObjectShape::Cube)]
