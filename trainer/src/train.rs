@@ -44,7 +44,7 @@ use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
 use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, StepContext, bc_beta};
 use crate::config::{Config, ConfigError};
 use crate::controllers::{Controller, ControllerInput, IgmConfig};
-use crate::eval::{EpisodeOutcome, EvalError, EvalReport};
+use crate::eval::{EpisodeOutcome, EvalError, EvalReport, wrap_pi};
 use crate::gait::ContactSwitches;
 use crate::policy_export::export_hand_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
@@ -242,8 +242,6 @@ fn discounted_returns(rewards: &[f32], gamma: f64) -> (f64, u64, Option<f64>) {
     }
     (sum, rewards.len() as u64, max)
 }
-
-use crate::eval::wrap_pi;
 
 const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,beta,updates,steps_per_s";
 
