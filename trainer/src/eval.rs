@@ -53,7 +53,8 @@ pub struct EvalReport {
     pub mean_rotation_rad: f64,
     /// Share of episodes turned >= 2π without a drop.
     pub success_rate: f64,
-    /// Share of episodes the env terminated (drop or too few contacts).
+    /// Share of episodes the env terminated: a drop (or, where the env is configured to end
+    /// episodes below a number of contacts, too few contacts).
     pub drop_rate: f64,
     pub mean_contacts: f64,
     /// Fingertip contact switches per episode ([`crate::gait`]).

@@ -530,7 +530,7 @@ pub fn train(
         }
         if crossed(config.run.eval_interval) {
             lap(&mut times.sim_s);
-            let report = evaluate_actor(config, &sac, step)?;
+            let report = evaluate_policy(config, &export_actor(config, &sac, step)?)?;
             append_eval_row(out_dir, step, &report)?;
             lap(&mut times.eval_s);
         }
@@ -568,9 +568,9 @@ pub fn train(
     } else {
         let path = out_dir.join("policy.vgep");
         let bytes = export_actor(config, &sac, step)?;
-        std::fs::write(&path, bytes).map_err(io_err(&path))?;
+        std::fs::write(&path, &bytes).map_err(io_err(&path))?;
         let eval_start = Instant::now();
-        let report = evaluate_actor(config, &sac, step)?;
+        let report = evaluate_policy(config, &bytes)?;
         times.eval_s += eval_start.elapsed().as_secs_f64();
         let wall_s = previous_wall_s + session_start.elapsed().as_secs_f64();
         write_final_eval(out_dir, config, &report, step, wall_s)?;
@@ -782,20 +782,19 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
     Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
 }
 
-/// The success test ([`crate::eval`]) of the actor exported as it is now, on the runtime:
-/// `run.eval_episodes` episodes of `run.eval_episode_s` from grasps randomised by
+/// The success test ([`crate::eval`]) of an exported actor (policy-file bytes) on the
+/// runtime: `run.eval_episodes` episodes of `run.eval_episode_s` from grasps randomised by
 /// `run.eval_grasp_noise_rad`, seeded from the config's seed only (training is not
 /// perturbed).
-fn evaluate_actor(config: &Config, sac: &Sac, step: u64) -> Result<EvalReport, TrainError> {
+fn evaluate_policy(config: &Config, bytes: &[u8]) -> Result<EvalReport, TrainError> {
     let run = &config.run;
     let env = crate::eval::success_test_env(
         &config.env.env_config(0),
         run.eval_episode_s,
         run.eval_grasp_noise_rad,
     );
-    let bytes = export_actor(config, sac, step)?;
     let eval_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1);
-    Ok(crate::eval::eval_policy_bytes(&bytes, &env, run.eval_episodes.max(1), eval_seed)?)
+    Ok(crate::eval::eval_policy_bytes(bytes, &env, run.eval_episodes.max(1), eval_seed)?)
 }
 
 const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";

@@ -91,16 +91,9 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-fn temp_root(name: &str) -> std::path::PathBuf {
-    let root = std::env::temp_dir().join(format!("vge-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    std::fs::create_dir_all(&root).expect("temp dir");
-    root
-}
-
 #[test]
 fn sweep_jobs_trains_seeds_side_by_side_and_names_the_failed_seed() {
-    let root = temp_root("sweep-jobs");
+    let root = common::temp_dir("sweep-jobs");
     let config = common::config("cube-fg-vge.toml");
     let out = root.join("sweep");
     // A seed folder whose checkpoint is garbage: its `train --resume` fails.
@@ -162,7 +155,7 @@ fn sbatch_dry_run(config: &Path, dir: &Path) -> Output {
 
 #[test]
 fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
-    let root = temp_root("sweep-sbatch");
+    let root = common::temp_dir("sweep-sbatch");
     let dir = root.join("sweep");
     std::fs::create_dir_all(dir.join("seed-1")).expect("dir");
     std::fs::write(dir.join("seed-1/policy.vgep"), "done").expect("write");
@@ -222,7 +215,7 @@ fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
 
 #[test]
 fn sweep_slurm_refuses_jobs_a_missing_sbatch_and_another_config() {
-    let root = temp_root("sweep-slurm-errors");
+    let root = common::temp_dir("sweep-slurm-errors");
     let config = common::config("cube-fg-vge.toml");
     let (c, d) = (config.to_str().expect("utf-8"), root.join("s"));
     let d = d.to_str().expect("utf-8");
@@ -247,7 +240,7 @@ fn sweep_slurm_refuses_jobs_a_missing_sbatch_and_another_config() {
 
 #[test]
 fn sweep_jobs_forwards_sigterm_so_every_running_seed_checkpoints() {
-    let root = temp_root("sweep-jobs-term");
+    let root = common::temp_dir("sweep-jobs-term");
     let config = common::config("cube-fg-vge.toml");
     let out = root.join("sweep");
     let (config, dir) = (config.to_str().expect("utf-8"), out.to_str().expect("utf-8"));

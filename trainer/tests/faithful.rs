@@ -3,6 +3,8 @@
 //! BC density stays finite at the action bound, and the success test counts a known 2π
 //! episode and rejects a dropped one (the stored gait policy on the no_std runtime).
 
+mod common;
+
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -101,13 +103,6 @@ fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
     assert!(matches!(e, BehaviourError::QNonFinite { step: 7, env: 0, .. }), "{e}");
 }
 
-fn tempdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vge-faithful-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
-}
-
 #[test]
 fn rl_bc_stores_and_clones_controller_actions_it_did_not_execute() {
     let mut c = shipped_vge_config();
@@ -130,7 +125,7 @@ fn rl_bc_stores_and_clones_controller_actions_it_did_not_execute() {
     }
     c.total_steps = 160;
     c.validate().expect("valid");
-    let dir = tempdir("rl-bc");
+    let dir = common::temp_dir("faithful-rl-bc");
     let summary = train(&c, &dir, false, &AtomicBool::new(false), &mut |_| {}).expect("train");
     assert_eq!(summary.behaviour.controller_steps, 0, "RL+BC never executes a controller action");
     assert_eq!(summary.behaviour.controller_queries, 160, "the controller labels every visited state");

@@ -59,3 +59,11 @@ pub fn config(name: &str) -> PathBuf {
 pub fn tiny_args() -> Vec<String> {
     TINY.iter().flat_map(|o| ["--set".to_owned(), (*o).to_owned()]).collect()
 }
+
+/// An empty directory `vge-{name}-{pid}` under the system's temp dir (emptied if it exists).
+pub fn temp_dir(name: &str) -> PathBuf {
+    let root = std::env::temp_dir().join(format!("vge-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).expect("temp dir");
+    root
+}
