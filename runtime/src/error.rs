@@ -34,6 +34,9 @@ pub enum RuntimeError {
     ActionLen { expected: usize, got: usize },
     /// An observation is NaN or infinite.
     NonFiniteObs { index: usize },
+    /// A layer's affine output (before its activation) is NaN or infinite: an overflow in
+    /// the weights or inputs. Caught per layer because tanh or ReLU could hide it.
+    NonFiniteActivation { layer: usize, index: usize },
     /// The network produced a NaN or infinite action (e.g. overflow in an identity layer).
     /// The action buffer is left untouched.
     NonFiniteAction { index: usize },
@@ -74,6 +77,9 @@ impl fmt::Display for RuntimeError {
             }
             Self::NonFiniteObs { index } => write!(f, "observation {index} is not finite"),
             Self::NonFiniteAction { index } => write!(f, "action {index} is not finite"),
+            Self::NonFiniteActivation { layer, index } => {
+                write!(f, "layer {layer} output {index} is not finite (overflow inside the network)")
+            }
         }
     }
 }

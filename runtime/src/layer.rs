@@ -9,7 +9,7 @@ use crate::RuntimeError;
 pub enum Activation {
     /// `y = x`
     Identity,
-    /// `y = max(x, 0)`
+    /// `y = max(x, 0)`, with NaN kept as NaN (`f32::max` would turn it into 0 and hide it).
     Relu,
     /// `y = tanh(x)`
     Tanh,
@@ -21,7 +21,14 @@ impl Activation {
     pub fn apply(self, x: f32) -> f32 {
         match self {
             Self::Identity => x,
-            Self::Relu => x.max(0.0),
+            // `!(x <= 0)` is true for NaN, so NaN passes through to the non-finite check.
+            Self::Relu => {
+                if x <= 0.0 {
+                    0.0
+                } else {
+                    x
+                }
+            }
             Self::Tanh => ComplexField::tanh(x),
         }
     }
@@ -95,12 +102,23 @@ impl<'a> Layer<'a> {
         let mut yv = DVectorViewMut::<f32>::from_slice(y, n_out);
         // y = 1 * (Wᵀ)ᵀ x + 1 * b
         yv.gemv_tr(1.0, &w_t, &xv, 1.0);
-
-        if self.activation != Activation::Identity {
-            for yo in y.iter_mut() {
-                *yo = self.activation.apply(*yo);
-            }
-        }
-        Ok(())
+        activate(self.activation, index, y)
     }
+}
+
+/// Checks the affine outputs `y` of layer `index` and applies the activation in place.
+///
+/// The check comes before the activation: tanh maps an overflow (±inf) to a finite ±1 and
+/// ReLU a -inf to 0, so a layer that overflowed would otherwise reach the motors looking
+/// like a valid action. Costs one compare per output, noise beside the layer's products.
+pub(crate) fn activate(activation: Activation, layer: usize, y: &mut [f32]) -> Result<(), RuntimeError> {
+    if let Some(index) = y.iter().position(|v| !v.is_finite()) {
+        return Err(RuntimeError::NonFiniteActivation { layer, index });
+    }
+    if activation != Activation::Identity {
+        for v in y.iter_mut() {
+            *v = activation.apply(*v);
+        }
+    }
+    Ok(())
 }

@@ -2,7 +2,7 @@
 
 use heapless::Vec;
 
-use crate::{Activation, Layer, RuntimeError};
+use crate::{Layer, RuntimeError};
 
 /// A multi-layer perceptron with at most `MAX_LAYERS` layers, each at most `MAX_WIDTH` wide.
 ///
@@ -177,15 +177,7 @@ fn dense(layer: &Layer<'_>, index: usize, x: &[f32], y: &mut [f32]) -> Result<()
         rows::<1>(w, core::slice::from_ref(b), x_chunks, x_tail, core::slice::from_mut(yo));
     }
 
-    match layer.activation {
-        Activation::Identity => {}
-        act => {
-            for yo in y.iter_mut() {
-                *yo = act.apply(*yo);
-            }
-        }
-    }
-    Ok(())
+    crate::layer::activate(layer.activation, index, y)
 }
 
 /// Kept out of line so that nalgebra's code does not change how [`dense`] is optimised.

@@ -215,8 +215,47 @@ fn overflowing_output_is_an_error() {
     let b = [0.0];
     let mlp = Small::new(&[layer(2, 1, &w, &b, Activation::Identity)]).unwrap();
     let mut y = [7.0];
-    assert_eq!(mlp.forward(&[10.0, 10.0], &mut y), Err(RuntimeError::NonFiniteAction { index: 0 }));
+    assert_eq!(
+        mlp.forward(&[10.0, 10.0], &mut y),
+        Err(RuntimeError::NonFiniteActivation { layer: 0, index: 0 })
+    );
     assert_eq!(y, [7.0]);
+}
+
+/// A hidden layer that overflows to NaN (inf - inf) must not be laundered by ReLU into 0, nor
+/// an overflow to inf by tanh into a valid-looking ±1: both stop the forward pass, naming the
+/// layer, whichever kernel (narrow or dense) runs it.
+#[test]
+fn overflow_inside_the_network_is_caught_at_its_layer() {
+    let (w1, b1) = ([1.0f32; 3], [0.0f32]);
+    for in_dim in [2usize, 32] {
+        // Row 1 sums +3e38 * 10 and -3e38 * 10: inf - inf = NaN.
+        let mut w0 = vec![0.1f32; 3 * in_dim];
+        w0[in_dim] = 3.0e38;
+        w0[in_dim + 1] = -3.0e38;
+        let b0 = [0.0f32; 3];
+        let x = vec![10.0f32; in_dim];
+        let relu = Mlp::<4, 64>::new(&[
+            layer(in_dim, 3, &w0, &b0, Activation::Relu),
+            layer(3, 1, &w1, &b1, Activation::Tanh),
+        ])
+        .unwrap();
+        let mut y = [7.0];
+        assert_eq!(relu.forward(&x, &mut y), Err(RuntimeError::NonFiniteActivation { layer: 0, index: 1 }));
+        assert_eq!(y, [7.0], "the action is left untouched");
+
+        // Row 2 overflows to +inf; tanh of it would be exactly 1.
+        let mut w0 = vec![0.1f32; 3 * in_dim];
+        w0[2 * in_dim] = 3.0e38;
+        let tanh = Mlp::<4, 64>::new(&[
+            layer(in_dim, 3, &w0, &b0, Activation::Tanh),
+            layer(3, 1, &w1, &b1, Activation::Identity),
+        ])
+        .unwrap();
+        assert_eq!(tanh.forward(&x, &mut y), Err(RuntimeError::NonFiniteActivation { layer: 0, index: 2 }));
+    }
+    assert_eq!(Activation::Relu.apply(f32::NAN).to_bits(), f32::NAN.to_bits());
+    assert_eq!((Activation::Relu.apply(-2.0), Activation::Relu.apply(2.0)), (0.0, 2.0));
 }
 
 #[test]

@@ -200,3 +200,22 @@ fn errors_display() {
         "observation 3 is not finite"
     );
 }
+
+/// A file that passes every load check (valid CRC, finite weights) but whose layer overflows
+/// at run time: weights 0 and 1 (file 0x46..0x4e) = 3e38, so the normalised obs (1, 1) gives
+/// 6e38 = inf before the tanh, which would turn it into a plausible-looking 1 x 0.05 rad.
+#[test]
+fn a_valid_file_whose_layer_overflows_is_refused_at_run_time() {
+    let mut b = EXAMPLE.to_vec();
+    b[0x46..0x4a].copy_from_slice(&3.0e38f32.to_le_bytes());
+    b[0x4a..0x4e].copy_from_slice(&3.0e38f32.to_le_bytes());
+    let b = refix(b);
+    let mut storage = [0.0f32; 9];
+    let policy = Policy::<'_, 2, 4>::load(&b, &mut storage).unwrap();
+    let mut a = [0.5f32];
+    let err = policy.forward(&[1.0, 3.0], &mut a).unwrap_err();
+    assert_eq!(err, PolicyError::Runtime(RuntimeError::NonFiniteActivation { layer: 0, index: 0 }));
+    assert_eq!(a, [0.5], "the action is left untouched");
+    // Small inputs through the same weights stay finite and run.
+    policy.forward(&[0.0, 1.0], &mut a).unwrap();
+}
