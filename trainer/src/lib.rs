@@ -3,6 +3,7 @@
 
 pub mod behaviour;
 pub mod bench_update;
+pub mod checkpoint;
 pub mod config;
 pub mod controllers;
 pub mod eval;

@@ -38,7 +38,9 @@ enum Command {
         /// Output directory of the run.
         #[arg(long, required_unless_present = "resume")]
         out: Option<PathBuf>,
-        /// Continue the run in this directory from its last checkpoint (its config.toml).
+        /// Continue the run in this directory from its last checkpoint (its config.toml). The
+        /// checkpoint's files are checked against its manifest first: a damaged, truncated or
+        /// older vge's checkpoint is refused, naming the file.
         #[arg(long, conflicts_with_all = ["config", "out"])]
         resume: Option<PathBuf>,
         /// Override the config's seed.

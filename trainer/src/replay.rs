@@ -223,20 +223,28 @@ impl ReplayBuffer {
         }
     }
 
-    /// Writes the filled part (raw little-endian f32 after a small header).
+    /// Writes the filled part (raw little-endian f32 after a small header) to `path`.
     pub fn save(&self, path: &Path) -> Result<(), ReplayError> {
         let shown = path.display().to_string();
         let io = |source| ReplayError::Io { path: shown.clone(), source };
         let file = std::fs::File::create(path).map_err(io)?;
         let mut w = std::io::BufWriter::new(file);
+        self.write_to(&mut w).map_err(io)?;
+        w.flush().map_err(io)
+    }
+
+    /// Writes what [`Self::save`] writes to `w` (which it does not flush).
+    pub fn write_to<W: Write>(&self, w: &mut W) -> std::io::Result<()> {
         let mut header = Vec::with_capacity(48);
         header.extend_from_slice(MAGIC);
         for v in [self.obs_dim, self.act_dim, self.capacity, self.len, self.next] {
             header.extend_from_slice(&(v as u64).to_le_bytes());
         }
-        w.write_all(&header).map_err(io)?;
+        w.write_all(&header)?;
         let n = self.len;
         let (o, a) = (self.obs_dim, self.act_dim);
+        // Converted in chunks of 64 KiB, not a whole column (hundreds of MB at 1M transitions).
+        let mut bytes = Vec::with_capacity(1 << 16);
         for (v, cols) in [
             (&self.obs, o),
             (&self.action, a),
@@ -247,13 +255,15 @@ impl ReplayBuffer {
             (&self.bc_action, a),
             (&self.bc_mask, 1),
         ] {
-            let mut bytes = Vec::with_capacity(n * cols * 4);
-            for x in &v[..n * cols] {
-                bytes.extend_from_slice(&x.to_le_bytes());
+            for chunk in v[..n * cols].chunks(1 << 14) {
+                bytes.clear();
+                for x in chunk {
+                    bytes.extend_from_slice(&x.to_le_bytes());
+                }
+                w.write_all(&bytes)?;
             }
-            w.write_all(&bytes).map_err(io)?;
         }
-        w.flush().map_err(io)
+        Ok(())
     }
 
     /// Reads a buffer written by [`Self::save`]; its shape must match this one's.

@@ -171,6 +171,14 @@ impl TargetActor {
     }
 }
 
+// The files of a checkpoint that [`Sac::save`] writes (checkpoint.rs lists them in its manifest).
+pub const ACTOR_FILE: &str = "actor.ot";
+pub const CRITIC_FILE: &str = "critic.ot";
+pub const TARGET_FILE: &str = "target.ot";
+/// TD3 only.
+pub const TARGET_ACTOR_FILE: &str = "target_actor.ot";
+pub const OPTIM_FILE: &str = "optim.ot";
+
 #[derive(Debug)]
 pub struct Sac {
     pub config: SacConfig,
@@ -546,14 +554,25 @@ impl Sac {
         });
     }
 
+    /// The files [`Self::save`] writes into a checkpoint folder, in the order it writes them.
+    pub fn checkpoint_files(&self) -> Vec<&'static str> {
+        let mut files = vec![ACTOR_FILE, CRITIC_FILE, TARGET_FILE];
+        if self.target_actor.is_some() {
+            files.push(TARGET_ACTOR_FILE);
+        }
+        files.push(OPTIM_FILE);
+        files
+    }
+
     /// Saves networks, optimiser states, α and the update counter under `dir`
-    /// (`actor.ot`, `critic.ot`, `target.ot`, `optim.ot`).
+    /// ([`Self::checkpoint_files`]: `actor.ot`, `critic.ot`, `target.ot`, `target_actor.ot`
+    /// for TD3, `optim.ot`).
     pub fn save(&self, dir: &Path) -> Result<(), tch::TchError> {
-        self.actor_vs.save(dir.join("actor.ot"))?;
-        self.critic_vs.save(dir.join("critic.ot"))?;
-        self.target_vs.save(dir.join("target.ot"))?;
+        self.actor_vs.save(dir.join(ACTOR_FILE))?;
+        self.critic_vs.save(dir.join(CRITIC_FILE))?;
+        self.target_vs.save(dir.join(TARGET_FILE))?;
         if let Some(target) = &self.target_actor {
-            target.vs.save(dir.join("target_actor.ot"))?;
+            target.vs.save(dir.join(TARGET_ACTOR_FILE))?;
         }
         let mut named = self.actor_opt.state("actor_opt");
         named.extend(self.critic_opt.state("critic_opt"));
@@ -563,19 +582,19 @@ impl Sac {
             named.push(("log_alpha".to_owned(), log_alpha.detach()));
             named.extend(opt.state("alpha_opt"));
         }
-        Tensor::save_multi(&named, dir.join("optim.ot"))
+        Tensor::save_multi(&named, dir.join(OPTIM_FILE))
     }
 
     /// Restores what [`Self::save`] wrote (same configuration).
     pub fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
-        self.actor_vs.load(dir.join("actor.ot"))?;
-        self.critic_vs.load(dir.join("critic.ot"))?;
-        self.target_vs.load(dir.join("target.ot"))?;
+        self.actor_vs.load(dir.join(ACTOR_FILE))?;
+        self.critic_vs.load(dir.join(CRITIC_FILE))?;
+        self.target_vs.load(dir.join(TARGET_FILE))?;
         if let Some(target) = &mut self.target_actor {
-            target.vs.load(dir.join("target_actor.ot"))?;
+            target.vs.load(dir.join(TARGET_ACTOR_FILE))?;
         }
         let named: std::collections::HashMap<String, Tensor> =
-            Tensor::load_multi(dir.join("optim.ot"))?.into_iter().collect();
+            Tensor::load_multi(dir.join(OPTIM_FILE))?.into_iter().collect();
         self.actor_opt.restore("actor_opt", &named)?;
         self.critic_opt.restore("critic_opt", &named)?;
         let updates = named

@@ -74,13 +74,13 @@ pub fn seed_state(dir: &Path) -> SeedState {
     }
 }
 
-/// The step of a run directory's last checkpoint (train's `checkpoint/state.toml`).
+/// The step of a run directory's last checkpoint (`state.toml` of the folder a resume reads,
+/// [`crate::checkpoint::resume_dir`]), for messages: the checkpoint is not verified here.
 pub fn checkpoint_step(dir: &Path) -> Option<u64> {
-    ["checkpoint", "checkpoint.old"].iter().find_map(|c| {
-        let text = std::fs::read_to_string(dir.join(c).join("state.toml")).ok()?;
-        let table: toml::Table = toml::from_str(&text).ok()?;
-        u64::try_from(table.get("step")?.as_integer()?).ok()
-    })
+    let ckpt = crate::checkpoint::resume_dir(dir)?;
+    let text = std::fs::read_to_string(ckpt.join(crate::checkpoint::STATE_FILE)).ok()?;
+    let table: toml::Table = toml::from_str(&text).ok()?;
+    u64::try_from(table.get("step")?.as_integer()?).ok()
 }
 
 /// True when the overrides set `sac.threads` (the sweep then leaves the thread count alone).

@@ -11,8 +11,11 @@
 //! - `eval.csv`: deterministic evaluations of the actor every `run.eval_interval` steps;
 //! - `checkpoint/`: `state.toml` (counters, generator state, metric window), `actor.ot`,
 //!   `critic.ot`, `target.ot`, `target_actor.ot` (TD3), `optim.ot` (Adam moments, α),
-//!   `replay.bin` (optional). It is
-//!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole;
+//!   `replay.bin` (optional), and `manifest.json` (every file's length and CRC-32). It is
+//!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole, and
+//!   a resume verifies every file against the manifest first: a damaged, truncated or
+//!   unverifiable checkpoint is refused with the file's name, never resumed
+//!   ([`crate::checkpoint`]);
 //! - `policy.vgep`: the exported actor at the end.
 //!
 //! Determinism and resume: every random draw comes from the run's ChaCha8 generator (env
@@ -42,6 +45,7 @@ use vge_export::Provenance;
 use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
 
 use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, StepContext, bc_beta};
+use crate::checkpoint::{self, CheckpointError};
 use crate::config::{Config, ConfigError};
 use crate::controllers::{Controller, ControllerInput, IgmConfig};
 use crate::eval::{EpisodeOutcome, EvalError, EvalReport, wrap_pi};
@@ -69,6 +73,8 @@ pub enum TrainError {
     Io { path: String, source: std::io::Error },
     #[error("resume: {0}")]
     Resume(String),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
     #[error("behaviour policy: {0}")]
     Behaviour(#[from] BehaviourError),
     #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
@@ -300,24 +306,16 @@ pub fn train(
     let mut window = Window::default();
     let mut last_window = Window::default();
     let mut previous_wall_s = 0.0f64;
-    let ckpt_dir = out_dir.join("checkpoint");
     let metrics_path = out_dir.join("metrics.csv");
     let config_hash = config.hash_hex();
 
     if resume {
-        let dir = if ckpt_dir.join("state.toml").exists() {
-            ckpt_dir.clone()
-        } else {
-            out_dir.join("checkpoint.old")
-        };
-        let state_path = dir.join("state.toml");
-        let text = std::fs::read_to_string(&state_path).map_err(io_err(&state_path))?;
-        let state: TrainState = toml::from_str(&text)
-            .map_err(|e| TrainError::Resume(format!("{}: {e}", state_path.display())))?;
-        sac.load(&dir)?;
-        if state.has_replay {
-            replay.load(&dir.join("replay.bin"))?;
-        }
+        // Every file is checked against the manifest before any is read (crate::checkpoint).
+        let ckpt = checkpoint::open(out_dir)?;
+        let state: TrainState = toml::from_str(ckpt.state_toml()).map_err(|e| {
+            TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::STATE_FILE).display()))
+        })?;
+        ckpt.load(&mut sac, state.has_replay.then_some(&mut replay))?;
         rng = rng_restore(&state.rng_seed_hex, state.rng_stream, &state.rng_word_pos)?;
         step = state.step;
         episodes = state.episodes;
@@ -736,37 +734,16 @@ fn truncate_csv(path: &Path, step: u64) -> Result<(), TrainError> {
     std::fs::write(path, kept).map_err(io_err(path))
 }
 
+/// Saves a checkpoint ([`crate::checkpoint::save`]) of `sac`, `state` and, when
+/// `state.has_replay`, `replay`.
 fn save_checkpoint(
     out_dir: &Path,
     sac: &Sac,
     replay: &ReplayBuffer,
     state: &TrainState,
 ) -> Result<(), TrainError> {
-    let tmp = out_dir.join("checkpoint.tmp");
-    let dir = out_dir.join("checkpoint");
-    let old = out_dir.join("checkpoint.old");
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(io_err(&tmp))?;
-    }
-    std::fs::create_dir_all(&tmp).map_err(io_err(&tmp))?;
-    sac.save(&tmp)?;
-    if state.has_replay {
-        replay.save(&tmp.join("replay.bin"))?;
-    }
     let text = toml::to_string(state).map_err(|e| TrainError::Resume(format!("serialising state: {e}")))?;
-    let path = tmp.join("state.toml");
-    std::fs::write(&path, text).map_err(io_err(&path))?;
-    if old.exists() {
-        std::fs::remove_dir_all(&old).map_err(io_err(&old))?;
-    }
-    if dir.exists() {
-        std::fs::rename(&dir, &old).map_err(io_err(&dir))?;
-    }
-    std::fs::rename(&tmp, &dir).map_err(io_err(&tmp))?;
-    if old.exists() {
-        std::fs::remove_dir_all(&old).map_err(io_err(&old))?;
-    }
-    Ok(())
+    Ok(checkpoint::save(out_dir, sac, state.has_replay.then_some(replay), &text)?)
 }
 
 /// The actor of `sac` encoded as a policy file (hand metadata from

@@ -1,0 +1,480 @@
+//! A run directory's checkpoint folder: written whole or not at all, and verified file by
+//! file before anything is resumed from it.
+//!
+//! `DIR/checkpoint/` holds `state.toml` (the training loop's counters, generator state and
+//! metric windows), the networks and optimiser state that [`Sac::save`] writes (`actor.ot`,
+//! `critic.ot`, `target.ot`, `target_actor.ot` for TD3, `optim.ot`), `replay.bin` when the
+//! run keeps its replay buffer, and [`MANIFEST`] (`manifest.json`): every other file's name,
+//! length in bytes and CRC-32 (IEEE, `"0x%08x"`).
+//!
+//! [`save`] writes everything into `DIR/checkpoint.tmp/`, each file's CRC computed as it is
+//! written (the replay buffer, `state.toml`) or read back right after libtorch has written it
+//! (the `.ot` files), then the manifest, last. It then swaps the folders: `checkpoint/` to
+//! `checkpoint.old/`, `checkpoint.tmp/` to `checkpoint/`, and deletes `checkpoint.old/`. A
+//! kill at any moment leaves one whole checkpoint: `checkpoint/`, or, between the two
+//! renames, `checkpoint.old/`.
+//!
+//! [`open`] resumes from `checkpoint/` when it exists, and from `checkpoint.old/` only when
+//! `checkpoint/` does not (a save killed between its renames); never from `checkpoint.old/`
+//! in place of a damaged `checkpoint/`. Before a single file reaches libtorch, the replay
+//! loader or the TOML parser, the folder must match its manifest: a missing manifest (an
+//! older vge's checkpoint, or not one of ours), a listed file that is missing, a file of a
+//! checkpoint's kind that the manifest does not list, a wrong length (truncation) or a wrong
+//! CRC is refused with a [`CheckpointError`] that names the file.
+
+use std::collections::BTreeSet;
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::replay::{ReplayBuffer, ReplayError};
+use crate::sac::{ACTOR_FILE, CRITIC_FILE, OPTIM_FILE, Sac, TARGET_ACTOR_FILE, TARGET_FILE};
+
+/// The checkpoint folder in a run directory.
+pub const DIR: &str = "checkpoint";
+/// Where [`save`] writes a checkpoint before renaming it to [`DIR`].
+pub const TMP_DIR: &str = "checkpoint.tmp";
+/// The previous checkpoint while [`save`] swaps the folders.
+pub const OLD_DIR: &str = "checkpoint.old";
+/// The list of the checkpoint's files with their lengths and CRCs, written last.
+pub const MANIFEST: &str = "manifest.json";
+/// The training loop's state (`crate::train`).
+pub const STATE_FILE: &str = "state.toml";
+/// The replay buffer ([`ReplayBuffer::write_to`]).
+pub const REPLAY_FILE: &str = "replay.bin";
+/// Every file a vge checkpoint holds besides its manifest: one of these that the manifest
+/// does not list is refused.
+pub const KNOWN_FILES: [&str; 7] =
+    [STATE_FILE, ACTOR_FILE, CRITIC_FILE, TARGET_FILE, TARGET_ACTOR_FILE, OPTIM_FILE, REPLAY_FILE];
+/// The manifest's `format`.
+pub const MANIFEST_FORMAT: u32 = 1;
+
+#[derive(Debug, Error)]
+pub enum CheckpointError {
+    #[error("{out_dir} holds no checkpoint (neither checkpoint/ nor checkpoint.old/)")]
+    NoCheckpoint { out_dir: PathBuf },
+    #[error("checkpoint {path} is not a folder (refusing to resume; delete it to start over)")]
+    NotAFolder { path: PathBuf },
+    #[error(
+        "checkpoint manifest {path} is missing: the checkpoint was written by a vge without \
+         checkpoint integrity checks, or is incomplete (refusing to resume an unverified \
+         checkpoint; delete the checkpoint folder to start over)"
+    )]
+    NoManifest { path: PathBuf },
+    #[error(
+        "checkpoint manifest {path} is corrupt: {message} (refusing to resume; delete the \
+         checkpoint folder to start over)"
+    )]
+    BadManifest { path: PathBuf, message: String },
+    #[error(
+        "checkpoint file {path} is missing: {MANIFEST} lists it (refusing to resume; delete \
+         the checkpoint folder to start over)"
+    )]
+    Missing { path: PathBuf },
+    #[error(
+        "checkpoint file {path} is missing: resuming needs it and {MANIFEST} does not list it \
+         (refusing to resume; delete the checkpoint folder to start over)"
+    )]
+    NotListed { path: PathBuf },
+    #[error(
+        "checkpoint file {path} is not listed in {MANIFEST}: it was put there after the \
+         checkpoint was written (refusing to resume; delete the checkpoint folder to start over)"
+    )]
+    Unlisted { path: PathBuf },
+    #[error(
+        "checkpoint file {path} is {what}: {actual} bytes, expected {expected} (refusing to \
+         resume; delete the checkpoint folder to start over)"
+    )]
+    Length { path: PathBuf, what: &'static str, actual: u64, expected: u64 },
+    #[error(
+        "checkpoint file {path} is corrupt: crc32 {actual:#010x}, expected {expected:#010x} \
+         (refusing to resume; delete the checkpoint folder to start over)"
+    )]
+    Corrupt { path: PathBuf, actual: u32, expected: u32 },
+    #[error("reading checkpoint file {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("writing checkpoint {path}: {source}")]
+    Write { path: PathBuf, source: std::io::Error },
+    #[error("writing the networks into {dir}: libtorch: {source}")]
+    SaveNetworks { dir: PathBuf, source: tch::TchError },
+    /// libtorch refused verified files: they are whole, but not this configuration's
+    /// networks (`message` is libtorch's, without its C++ backtrace).
+    #[error(
+        "loading the networks from checkpoint {dir} (is the configuration the one it was \
+         saved with?): libtorch: {message}"
+    )]
+    LoadNetworks { dir: PathBuf, message: String },
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+}
+
+/// What `manifest.json` holds.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`MANIFEST_FORMAT`].
+    pub format: u32,
+    /// The vge that wrote the checkpoint (informative).
+    pub vge_version: String,
+    /// Every file of the checkpoint but the manifest, in the order they were written.
+    pub files: Vec<FileEntry>,
+}
+
+/// One file of a checkpoint.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    /// Its name in the checkpoint folder (no path).
+    pub name: String,
+    /// Its length in bytes.
+    pub bytes: u64,
+    /// CRC-32 (IEEE 802.3, as zlib's `crc32`) of its bytes, as `"0x%08x"`.
+    pub crc32: String,
+}
+
+impl FileEntry {
+    fn new(name: &str, bytes: u64, crc: u32) -> Self {
+        Self { name: name.to_owned(), bytes, crc32: format!("{crc:#010x}") }
+    }
+
+    fn crc(&self) -> Option<u32> {
+        let hex = self.crc32.strip_prefix("0x")?;
+        if hex.len() != 8 {
+            return None;
+        }
+        u32::from_str_radix(hex, 16).ok()
+    }
+}
+
+/// A [`Write`] that passes everything to `inner` and keeps the CRC and length of it.
+struct CrcWriter<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+    bytes: u64,
+}
+
+impl<W: Write> Write for CrcWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        self.bytes += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// Buffer size for writing and hashing checkpoint files.
+const IO_BUF: usize = 1 << 20;
+
+/// Writes `dir/name` with `fill`, and its manifest entry from the bytes as they were written.
+fn write_file(
+    dir: &Path,
+    name: &str,
+    fill: impl FnOnce(&mut CrcWriter<BufWriter<File>>) -> std::io::Result<()>,
+) -> Result<FileEntry, CheckpointError> {
+    let path = dir.join(name);
+    let err = |source| CheckpointError::Write { path: path.clone(), source };
+    let file = File::create(&path).map_err(err)?;
+    let mut w =
+        CrcWriter { inner: BufWriter::with_capacity(IO_BUF, file), crc: crc32fast::Hasher::new(), bytes: 0 };
+    fill(&mut w).map_err(err)?;
+    w.inner.into_inner().map_err(|e| err(e.into_error()))?;
+    Ok(FileEntry::new(name, w.bytes, w.crc.finalize()))
+}
+
+/// The length and CRC-32 of the file at `path`, read through once.
+pub fn crc_of_file(path: &Path) -> std::io::Result<(u64, u32)> {
+    let mut file = File::open(path)?;
+    let mut buf = vec![0u8; IO_BUF];
+    let mut crc = crc32fast::Hasher::new();
+    let mut bytes = 0u64;
+    loop {
+        let n = match file.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        crc.update(&buf[..n]);
+        bytes += n as u64;
+    }
+    Ok((bytes, crc.finalize()))
+}
+
+/// Saves a checkpoint into `out_dir/checkpoint/`: the networks and optimiser state of `sac`,
+/// `replay` when given, `state_toml` as `state.toml`, and the manifest (module docs). The
+/// previous checkpoint stays whole until the new one is complete.
+pub fn save(
+    out_dir: &Path,
+    sac: &Sac,
+    replay: Option<&ReplayBuffer>,
+    state_toml: &str,
+) -> Result<(), CheckpointError> {
+    let tmp = out_dir.join(TMP_DIR);
+    let dir = out_dir.join(DIR);
+    let old = out_dir.join(OLD_DIR);
+    let write_err = |path: &Path| {
+        let path = path.to_owned();
+        move |source| CheckpointError::Write { path, source }
+    };
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(write_err(&tmp))?;
+    }
+    std::fs::create_dir_all(&tmp).map_err(write_err(&tmp))?;
+    sac.save(&tmp).map_err(|source| CheckpointError::SaveNetworks { dir: tmp.clone(), source })?;
+    let mut files = Vec::new();
+    for name in sac.checkpoint_files() {
+        let path = tmp.join(name);
+        let (bytes, crc) =
+            crc_of_file(&path).map_err(|source| CheckpointError::Read { path: path.clone(), source })?;
+        files.push(FileEntry::new(name, bytes, crc));
+    }
+    if let Some(replay) = replay {
+        files.push(write_file(&tmp, REPLAY_FILE, |w| replay.write_to(w))?);
+    }
+    files.push(write_file(&tmp, STATE_FILE, |w| w.write_all(state_toml.as_bytes()))?);
+    let manifest =
+        Manifest { format: MANIFEST_FORMAT, vge_version: env!("CARGO_PKG_VERSION").to_owned(), files };
+    let mut text = serde_json::to_string_pretty(&manifest).map_err(|e| write_err(&tmp)(e.into()))?;
+    text.push('\n');
+    let path = tmp.join(MANIFEST);
+    std::fs::write(&path, text).map_err(write_err(&path))?;
+
+    if dir.exists() {
+        // A checkpoint.old/ beside a whole checkpoint/ is a save killed after its second rename.
+        if old.exists() {
+            std::fs::remove_dir_all(&old).map_err(write_err(&old))?;
+        }
+        std::fs::rename(&dir, &old).map_err(write_err(&dir))?;
+    }
+    // Without checkpoint/, checkpoint.old/ is the whole one (a save killed between its
+    // renames, then resumed from it): it stays until the new one is in place.
+    std::fs::rename(&tmp, &dir).map_err(write_err(&tmp))?;
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(write_err(&old))?;
+    }
+    Ok(())
+}
+
+/// The checkpoint folder a resume of `out_dir` reads: `checkpoint/` when it exists (whatever
+/// state it is in), else `checkpoint.old/` when that exists (a save killed between its two
+/// renames), else `None`.
+pub fn resume_dir(out_dir: &Path) -> Option<PathBuf> {
+    let dir = out_dir.join(DIR);
+    if dir.symlink_metadata().is_ok() {
+        return Some(dir);
+    }
+    let old = out_dir.join(OLD_DIR);
+    old.symlink_metadata().is_ok().then_some(old)
+}
+
+/// Reads `dir`'s manifest and checks every file against it (module docs): the manifest, or
+/// the first problem found, cheap checks (presence, lengths) before CRCs.
+pub fn verify(dir: &Path) -> Result<Manifest, CheckpointError> {
+    let meta = dir.metadata().map_err(|source| CheckpointError::Read { path: dir.to_owned(), source })?;
+    if !meta.is_dir() {
+        return Err(CheckpointError::NotAFolder { path: dir.to_owned() });
+    }
+    let path = dir.join(MANIFEST);
+    let text = match std::fs::read(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(CheckpointError::NoManifest { path });
+        }
+        Err(source) => return Err(CheckpointError::Read { path, source }),
+    };
+    let bad = |message: String| CheckpointError::BadManifest { path: path.clone(), message };
+    let manifest: Manifest = serde_json::from_slice(&text).map_err(|e| bad(e.to_string()))?;
+    if manifest.format != MANIFEST_FORMAT {
+        return Err(bad(format!(
+            "format {} (this vge reads format {MANIFEST_FORMAT}; a newer vge wrote it?)",
+            manifest.format
+        )));
+    }
+    let mut names = BTreeSet::new();
+    let mut crcs = Vec::with_capacity(manifest.files.len());
+    for f in &manifest.files {
+        let plain = !f.name.is_empty()
+            && f.name != "."
+            && f.name != ".."
+            && f.name != MANIFEST
+            && !f.name.contains(['/', '\\', '\0']);
+        if !plain {
+            return Err(bad(format!("lists {:?}, which is not a checkpoint file name", f.name)));
+        }
+        if !names.insert(f.name.as_str()) {
+            return Err(bad(format!("lists {} twice", f.name)));
+        }
+        crcs.push(
+            f.crc().ok_or_else(|| {
+                bad(format!("crc32 {:?} of {} is not 0x and 8 hex digits", f.crc32, f.name))
+            })?,
+        );
+    }
+    for name in KNOWN_FILES {
+        let path = dir.join(name);
+        if !names.contains(name) && path.symlink_metadata().is_ok() {
+            return Err(CheckpointError::Unlisted { path });
+        }
+    }
+    let length = |path: PathBuf, actual: u64, expected: u64| CheckpointError::Length {
+        what: if actual < expected { "truncated" } else { "longer than written" },
+        path,
+        actual,
+        expected,
+    };
+    for f in &manifest.files {
+        let path = dir.join(&f.name);
+        let actual = match path.metadata() {
+            Ok(m) => m.len(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(CheckpointError::Missing { path });
+            }
+            Err(source) => return Err(CheckpointError::Read { path, source }),
+        };
+        if actual != f.bytes {
+            return Err(length(path, actual, f.bytes));
+        }
+    }
+    for (f, &expected) in manifest.files.iter().zip(&crcs) {
+        let path = dir.join(&f.name);
+        let (bytes, actual) =
+            crc_of_file(&path).map_err(|source| CheckpointError::Read { path: path.clone(), source })?;
+        if bytes != f.bytes {
+            return Err(length(path, bytes, f.bytes));
+        }
+        if actual != expected {
+            return Err(CheckpointError::Corrupt { path, actual, expected });
+        }
+    }
+    Ok(manifest)
+}
+
+/// A checkpoint folder whose files all match its manifest.
+#[derive(Debug)]
+pub struct Verified {
+    dir: PathBuf,
+    manifest: Manifest,
+    state_toml: String,
+}
+
+/// Picks the checkpoint folder of `out_dir` ([`resume_dir`]) and [`verify`]s it; reads its
+/// `state.toml`.
+pub fn open(out_dir: &Path) -> Result<Verified, CheckpointError> {
+    let dir =
+        resume_dir(out_dir).ok_or_else(|| CheckpointError::NoCheckpoint { out_dir: out_dir.to_owned() })?;
+    let manifest = verify(&dir)?;
+    let mut checkpoint = Verified { dir, manifest, state_toml: String::new() };
+    let path = checkpoint.require(STATE_FILE)?;
+    checkpoint.state_toml =
+        std::fs::read_to_string(&path).map_err(|source| CheckpointError::Read { path, source })?;
+    Ok(checkpoint)
+}
+
+impl Verified {
+    /// The folder: `checkpoint/` or `checkpoint.old/`.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// The text of `state.toml`.
+    pub fn state_toml(&self) -> &str {
+        &self.state_toml
+    }
+
+    /// The path of `name`, which the manifest must list (verified files only are read).
+    fn require(&self, name: &str) -> Result<PathBuf, CheckpointError> {
+        let path = self.dir.join(name);
+        if self.manifest.files.iter().any(|f| f.name == name) {
+            Ok(path)
+        } else {
+            Err(CheckpointError::NotListed { path })
+        }
+    }
+
+    /// Restores the networks and optimiser state into `sac` (same configuration as the one
+    /// that saved them) and, when given, the replay buffer.
+    pub fn load(&self, sac: &mut Sac, replay: Option<&mut ReplayBuffer>) -> Result<(), CheckpointError> {
+        for name in sac.checkpoint_files() {
+            self.require(name)?;
+        }
+        let replay_path = replay.as_ref().map(|_| self.require(REPLAY_FILE)).transpose()?;
+        sac.load(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
+            dir: self.dir.clone(),
+            message: without_backtrace(&e.to_string()).to_owned(),
+        })?;
+        if let (Some(replay), Some(path)) = (replay, replay_path) {
+            replay.load(&path)?;
+        }
+        Ok(())
+    }
+}
+
+/// A libtorch error message up to the C++ backtrace that follows it.
+fn without_backtrace(message: &str) -> &str {
+    let end = ["\nframe #", "\nException raised from"].iter().filter_map(|m| message.find(m)).min();
+    message[..end.unwrap_or(message.len())].trim_end()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn folder(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("vge-checkpoint-unit-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        dir
+    }
+
+    fn write_manifest(dir: &Path, files: Vec<FileEntry>) {
+        let m = Manifest { format: MANIFEST_FORMAT, vge_version: "test".to_owned(), files };
+        std::fs::write(dir.join(MANIFEST), serde_json::to_string(&m).expect("json")).expect("manifest");
+    }
+
+    #[test]
+    fn libtorch_backtraces_are_cut() {
+        let m = "Internal torch error: shape mismatch for actor.l0.weight\nException raised from load at x.cpp:1\nframe #0: c10";
+        assert_eq!(without_backtrace(m), "Internal torch error: shape mismatch for actor.l0.weight");
+        assert_eq!(without_backtrace("plain"), "plain");
+    }
+
+    #[test]
+    fn the_crc_is_zlibs_and_a_written_file_verifies() {
+        let dir = folder("crc");
+        let entry = write_file(&dir, STATE_FILE, |w| w.write_all(b"123456789")).expect("write");
+        // The CRC-32 check value of "123456789".
+        assert_eq!(entry, FileEntry::new(STATE_FILE, 9, 0xcbf4_3926));
+        assert_eq!(crc_of_file(&dir.join(STATE_FILE)).expect("crc"), (9, 0xcbf4_3926));
+        write_manifest(&dir, vec![entry]);
+        assert_eq!(verify(&dir).expect("verifies").files.len(), 1);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn manifests_naming_paths_twice_listed_files_or_bad_crcs_are_refused() {
+        let dir = folder("names");
+        let entry = write_file(&dir, STATE_FILE, |w| w.write_all(b"step = 1\n")).expect("write");
+        for (files, expect) in [
+            (vec![FileEntry { name: "../x".to_owned(), ..entry.clone() }], "not a checkpoint file name"),
+            (vec![FileEntry { name: MANIFEST.to_owned(), ..entry.clone() }], "not a checkpoint file name"),
+            (vec![entry.clone(), entry.clone()], "twice"),
+            (vec![FileEntry { crc32: "12".to_owned(), ..entry.clone() }], "8 hex digits"),
+        ] {
+            write_manifest(&dir, files);
+            let err = verify(&dir).expect_err(expect).to_string();
+            assert!(err.contains(expect) && err.contains(&dir.join(MANIFEST).display().to_string()), "{err}");
+        }
+        std::fs::write(dir.join(MANIFEST), "{\"format\": 1,").expect("write");
+        assert!(matches!(verify(&dir), Err(CheckpointError::BadManifest { .. })));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
