@@ -2,9 +2,28 @@
 //! build the observation exactly as the simulator does (`vge_sim::observation`), run the
 //! policy, pass its action through the safety filter and send joint commands.
 //!
-//! Deadlines are `start + k * period`, so a late step does not delay the ones after it. Each
-//! wait sleeps until `spin` before the deadline and then spins: the OS timer alone overshoots
-//! by 50-100 us, too coarse for a 1 kHz loop.
+//! Deadlines are `start + k * period`. Each wait sleeps until `spin` before the deadline and
+//! then spins: the OS timer alone overshoots by 50-100 us, too coarse for a 1 kHz loop. A loop
+//! that wakes a whole period late skips the periods already gone (each a deadline miss)
+//! instead of running them back to back, so the achieved rate and the misses tell the truth.
+//!
+//! What the loop does not trust, and what it does then (docs/can-protocol.md, Semantics):
+//! - no fresh joint state for `watchdog_periods`: halt (watchdog);
+//! - a node fault (fault frame, status bit, heartbeat state): halt;
+//! - a node heartbeat missing for `heartbeat_timeout`, or its counter stuck: halt;
+//! - a stale frame (seq lagging the last command) or an implausible joint position: the
+//!   frame is dropped and counted, the step holds the last safe targets, and the loop halts
+//!   if that persists for `watchdog_periods`;
+//! - a policy that errs (non-finite output, overflow inside the network): hold, halt if it
+//!   persists;
+//! - more than `rx_budget` frames in one period (a flood): the rest waits for the next
+//!   period, and the loop halts if that persists;
+//! - a SocketCAN bus-off error frame: halt; other error frames are counted by class;
+//! - a full transmit queue (ENOBUFS): the frame is retried once, then dropped and counted;
+//!   the loop halts if commands cannot be sent for `watchdog_periods`.
+//!
+//! Halting holds the last safe targets for `halt_hold_periods` (the grasp does not drop),
+//! then disables every finger.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -13,11 +32,13 @@ use thiserror::Error;
 use vge_sim::kinematics::JointLimit;
 use vge_sim::observation::{OBS_DIM, build_observation};
 
-use crate::hand_state::HandState;
-use crate::protocol::{FingerId, JointCommand, Message};
+use crate::hand_state::{HandState, HeartbeatProblem, Plausibility};
+use crate::protocol::{
+    FingerId, HEARTBEAT_PERIOD_MS, HOST_NODE, Heartbeat, JointCommand, Message, NUM_FINGERS, NodeState,
+};
 use crate::safety::{SafetyCounts, SafetyFilter};
 use crate::stats::Percentiles;
-use crate::transport::{Received, Transport, TransportError};
+use crate::transport::{ErrorClass, Received, Transport, TransportError};
 
 /// What turns an observation into a change of the joint targets.
 pub trait PolicyRunner {
@@ -30,9 +51,10 @@ pub struct LoopConfig {
     pub rate_hz: f64,
     /// Stop after this long; `None` runs until the stop flag is raised.
     pub duration: Option<Duration>,
-    /// No fresh joint state for more than this many periods trips the watchdog.
+    /// No fresh joint state for more than this many periods trips the watchdog; any other
+    /// problem that persists this many periods halts the loop.
     pub watchdog_periods: u32,
-    /// How long to wait for every node's first joint state before giving up.
+    /// How long to wait for every node's first joint state and heartbeat.
     pub startup_timeout: Duration,
     /// Periods the halt sequence holds the last safe targets before disabling.
     pub halt_hold_periods: u32,
@@ -41,7 +63,40 @@ pub struct LoopConfig {
     pub limits: [JointLimit; 15],
     /// Spin this long before each deadline instead of sleeping.
     pub spin: Duration,
+    /// A node heartbeat older than this is a lost node.
+    pub heartbeat_timeout: Duration,
+    /// How far outside its range a measured joint may read before it is implausible.
+    pub plausibility_margin_rad: f32,
+    /// Largest accepted lag of a node frame's seq behind the last command.
+    pub max_seq_lag: u8,
+    /// Frames taken from the bus per period at most.
+    pub rx_budget: usize,
 }
+
+impl LoopConfig {
+    /// The defaults the `vge-bridge` command line uses, at `rate_hz` with `limits`.
+    pub fn new(rate_hz: f64, limits: [JointLimit; 15]) -> Self {
+        Self {
+            rate_hz,
+            duration: None,
+            watchdog_periods: 5,
+            startup_timeout: Duration::from_secs(5),
+            halt_hold_periods: 3,
+            max_delta_rad: 0.05,
+            limits,
+            spin: Duration::from_micros(200),
+            // Five heartbeat periods: one late beat on a loaded host is not a lost node.
+            heartbeat_timeout: Duration::from_millis(5 * u64::from(HEARTBEAT_PERIOD_MS)),
+            plausibility_margin_rad: 0.1,
+            max_seq_lag: 3,
+            // Ten times a period's traffic (25 frames + heartbeats) at any rate.
+            rx_budget: 256,
+        }
+    }
+}
+
+/// A heartbeat counter that repeats this many times in a row is a stuck node.
+pub const HEARTBEAT_MAX_REPEATS: u32 = 3;
 
 /// Why the loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,23 +107,117 @@ pub enum StopReason {
     Watchdog,
     /// A node reported a fault.
     NodeFault,
+    /// A node's heartbeat stopped or its counter stuck.
+    HeartbeatLost,
+    /// Stale or implausible joint state persisted.
+    ImplausibleState,
+    /// The policy failed (error or non-finite output) for too many periods in a row.
+    PolicyFailure,
+    /// The CAN controller reported bus-off.
+    BusOff,
+    /// More frames than the receive budget arrived, period after period.
+    BusOverload,
+    /// Commands could not be sent (transmit queue full) for too many periods.
+    TxFailure,
+}
+
+impl StopReason {
+    /// The name used in JSON summaries.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::DurationReached => "duration",
+            Self::StopRequested => "stop_requested",
+            Self::Watchdog => "watchdog",
+            Self::NodeFault => "node_fault",
+            Self::HeartbeatLost => "heartbeat_lost",
+            Self::ImplausibleState => "implausible_state",
+            Self::PolicyFailure => "policy_failure",
+            Self::BusOff => "bus_off",
+            Self::BusOverload => "bus_overload",
+            Self::TxFailure => "tx_failure",
+        }
+    }
+}
+
+/// SocketCAN error frames received, by class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ErrorFrameCounts {
+    pub bus_off: u64,
+    /// Controller problems (error-warning, error-passive, overflows).
+    pub controller: u64,
+    pub protocol: u64,
+    pub no_ack: u64,
+    /// Every other class (arbitration lost, transceiver, bus error, restarted, tx timeout).
+    pub other: u64,
+}
+
+impl ErrorFrameCounts {
+    fn count(&mut self, class: u32) {
+        if class & ErrorClass::BUS_OFF != 0 {
+            self.bus_off += 1;
+        } else if class & ErrorClass::CONTROLLER != 0 {
+            self.controller += 1;
+        } else if class & ErrorClass::PROTOCOL != 0 {
+            self.protocol += 1;
+        } else if class & ErrorClass::NO_ACK != 0 {
+            self.no_ack += 1;
+        } else {
+            self.other += 1;
+        }
+    }
+
+    pub fn total(&self) -> u64 {
+        self.bus_off + self.controller + self.protocol + self.no_ack + self.other
+    }
+}
+
+/// What crossed the link, and what of it was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkCounts {
+    /// Frames on the wire (with CAN FD one frame carries several messages).
+    pub frames_in: u64,
+    pub frames_out: u64,
+    /// Protocol messages decoded and sent.
+    pub messages_in: u64,
+    pub messages_out: u64,
+    /// Frames with a protocol id but a wrong length or payload, extended or remote frames:
+    /// counted, ignored. (Ids outside the protocol are dropped by the socket's filter.)
+    pub bad_frames: u64,
+    /// Node frames whose seq lagged the last command by more than `max_seq_lag`: dropped.
+    pub stale_frames: u64,
+    /// Joint positions outside their range plus the margin: dropped.
+    pub implausible_frames: u64,
+    /// Periods in which a finger sent no fresh joint position, summed over fingers.
+    pub lost_frames: u64,
+    pub error_frames: ErrorFrameCounts,
+    /// Frames not sent because the transmit queue stayed full.
+    pub tx_dropped: u64,
+    /// Periods whose receive budget ran out.
+    pub overload_periods: u64,
+    pub heartbeats_out: u64,
 }
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoopReport {
     pub stop_reason: StopReason,
+    /// What exactly stopped the loop (which node, which error), empty for a normal end.
+    pub stop_detail: String,
+    /// Command sets sent on time or late (skipped periods are not steps).
     pub steps: u64,
     pub achieved_rate_hz: f64,
     /// How late the loop woke after each deadline.
     pub wake_jitter: Percentiles,
     /// Time from waking to commands sent.
     pub loop_time: Percentiles,
-    /// Steps whose work ran past the next deadline.
+    /// Periods whose commands did not go out before the next deadline, skipped ones
+    /// included.
     pub deadline_misses: u64,
-    pub frames_in: u64,
-    pub frames_out: u64,
-    /// Frames that were not standard 8-byte data frames of the protocol: counted, ignored.
-    pub bad_frames: u64,
+    /// Periods skipped because the loop woke after they had passed.
+    pub skipped_periods: u64,
+    pub link: LinkCounts,
+    /// Steps that held the last safe targets instead of running the policy's action.
+    pub holds: u64,
+    pub policy_errors: u64,
     pub safety: SafetyCounts,
     /// Last targets sent while enabled.
     pub final_targets_rad: [f32; 15],
@@ -78,49 +227,106 @@ pub struct LoopReport {
 pub enum LoopError {
     #[error("transport: {0}")]
     Transport(#[from] TransportError),
-    #[error("no joint state from every finger within {0:?} of start (is the hand powered and on the bus?)")]
-    StartupTimeout(Duration),
+    #[error("no {missing} within {timeout:?} of start (is the hand powered and on the bus?)")]
+    StartupTimeout { timeout: Duration, missing: String },
     #[error("rate must be a positive finite number of Hz, got {0}")]
     BadRate(f64),
+}
+
+/// A problem that halts the loop once it has lasted more than `limit` periods in a row.
+#[derive(Debug, Default)]
+struct Persisting {
+    run: u32,
+}
+
+impl Persisting {
+    /// Records one period with (`true`) or without the problem; whether it now halts.
+    fn record(&mut self, present: bool, limit: u32) -> bool {
+        self.run = if present { self.run + 1 } else { 0 };
+        self.run > limit
+    }
 }
 
 struct Io<'t, T: Transport> {
     transport: &'t mut T,
     state: HandState,
-    frames_in: u64,
-    frames_out: u64,
-    bad_frames: u64,
-    seq: u8,
+    check: Plausibility,
+    counts: LinkCounts,
+    /// Seq of the last command set sent; `None` before the first.
+    seq: Option<u8>,
+    heartbeat_counter: u8,
+    next_heartbeat: Instant,
 }
 
 impl<T: Transport> Io<'_, T> {
-    fn drain(&mut self) -> Result<(), TransportError> {
-        while let Some(received) = self.transport.recv(Duration::ZERO)? {
-            self.frames_in += 1;
+    /// Takes in what is queued, at most `budget` frames; returns whether frames were left.
+    fn drain(&mut self, budget: usize) -> Result<bool, TransportError> {
+        for _ in 0..budget {
+            let Some(received) = self.transport.recv(Duration::ZERO)? else { return Ok(false) };
             let now = Instant::now();
             match received {
                 Received::Frame(f) => match Message::decode_frame(&f) {
-                    Ok(m) => self.state.apply(&m, now),
-                    Err(_) => self.bad_frames += 1,
+                    Ok(m) => {
+                        self.counts.messages_in += 1;
+                        self.state.apply(&m, now, &self.check, self.seq);
+                    }
+                    Err(_) => self.counts.bad_frames += 1,
                 },
-                Received::Malformed { .. } => self.bad_frames += 1,
+                Received::Malformed { .. } => self.counts.bad_frames += 1,
+                Received::Error { class } => self.counts.error_frames.count(class),
             }
         }
-        Ok(())
+        Ok(true)
     }
 
-    fn send_targets(&mut self, targets: &[f32; 15], enable: bool) -> Result<(), TransportError> {
-        self.seq = self.seq.wrapping_add(1);
+    /// Sends `message`, retrying once on a full transmit queue; a frame that still cannot go
+    /// is dropped and counted (`false`).
+    fn send(&mut self, message: &Message) -> Result<bool, TransportError> {
+        // Values come from the safety filter (within joint limits) or are constants, so
+        // encoding cannot fail; if it ever did, sending nothing lets the node time out safely.
+        let Ok(frame) = message.encode() else { return Ok(false) };
+        for attempt in 0..2 {
+            match self.transport.send(&frame) {
+                Ok(()) => {
+                    self.counts.messages_out += 1;
+                    return Ok(true);
+                }
+                Err(TransportError::TxQueueFull { .. }) if attempt == 0 => {
+                    std::thread::sleep(Duration::from_micros(100));
+                }
+                Err(TransportError::TxQueueFull { .. }) => break,
+                Err(e) => return Err(e),
+            }
+        }
+        self.counts.tx_dropped += 1;
+        Ok(false)
+    }
+
+    /// One command set with a new seq; whether every frame went out.
+    fn send_targets(&mut self, targets: &[f32; 15], enable: bool) -> Result<bool, TransportError> {
+        let seq = self.seq.map_or(1, |s| s.wrapping_add(1));
+        self.seq = Some(seq);
+        let mut all_sent = true;
         for finger in FingerId::all() {
             let i = usize::from(finger.index()) * 3;
             let q = [targets[i], targets[i + 1], targets[i + 2]];
-            let cmd = Message::JointCommand(JointCommand { finger, q_target_rad: q, enable, seq: self.seq });
-            // Safe targets are within joint limits (|q| < 3.2 rad), so encoding cannot fail;
-            // if it ever did, sending nothing for that finger lets its node time out safely.
-            if let Ok(frame) = cmd.encode() {
-                self.transport.send(&frame)?;
-                self.frames_out += 1;
-            }
+            all_sent &=
+                self.send(&Message::JointCommand(JointCommand { finger, q_target_rad: q, enable, seq }))?;
+        }
+        Ok(all_sent)
+    }
+
+    /// The host's heartbeat, when one is due.
+    fn heartbeat(&mut self, now: Instant, state: NodeState) -> Result<(), TransportError> {
+        if now < self.next_heartbeat {
+            return Ok(());
+        }
+        let period = Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS));
+        self.next_heartbeat = (self.next_heartbeat + period).max(now);
+        let beat = Heartbeat { node: HOST_NODE, state, counter: self.heartbeat_counter };
+        self.heartbeat_counter = self.heartbeat_counter.wrapping_add(1);
+        if self.send(&Message::Heartbeat(beat))? {
+            self.counts.heartbeats_out += 1;
         }
         Ok(())
     }
@@ -136,7 +342,81 @@ fn wait_until(deadline: Instant, spin: Duration) {
     }
 }
 
-/// Runs the loop until the duration, the stop flag, the watchdog or a node fault ends it,
+const FINGER_NAMES: [&str; NUM_FINGERS as usize] = ["thumb", "index", "middle", "ring", "little"];
+
+/// Startup: disabled commands ask every node for its state until all have answered with
+/// positions, targets and a heartbeat. Returns the targets to start from: those the nodes
+/// hold (they keep the current grasp), or, for a node that never reports targets, its
+/// measured positions after a few more query rounds.
+fn start_up<T: Transport>(
+    io: &mut Io<'_, T>,
+    config: &LoopConfig,
+    stop: &AtomicBool,
+) -> Result<[f32; 15], LoopError> {
+    let period = Duration::from_secs_f64(1.0 / config.rate_hz);
+    let started = Instant::now();
+    let mut rounds_with_positions = 0;
+    loop {
+        io.drain(config.rx_budget)?;
+        let heartbeats =
+            io.state.heartbeat_problem(Instant::now(), config.heartbeat_timeout, HEARTBEAT_MAX_REPEATS);
+        match (io.state.q_rad(), io.state.q_target_rad(), heartbeats) {
+            (Some(_), Some(targets), None) => return Ok(targets),
+            (Some(q), None, None) if rounds_with_positions >= 3 => return Ok(q),
+            (Some(_), None, _) => rounds_with_positions += 1,
+            _ => {}
+        }
+        if started.elapsed() > config.startup_timeout || stop.load(Ordering::Relaxed) {
+            let missing = match (io.state.q_rad(), heartbeats) {
+                (None, _) => "joint state from every finger".to_owned(),
+                (
+                    Some(_),
+                    Some(HeartbeatProblem::Missing { finger } | HeartbeatProblem::Stuck { finger, .. }),
+                ) => {
+                    format!("heartbeat from node {finger} ({})", FINGER_NAMES[finger])
+                }
+                (Some(_), None) => "joint targets".to_owned(),
+            };
+            return Err(LoopError::StartupTimeout { timeout: config.startup_timeout, missing });
+        }
+        io.heartbeat(Instant::now(), NodeState::Ready)?;
+        io.send_targets(&[0.0; 15], false)?;
+        std::thread::sleep(period.min(Duration::from_millis(10)));
+    }
+}
+
+/// Why the hand's state cannot be trusted this period, if it cannot: the halting reason and
+/// its detail.
+fn distrust<T: Transport>(io: &Io<'_, T>, config: &LoopConfig, now: Instant) -> Option<(StopReason, String)> {
+    if io.counts.error_frames.bus_off > 0 {
+        return Some((StopReason::BusOff, "the CAN controller reported bus-off".to_owned()));
+    }
+    if let Some(f) = io.state.fault.iter().position(|&f| f) {
+        return Some((StopReason::NodeFault, format!("node {f} ({}) reported a fault", FINGER_NAMES[f])));
+    }
+    match io.state.heartbeat_problem(now, config.heartbeat_timeout, HEARTBEAT_MAX_REPEATS) {
+        Some(HeartbeatProblem::Missing { finger }) => {
+            let detail = format!(
+                "no heartbeat from node {finger} ({}) for {:?}",
+                FINGER_NAMES[finger], config.heartbeat_timeout
+            );
+            return Some((StopReason::HeartbeatLost, detail));
+        }
+        Some(HeartbeatProblem::Stuck { finger, counter }) => {
+            let detail =
+                format!("heartbeat counter of node {finger} ({}) stuck at {counter}", FINGER_NAMES[finger]);
+            return Some((StopReason::HeartbeatLost, detail));
+        }
+        None => {}
+    }
+    let watchdog = Duration::from_secs_f64(f64::from(config.watchdog_periods.max(1)) / config.rate_hz);
+    if io.state.oldest_position_age(now).is_none_or(|age| age > watchdog) {
+        return Some((StopReason::Watchdog, format!("no fresh joint state for {watchdog:?}")));
+    }
+    None
+}
+
+/// Runs the loop until the duration, the stop flag or a problem it does not trust ends it,
 /// then runs the halt sequence (hold, then disable).
 pub fn run<T: Transport, P: PolicyRunner>(
     transport: &mut T,
@@ -148,93 +428,190 @@ pub fn run<T: Transport, P: PolicyRunner>(
         return Err(LoopError::BadRate(config.rate_hz));
     }
     let period = Duration::from_secs_f64(1.0 / config.rate_hz);
-    let mut io =
-        Io { transport, state: HandState::default(), frames_in: 0, frames_out: 0, bad_frames: 0, seq: 0 };
-
-    // Startup: disabled commands ask every node for its state, until all have answered.
-    // Start from the targets the nodes hold (they keep the current grasp). Nodes answer a
-    // query with positions then targets; a node that never reports targets gets its
-    // measured positions after a few more query rounds.
-    let started = Instant::now();
-    let mut rounds_with_positions = 0;
-    let q_start = loop {
-        io.drain()?;
-        match (io.state.q_rad(), io.state.q_target_rad()) {
-            (Some(_), Some(targets)) => break targets,
-            (Some(q), None) if rounds_with_positions >= 3 => break q,
-            (Some(_), None) => rounds_with_positions += 1,
-            _ => {}
-        }
-        if started.elapsed() > config.startup_timeout || stop.load(Ordering::Relaxed) {
-            return Err(LoopError::StartupTimeout(config.startup_timeout));
-        }
-        io.send_targets(&[0.0; 15], false)?;
-        std::thread::sleep(period.min(Duration::from_millis(10)));
+    let check = Plausibility {
+        limits: config.limits,
+        margin_rad: config.plausibility_margin_rad,
+        max_seq_lag: config.max_seq_lag,
     };
+    let mut io = Io {
+        transport,
+        state: HandState::default(),
+        check,
+        counts: LinkCounts::default(),
+        seq: None,
+        heartbeat_counter: 0,
+        next_heartbeat: Instant::now(),
+    };
+    let q_start = start_up(&mut io, config, stop)?;
     let mut safety = SafetyFilter::new(config.max_delta_rad, config.limits, q_start);
-    let watchdog = period * config.watchdog_periods.max(1);
+    let limit = config.watchdog_periods.max(1);
 
-    let mut wake_jitter = Vec::new();
-    let mut loop_times = Vec::new();
-    let mut deadline_misses = 0;
+    let (mut wake_jitter, mut loop_times) = (Vec::new(), Vec::new());
+    let (mut deadline_misses, mut skipped_periods, mut holds, mut policy_errors) = (0, 0, 0, 0);
+    let (mut suspect, mut failing_policy) = (Persisting::default(), Persisting::default());
+    let (mut overload, mut unsent) = (Persisting::default(), Persisting::default());
+    let mut last_positions = io.state.position_times();
     let start = Instant::now();
-    let mut step: u64 = 0;
-    let stop_reason = loop {
-        let deadline = start + period.mul_f64(step as f64);
+    let (mut period_index, mut steps): (u64, u64) = (0, 0);
+    let (stop_reason, stop_detail) = loop {
+        let mut deadline = start + period.mul_f64(period_index as f64);
         wait_until(deadline, config.spin);
         let woke = Instant::now();
+        let behind = (woke.saturating_duration_since(deadline).as_secs_f64() / period.as_secs_f64()) as u64;
+        if behind > 0 {
+            period_index += behind;
+            skipped_periods += behind;
+            deadline_misses += behind;
+            deadline = start + period.mul_f64(period_index as f64);
+        }
         wake_jitter.push(woke.saturating_duration_since(deadline));
 
         if stop.load(Ordering::Relaxed) {
-            break StopReason::StopRequested;
+            break (StopReason::StopRequested, String::new());
         }
         if config.duration.is_some_and(|d| woke.saturating_duration_since(start) >= d) {
-            break StopReason::DurationReached;
+            break (StopReason::DurationReached, String::new());
         }
-        io.drain()?;
-        if io.state.any_fault() {
-            break StopReason::NodeFault;
+        let flooded = io.drain(config.rx_budget)?;
+        if flooded {
+            io.counts.overload_periods += 1;
         }
-        let fresh = io.state.oldest_position_age(woke).is_some_and(|age| age <= watchdog);
-        if !fresh {
-            break StopReason::Watchdog;
+        if overload.record(flooded, limit) {
+            break (StopReason::BusOverload, format!("more than {} frames per period", config.rx_budget));
         }
-        let q = io.state.q_rad().unwrap_or(q_start);
-        let obs = build_observation(&q, &safety.last_safe_rad(), &io.state.contacts());
-        // A policy error (e.g. NaN in the observation) holds the last safe targets.
-        let delta = policy.act(&obs).unwrap_or([f32::NAN; 15]);
-        let targets = safety.apply_delta(&delta);
-        io.send_targets(&targets, true)?;
+        // Stale or implausible frames this period: hold rather than act on a state the
+        // policy never saw in training. Checked before the watchdog, which the dropped frames
+        // trip too, so that the stop names the cause.
+        let suspects = io.state.take_suspects();
+        let hold = suspects.iter().any(|&s| s);
+        if suspect.record(hold, limit) {
+            let f = suspects.iter().position(|&s| s).unwrap_or(0);
+            let detail =
+                format!("node {f} ({}) sent stale or implausible state for {limit} periods", FINGER_NAMES[f]);
+            break (StopReason::ImplausibleState, detail);
+        }
+        if let Some((reason, detail)) = distrust(&io, config, woke) {
+            // Joint state goes stale when its frames are refused: name the cause.
+            if reason == StopReason::Watchdog && suspect.run > 0 {
+                let f = suspects.iter().position(|&s| s).unwrap_or(0);
+                let why = format!("node {f} ({}) sent stale or implausible state; {detail}", FINGER_NAMES[f]);
+                break (StopReason::ImplausibleState, why);
+            }
+            break (reason, detail);
+        }
+        // From the second step on: the first drains what start-up's queries left queued.
+        let positions = io.state.position_times();
+        if steps > 0 {
+            io.counts.lost_frames +=
+                positions.iter().zip(&last_positions).filter(|(now, before)| now == before).count() as u64;
+        }
+        last_positions = positions;
+
+        let targets = if hold {
+            holds += 1;
+            safety.last_safe_rad()
+        } else {
+            let q = io.state.q_rad().unwrap_or(q_start);
+            let obs = build_observation(&q, &safety.last_safe_rad(), &io.state.contacts());
+            let action = policy.act(&obs);
+            let failed = !action.as_ref().is_ok_and(|a| a.iter().all(|v| v.is_finite()));
+            if failed {
+                policy_errors += 1;
+                holds += 1;
+            }
+            if failing_policy.record(failed, limit) {
+                let detail = match action {
+                    Err(e) => format!("the policy failed for {limit} periods: {e}"),
+                    Ok(_) => format!("the policy's action was not finite for {limit} periods"),
+                };
+                break (StopReason::PolicyFailure, detail);
+            }
+            // A failed action goes to the filter as NaN: it holds the last safe targets.
+            safety.apply_delta(&action.unwrap_or([f32::NAN; 15]))
+        };
+        io.heartbeat(woke, NodeState::Enabled)?;
+        let sent = io.send_targets(&targets, true)?;
+        if unsent.record(!sent, limit) {
+            break (
+                StopReason::TxFailure,
+                format!("commands could not be sent for {limit} periods (transmit queue full)"),
+            );
+        }
+        steps += 1;
 
         let done = Instant::now();
         loop_times.push(done - woke);
         if done > deadline + period {
             deadline_misses += 1;
         }
-        step += 1;
+        period_index += 1;
     };
     let elapsed = start.elapsed();
     let final_targets_rad = safety.last_safe_rad();
 
     // Halt: hold the last safe targets (motors on, so the grasp does not drop), then disable.
+    // Best effort: a bus that refuses frames now leaves the nodes to their command timeout.
+    let halting = if matches!(stop_reason, StopReason::DurationReached | StopReason::StopRequested) {
+        NodeState::Ready
+    } else {
+        NodeState::Fault
+    };
     for _ in 0..config.halt_hold_periods {
         std::thread::sleep(period);
-        io.send_targets(&final_targets_rad, true)?;
+        let _ = io.drain(config.rx_budget);
+        let _ = io.heartbeat(Instant::now(), halting);
+        let _ = io.send_targets(&final_targets_rad, true);
     }
-    io.send_targets(&final_targets_rad, false)?;
-    io.drain()?;
+    let _ = io.send_targets(&final_targets_rad, false);
+    let _ = io.drain(config.rx_budget);
 
+    let bus = io.transport.bus_counts();
+    io.counts.frames_in = bus.frames_in;
+    io.counts.frames_out = bus.frames_out;
+    io.counts.stale_frames = io.state.stale_frames;
+    io.counts.implausible_frames = io.state.implausible_frames;
     Ok(LoopReport {
         stop_reason,
-        steps: step,
-        achieved_rate_hz: if elapsed.is_zero() { 0.0 } else { step as f64 / elapsed.as_secs_f64() },
+        stop_detail,
+        steps,
+        achieved_rate_hz: if elapsed.is_zero() { 0.0 } else { steps as f64 / elapsed.as_secs_f64() },
         wake_jitter: Percentiles::of(&mut wake_jitter),
         loop_time: Percentiles::of(&mut loop_times),
         deadline_misses,
-        frames_in: io.frames_in,
-        frames_out: io.frames_out,
-        bad_frames: io.bad_frames,
+        skipped_periods,
+        link: io.counts,
+        holds,
+        policy_errors,
         safety: safety.counts,
         final_targets_rad,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_problem_halts_only_once_it_outlasts_the_limit() {
+        let mut p = Persisting::default();
+        assert!(!p.record(true, 2) && !p.record(true, 2));
+        assert!(!p.record(false, 2), "a good period resets the count");
+        assert!(!p.record(true, 2) && !p.record(true, 2) && p.record(true, 2));
+    }
+
+    #[test]
+    fn error_frames_are_counted_by_class() {
+        let mut c = ErrorFrameCounts::default();
+        for class in [
+            ErrorClass::BUS_OFF,
+            ErrorClass::CONTROLLER,
+            ErrorClass::CONTROLLER | ErrorClass::PROTOCOL,
+            ErrorClass::NO_ACK,
+            ErrorClass::LOST_ARBITRATION,
+        ] {
+            c.count(class);
+        }
+        assert_eq!(c, ErrorFrameCounts { bus_off: 1, controller: 2, protocol: 0, no_ack: 1, other: 1 });
+        assert_eq!(c.total(), 5);
+    }
 }

@@ -2,13 +2,16 @@
 //!
 //! It lets the bridge be exercised end to end on a virtual CAN bus (vcan) without hardware:
 //! each finger node applies enabled commands as a first-order lag towards the target and
-//! answers every command with a joint position frame that echoes its sequence number.
+//! answers every command with a joint position frame that echoes its sequence number. The
+//! node duties (heartbeats, enable state, command timeout) are [`NodeSupervisor`]'s.
 
-use std::time::Duration;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use thiserror::Error;
 
-use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError, STATUS_ENABLED};
+use crate::node_supervisor::NodeSupervisor;
+use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError};
 use crate::transport::{Received, Transport, TransportError};
 
 /// Joint positions of all fingers, moving towards their commanded targets.
@@ -25,20 +28,16 @@ impl JointControllerEmulator {
         Self { q_rad: [[0.0; 3]; NUM_FINGERS as usize], response: response.clamp(0.0, 1.0) }
     }
 
-    /// Applies one command and returns the finger's state after it.
-    pub fn apply(&mut self, cmd: &JointCommand) -> JointPosition {
+    /// Applies one command (moving only if it is enabled and `apply` is set: a faulted node
+    /// holds) and returns the finger's state after it, with the given status byte.
+    pub fn apply(&mut self, cmd: &JointCommand, apply: bool, status: u8) -> JointPosition {
         let q = &mut self.q_rad[usize::from(cmd.finger.index())];
-        if cmd.enable {
+        if cmd.enable && apply {
             for (q_i, target) in q.iter_mut().zip(cmd.q_target_rad) {
                 *q_i += self.response * (target - *q_i);
             }
         }
-        JointPosition {
-            finger: cmd.finger,
-            q_rad: *q,
-            status: if cmd.enable { STATUS_ENABLED } else { 0 },
-            seq: cmd.seq,
-        }
+        JointPosition { finger: cmd.finger, q_rad: *q, status, seq: cmd.seq }
     }
 }
 
@@ -56,19 +55,44 @@ pub struct EmulatorStats {
     pub commands: u64,
     /// Frames on the bus that were not joint commands (other nodes' traffic).
     pub ignored: u64,
+    /// Command-timeout faults the nodes raised.
+    pub command_timeouts: u64,
+    pub heartbeats_sent: u64,
 }
 
-/// Serves joint commands on `transport` until `max_commands` were answered or no frame
-/// arrived for `idle_timeout`.
+/// When [`serve`] stops, and the nodes' command timeout.
+#[derive(Debug, Clone, Copy)]
+pub struct ServeLimits {
+    /// Stop after answering this many commands (the nodes then fall silent).
+    pub max_commands: u64,
+    /// Stop when no frame arrived for this long.
+    pub idle_timeout: Duration,
+    pub command_timeout: Duration,
+}
+
+/// Serves joint commands on `transport` until `limits` or `stop` end it, sending the
+/// nodes' heartbeats and command-timeout faults as they fall due.
 pub fn serve<T: Transport>(
     transport: &mut T,
     emulator: &mut JointControllerEmulator,
-    max_commands: u64,
-    idle_timeout: Duration,
+    limits: ServeLimits,
+    stop: &AtomicBool,
 ) -> Result<EmulatorStats, EmulatorError> {
     let mut stats = EmulatorStats::default();
-    while stats.commands < max_commands {
-        let Some(received) = transport.recv(idle_timeout)? else { break };
+    let mut nodes = NodeSupervisor::new(limits.command_timeout, Instant::now());
+    let mut last_frame = Instant::now();
+    while stats.commands < limits.max_commands && !stop.load(Ordering::Relaxed) {
+        let now = Instant::now();
+        for frame in nodes.poll(now)? {
+            transport.send(&frame)?;
+        }
+        if now.saturating_duration_since(last_frame) >= limits.idle_timeout {
+            break;
+        }
+        let Some(received) = transport.recv(nodes.until_due(now, Duration::from_millis(20)))? else {
+            continue;
+        };
+        last_frame = Instant::now();
         let Received::Frame(frame) = received else {
             stats.ignored += 1;
             continue;
@@ -77,30 +101,35 @@ pub fn serve<T: Transport>(
             stats.ignored += 1;
             continue;
         };
-        let state = Message::JointPosition(emulator.apply(&cmd));
+        let applied = nodes.on_command(&cmd, last_frame);
+        let state = Message::JointPosition(emulator.apply(&cmd, applied, nodes.status(cmd.finger)));
         transport.send(&state.encode()?)?;
         stats.commands += 1;
     }
+    stats.command_timeouts = nodes.command_timeouts;
+    stats.heartbeats_sent = nodes.heartbeats_sent;
     Ok(stats)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::FingerId;
+    use crate::protocol::{FingerId, STATUS_ENABLED};
 
     #[test]
     fn enabled_commands_move_towards_target_and_disabled_ones_hold() {
         let mut emu = JointControllerEmulator::new(0.5);
         let finger = FingerId::new(2).expect("valid");
         let cmd = JointCommand { finger, q_target_rad: [0.4, -0.2, 1.0], enable: true, seq: 9 };
-        let s1 = emu.apply(&cmd);
+        let s1 = emu.apply(&cmd, true, STATUS_ENABLED);
         assert_eq!(s1.q_rad, [0.2, -0.1, 0.5]);
         assert_eq!((s1.status, s1.seq), (STATUS_ENABLED, 9));
-        let s2 = emu.apply(&cmd);
+        let s2 = emu.apply(&cmd, true, STATUS_ENABLED);
         assert_eq!(s2.q_rad, [0.3, -0.15, 0.75]);
-        let hold = emu.apply(&JointCommand { enable: false, seq: 10, ..cmd });
+        let hold = emu.apply(&JointCommand { enable: false, seq: 10, ..cmd }, true, 0);
         assert_eq!(hold.q_rad, s2.q_rad);
         assert_eq!(hold.status, 0);
+        let faulted = emu.apply(&cmd, false, 0);
+        assert_eq!(faulted.q_rad, s2.q_rad, "a faulted node holds");
     }
 }

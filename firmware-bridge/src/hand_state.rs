@@ -1,13 +1,50 @@
 //! The latest readings from the hand's nodes, assembled from protocol messages, with the time
 //! each arrived so the control loop can tell fresh state from stale.
+//!
+//! Readings are checked before they are kept (`Plausibility`): a frame whose seq lags the
+//! last command sent by more than a bound is stale, a joint position outside the joint's
+//! range plus a margin is implausible. Neither enters the state; both are counted and flag
+//! their finger as suspect until the loop takes the flags ([`HandState::take_suspects`]).
 
 use std::time::{Duration, Instant};
 
+use vge_sim::kinematics::JointLimit;
 use vge_sim::observation::FingertipReading;
 
-use crate::protocol::{Message, NUM_FINGERS, STATUS_FAULT};
+use crate::protocol::{Message, NUM_FINGERS, NodeState, STATUS_FAULT};
 
 const FINGERS: usize = NUM_FINGERS as usize;
+
+/// What a reading must satisfy to be believed.
+#[derive(Debug, Clone, Copy)]
+pub struct Plausibility {
+    pub limits: [JointLimit; 15],
+    /// How far outside its range a measured joint may read (encoder noise, compliance).
+    pub margin_rad: f32,
+    /// Largest accepted lag of a frame's seq behind the last command sent.
+    pub max_seq_lag: u8,
+}
+
+/// The last heartbeat of a node, and how often its counter repeated in a row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HeartbeatSeen {
+    pub at: Instant,
+    pub counter: u8,
+    pub state: NodeState,
+    pub repeats: u32,
+}
+
+/// What happened to one received message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Applied {
+    Kept,
+    /// Its seq lagged the last command by more than allowed (or was never sent).
+    Stale,
+    /// A joint position outside its range plus the margin.
+    Implausible,
+    /// Not hand state (commands, the host's heartbeat).
+    Ignored,
+}
 
 /// Per-finger readings; `None` until the first frame of that kind arrived.
 #[derive(Debug, Clone, Default)]
@@ -21,17 +58,48 @@ pub struct HandState {
     q_target_rad: [Option<[f32; 3]>; FINGERS],
     tip_position_m: [Option<([f32; 3], f32)>; FINGERS],
     tip_normal: [Option<([f32; 3], bool)>; FINGERS],
-    /// A node reported a fault (fault frame, or the fault bit in its position status).
+    /// A node reported a fault (fault frame, the fault bit in its position status, or
+    /// heartbeat state fault).
     pub fault: [bool; FINGERS],
+    pub heartbeat: [Option<HeartbeatSeen>; FINGERS],
+    /// Fingers that sent a stale or implausible frame since the last `take_suspects`.
+    suspect: [bool; FINGERS],
+    pub stale_frames: u64,
+    pub implausible_frames: u64,
 }
 
 impl HandState {
-    /// Takes in one decoded message received at `now`. Commands and heartbeats are ignored
-    /// (they carry no hand state).
-    pub fn apply(&mut self, message: &Message, now: Instant) {
+    /// Takes in one decoded message received at `now`, after checking it against `check`
+    /// and `last_seq_sent` (the seq of the host's last command; `None` before the first).
+    pub fn apply(
+        &mut self,
+        message: &Message,
+        now: Instant,
+        check: &Plausibility,
+        last_seq_sent: Option<u8>,
+    ) -> Applied {
+        if let (Some(finger), Some(seq), Some(sent)) =
+            (message_finger(message), message_seq(message), last_seq_sent)
+        {
+            // Wrapping lag: a seq from the future (never sent) is a huge lag, also refused.
+            if sent.wrapping_sub(seq) > check.max_seq_lag {
+                self.stale_frames += 1;
+                self.suspect[finger] = true;
+                return Applied::Stale;
+            }
+        }
         match *message {
             Message::JointPosition(p) => {
                 let f = usize::from(p.finger.index());
+                let outside = p.q_rad.iter().enumerate().any(|(j, &q)| {
+                    let l = check.limits[3 * f + j];
+                    !(l.lower_rad - check.margin_rad..=l.upper_rad + check.margin_rad).contains(&q)
+                });
+                if outside {
+                    self.implausible_frames += 1;
+                    self.suspect[f] = true;
+                    return Applied::Implausible;
+                }
                 self.q_rad[f] = Some(p.q_rad);
                 self.q_at[f] = Some(now);
                 self.applied_seq[f] = Some(p.seq);
@@ -49,8 +117,49 @@ impl HandState {
                 self.q_target_rad[usize::from(t.finger.index())] = Some(t.q_target_rad)
             }
             Message::Fault(f) => self.fault[usize::from(f.finger.index())] = true,
-            Message::JointCommand(_) | Message::Heartbeat(_) => {}
+            Message::Heartbeat(h) if h.node < NUM_FINGERS => {
+                let f = usize::from(h.node);
+                let repeats = match self.heartbeat[f] {
+                    Some(last) if last.counter == h.counter => last.repeats + 1,
+                    _ => 0,
+                };
+                self.heartbeat[f] =
+                    Some(HeartbeatSeen { at: now, counter: h.counter, state: h.state, repeats });
+                self.fault[f] |= h.state == NodeState::Fault;
+            }
+            Message::JointCommand(_) | Message::Heartbeat(_) => return Applied::Ignored,
         }
+        Applied::Kept
+    }
+
+    /// Which fingers sent a stale or implausible frame since the last call; clears the flags.
+    pub fn take_suspects(&mut self) -> [bool; FINGERS] {
+        std::mem::take(&mut self.suspect)
+    }
+
+    /// The first node whose heartbeat is missing for longer than `timeout` (or never came),
+    /// or whose counter repeated more than `max_repeats` times in a row.
+    pub fn heartbeat_problem(
+        &self,
+        now: Instant,
+        timeout: Duration,
+        max_repeats: u32,
+    ) -> Option<HeartbeatProblem> {
+        self.heartbeat.iter().enumerate().find_map(|(f, seen)| match seen {
+            None => Some(HeartbeatProblem::Missing { finger: f }),
+            Some(s) if now.saturating_duration_since(s.at) > timeout => {
+                Some(HeartbeatProblem::Missing { finger: f })
+            }
+            Some(s) if s.repeats > max_repeats => {
+                Some(HeartbeatProblem::Stuck { finger: f, counter: s.counter })
+            }
+            Some(_) => None,
+        })
+    }
+
+    /// Time of each finger's latest joint position.
+    pub fn position_times(&self) -> [Option<Instant>; FINGERS] {
+        self.q_at
     }
 
     /// All 15 joint positions, once every finger has reported.
@@ -95,10 +204,53 @@ impl HandState {
     }
 }
 
+/// Why a node's heartbeat is not trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeartbeatProblem {
+    Missing { finger: usize },
+    Stuck { finger: usize, counter: u8 },
+}
+
+/// The finger a node frame is about (`None` for commands and the host's heartbeat).
+fn message_finger(m: &Message) -> Option<usize> {
+    let finger = match m {
+        Message::Fault(x) => x.finger,
+        Message::JointPosition(x) => x.finger,
+        Message::JointVelocity(x) => x.finger,
+        Message::JointEffort(x) => x.finger,
+        Message::TipContact(x) => x.finger,
+        Message::TipNormal(x) => x.finger,
+        Message::JointTarget(x) => x.finger,
+        Message::JointCommand(_) | Message::Heartbeat(_) => return None,
+    };
+    Some(usize::from(finger.index()))
+}
+
+/// The seq a node frame echoes (the last command it applied). Faults are kept whatever
+/// their seq: a fault is never ignored as stale.
+fn message_seq(m: &Message) -> Option<u8> {
+    match m {
+        Message::JointPosition(x) => Some(x.seq),
+        Message::JointVelocity(x) => Some(x.seq),
+        Message::JointEffort(x) => Some(x.seq),
+        Message::TipNormal(x) => Some(x.seq),
+        Message::JointTarget(x) => Some(x.seq),
+        Message::Fault(_) | Message::TipContact(_) | Message::JointCommand(_) | Message::Heartbeat(_) => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{FingerId, JointPosition, TipContact, TipNormal};
+    use crate::protocol::{FingerId, Heartbeat, JointPosition, TipContact, TipNormal};
+
+    fn check() -> Plausibility {
+        Plausibility {
+            limits: [JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15],
+            margin_rad: 0.1,
+            max_seq_lag: 2,
+        }
+    }
 
     #[test]
     fn positions_complete_only_when_every_finger_reported_and_ages_track_the_oldest() {
@@ -109,13 +261,20 @@ mod tests {
             s.apply(
                 &Message::JointPosition(JointPosition { finger, q_rad: [0.1; 3], status: 1, seq: 1 }),
                 t0,
+                &check(),
+                Some(1),
             );
         }
         assert!(s.q_rad().is_none());
         assert!(s.oldest_position_age(t0).is_none());
         let later = t0 + Duration::from_millis(30);
         let finger = FingerId::new(4).expect("finger");
-        s.apply(&Message::JointPosition(JointPosition { finger, q_rad: [0.2; 3], status: 3, seq: 1 }), later);
+        s.apply(
+            &Message::JointPosition(JointPosition { finger, q_rad: [0.2; 3], status: 3, seq: 1 }),
+            later,
+            &check(),
+            None,
+        );
         assert_eq!(s.q_rad().map(|q| q[14]), Some(0.2));
         assert_eq!(s.oldest_position_age(later), Some(Duration::from_millis(30)));
         assert!(s.fault[4] && s.any_fault());
@@ -126,17 +285,84 @@ mod tests {
         let mut s = HandState::default();
         let now = Instant::now();
         let finger = FingerId::new(2).expect("finger");
-        s.apply(&Message::TipContact(TipContact { finger, position_m: [0.06, 0.0, 0.0], force_n: 3.0 }), now);
+        s.apply(
+            &Message::TipContact(TipContact { finger, position_m: [0.06, 0.0, 0.0], force_n: 3.0 }),
+            now,
+            &check(),
+            None,
+        );
         assert!(s.contacts()[2].is_none());
         s.apply(
             &Message::TipNormal(TipNormal { finger, normal: [-1.0, 0.0, 0.0], in_contact: true, seq: 0 }),
             now,
+            &check(),
+            None,
         );
         assert_eq!(s.contacts()[2].map(|c| c.force_n), Some(3.0));
         s.apply(
             &Message::TipNormal(TipNormal { finger, normal: [-1.0, 0.0, 0.0], in_contact: false, seq: 0 }),
             now,
+            &check(),
+            None,
         );
         assert!(s.contacts()[2].is_none());
+    }
+
+    #[test]
+    fn stale_seqs_and_impossible_joint_positions_are_refused_counted_and_flag_the_finger() {
+        let mut s = HandState::default();
+        let now = Instant::now();
+        let finger = FingerId::new(3).expect("finger");
+        let position = |q: f32, seq: u8| {
+            Message::JointPosition(JointPosition { finger, q_rad: [0.0, q, 0.0], status: 1, seq })
+        };
+        assert_eq!(
+            s.apply(&position(0.55, 10), now, &check(), Some(12)),
+            Applied::Kept,
+            "lag 2, inside the margin"
+        );
+        assert_eq!(s.apply(&position(0.0, 9), now, &check(), Some(12)), Applied::Stale, "lag 3");
+        assert_eq!(s.apply(&position(0.0, 13), now, &check(), Some(12)), Applied::Stale, "never sent");
+        assert_eq!(s.apply(&position(3.2767, 12), now, &check(), Some(12)), Applied::Implausible);
+        assert_eq!(s.apply(&position(-0.61, 12), now, &check(), Some(12)), Applied::Implausible);
+        assert_eq!((s.stale_frames, s.implausible_frames), (2, 2));
+        assert_eq!(s.q_rad[3], Some([0.0, 0.55, 0.0]), "only the plausible reading was kept");
+        assert_eq!(s.take_suspects(), [false, false, false, true, false]);
+        assert_eq!(s.take_suspects(), [false; 5], "taking clears");
+        // Wrap-around: seq 255 is one behind 0.
+        assert_eq!(s.apply(&position(0.0, 255), now, &check(), Some(0)), Applied::Kept);
+    }
+
+    #[test]
+    fn heartbeats_missing_late_or_stuck_are_problems() {
+        let mut s = HandState::default();
+        let t0 = Instant::now();
+        let timeout = Duration::from_millis(300);
+        assert_eq!(s.heartbeat_problem(t0, timeout, 2), Some(HeartbeatProblem::Missing { finger: 0 }));
+        let beat = |node, counter| Message::Heartbeat(Heartbeat { node, state: NodeState::Enabled, counter });
+        for node in 0..5 {
+            s.apply(&beat(node, 0), t0, &check(), None);
+        }
+        assert_eq!(s.heartbeat_problem(t0, timeout, 2), None);
+        assert_eq!(
+            s.heartbeat_problem(t0 + Duration::from_millis(301), timeout, 2),
+            Some(HeartbeatProblem::Missing { finger: 0 })
+        );
+        for _ in 0..3 {
+            s.apply(&beat(2, 0), t0, &check(), None);
+        }
+        assert_eq!(
+            s.heartbeat_problem(t0, timeout, 2),
+            Some(HeartbeatProblem::Stuck { finger: 2, counter: 0 })
+        );
+        s.apply(&beat(2, 1), t0, &check(), None);
+        assert_eq!(s.heartbeat_problem(t0, timeout, 2), None);
+        s.apply(
+            &Message::Heartbeat(Heartbeat { node: 4, state: NodeState::Fault, counter: 1 }),
+            t0,
+            &check(),
+            None,
+        );
+        assert!(s.fault[4], "a node in state fault is a fault");
     }
 }

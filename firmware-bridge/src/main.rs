@@ -9,15 +9,20 @@ use std::thread;
 use std::time::Duration;
 
 use anyhow::{Context, bail};
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
+use serde_json::{Value, json};
 use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner};
-use vge_bridge::emulator::{JointControllerEmulator, serve};
+use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
 use vge_bridge::report::json_line;
 use vge_bridge::sim_hand::{self, SimHand, SimHandSummary};
-use vge_bridge::transport::{FdSocketCanTransport, InProcessTransport, SocketCanTransport};
+use vge_bridge::transport::{FdSocketCanTransport, InProcessTransport, Role, SocketCanTransport, Transport};
 use vge_sim::observation::OBS_DIM;
 use vge_sim::{EnvConfig, NUM_JOINTS, ObjectShape};
+
+/// Exit status of `emulate` when a node faulted (e.g. the bridge stopped sending commands
+/// while the fingers were enabled): the summary is printed, and scripts see the fault.
+const EXIT_NODE_FAULT: u8 = 2;
 
 /// Runs exported vge policies against the simulator or a real hand over SocketCAN.
 ///
@@ -137,7 +142,11 @@ enum Command {
     /// CAN interface, in real time, speaking the protocol.
     ///
     /// With --model sim (default) the nodes are the simulated hand holding --object: every
-    /// full set of enabled joint commands advances the simulation one control period.
+    /// full set of enabled joint commands advances the simulation one control period. The
+    /// nodes send heartbeats at 10 Hz and report their enable state; an enabled finger that
+    /// gets no command for --command-timeout-s holds and reports fault command_timeout.
+    /// Stops when no frame arrived for --idle-timeout-s or on Ctrl-C, printing a summary.
+    /// Exit status 0, or 2 when a node faulted during the run.
     Emulate {
         #[arg(long, default_value = "vcan0")]
         iface: String,
@@ -153,6 +162,10 @@ enum Command {
         /// Stop after this many seconds without a frame.
         #[arg(long, default_value_t = 10.0)]
         idle_timeout_s: f64,
+        /// An enabled finger that receives no command for this long holds and reports fault
+        /// command_timeout (cleared by a disabled command).
+        #[arg(long, default_value_t = 0.5)]
+        command_timeout_s: f64,
         /// Print one JSON line when done.
         #[arg(long)]
         json: bool,
@@ -175,13 +188,38 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
+    // `run --help` lists the joint limits of the hand, read from the one hand description.
+    let command = Cli::command().mut_subcommand("run", |c| c.after_long_help(joint_limits_help()));
+    let cli = match Cli::from_arg_matches(&command.get_matches()) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    match run(cli) {
+        Ok(code) => code,
         Err(e) => {
             eprintln!("vge-bridge: {e:#}");
             ExitCode::FAILURE
         }
     }
+}
+
+/// The joint limits every target is clamped to (and positions are checked against).
+fn joint_limits_help() -> String {
+    let limits = EnvConfig::default().hand.joint_limits();
+    let fingers = ["thumb", "index", "middle", "ring", "little"];
+    let mut text = String::from(
+        "Joint limits (rad) of the hand: the safety filter clamps every target to them, and a measured\n\
+         position more than 0.1 rad outside them is implausible (dropped and counted; the loop holds,\n\
+         and halts if it persists).\n  finger   roll              proximal flexion  distal flexion\n",
+    );
+    for (f, name) in fingers.iter().enumerate() {
+        text.push_str(&format!("  {name:<8}"));
+        for l in &limits[3 * f..3 * f + 3] {
+            text.push_str(&format!(" [{:+.3}, {:+.3}]", l.lower_rad, l.upper_rad));
+        }
+        text.push('\n');
+    }
+    text
 }
 
 /// A flag raised by Ctrl-C or SIGTERM, so loops stop cleanly (hold, then disable).
@@ -211,14 +249,10 @@ fn loop_config(args: &LoopArgs, policy_hz: f32) -> anyhow::Result<LoopConfig> {
         "--max-delta-rad must be positive"
     );
     Ok(LoopConfig {
-        rate_hz,
         duration: positive_seconds("duration", args.duration, true)?,
         watchdog_periods: args.watchdog_periods.max(1),
-        startup_timeout: Duration::from_secs(5),
-        halt_hold_periods: 3,
         max_delta_rad: args.max_delta_rad,
-        limits: EnvConfig::default().hand.joint_limits(),
-        spin: Duration::from_micros(200),
+        ..LoopConfig::new(rate_hz, EnvConfig::default().hand.joint_limits())
     })
 }
 
@@ -228,7 +262,7 @@ fn read_policy(path: &PathBuf) -> anyhow::Result<Vec<u8>> {
 
 fn print_report(
     json: bool,
-    extra: &[(&str, String)],
+    extra: &[(&str, Value)],
     cfg: &LoopConfig,
     r: &LoopReport,
     sim: Option<&SimHandSummary>,
@@ -237,20 +271,43 @@ fn print_report(
         println!("{}", json_line(extra, cfg.rate_hz, r, sim));
         return;
     }
-    println!("stopped: {:?} after {} steps", r.stop_reason, r.steps);
+    let detail = if r.stop_detail.is_empty() { String::new() } else { format!(": {}", r.stop_detail) };
+    println!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.steps);
     println!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, cfg.rate_hz);
     println!(
-        "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {}",
-        r.wake_jitter.p50_us, r.wake_jitter.p99_us, r.wake_jitter.max_us, r.deadline_misses
+        "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {} ({} periods skipped)",
+        r.wake_jitter.p50_us,
+        r.wake_jitter.p99_us,
+        r.wake_jitter.max_us,
+        r.deadline_misses,
+        r.skipped_periods
     );
     println!(
         "loop:    p50 {:.1} us, p99 {:.1} us, max {:.1} us",
         r.loop_time.p50_us, r.loop_time.p99_us, r.loop_time.max_us
     );
-    println!("frames:  {} in, {} out, {} bad", r.frames_in, r.frames_out, r.bad_frames);
+    let l = &r.link;
     println!(
-        "safety:  {} NaN holds, {} delta clamps, {} limit clamps",
-        r.safety.non_finite_holds, r.safety.delta_clamps, r.safety.limit_clamps
+        "frames:  {} in, {} out on the bus ({} / {} messages); {} bad, {} stale, {} implausible, {} lost",
+        l.frames_in,
+        l.frames_out,
+        l.messages_in,
+        l.messages_out,
+        l.bad_frames,
+        l.stale_frames,
+        l.implausible_frames,
+        l.lost_frames
+    );
+    println!(
+        "bus:     {} error frames ({} bus-off), {} frames not sent, {} overloaded periods",
+        l.error_frames.total(),
+        l.error_frames.bus_off,
+        l.tx_dropped,
+        l.overload_periods
+    );
+    println!(
+        "safety:  {} holds ({} policy errors), {} NaN holds, {} delta clamps, {} limit clamps",
+        r.holds, r.policy_errors, r.safety.non_finite_holds, r.safety.delta_clamps, r.safety.limit_clamps
     );
     if let Some(s) = sim {
         println!(
@@ -264,7 +321,7 @@ fn print_report(
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Run { policy, backend, iface, fd, object, seed, loop_args } => {
             let bytes = read_policy(&policy)?;
@@ -278,81 +335,93 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 Backend::Can => {
                     let opening = || format!("opening CAN interface {iface}");
                     let report = if fd {
-                        let mut transport = FdSocketCanTransport::open(&iface).with_context(opening)?;
+                        let mut transport =
+                            FdSocketCanTransport::open(&iface, Role::Host).with_context(opening)?;
                         control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
                     } else {
-                        let mut transport = SocketCanTransport::open(&iface).with_context(opening)?;
+                        let mut transport =
+                            SocketCanTransport::open(&iface, Role::Host).with_context(opening)?;
                         control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
                     };
-                    let backend = if fd { "\"can-fd\"" } else { "\"can\"" };
-                    print_report(loop_args.json, &[("backend", backend.into())], &cfg, &report, None);
+                    let backend = if fd { "can-fd" } else { "can" };
+                    print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None);
                 }
                 Backend::Sim => {
                     let (report, summary) = run_against_sim(&mut runner, &cfg, object, seed, &stop)?;
-                    let extra = [("backend", "\"sim\"".into()), ("object", format!("\"{object}\""))];
+                    let extra = [("backend", json!("sim")), ("object", json!(object.to_string()))];
                     print_report(loop_args.json, &extra, &cfg, &report, Some(&summary));
                 }
             }
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
-        Command::Emulate { iface, model, fd, object, seed, idle_timeout_s, json } => {
+        Command::Emulate { iface, model, fd, object, seed, idle_timeout_s, command_timeout_s, json } => {
             let idle = positive_seconds("idle-timeout-s", idle_timeout_s, false)?.unwrap_or(Duration::MAX);
+            let command_timeout =
+                positive_seconds("command-timeout-s", command_timeout_s, false)?.unwrap_or(Duration::MAX);
             let stop = stop_on_signal()?;
             anyhow::ensure!(!(fd && model == NodeModel::Lag), "--fd needs --model sim");
             let opening = || format!("opening CAN interface {iface}");
-            match model {
+            let summary = match model {
                 NodeModel::Lag => {
-                    let mut transport = SocketCanTransport::open(&iface).with_context(opening)?;
-                    let stats =
-                        serve(&mut transport, &mut JointControllerEmulator::new(0.2), u64::MAX, idle)?;
-                    eprintln!(
-                        "vge-bridge: answered {} commands, ignored {} other frames",
-                        stats.commands, stats.ignored
-                    );
+                    let mut transport =
+                        SocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
+                    let limits = ServeLimits { max_commands: u64::MAX, idle_timeout: idle, command_timeout };
+                    let stats = serve(&mut transport, &mut JointControllerEmulator::new(0.2), limits, &stop)?;
+                    let bus = transport.bus_counts();
+                    json!({
+                        "model": "lag",
+                        "commands": stats.commands,
+                        "frames_in": bus.frames_in,
+                        "frames_out": bus.frames_out,
+                        "ignored": stats.ignored,
+                        "heartbeats_sent": stats.heartbeats_sent,
+                        "command_timeouts": stats.command_timeouts,
+                    })
                 }
                 NodeModel::Sim => {
                     let mut config = EnvConfig::default();
                     config.object.shape = object;
-                    let mut hand = SimHand::new(config, seed)?;
+                    let mut hand = SimHand::new(config, seed, command_timeout)?;
                     eprintln!(
                         "vge-bridge: emulating the hand holding a {object} on {iface}{}",
                         if fd { " (CAN FD)" } else { "" }
                     );
-                    let stats = if fd {
-                        sim_hand::serve(
-                            &mut FdSocketCanTransport::open(&iface).with_context(opening)?,
-                            &mut hand,
-                            idle,
-                            &stop,
-                        )?
+                    let (stats, bus) = if fd {
+                        let mut t = FdSocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
+                        (sim_hand::serve(&mut t, &mut hand, idle, &stop)?, t.bus_counts())
                     } else {
-                        sim_hand::serve(
-                            &mut SocketCanTransport::open(&iface).with_context(opening)?,
-                            &mut hand,
-                            idle,
-                            &stop,
-                        )?
+                        let mut t = SocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
+                        (sim_hand::serve(&mut t, &mut hand, idle, &stop)?, t.bus_counts())
                     };
                     let s = hand.summary();
-                    if json {
-                        println!(
-                            "{{\"frames_in\":{},\"frames_out\":{},\"bad_frames\":{},\"sim_steps\":{},\"rotation_rad\":{:.4},\"terminated\":{}}}",
-                            stats.frames_in,
-                            stats.frames_out,
-                            stats.bad_frames,
-                            s.steps,
-                            s.rotation_rad,
-                            s.terminated
-                        );
-                    } else {
-                        println!(
-                            "frames {} in, {} out, {} bad; {} sim steps; object turned {:.3} rad",
-                            stats.frames_in, stats.frames_out, stats.bad_frames, s.steps, s.rotation_rad
-                        );
-                    }
+                    json!({
+                        "model": "sim",
+                        "frames_in": bus.frames_in,
+                        "frames_out": bus.frames_out,
+                        "messages_in": stats.frames_in,
+                        "messages_out": stats.frames_out,
+                        "bad_frames": stats.bad_frames,
+                        "heartbeats_sent": stats.heartbeats_sent,
+                        "command_timeouts": stats.command_timeouts,
+                        "sim_steps": s.steps,
+                        "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
+                        "terminated": s.terminated,
+                    })
                 }
+            };
+            let timeouts = summary["command_timeouts"].as_u64().unwrap_or(0);
+            if timeouts > 0 {
+                eprintln!(
+                    "vge-bridge: {timeouts} finger node(s) faulted with command_timeout: the bridge stopped sending \
+                     commands while they were enabled; they held their positions"
+                );
             }
-            Ok(())
+            if json {
+                println!("{summary}");
+            } else {
+                eprintln!("vge-bridge: emulator summary: {summary}");
+            }
+            Ok(if timeouts > 0 { ExitCode::from(EXIT_NODE_FAULT) } else { ExitCode::SUCCESS })
         }
         Command::Bench { policy, rate, duration, json, realtime } => {
             let loop_args = LoopArgs {
@@ -366,9 +435,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             anyhow::ensure!(duration > 0.0, "--duration must be positive");
             let stop = stop_on_signal()?;
             let (bridge_end, nodes_end) = InProcessTransport::pair();
+            let nodes_stop = Arc::new(AtomicBool::new(false));
+            let nodes_flag = nodes_stop.clone();
             let nodes = thread::spawn(move || {
                 let mut end = nodes_end;
-                serve(&mut end, &mut JointControllerEmulator::new(0.5), u64::MAX, Duration::from_secs(1))
+                let limits = ServeLimits {
+                    max_commands: u64::MAX,
+                    idle_timeout: Duration::from_secs(1),
+                    command_timeout: Duration::from_secs(1),
+                };
+                serve(&mut end, &mut JointControllerEmulator::new(0.5), limits, &nodes_flag)
             });
             let mut bridge_end = bridge_end;
             realtime.apply();
@@ -381,24 +457,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     (
                         control_loop::run(&mut bridge_end, &mut runner, &cfg, &stop)?,
                         cfg,
-                        format!("\"{}\"", path.display()),
+                        path.display().to_string(),
                     )
                 }
                 None => {
                     let cfg = loop_config(&loop_args, rate as f32)?;
-                    (control_loop::run(&mut bridge_end, &mut Hold, &cfg, &stop)?, cfg, "\"hold\"".to_owned())
+                    (control_loop::run(&mut bridge_end, &mut Hold, &cfg, &stop)?, cfg, "hold".to_owned())
                 }
             };
+            nodes_stop.store(true, Ordering::Relaxed);
             drop(bridge_end);
             let _ = nodes.join();
             print_report(
                 json,
-                &[("bench", "\"loop\"".into()), ("transport", "\"in-process\"".into()), ("policy", name)],
+                &[("bench", json!("loop")), ("transport", json!("in-process")), ("policy", json!(name))],
                 &cfg,
                 &report,
                 None,
             );
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
     }
 }
@@ -426,7 +503,8 @@ fn run_against_sim<P: PolicyRunner>(
     let (mut bridge_end, mut nodes_end) = InProcessTransport::pair();
     let nodes_stop = Arc::new(AtomicBool::new(false));
     let nodes_flag = nodes_stop.clone();
-    let hand = SimHand::new(env, seed).context("building the simulated hand")?;
+    // In-process the link cannot lose commands; the timeout only guards a stalled loop.
+    let hand = SimHand::new(env, seed, Duration::from_secs(1)).context("building the simulated hand")?;
     let nodes = thread::spawn(move || {
         let mut hand = hand;
         sim_hand::serve(&mut nodes_end, &mut hand, Duration::from_secs(5), &nodes_flag)

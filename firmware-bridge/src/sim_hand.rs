@@ -5,16 +5,19 @@
 //! fingers, the simulator advances one control period towards those targets and every node
 //! reports its state. Disabled commands (the bridge's start-up query) are answered without
 //! advancing time. The sensor frames carry what the env observes (noise included), so the
-//! bridge rebuilds the env's own observation, up to the protocol's quantisation.
+//! bridge rebuilds the env's own observation, up to the protocol's quantisation. The node
+//! duties (heartbeats, enable state, command timeout) are [`NodeSupervisor`]'s: a faulted
+//! finger's commands are not applied, so the lockstep holds.
 
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use thiserror::Error;
 use vge_sim::observation::{OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q};
 use vge_sim::{Env, EnvConfig, SimError};
 
+use crate::node_supervisor::NodeSupervisor;
 use crate::protocol::*;
 use crate::transport::{Received, Transport, TransportError};
 
@@ -37,6 +40,9 @@ pub struct ServeStats {
     pub frames_out: u64,
     /// Malformed frames or unknown ids: counted and ignored.
     pub bad_frames: u64,
+    /// Command-timeout faults the nodes raised.
+    pub command_timeouts: u64,
+    pub heartbeats_sent: u64,
 }
 
 /// Answers the bridge on `transport` until `stop` is raised or nothing arrives for
@@ -48,28 +54,35 @@ pub fn serve<T: Transport>(
     stop: &AtomicBool,
 ) -> Result<ServeStats, SimHandError> {
     let mut stats = ServeStats::default();
-    let poll = Duration::from_millis(20).min(idle_timeout);
-    let mut idle = Duration::ZERO;
-    while !stop.load(Ordering::Relaxed) && idle < idle_timeout {
-        let Some(received) = transport.recv(poll)? else {
-            idle += poll;
-            continue;
-        };
-        idle = Duration::ZERO;
+    let mut last_frame = Instant::now();
+    while !stop.load(Ordering::Relaxed) {
+        let now = Instant::now();
+        for frame in hand.nodes.poll(now)? {
+            transport.send(&frame)?;
+            stats.frames_out += 1;
+        }
+        if now.saturating_duration_since(last_frame) >= idle_timeout {
+            break;
+        }
+        let wait = hand.nodes.until_due(now, Duration::from_millis(20));
+        let Some(received) = transport.recv(wait)? else { continue };
+        last_frame = Instant::now();
         stats.frames_in += 1;
         let message = match received {
             Received::Frame(f) => Message::decode_frame(&f),
-            Received::Malformed { .. } => Err(ProtocolError::UnknownId(0)),
+            Received::Malformed { .. } | Received::Error { .. } => Err(ProtocolError::UnknownId(0)),
         };
         let Ok(message) = message else {
             stats.bad_frames += 1;
             continue;
         };
-        for frame in hand.on_message(&message)? {
+        for frame in hand.on_message(&message, last_frame)? {
             transport.send(&frame)?;
             stats.frames_out += 1;
         }
     }
+    stats.command_timeouts = hand.nodes.command_timeouts;
+    stats.heartbeats_sent = hand.nodes.heartbeats_sent;
     Ok(stats)
 }
 
@@ -95,11 +108,14 @@ pub struct SimHand {
     last_yaw_rad: f32,
     contact_sum: f32,
     summary: SimHandSummary,
+    /// The nodes' protocol duties; `serve` polls it for heartbeats and timeouts.
+    pub nodes: NodeSupervisor,
 }
 
 impl SimHand {
     /// Builds the env and resets it with `seed` (the grasp is found by closing the fingers).
-    pub fn new(config: EnvConfig, seed: u64) -> Result<Self, SimHandError> {
+    /// An enabled finger that gets no command for `command_timeout` faults and holds.
+    pub fn new(config: EnvConfig, seed: u64, command_timeout: Duration) -> Result<Self, SimHandError> {
         let mut env = Env::new(config)?;
         let (obs, _) = env.reset(seed)?;
         let last_yaw_rad = env.privileged().map(|s| s.object.yaw_rad()).unwrap_or(0.0);
@@ -110,6 +126,7 @@ impl SimHand {
             last_yaw_rad,
             contact_sum: 0.0,
             summary: SimHandSummary::default(),
+            nodes: NodeSupervisor::new(command_timeout, Instant::now()),
         })
     }
 
@@ -123,18 +140,21 @@ impl SimHand {
         s
     }
 
-    /// Takes one received message; returns the frames the nodes send in reply.
-    pub fn on_message(&mut self, message: &Message) -> Result<Vec<RawFrame>, SimHandError> {
+    /// Takes one message received at `now`; returns the frames the nodes send in reply.
+    pub fn on_message(&mut self, message: &Message, now: Instant) -> Result<Vec<RawFrame>, SimHandError> {
         let Message::JointCommand(cmd) = *message else { return Ok(Vec::new()) };
+        if !self.nodes.on_command(&cmd, now) {
+            // A faulted finger holds: its command does not count towards the next step.
+            return Ok(Vec::new());
+        }
         if !cmd.enable {
-            let mut frames = self.state_frames(cmd.seq)?;
+            // A query: this finger's node answers for itself, state then held targets.
+            let finger = cmd.finger;
+            let mut frames = self.state_frames(&[finger], cmd.seq)?;
             let q_target = self.env.privileged().map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
-            for finger in FingerId::all() {
-                let f = 3 * usize::from(finger.index());
-                let q_target_rad = [q_target[f], q_target[f + 1], q_target[f + 2]];
-                frames
-                    .push(Message::JointTarget(JointTarget { finger, q_target_rad, seq: cmd.seq }).encode()?);
-            }
+            let f = 3 * usize::from(finger.index());
+            let q_target_rad = [q_target[f], q_target[f + 1], q_target[f + 2]];
+            frames.push(Message::JointTarget(JointTarget { finger, q_target_rad, seq: cmd.seq }).encode()?);
             return Ok(frames);
         }
         self.pending[usize::from(cmd.finger.index())] = Some(cmd);
@@ -160,11 +180,12 @@ impl SimHand {
         self.summary.total_reward += result.reward;
         self.summary.terminated |= result.terminated;
         self.contact_sum += result.info.num_tip_contacts as f32;
-        self.state_frames(cmd.seq)
+        let all: Vec<FingerId> = FingerId::all().collect();
+        self.state_frames(&all, cmd.seq)
     }
 
-    /// Every node's state frames, from the latest observation.
-    fn state_frames(&self, seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
+    /// The state frames of `fingers`' nodes, from the latest observation.
+    fn state_frames(&self, fingers: &[FingerId], seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
         let state = self.env.privileged();
         let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or([0.0; 15]);
         let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
@@ -172,7 +193,7 @@ impl SimHand {
         let kp = self.env.config().physics.motor_stiffness_nm_per_rad;
         let caps = hand.torque_caps_nm();
         let mut frames = Vec::with_capacity(FINGERS * 5);
-        for finger in FingerId::all() {
+        for &finger in fingers {
             let f = usize::from(finger.index());
             let q: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_Q.start + 3 * f + j]);
             // Effort: the motor law's stiffness term, capped as the motors are (an estimate:
@@ -186,7 +207,12 @@ impl SimHand {
             let force_n = self.obs[OBS_CONTACT_FORCE.start + f];
             let in_contact = state.is_some_and(|s| s.contacts[f].is_some());
             let messages = [
-                Message::JointPosition(JointPosition { finger, q_rad: q, status: STATUS_ENABLED, seq }),
+                Message::JointPosition(JointPosition {
+                    finger,
+                    q_rad: q,
+                    status: self.nodes.status(finger),
+                    seq,
+                }),
                 Message::JointVelocity(JointVelocity {
                     finger,
                     dq_radps: std::array::from_fn(|j| dq[3 * f + j].clamp(-32.0, 32.0)),

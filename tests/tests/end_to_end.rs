@@ -89,20 +89,16 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
     let env = EnvConfig::default();
     let limits = env.hand.joint_limits();
     let rate_hz = f64::from(env.control_hz);
-    let hand = SimHand::new(env, 9).expect("simulated hand");
+    let hand = SimHand::new(env, 9, Duration::from_secs(1)).expect("simulated hand");
     let sim = thread::spawn(move || {
         let mut hand = hand;
         sim_hand::serve(&mut nodes, &mut hand, Duration::from_secs(5), &flag).map(|_| hand.summary())
     });
     let loop_config = LoopConfig {
-        rate_hz,
         duration: Some(Duration::from_secs(2)),
-        watchdog_periods: 5,
-        startup_timeout: Duration::from_secs(5),
         halt_hold_periods: 2,
         max_delta_rad: config.env.max_action_rad,
-        limits,
-        spin: Duration::from_micros(200),
+        ..LoopConfig::new(rate_hz, limits)
     };
     let report = control_loop::run(&mut bridge, &mut runner, &loop_config, &AtomicBool::new(false))
         .expect("bridge loop runs");
@@ -112,7 +108,7 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
 
     assert_eq!(report.stop_reason, StopReason::DurationReached);
     assert!((38..=41).contains(&report.steps), "{} steps in 2 s at 20 Hz", report.steps);
-    assert_eq!((report.bad_frames, report.safety.non_finite_holds), (0, 0));
+    assert_eq!((report.link.bad_frames, report.safety.non_finite_holds), (0, 0));
     assert!(sim_summary.steps >= report.steps, "{sim_summary:?}");
     assert!(sim_summary.rotation_rad.is_finite());
     eprintln!("e2e: runtime vs tch max diff {max_diff:.2e}; bridge {report:?}; object {sim_summary:?}");

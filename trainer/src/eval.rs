@@ -189,7 +189,7 @@ pub fn eval_policy_bytes(
     episodes: usize,
     seed: u64,
 ) -> Result<EvalReport, EvalError> {
-    let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(format!("{e:?}")))?;
+    let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
     if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
         return Err(EvalError::Policy(format!(
             "policy maps {} observations to {} actions, the hand needs {OBS_DIM} -> {NUM_JOINTS}",
@@ -203,10 +203,8 @@ pub fn eval_policy_bytes(
     env.episode_length_steps = (duration_s * env.control_hz).round().max(1.0) as usize;
     let mut storage = vec![0.0f32; info.storage_len];
     let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(bytes, &mut storage)
-        .map_err(|e| EvalError::Policy(format!("{e:?}")))?;
-    run_episodes(&env, episodes, seed, &|obs, action| {
-        policy.forward(obs, action).map_err(|e| format!("{e:?}"))
-    })
+        .map_err(|e| EvalError::Policy(e.to_string()))?;
+    run_episodes(&env, episodes, seed, &|obs, action| policy.forward(obs, action).map_err(|e| e.to_string()))
 }
 
 /// [`eval_policy_bytes`] of the file at `path`.

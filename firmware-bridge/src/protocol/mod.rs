@@ -32,6 +32,52 @@ pub use fields::{
 };
 pub use messages::*;
 
+/// Period of every node's and the host's heartbeat (10 Hz).
+pub const HEARTBEAT_PERIOD_MS: u32 = 100;
+
+/// SocketCAN receive filters, `(id, mask)` as `struct can_filter` takes them: a frame passes
+/// when `frame_id & mask == id & mask`. The masks include the extended-frame and remote-frame
+/// flags, so only standard data frames pass. Each side's socket lets through only the ids it
+/// reads: the kernel drops everything else (another protocol's traffic, a babbling node, a
+/// flood) before it costs the control loop a system call.
+pub mod filters {
+    use super::fd::{FD_HAND_COMMAND_ID, FD_NODE_STATE_BASE_ID};
+    use super::ids;
+
+    /// `CAN_EFF_FLAG | CAN_RTR_FLAG`: a filter with these in its mask and not in its id
+    /// rejects extended and remote frames.
+    const FLAGS: u32 = 0x8000_0000 | 0x4000_0000;
+    /// The function code's 8 ids (`code + 0..=7`): the five nodes and three unused.
+    const CODE: u32 = FLAGS | 0x7F8;
+    /// Exactly one id.
+    const EXACT: u32 = FLAGS | 0x7FF;
+
+    /// What the host (bridge) reads: every node frame, classic and FD, and node heartbeats.
+    pub const HOST_RX: [(u32, u32); 9] = [
+        (ids::FAULT as u32, CODE),
+        (ids::JOINT_POSITION as u32, CODE),
+        (ids::JOINT_VELOCITY as u32, CODE),
+        (ids::JOINT_EFFORT as u32, CODE),
+        (ids::TIP_CONTACT as u32, CODE),
+        (ids::TIP_NORMAL as u32, CODE),
+        (ids::JOINT_TARGET as u32, CODE),
+        (FD_NODE_STATE_BASE_ID as u32, CODE),
+        (ids::HEARTBEAT as u32, CODE),
+    ];
+
+    /// What the finger nodes read: joint commands, the FD hand command, the host heartbeat.
+    pub const NODE_RX: [(u32, u32); 3] = [
+        (ids::JOINT_COMMAND as u32, CODE),
+        (FD_HAND_COMMAND_ID as u32, EXACT),
+        ((ids::HEARTBEAT + super::HOST_NODE as u16) as u32, EXACT),
+    ];
+
+    /// Whether a standard data frame with `id` passes `filters` (the kernel's rule).
+    pub fn passes(filters: &[(u32, u32)], id: u16) -> bool {
+        filters.iter().any(|&(f, mask)| u32::from(id) & mask == f & mask)
+    }
+}
+
 /// Fingers on the hand, one CAN node each.
 pub const NUM_FINGERS: u8 = 5;
 /// Node id of the host (the bridge) in heartbeat frames.
@@ -111,6 +157,26 @@ pub fn bus_load(rate_hz: f64, bitrate_bps: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn filters_pass_each_side_exactly_the_frames_it_reads() {
+        use filters::{HOST_RX, NODE_RX, passes};
+        for f in FingerId::all() {
+            let n = u16::from(f.index());
+            for code in [ids::FAULT, ids::JOINT_POSITION, ids::JOINT_VELOCITY, ids::JOINT_EFFORT] {
+                assert!(passes(&HOST_RX, code + n) && !passes(&NODE_RX, code + n));
+            }
+            for code in [ids::TIP_CONTACT, ids::TIP_NORMAL, ids::JOINT_TARGET, ids::HEARTBEAT, 0x480] {
+                assert!(passes(&HOST_RX, code + n) && !passes(&NODE_RX, code + n));
+            }
+            assert!(passes(&NODE_RX, ids::JOINT_COMMAND + n) && !passes(&HOST_RX, ids::JOINT_COMMAND + n));
+        }
+        assert!(passes(&NODE_RX, 0x70F) && passes(&NODE_RX, 0x0F0));
+        assert!(!passes(&HOST_RX, 0x70F), "the host does not read its own heartbeat");
+        for junk in [0x000, 0x001, 0x555, 0x7FF, 0x0F1, 0x700 + 0x0E] {
+            assert!(!passes(&HOST_RX, junk) && !passes(&NODE_RX, junk), "{junk:#x}");
+        }
+    }
 
     #[test]
     fn bus_load_at_the_default_rate_is_far_below_the_limit() {

@@ -1,0 +1,204 @@
+//! What every finger node owes the bus besides its joint state (docs/can-protocol.md,
+//! Semantics): a heartbeat at 10 Hz, the enable state it reports, and the command timeout.
+//! Both emulators use it, so they behave as the protocol says a real node does.
+//!
+//! - **enable:** a finger is enabled by a command with the enable flag and disabled by one
+//!   without; its position status and heartbeat say which.
+//! - **command timeout:** an enabled finger that receives no command for `command_timeout`
+//!   latches fault `command_timeout` (a fault frame, the status fault bit, heartbeat state
+//!   fault) and holds: it applies no targets until a disabled command (the host's start-up
+//!   query) clears the fault.
+
+use std::time::{Duration, Instant};
+
+use crate::protocol::{
+    Fault, FaultCode, FingerId, HEARTBEAT_PERIOD_MS, Heartbeat, JointCommand, Message, NUM_FINGERS,
+    NodeState, ProtocolError, RawFrame, STATUS_ENABLED, STATUS_FAULT,
+};
+
+const FINGERS: usize = NUM_FINGERS as usize;
+
+/// The protocol duties of the five finger nodes.
+#[derive(Debug, Clone)]
+pub struct NodeSupervisor {
+    command_timeout: Duration,
+    enabled: [bool; FINGERS],
+    fault: [Option<FaultCode>; FINGERS],
+    last_command: [Option<Instant>; FINGERS],
+    last_seq: [u8; FINGERS],
+    next_heartbeat: Instant,
+    heartbeat_counter: u8,
+    /// Command-timeout faults raised so far (one per finger and occurrence).
+    pub command_timeouts: u64,
+    pub heartbeats_sent: u64,
+}
+
+impl NodeSupervisor {
+    /// Nodes that are booted, disabled, with the first heartbeat due at `now`.
+    pub fn new(command_timeout: Duration, now: Instant) -> Self {
+        Self {
+            command_timeout,
+            enabled: [false; FINGERS],
+            fault: [None; FINGERS],
+            last_command: [None; FINGERS],
+            last_seq: [0; FINGERS],
+            next_heartbeat: now,
+            heartbeat_counter: 0,
+            command_timeouts: 0,
+            heartbeats_sent: 0,
+        }
+    }
+
+    /// Takes in a command for its finger at `now`; returns whether the node applies its
+    /// targets (`false` while a fault is latched: the finger holds). A disabled command
+    /// disables the finger and clears a latched fault.
+    pub fn on_command(&mut self, cmd: &JointCommand, now: Instant) -> bool {
+        let f = usize::from(cmd.finger.index());
+        self.last_command[f] = Some(now);
+        self.last_seq[f] = cmd.seq;
+        if !cmd.enable {
+            self.enabled[f] = false;
+            self.fault[f] = None;
+            return true;
+        }
+        if self.fault[f].is_some() {
+            return false;
+        }
+        self.enabled[f] = true;
+        true
+    }
+
+    /// The status byte of the finger's position frames.
+    pub fn status(&self, finger: FingerId) -> u8 {
+        let f = usize::from(finger.index());
+        let enabled = if self.enabled[f] { STATUS_ENABLED } else { 0 };
+        let fault = if self.fault[f].is_some() { STATUS_FAULT } else { 0 };
+        enabled | fault
+    }
+
+    /// Whether any finger has a fault latched.
+    pub fn any_fault(&self) -> bool {
+        self.fault.iter().any(Option::is_some)
+    }
+
+    /// Frames due at `now`: a fault frame for each enabled finger whose command timed out
+    /// (it is then disabled and holds), and every node's heartbeat once per period.
+    pub fn poll(&mut self, now: Instant) -> Result<Vec<RawFrame>, ProtocolError> {
+        let mut frames = Vec::new();
+        for finger in FingerId::all() {
+            let f = usize::from(finger.index());
+            let silent_for = self.last_command[f].map(|t| now.saturating_duration_since(t));
+            if self.enabled[f]
+                && self.fault[f].is_none()
+                && silent_for.is_some_and(|d| d > self.command_timeout)
+            {
+                self.fault[f] = Some(FaultCode::CommandTimeout);
+                self.enabled[f] = false;
+                self.command_timeouts += 1;
+                let ms = silent_for.map_or(0, |d| d.as_millis());
+                let fault = Fault {
+                    finger,
+                    code: FaultCode::CommandTimeout,
+                    joint: None,
+                    value: i16::try_from(ms).unwrap_or(i16::MAX),
+                    seq: self.last_seq[f],
+                };
+                frames.push(Message::Fault(fault).encode()?);
+            }
+        }
+        if now >= self.next_heartbeat {
+            let period = Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS));
+            // Catch up without bursting: the next beat is one period from now at the latest.
+            self.next_heartbeat = (self.next_heartbeat + period).max(now);
+            for finger in FingerId::all() {
+                let f = usize::from(finger.index());
+                let state = match (self.fault[f], self.enabled[f]) {
+                    (Some(_), _) => NodeState::Fault,
+                    (None, true) => NodeState::Enabled,
+                    (None, false) => NodeState::Ready,
+                };
+                let beat = Heartbeat { node: finger.index(), state, counter: self.heartbeat_counter };
+                frames.push(Message::Heartbeat(beat).encode()?);
+                self.heartbeats_sent += 1;
+            }
+            self.heartbeat_counter = self.heartbeat_counter.wrapping_add(1);
+        }
+        Ok(frames)
+    }
+
+    /// How long until [`Self::poll`] has something to send, at most `cap` (a receive timeout).
+    pub fn until_due(&self, now: Instant, cap: Duration) -> Duration {
+        self.next_heartbeat.saturating_duration_since(now).min(cap)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::ids;
+
+    fn cmd(finger: u8, enable: bool, seq: u8) -> JointCommand {
+        JointCommand { finger: FingerId::new(finger).expect("finger"), q_target_rad: [0.0; 3], enable, seq }
+    }
+
+    fn decode(frames: &[RawFrame]) -> Vec<Message> {
+        frames.iter().map(|f| Message::decode_frame(f).expect("valid frame")).collect()
+    }
+
+    #[test]
+    fn heartbeats_every_period_with_a_counter_and_the_enable_state() {
+        let t0 = Instant::now();
+        let mut s = NodeSupervisor::new(Duration::from_millis(500), t0);
+        let first = decode(&s.poll(t0).expect("frames"));
+        assert_eq!(first.len(), 5);
+        assert!(matches!(
+            first[0],
+            Message::Heartbeat(Heartbeat { node: 0, state: NodeState::Ready, counter: 0 })
+        ));
+        assert!(s.poll(t0 + Duration::from_millis(50)).expect("frames").is_empty(), "not due yet");
+        assert!(s.on_command(&cmd(2, true, 1), t0 + Duration::from_millis(60)));
+        let second = decode(&s.poll(t0 + Duration::from_millis(100)).expect("frames"));
+        assert!(matches!(
+            second[2],
+            Message::Heartbeat(Heartbeat { state: NodeState::Enabled, counter: 1, .. })
+        ));
+        assert!(matches!(second[1], Message::Heartbeat(Heartbeat { state: NodeState::Ready, .. })));
+        assert_eq!(s.status(FingerId::new(2).expect("finger")), STATUS_ENABLED);
+        s.on_command(&cmd(2, false, 2), t0 + Duration::from_millis(110));
+        assert_eq!(s.status(FingerId::new(2).expect("finger")), 0, "a disabled command disables");
+    }
+
+    #[test]
+    fn an_enabled_finger_without_commands_latches_command_timeout_and_holds_until_disabled() {
+        let t0 = Instant::now();
+        let mut s = NodeSupervisor::new(Duration::from_millis(200), t0);
+        s.poll(t0).expect("first heartbeats");
+        let finger = FingerId::new(1).expect("finger");
+        s.on_command(&cmd(1, true, 7), t0);
+        s.on_command(&cmd(3, false, 7), t0);
+        // Within the timeout: nothing but heartbeats.
+        assert!(
+            s.poll(t0 + Duration::from_millis(150)).expect("frames").iter().all(|f| f.id >= ids::HEARTBEAT)
+        );
+        let frames = s.poll(t0 + Duration::from_millis(250)).expect("frames");
+        let faults: Vec<_> = decode(&frames)
+            .into_iter()
+            .filter_map(|m| if let Message::Fault(f) = m { Some(f) } else { None })
+            .collect();
+        assert_eq!(faults.len(), 1, "only the enabled finger times out");
+        assert_eq!((faults[0].finger, faults[0].code, faults[0].seq), (finger, FaultCode::CommandTimeout, 7));
+        assert_eq!(faults[0].value, 250, "milliseconds without a command");
+        assert_eq!(s.status(finger), STATUS_FAULT);
+        assert_eq!(s.command_timeouts, 1);
+        // Latched: enabled commands are not applied, and the fault is not raised twice.
+        assert!(!s.on_command(&cmd(1, true, 8), t0 + Duration::from_millis(260)));
+        assert!(
+            s.poll(t0 + Duration::from_millis(900)).expect("frames").iter().all(|f| f.id >= ids::HEARTBEAT)
+        );
+        assert_eq!(s.command_timeouts, 1);
+        // A disabled command (the host querying again) clears it.
+        assert!(s.on_command(&cmd(1, false, 9), t0 + Duration::from_millis(950)));
+        assert!(s.on_command(&cmd(1, true, 10), t0 + Duration::from_millis(960)));
+        assert_eq!(s.status(finger), STATUS_ENABLED);
+    }
+}
