@@ -57,6 +57,15 @@ step "cargo clippy --workspace --all-targets -- -D warnings"
 # --release shares build-script outputs (torch-sys' C++) with the test build below.
 cargo clippy --release --workspace --all-targets -- -D warnings
 
+step "dependency rule: vge-controllers and vge-bridge never link libtorch"
+for crate in vge-controllers vge-bridge; do
+  tree=$(cargo tree -p "$crate" -e normal,build --prefix none)
+  if grep -q '^torch-sys ' <<<"$tree"; then
+    echo "$crate depends on torch-sys:"; cargo tree -p "$crate" -i torch-sys; exit 1
+  fi
+  echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
+done
+
 step "no_std builds for thumbv7em-none-eabihf (Cortex-M4F): runtime, CAN protocol"
 cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
 cargo build --release -p vge-bridge --lib --no-default-features --target thumbv7em-none-eabihf

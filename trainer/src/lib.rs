@@ -5,7 +5,6 @@ pub mod behaviour;
 pub mod bench_update;
 pub mod checkpoint;
 pub mod config;
-pub mod controllers;
 pub mod eval;
 pub mod gait;
 pub mod nets;
@@ -18,3 +17,7 @@ pub mod sweep;
 pub mod tensorboard;
 pub mod toy;
 pub mod train;
+
+/// The sub-skill controllers live in their own crate (no libtorch); re-exported so that
+/// `vge_trainer::controllers::...` keeps naming them.
+pub use vge_controllers as controllers;

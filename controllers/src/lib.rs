@@ -1,4 +1,4 @@
-//! The paper's sub-skill controllers that steer VGE's exploration: in-grasp manipulation
+//! vge-controllers: the paper's sub-skill controllers that steer VGE's exploration: in-grasp manipulation
 //! (IGM, [`igm`]), contact switching (CS, [`cs`]) and their superposition, finger-gaiting
 //! (FG, [`fg`]); plus the contact-force QP of IGM's stability term ([`qp`]).
 //!
@@ -12,6 +12,10 @@
 //! finger-major `[f0.roll, f0.flex_prox, f0.flex_dist, f1.roll, ...]`; the grasp map is
 //! G (6 x 3k) with `w = G f` and `J_S dq = G^T do`. A controller's output is a change of
 //! the joint *targets* for one control step (radians), the env's action.
+//!
+//! A crate of its own (sim <- controllers <- trainer) so that the controllers, `vge
+//! controller`'s rollouts and their tests build and run without libtorch; the test command
+//! checks that this crate and the bridge never depend on torch-sys.
 
 pub mod cs;
 pub mod fg;

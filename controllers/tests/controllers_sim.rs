@@ -1,11 +1,9 @@
 //! The controllers on the real simulator (rapier world, clarabel QP), seeded: the
 //! acceptance of issue 5. Short episodes keep the suite fast in release.
 
+use vge_controllers::rollout::{self, ControllerKind, RolloutOptions, run_episode};
+use vge_controllers::{Controller, ControllerInput, CsConfig, CsController, IgmConfig, IgmController};
 use vge_sim::{Env, EnvConfig, NUM_FINGERS, ObjectShape};
-use vge_trainer::controllers::rollout::{self, ControllerKind, RolloutOptions, run_episode};
-use vge_trainer::controllers::{
-    Controller, ControllerInput, CsConfig, CsController, IgmConfig, IgmController,
-};
 
 /// The default env with a little grasp-pose noise so that seeds differ.
 fn env_config(steps: usize) -> EnvConfig {

@@ -5,13 +5,13 @@
 use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use vge_sim::kinematics::joint_index;
-use vge_sim::{HandModel, NOMINAL_CUBE_SIDE_M, NUM_FINGERS, NUM_JOINTS};
-use vge_trainer::controllers::qp::{bench_contact_force_qp, grasp_map_f64};
-use vge_trainer::controllers::{
+use vge_controllers::qp::{bench_contact_force_qp, grasp_map_f64};
+use vge_controllers::{
     Controller, ControllerError, ControllerInput, CsConfig, CsController, FgController, FingerContact,
     IgmConfig, IgmController, QpError, TipContact, contact_force_qp, igm::damped_least_squares, igm_step,
 };
+use vge_sim::kinematics::joint_index;
+use vge_sim::{HandModel, NOMINAL_CUBE_SIDE_M, NUM_FINGERS, NUM_JOINTS};
 
 // ---------------------------------------------------------------- QP
 
@@ -23,7 +23,7 @@ fn check_constraints(c: &[f64], fixed: usize) {
 fn solve(
     points: &[Vector3<f64>],
     normals: &[Vector3<f64>],
-) -> Result<vge_trainer::controllers::ContactForces, QpError> {
+) -> Result<vge_controllers::ContactForces, QpError> {
     contact_force_qp(&grasp_map_f64(points, Vector3::zeros()), normals)
 }
 
@@ -250,7 +250,7 @@ fn igm_stability_pushes_where_force_is_missing() {
     let config = IgmConfig {
         object_delta: [0.0; 6],
         max_delta_rad: 10.0,
-        force_scaling: vge_trainer::controllers::ForceScaling::MatchMeanMeasured { min_mean_n: 0.5 },
+        force_scaling: vge_controllers::ForceScaling::MatchMeanMeasured { min_mean_n: 0.5 },
         ..IgmConfig::default()
     };
     let out = igm_step(&g.hand, &g.q, &three, Vector3::zeros(), &config).expect("igm");
