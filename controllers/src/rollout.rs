@@ -138,11 +138,6 @@ pub struct EpisodeStats {
     pub controller_s: Vec<f64>,
 }
 
-fn wrap_pi(a: f32) -> f32 {
-    let tau = std::f32::consts::TAU;
-    a - tau * ((a + std::f32::consts::PI) / tau).floor()
-}
-
 /// Resets `env` with `seed`, resets `controller` with a generator seeded from `seed`,
 /// and runs one episode; `on_step` sees every step.
 pub fn run_episode(
@@ -177,7 +172,7 @@ pub fn run_episode(
             stats.no_action_steps += 1;
         }
         let StepResult { reward, terminated, truncated, info, .. } = env.step(&action)?;
-        rotation += wrap_pi(info.object_yaw_rad - yaw);
+        rotation += vge_sim::wrap_angle_rad(info.object_yaw_rad - yaw);
         yaw = info.object_yaw_rad;
         ret += reward;
         contact_sum += info.num_tip_contacts;

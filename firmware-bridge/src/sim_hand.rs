@@ -9,7 +9,6 @@
 //! duties (heartbeats, enable state, command timeout) are [`NodeSupervisor`]'s: a faulted
 //! finger's commands are not applied, so the lockstep holds.
 
-use std::f32::consts::PI;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -174,7 +173,7 @@ impl SimHand {
         let result = self.env.step(&action)?;
         self.obs = result.obs;
         let yaw = result.info.object_yaw_rad;
-        self.summary.rotation_rad += wrap_angle(yaw - self.last_yaw_rad);
+        self.summary.rotation_rad += vge_sim::wrap_angle_rad(yaw - self.last_yaw_rad);
         self.last_yaw_rad = yaw;
         self.summary.steps += 1;
         self.summary.total_reward += result.reward;
@@ -232,28 +231,5 @@ impl SimHand {
             }
         }
         Ok(frames)
-    }
-}
-
-/// Angle wrapped to (-π, π].
-fn wrap_angle(a: f32) -> f32 {
-    let mut a = a % (2.0 * PI);
-    if a > PI {
-        a -= 2.0 * PI;
-    } else if a <= -PI {
-        a += 2.0 * PI;
-    }
-    a
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn wraps_angles() {
-        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-5);
-        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-5);
-        assert_eq!(wrap_angle(0.25), 0.25);
     }
 }

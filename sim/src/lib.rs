@@ -14,6 +14,7 @@ pub mod observation;
 pub mod vec_env;
 pub mod world;
 
+pub use env::wrap_angle_rad;
 pub use env::{
     Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState, ResetInfo, StepInfo,
     StepResult,

@@ -76,12 +76,6 @@ impl EvalReport {
     }
 }
 
-/// Angle wrapped to [-π, π).
-pub fn wrap_pi(a: f32) -> f32 {
-    let tau = std::f32::consts::TAU;
-    a - tau * ((a + std::f32::consts::PI) / tau).floor()
-}
-
 /// One episode's figures.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct EpisodeOutcome {
@@ -148,7 +142,7 @@ pub fn run_episode(
         policy(&obs, &mut action).map_err(EvalError::Policy)?;
         let r = env.step(&action)?;
         out.episode_return += f64::from(r.reward);
-        out.rotation_rad += f64::from(wrap_pi(r.info.object_yaw_rad - yaw));
+        out.rotation_rad += f64::from(vge_sim::wrap_angle_rad(r.info.object_yaw_rad - yaw));
         yaw = r.info.object_yaw_rad;
         contacts += r.info.num_tip_contacts;
         switches.update(r.info.tip_contacts);

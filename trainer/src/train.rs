@@ -48,7 +48,7 @@ use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, StepContext, b
 use crate::checkpoint::{self, CheckpointError};
 use crate::config::{Config, ConfigError};
 use crate::controllers::{Controller, ControllerInput, IgmConfig};
-use crate::eval::{EpisodeOutcome, EvalError, EvalReport, wrap_pi};
+use crate::eval::{EpisodeOutcome, EvalError, EvalReport};
 use crate::gait::ContactSwitches;
 use crate::policy_export::export_hand_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
@@ -441,7 +441,7 @@ pub fn train(
             replay.push(&obs[i], &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
             let run = &mut running[i];
             run.ret += f64::from(r.reward);
-            run.rotation += f64::from(wrap_pi(r.info.object_yaw_rad - run.yaw));
+            run.rotation += f64::from(vge_sim::wrap_angle_rad(r.info.object_yaw_rad - run.yaw));
             run.yaw = r.info.object_yaw_rad;
             run.contacts += r.info.num_tip_contacts as u64;
             run.length += 1;
