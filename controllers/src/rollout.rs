@@ -134,6 +134,8 @@ pub struct EpisodeStats {
     pub dropped: bool,
     /// Steps on which the controller had no action.
     pub no_action_steps: usize,
+    /// Fingertips that broke and remade contact ([`vge_sim::gait::ContactSwitches`]).
+    pub contact_switches: u32,
     /// Controller call times (s), one per step.
     pub controller_s: Vec<f64>,
 }
@@ -149,7 +151,9 @@ pub fn run_episode(
     env.reset(seed)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_c0de_0000_0000);
     controller.reset(&mut rng);
-    let mut yaw = env.privileged().ok_or(SimError::NotReset)?.object.yaw_rad();
+    let start_state = env.privileged().ok_or(SimError::NotReset)?;
+    let mut yaw = start_state.object.yaw_rad();
+    let mut switches = vge_sim::gait::ContactSwitches::new(start_state.contacts.map(|c| c.is_some()));
     let (mut rotation, mut ret, mut contact_sum) = (0.0f32, 0.0f32, 0usize);
     let mut stats = EpisodeStats {
         episode_return: 0.0,
@@ -158,6 +162,7 @@ pub fn run_episode(
         steps: 0,
         dropped: false,
         no_action_steps: 0,
+        contact_switches: 0,
         controller_s: Vec::with_capacity(env.config().episode_length_steps),
     };
     loop {
@@ -179,6 +184,7 @@ pub fn run_episode(
         stats.steps += 1;
         let in_contact =
             env.privileged().map_or([false; vge_sim::NUM_FINGERS], |s| s.contacts.map(|c| c.is_some()));
+        switches.update(in_contact);
         on_step(
             &StepTrace {
                 step: info.step,
@@ -198,6 +204,7 @@ pub fn run_episode(
         }
     }
     stats.episode_return = ret;
+    stats.contact_switches = switches.count;
     stats.rotation_rad = rotation;
     stats.mean_contacts = contact_sum as f32 / stats.steps.max(1) as f32;
     Ok(stats)
@@ -225,6 +232,8 @@ pub struct RolloutSummary {
     pub mean_contacts: f32,
     /// Episodes the env terminated (object fell, or fewer than 3 fingertips held it).
     pub drops: usize,
+    /// Mean contact switches per episode (a fingertip that broke and remade contact).
+    pub mean_contact_switches: f32,
     /// Mean episode length (control steps).
     pub mean_steps: f32,
     /// Fraction of steps on which the controller had no action (zero action applied).
@@ -250,14 +259,14 @@ fn json_num(v: f64) -> String {
 impl RolloutSummary {
     /// One JSON object on one line (no trailing newline), keys: `kind`, `object`,
     /// `episodes`, `seed`, `mean_return`, `mean_rotation_rad`, `max_abs_rotation_rad`,
-    /// `mean_contacts`, `drops`, `mean_steps`, `no_action_fraction`,
+    /// `mean_contacts`, `drops`, `mean_contact_switches`, `mean_steps`, `no_action_fraction`,
     /// `controller_median_us`, `controller_p90_us`. Non-finite numbers are `null`.
     #[must_use]
     pub fn to_json_line(&self) -> String {
         format!(
             "{{\"kind\":\"{}\",\"object\":\"{}\",\"episodes\":{},\"seed\":{},\"mean_return\":{},\
              \"mean_rotation_rad\":{},\"max_abs_rotation_rad\":{},\"mean_contacts\":{},\"drops\":{},\
-             \"mean_steps\":{},\"no_action_fraction\":{},\"controller_median_us\":{},\
+             \"mean_contact_switches\":{},\"mean_steps\":{},\"no_action_fraction\":{},\"controller_median_us\":{},\
              \"controller_p90_us\":{}}}",
             self.kind.name(),
             self.object.name(),
@@ -268,6 +277,7 @@ impl RolloutSummary {
             json_num(f64::from(self.max_abs_rotation_rad)),
             json_num(f64::from(self.mean_contacts)),
             self.drops,
+            json_num(f64::from(self.mean_contact_switches)),
             json_num(f64::from(self.mean_steps)),
             json_num(f64::from(self.no_action_fraction)),
             json_num(self.controller_median_us),
@@ -296,6 +306,7 @@ impl fmt::Display for RolloutSummary {
         )?;
         writeln!(f, "  mean fingertip contacts {:.2}", self.mean_contacts)?;
         writeln!(f, "  drops                {} of {}", self.drops, self.episodes)?;
+        writeln!(f, "  contact switches     {:.1} per episode", self.mean_contact_switches)?;
         writeln!(
             f,
             "  mean episode length  {:.1} steps; no action on {:.1} % of steps",
@@ -331,6 +342,7 @@ pub fn run_with(
     let mut env = Env::new(env_config)?;
     let (mut ret, mut rot, mut max_rot, mut contacts, mut steps, mut drops, mut no_action) =
         (0.0f64, 0.0f64, 0.0f32, 0.0f64, 0usize, 0usize, 0usize);
+    let mut switches = 0u64;
     let mut costs = Vec::new();
     for i in 0..episodes {
         let stats = run_episode(&mut env, controller.as_mut(), seed.wrapping_add(i as u64), |_, _| {})?;
@@ -341,6 +353,7 @@ pub fn run_with(
         steps += stats.steps;
         drops += usize::from(stats.dropped);
         no_action += stats.no_action_steps;
+        switches += u64::from(stats.contact_switches);
         costs.extend_from_slice(&stats.controller_s);
         on_episode(i, &stats);
     }
@@ -356,6 +369,7 @@ pub fn run_with(
         max_abs_rotation_rad: max_rot,
         mean_contacts: (contacts / steps.max(1) as f64) as f32,
         drops,
+        mean_contact_switches: (switches as f64 / n) as f32,
         mean_steps: (steps as f64 / n) as f32,
         no_action_fraction: (no_action as f64 / steps.max(1) as f64) as f32,
         controller_median_us: percentile(&costs, 0.5) * 1e6,

@@ -92,15 +92,18 @@ fn cs_breaks_and_remakes_one_contact_in_most_trials() {
 /// within 2 s), so this test asserts what holds (it runs, turns the cube the right way on
 /// average, stays short of a full turn) and prints the drops rather than asserting none.
 #[test]
-fn fg_runs_reports_and_falls_short_of_a_full_turn() {
-    let options = RolloutOptions { env: env_config(60), ..RolloutOptions::default() }; // 3 s
+fn fg_turns_the_cube_while_it_switches_contacts_and_keeps_the_grasp() {
+    // FG = IGM + CS: IGM turns the object about +z while CS takes one finger off and puts
+    // it back (a detach and re-attach per H = 50 steps). 6 s episodes from noisy grasps.
+    let options = RolloutOptions { env: env_config(120), ..RolloutOptions::default() };
     let summary = rollout::run(ControllerKind::Fg, ObjectShape::Cube, 4, 0, &options).expect("rollout");
     println!("{summary}");
-    println!("{}", summary.to_json_line());
-    assert!(summary.mean_return.is_finite(), "{summary}");
+    // FG alone is not robust (the paper's point: the learner must do better); it may drop
+    // the cube now and then, not mostly.
+    assert!(summary.drops * 2 <= summary.episodes, "{summary}");
     assert!(summary.mean_contacts >= 3.0, "{summary}");
-    assert!(summary.max_abs_rotation_rad < std::f32::consts::TAU, "{summary}");
-    assert!(summary.mean_rotation_rad > 0.0, "{summary}");
+    assert!(summary.mean_rotation_rad > 0.05, "turns the cube the right way: {summary}");
+    assert!(summary.mean_contact_switches >= 1.0, "completes contact switches: {summary}");
 }
 
 #[test]

@@ -8,6 +8,7 @@
 pub mod bench;
 pub mod env;
 pub mod error;
+pub mod gait;
 pub mod kinematics;
 pub mod objects;
 pub mod observation;

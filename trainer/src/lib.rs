@@ -6,7 +6,6 @@ pub mod bench_update;
 pub mod checkpoint;
 pub mod config;
 pub mod eval;
-pub mod gait;
 pub mod nets;
 pub mod optim;
 pub mod plot;
@@ -21,3 +20,5 @@ pub mod train;
 /// The sub-skill controllers live in their own crate (no libtorch); re-exported so that
 /// `vge_trainer::controllers::...` keeps naming them.
 pub use vge_controllers as controllers;
+/// Contact-switch counting lives in vge-sim (shared with the bridge and the rollouts).
+pub use vge_sim::gait;

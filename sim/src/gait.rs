@@ -2,9 +2,10 @@
 //! touched the object, let go for at least [`MIN_DETACH_STEPS`] control steps, and touched
 //! it again. Counted per episode by evaluation (the evidence that a policy gaits) and per
 //! 1k env steps by training (whether the behaviour policy completes the controller's
-//! switches).
+//! switches). In vge-sim, beside the contacts it reads, so that evaluation, the controller
+//! rollouts and the bridge count switches the same way.
 
-use vge_sim::NUM_FINGERS;
+use crate::NUM_FINGERS;
 
 /// Shortest break that counts: 3 control steps (0.15 s at 20 Hz). A one- or two-step
 /// flicker of a sliding tip is contact noise, not a switch; CS's detach phase alone takes
