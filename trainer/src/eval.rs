@@ -42,6 +42,8 @@ pub enum EvalError {
     Sim(#[from] SimError),
     #[error("episodes must be at least 1")]
     NoEpisodes,
+    #[error("{0}")]
+    InvalidOption(String),
 }
 
 /// Figures over the evaluated episodes.

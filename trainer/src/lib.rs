@@ -11,6 +11,7 @@ pub mod optim;
 pub mod plot;
 pub mod policy_export;
 pub mod replay;
+pub mod robustness;
 pub mod sac;
 pub mod sweep;
 pub mod tensorboard;

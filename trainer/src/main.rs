@@ -128,6 +128,43 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// The paper's robustness test (Fig. 4): return, success and drops of a policy against the
+    /// level of one disturbance at a time.
+    ///
+    /// Axes, each from 0 to the paper's level in --levels even steps, the others off: noise
+    /// on the observed joint positions (0..0.1 rad), error on the contact normals (0..50%),
+    /// error on the contact positions (0..3 mm), a random force on the object (0..its weight,
+    /// redrawn with probability 0.1 per step). Every level runs the same --episodes episodes
+    /// (same grasps). Writes DIR/robustness.csv (one row per axis and level, with
+    /// return_fraction = return / undisturbed return), DIR/robustness.json and
+    /// DIR/robustness.png.
+    ///
+    /// Example: vge robustness --policy runs/fg/seed-0/policy.vgep --episodes 10 --out rob/
+    Robustness {
+        /// The policy file.
+        #[arg(long)]
+        policy: PathBuf,
+        /// Episodes per level.
+        #[arg(long, default_value_t = 10)]
+        episodes: usize,
+        /// Levels per axis, evenly from 0 to the paper's level (at least 2).
+        #[arg(long, default_value_t = 5)]
+        levels: usize,
+        #[arg(long, default_value_t = ObjectShape::Cube)]
+        object: ObjectShape,
+        /// Seed of the grasps and of the noise draws (episode k uses seed + k at every level).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Episode length in seconds of sim time.
+        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODE_S)]
+        episode_s: f32,
+        /// Uniform noise (+-rad) on the initial grasps, as in the success test.
+        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
+        grasp_noise_rad: f32,
+        /// Output folder (created).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Write a policy file (postcard, see docs/policy-format.md) from an actor.
     ///
     /// The file carries the actor's layers, the hand's observation and action layouts, the
@@ -412,6 +449,48 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     100.0 * vge_trainer::eval::LEARNED_SUCCESS_RATE
                 );
             }
+            Ok(())
+        }
+        Command::Robustness { policy, episodes, levels, object, seed, episode_s, grasp_noise_rad, out } => {
+            use vge_trainer::robustness::{self, RobustnessOptions};
+            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+            anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
+            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+            anyhow::ensure!(
+                grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0,
+                "--grasp-noise-rad must be >= 0"
+            );
+            let bytes = std::fs::read(&policy)
+                .with_context(|| format!("reading policy file {}", policy.display()))?;
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let mut base = EnvConfig::default();
+            base.object.shape = object;
+            let options = RobustnessOptions { episodes, episode_s, grasp_noise_rad, seed, levels };
+            let total = 1 + robustness::Axis::ALL.len() * (levels - 1);
+            eprintln!(
+                "vge robustness: {total} evaluations of {episodes} episodes x {episode_s} s on the {object}"
+            );
+            let report = robustness::run(&bytes, &base, &options, |r| {
+                eprintln!(
+                    "  {:<22} {:>9.4}  return {:>8.3} ({:>5.1}% of clean)  success {:.2}  drops {:.2}",
+                    r.axis,
+                    r.level,
+                    r.mean_return,
+                    100.0 * r.return_fraction,
+                    r.success_rate,
+                    r.drop_rate
+                );
+            })
+            .with_context(|| format!("evaluating {}", policy.display()))?;
+            let csv = out.join("robustness.csv");
+            std::fs::write(&csv, robustness::to_csv(&report))
+                .with_context(|| format!("writing {}", csv.display()))?;
+            let json = out.join("robustness.json");
+            let text = serde_json::to_string_pretty(&report).context("serialising the report")?;
+            std::fs::write(&json, text).with_context(|| format!("writing {}", json.display()))?;
+            let png = out.join("robustness.png");
+            robustness::plot(&report, &png).with_context(|| format!("drawing {}", png.display()))?;
+            println!("wrote {}, {} and {}", csv.display(), json.display(), png.display());
             Ok(())
         }
         Command::Controller { kind, object, episodes, seed, episode_s, grasp_noise_rad, json } => {

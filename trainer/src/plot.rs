@@ -195,7 +195,8 @@ fn spread(runs: &[&RunCurves], series: impl Fn(&RunCurves) -> &[f64]) -> Vec<Spr
         .collect()
 }
 
-fn load_font() -> Result<(), PlotError> {
+/// Registers DejaVu Sans as plotters' `sans-serif` (Debian's fonts-dejavu-core).
+pub(crate) fn load_font() -> Result<(), PlotError> {
     const CANDIDATES: [&str; 3] = [
         "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
         "/usr/share/fonts/TTF/DejaVuSans.ttf",

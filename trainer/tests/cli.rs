@@ -275,3 +275,51 @@ fn sweep_jobs_forwards_sigterm_so_every_running_seed_checkpoints() {
     assert!(stdout.contains("seed 2: not started"), "{stdout}");
     let _ = std::fs::remove_dir_all(&root);
 }
+
+#[test]
+fn robustness_writes_csv_json_and_png_with_one_row_per_axis_and_level() {
+    let dir = common::temp_dir("robustness");
+    let policy = dir.join("init.vgep");
+    let export = vge(&["export", "--init", "--seed", "2", "--out"], &[policy.display().to_string()]);
+    assert!(export.status.success(), "{}", text(&export.stderr));
+    let out = dir.join("rob");
+    let run = vge(
+        &["robustness", "--episodes", "2", "--episode-s", "0.5", "--levels", "3", "--policy"],
+        &[policy.display().to_string(), "--out".to_owned(), out.display().to_string()],
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+
+    let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("robustness.csv");
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4 * 3, "{csv}");
+    for (axis, max) in [
+        ("joint_noise_rad", 0.1),
+        ("normal_error_frac", 0.5),
+        ("position_error_m", 0.003),
+        ("perturbation_force_n", 0.15 * 9.81),
+    ] {
+        let levels: Vec<f64> =
+            rows.iter().filter(|r| r[0] == axis).map(|r| r[1].parse().expect("level")).collect();
+        assert_eq!(levels.len(), 3, "{axis}: {csv}");
+        assert!(levels[0] == 0.0 && (levels[1] - max / 2.0).abs() < 1e-6 && (levels[2] - max).abs() < 1e-6);
+    }
+    // Level 0 of every axis is the same undisturbed run: return fraction exactly 1.
+    let clean: Vec<&Vec<&str>> = rows.iter().filter(|r| r[1] == "0").collect();
+    assert_eq!(clean.len(), 4);
+    assert!(clean.iter().all(|r| r[3] == clean[0][3]), "{csv}");
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("robustness.json")).expect("json"))
+            .expect("valid");
+    assert_eq!(json["rows"].as_array().map(Vec::len), Some(12));
+    assert_eq!(json["episodes"], 2);
+    let png = std::fs::read(out.join("robustness.png")).expect("png");
+    assert!(png.len() > 10_000 && png.starts_with(b"\x89PNG"), "{} bytes", png.len());
+
+    let refused = vge(
+        &["robustness", "--levels", "1", "--policy"],
+        &[policy.display().to_string(), "--out".into(), out.display().to_string()],
+    );
+    assert!(!refused.status.success() && text(&refused.stderr).contains("--levels"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
