@@ -132,6 +132,17 @@ pub fn run_episode(
     seed: u64,
     policy: &PolicyFn<'_>,
 ) -> Result<EpisodeOutcome, EvalError> {
+    run_episode_traced(env_config, seed, policy, |_, _| {})
+}
+
+/// [`run_episode`], with `on_step(tip_contacts, rotation_rad)` after every step (the object's
+/// rotation about z so far).
+pub fn run_episode_traced(
+    env_config: &EnvConfig,
+    seed: u64,
+    policy: &PolicyFn<'_>,
+    mut on_step: impl FnMut([bool; vge_sim::NUM_FINGERS], f64),
+) -> Result<EpisodeOutcome, EvalError> {
     let mut env = Env::new(env_config.clone())?;
     let (mut obs, _) = env.reset(seed)?;
     let start = env.privileged().ok_or(SimError::NotReset)?;
@@ -148,6 +159,7 @@ pub fn run_episode(
         yaw = r.info.object_yaw_rad;
         contacts += r.info.num_tip_contacts;
         switches.update(r.info.tip_contacts);
+        on_step(r.info.tip_contacts, out.rotation_rad);
         out.length += 1;
         obs = r.obs;
         if r.terminated || r.truncated {
@@ -185,6 +197,42 @@ pub fn eval_policy_bytes(
     episodes: usize,
     seed: u64,
 ) -> Result<EvalReport, EvalError> {
+    with_runtime_policy(bytes, env, |env, policy| run_episodes(env, episodes, seed, policy))
+}
+
+/// One episode of an encoded policy file on the runtime, step by step: each finger's
+/// contact and the object's rotation (for `vge eval --plot`'s gait diagram).
+pub fn trace_policy_bytes(bytes: &[u8], env: &EnvConfig, seed: u64) -> Result<GaitTrace, EvalError> {
+    with_runtime_policy(bytes, env, |env, policy| {
+        let mut trace = GaitTrace { dt_s: 1.0 / env.control_hz, ..GaitTrace::default() };
+        let outcome = run_episode_traced(env, seed, policy, |contacts, rotation| {
+            trace.tip_contacts.push(contacts);
+            trace.rotation_rad.push(rotation);
+        })?;
+        trace.outcome = outcome;
+        Ok(trace)
+    })
+}
+
+/// One episode's contacts and rotation, step by step.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GaitTrace {
+    /// Control period (s).
+    pub dt_s: f32,
+    /// Which fingertips touch the object after each step.
+    pub tip_contacts: Vec<[bool; vge_sim::NUM_FINGERS]>,
+    /// The object's rotation about z since the start, after each step (rad).
+    pub rotation_rad: Vec<f64>,
+    pub outcome: EpisodeOutcome,
+}
+
+/// Loads `bytes` on the runtime and runs `f` with the env at the policy's control rate
+/// (`env.control_hz` is replaced by the file's, the episode duration kept) and the policy.
+fn with_runtime_policy<T>(
+    bytes: &[u8],
+    env: &EnvConfig,
+    f: impl FnOnce(&EnvConfig, &PolicyFn<'_>) -> Result<T, EvalError>,
+) -> Result<T, EvalError> {
     let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
     if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
         return Err(EvalError::Policy(format!(
@@ -200,7 +248,7 @@ pub fn eval_policy_bytes(
     let mut storage = vec![0.0f32; info.storage_len];
     let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(bytes, &mut storage)
         .map_err(|e| EvalError::Policy(e.to_string()))?;
-    run_episodes(&env, episodes, seed, &|obs, action| policy.forward(obs, action).map_err(|e| e.to_string()))
+    f(&env, &|obs, action| policy.forward(obs, action).map_err(|e| e.to_string()))
 }
 
 /// [`eval_policy_bytes`] of the file at `path`.

@@ -6,6 +6,7 @@ pub mod bench_update;
 pub mod checkpoint;
 pub mod config;
 pub mod eval;
+pub mod gait_diagram;
 pub mod nets;
 pub mod optim;
 pub mod plot;

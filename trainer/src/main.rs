@@ -125,6 +125,10 @@ enum Command {
         /// Random external force on the object, std per axis (N).
         #[arg(long, default_value_t = 0.0)]
         perturb_force_n: f32,
+        /// Also draw the gait diagram of the first episode (seed --seed) into this PNG: each
+        /// finger's contact over time above the object's rotation.
+        #[arg(long)]
+        plot: Option<PathBuf>,
         #[arg(long)]
         json: bool,
     },
@@ -398,6 +402,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             noise_normal_frac,
             noise_position_m,
             perturb_force_n,
+            plot,
             json,
         } => {
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
@@ -423,6 +428,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
                 .with_context(|| format!("evaluating {}", policy.display()))?;
+            if let Some(png) = &plot {
+                let bytes =
+                    std::fs::read(&policy).with_context(|| format!("reading {}", policy.display()))?;
+                let trace = vge_trainer::eval::trace_policy_bytes(&bytes, &env, seed)
+                    .with_context(|| format!("tracing {}", policy.display()))?;
+                let o = &trace.outcome;
+                let title = format!(
+                    "{}: episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+                    policy.display(),
+                    o.rotation_rad,
+                    o.length as f32 * trace.dt_s,
+                    o.contact_switches,
+                    if o.terminated { ", dropped" } else { "" }
+                );
+                vge_trainer::gait_diagram::plot(&trace, &title, png)
+                    .with_context(|| format!("drawing {}", png.display()))?;
+                eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
+            }
             if json {
                 println!("{}", report.to_json_line());
             } else {

@@ -323,3 +323,21 @@ fn robustness_writes_csv_json_and_png_with_one_row_per_axis_and_level() {
     assert!(!refused.status.success() && text(&refused.stderr).contains("--levels"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn eval_plot_draws_the_gait_diagram_of_one_episode() {
+    let dir = common::temp_dir("gait-plot");
+    let policy = dir.join("init.vgep");
+    let export = vge(&["export", "--init", "--seed", "3", "--out"], &[policy.display().to_string()]);
+    assert!(export.status.success(), "{}", text(&export.stderr));
+    let png = dir.join("gait.png");
+    let run = vge(
+        &["eval", "--episodes", "1", "--episode-s", "1", "--json", "--policy"],
+        &[policy.display().to_string(), "--plot".to_owned(), png.display().to_string()],
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stderr).contains("gait diagram"), "{}", text(&run.stderr));
+    let bytes = std::fs::read(&png).expect("the PNG");
+    assert!(bytes.len() > 10_000 && bytes.starts_with(b"\x89PNG"), "{} bytes", bytes.len());
+    let _ = std::fs::remove_dir_all(&dir);
+}

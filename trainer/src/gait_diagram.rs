@@ -1,0 +1,108 @@
+//! The gait diagram of one episode (`vge eval --plot F.png`): each finger's contact with the
+//! object as bars over time, above the object's rotation about z. Finger gaiting shows as
+//! fingers taking turns to let go while the rotation keeps climbing.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::eval::GaitTrace;
+use crate::plot::PlotError;
+
+const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+
+/// Draws `trace` into a PNG at `out`; `title` goes above the contacts.
+pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError> {
+    crate::plot::load_font()?;
+    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
+    let root = BitMapBackend::new(out, (1400, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    let (top, bottom) = root.split_vertically(330);
+    let dt = f64::from(trace.dt_s);
+    let t_end = (trace.tip_contacts.len() as f64 * dt).max(dt);
+
+    // Contacts: finger f's bar spans [f + 0.1, f + 0.9] wherever it touches.
+    let mut contacts = ChartBuilder::on(&top)
+        .caption(title, ("sans-serif", 22))
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_end, 0.0..FINGERS.len() as f64)
+        .map_err(|e| draw_err(&e))?;
+    contacts
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(FINGERS.len() * 2 + 1)
+        .y_label_formatter(&|y| {
+            let i = (y - 0.5).round();
+            if (y - 0.5 - i).abs() < 1e-6 && (0.0..FINGERS.len() as f64).contains(&i) {
+                FINGERS[i as usize].to_owned()
+            } else {
+                String::new()
+            }
+        })
+        .x_desc("time (s)")
+        .draw()
+        .map_err(|e| draw_err(&e))?;
+    for (f, _) in FINGERS.iter().enumerate() {
+        let color = Palette99::pick(f).to_rgba();
+        // One rectangle per run of contact steps.
+        let mut runs = Vec::new();
+        let mut start = None;
+        for (k, c) in trace.tip_contacts.iter().enumerate() {
+            match (c[f], start) {
+                (true, None) => start = Some(k),
+                (false, Some(s)) => {
+                    runs.push((s, k));
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(s) = start {
+            runs.push((s, trace.tip_contacts.len()));
+        }
+        let y = f as f64;
+        contacts
+            .draw_series(runs.into_iter().map(|(a, b)| {
+                Rectangle::new([(a as f64 * dt, y + 0.15), (b as f64 * dt, y + 0.85)], color.filled())
+            }))
+            .map_err(|e| draw_err(&e))?;
+    }
+
+    // Rotation, with the 2 pi of the success test marked.
+    let rot_max = trace.rotation_rad.iter().copied().fold(2.0 * std::f64::consts::PI, f64::max);
+    let rot_min = trace.rotation_rad.iter().copied().fold(0.0, f64::min);
+    let mut rotation = ChartBuilder::on(&bottom)
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_end, rot_min..rot_max * 1.05)
+        .map_err(|e| draw_err(&e))?;
+    rotation
+        .configure_mesh()
+        .x_desc("time (s)")
+        .y_desc("object rotation about z (rad)")
+        .draw()
+        .map_err(|e| draw_err(&e))?;
+    rotation
+        .draw_series(LineSeries::new(
+            trace.rotation_rad.iter().enumerate().map(|(k, r)| ((k + 1) as f64 * dt, *r)),
+            BLUE.stroke_width(2),
+        ))
+        .map_err(|e| draw_err(&e))?;
+    let two_pi = 2.0 * std::f64::consts::PI;
+    rotation
+        .draw_series(DashedLineSeries::new([(0.0, two_pi), (t_end, two_pi)], 8, 6, BLACK.stroke_width(1)))
+        .map_err(|e| draw_err(&e))?
+        .label("2 pi: a success")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    rotation
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| draw_err(&e))?;
+    root.present().map_err(|e| draw_err(&e))
+}
