@@ -311,11 +311,12 @@ fn print_report(
     );
     if let Some(s) = sim {
         println!(
-            "object:  turned {:.3} rad about z in {} sim steps; return {:.3}; {:.2} fingertip contacts on average{}",
+            "object:  turned {:.3} rad about z in {} sim steps; return {:.3}; {:.2} fingertip contacts on average, {} contact switches{}",
             s.rotation_rad,
             s.steps,
             s.total_reward,
             s.mean_tip_contacts,
+            s.contact_switches,
             if s.terminated { "; the episode terminated (drop or lost contacts)" } else { "" }
         );
     }
@@ -405,6 +406,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         "command_timeouts": stats.command_timeouts,
                         "sim_steps": s.steps,
                         "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
+                        "contact_switches": s.contact_switches,
                         "terminated": s.terminated,
                     })
                 }

@@ -70,6 +70,7 @@ pub fn json_line(
         m.insert("total_reward".to_owned(), round(f64::from(s.total_reward), 4));
         m.insert("mean_tip_contacts".to_owned(), round(f64::from(s.mean_tip_contacts), 3));
         m.insert("terminated".to_owned(), json!(s.terminated));
+        m.insert("contact_switches".to_owned(), json!(s.contact_switches));
     }
     Value::Object(m).to_string()
 }

@@ -97,6 +97,8 @@ pub struct SimHandSummary {
     /// The env reported termination (drop, or too few fingertip contacts).
     pub terminated: bool,
     pub mean_tip_contacts: f32,
+    /// Fingertips that broke and remade contact with the object ([`vge_sim::gait`]).
+    pub contact_switches: u32,
 }
 
 #[derive(Debug)]
@@ -106,6 +108,7 @@ pub struct SimHand {
     pending: [Option<JointCommand>; FINGERS],
     last_yaw_rad: f32,
     contact_sum: f32,
+    switches: vge_sim::gait::ContactSwitches,
     summary: SimHandSummary,
     /// The nodes' protocol duties; `serve` polls it for heartbeats and timeouts.
     pub nodes: NodeSupervisor,
@@ -118,12 +121,14 @@ impl SimHand {
         let mut env = Env::new(config)?;
         let (obs, _) = env.reset(seed)?;
         let last_yaw_rad = env.privileged().map(|s| s.object.yaw_rad()).unwrap_or(0.0);
+        let touching = env.privileged().map(|s| s.contacts.map(|c| c.is_some())).unwrap_or_default();
         Ok(Self {
             env,
             obs,
             pending: [None; FINGERS],
             last_yaw_rad,
             contact_sum: 0.0,
+            switches: vge_sim::gait::ContactSwitches::new(touching),
             summary: SimHandSummary::default(),
             nodes: NodeSupervisor::new(command_timeout, Instant::now()),
         })
@@ -136,6 +141,7 @@ impl SimHand {
     pub fn summary(&self) -> SimHandSummary {
         let mut s = self.summary;
         s.mean_tip_contacts = if s.steps == 0 { 0.0 } else { self.contact_sum / s.steps as f32 };
+        s.contact_switches = self.switches.count;
         s
     }
 
@@ -179,6 +185,7 @@ impl SimHand {
         self.summary.total_reward += result.reward;
         self.summary.terminated |= result.terminated;
         self.contact_sum += result.info.num_tip_contacts as f32;
+        self.switches.update(result.info.tip_contacts);
         let all: Vec<FingerId> = FingerId::all().collect();
         self.state_frames(&all, cmd.seq)
     }

@@ -1,6 +1,7 @@
-//! A policy file that passes every load check (valid CRC, finite weights) but overflows
-//! inside its first layer at run time (issue 13, item 4): `vge eval` and `vge-bridge run`
-//! must refuse to act on it, where before ReLU turned the NaN into 0 and the hand moved.
+//! Policy files through `vge eval` and `vge-bridge run`: one that passes every load check
+//! (valid CRC, finite weights) but overflows inside its first layer at run time (issue 13,
+//! item 4) must be refused, where before ReLU turned the NaN into 0 and the hand moved; the
+//! stored gait must turn the cube and switch contacts.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -78,4 +79,22 @@ fn a_policy_that_overflows_inside_is_refused_by_eval_and_halts_the_bridge() {
     assert_eq!(json["terminated"], false, "the hand held the object: {report}");
     assert!(json["rotation_rad"].as_f64().is_some_and(|r| r.abs() < 0.05), "{report}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The contrast: the stored seed-0 gait (docs/results/cube-fg-vge-seeds/seed-0) through the
+/// bridge on the simulated hand turns the cube and switches contacts.
+#[test]
+fn the_stored_gait_turns_the_cube_and_switches_contacts_through_the_bridge() {
+    let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/results/cube-fg-vge-seeds/seed-0/policy.vgep");
+    let run = Command::new(workspace_bin("vge-bridge"))
+        .args(["run", "--backend", "sim", "--duration", "6", "--json", "--policy", policy])
+        .output()
+        .expect("vge-bridge runs");
+    let report = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let json: serde_json::Value = serde_json::from_str(report.trim()).expect("one JSON line");
+    assert_eq!(json["stop_reason"], "duration", "{report}");
+    // In the success test this policy turns the cube ~0.9 rad/s with ~3 switches per second.
+    assert!(json["rotation_rad"].as_f64().is_some_and(|r| r > 2.0), "{report}");
+    assert!(json["contact_switches"].as_u64().is_some_and(|n| n >= 5), "{report}");
 }
