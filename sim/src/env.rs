@@ -117,6 +117,36 @@ pub struct EnvConfig {
     pub noise: NoiseConfig,
     /// External forces on the object.
     pub perturbation: PerturbationConfig,
+    /// Per-episode randomisation of the object's physics and of the action's timing.
+    pub randomization: DomainRandomization,
+}
+
+/// Domain randomisation for policies that must survive a real hand: the object's mass and
+/// friction drawn per episode, and a delay between an action and its effect. The defaults
+/// change nothing and draw nothing from the generator, so runs without it are unchanged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DomainRandomization {
+    /// At every reset the object's mass is multiplied by a factor drawn uniformly from
+    /// `[lo, hi]`; `[1, 1]` is off.
+    pub mass_scale: [f32; 2],
+    /// Likewise the object's friction coefficient.
+    pub friction_scale: [f32; 2],
+    /// Control steps between an action and the targets it sets (0: the same step). The
+    /// actions in flight at a reset are zero.
+    pub action_latency_steps: usize,
+}
+
+impl Default for DomainRandomization {
+    fn default() -> Self {
+        Self { mass_scale: [1.0, 1.0], friction_scale: [1.0, 1.0], action_latency_steps: 0 }
+    }
+}
+
+impl DomainRandomization {
+    /// A factor from `range`, drawing only when the range is not a single value.
+    fn draw(rng: &mut ChaCha8Rng, range: [f32; 2]) -> f32 {
+        if range[0] < range[1] { rng.random_range(range[0]..=range[1]) } else { range[0] }
+    }
 }
 
 impl Default for EnvConfig {
@@ -133,6 +163,7 @@ impl Default for EnvConfig {
             drop_height_m: 0.03,
             max_reward_rad_per_s: 3.0,
             grasp: GraspConfig::default(),
+            randomization: DomainRandomization::default(),
             noise: NoiseConfig::default(),
             perturbation: PerturbationConfig::default(),
         }
@@ -194,6 +225,16 @@ impl EnvConfig {
         let p = self.perturbation.change_probability;
         if !(0.0..=1.0).contains(&p) {
             return bad("perturbation change probability", p);
+        }
+        for (what, [lo, hi]) in [
+            ("mass scale", self.randomization.mass_scale),
+            ("friction scale", self.randomization.friction_scale),
+        ] {
+            if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo <= hi) {
+                return Err(SimError::InvalidConfig(format!(
+                    "{what} range [{lo}, {hi}]: needs 0 < lo <= hi"
+                )));
+            }
         }
         if self.min_contacts > NUM_FINGERS || self.reward_min_contacts > NUM_FINGERS {
             return Err(SimError::InvalidConfig("contact counts above the number of fingers".to_owned()));
@@ -283,6 +324,8 @@ pub struct Env {
     external_force_n: Vector3<f32>,
     reference_height_m: f32,
     steps: usize,
+    /// Actions waiting out `randomization.action_latency_steps`, oldest first.
+    in_flight: std::collections::VecDeque<[f32; NUM_JOINTS]>,
 }
 
 /// A standard normal draw (Box-Muller; deterministic given the generator).
@@ -304,6 +347,7 @@ impl Env {
             external_force_n: Vector3::zeros(),
             reference_height_m: 0.0,
             steps: 0,
+            in_flight: std::collections::VecDeque::new(),
         })
     }
 
@@ -352,8 +396,11 @@ impl Env {
                 *v = self.rng.random_range(-grasp.pose_noise_rad..=grasp.pose_noise_rad);
             }
         }
+        let mut object = cfg.object;
+        object.mass_kg *= DomainRandomization::draw(&mut self.rng, cfg.randomization.mass_scale);
+        object.friction *= DomainRandomization::draw(&mut self.rng, cfg.randomization.friction_scale);
         let q0 = [0.0f32; NUM_JOINTS];
-        let mut world = HandWorld::new(&cfg.hand, &cfg.physics, &cfg.object, &q0, &Isometry3::identity())?;
+        let mut world = HandWorld::new(&cfg.hand, &cfg.physics, &object, &q0, &Isometry3::identity())?;
         world.set_object_fixed(true);
         let mut q = q0;
         for finger in 0..NUM_FINGERS {
@@ -393,6 +440,9 @@ impl Env {
         self.world = Some(world);
         self.external_force_n = Vector3::zeros();
         self.steps = 0;
+        self.in_flight.clear();
+        self.in_flight
+            .extend(std::iter::repeat_n([0.0; NUM_JOINTS], self.config.randomization.action_latency_steps));
         let state = self.read_state()?;
         self.reference_height_m = state.object.pose.translation.vector.z;
         let info = ResetInfo {
@@ -461,7 +511,11 @@ impl Env {
 
     /// One control step: apply the clipped target deltas, advance the physics, observe.
     pub fn step(&mut self, action: &[f32]) -> Result<StepResult, SimError> {
-        let action = Self::check_action(action)?;
+        let mut action = Self::check_action(action)?;
+        if self.config.randomization.action_latency_steps > 0 {
+            self.in_flight.push_back(action);
+            action = self.in_flight.pop_front().unwrap_or([0.0; NUM_JOINTS]);
+        }
         let cfg = &self.config;
         let max = cfg.max_action_rad;
         let n_physics = cfg.physics_steps_per_control();

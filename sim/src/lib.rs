@@ -17,8 +17,8 @@ pub mod world;
 
 pub use env::wrap_angle_rad;
 pub use env::{
-    Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState, ResetInfo, StepInfo,
-    StepResult,
+    DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
+    ResetInfo, StepInfo, StepResult,
 };
 pub use error::SimError;
 pub use kinematics::{

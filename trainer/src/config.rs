@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use vge_sim::{EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig};
+use vge_sim::{DomainRandomization, EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig};
 
 use crate::controllers::{ControllerKind, CsConfig};
 use crate::nets::NetSpec;
@@ -140,6 +140,13 @@ pub struct EnvSection {
     pub noise_position_std_m: f32,
     pub perturb_force_std_n: f32,
     pub perturb_change_probability: f32,
+    /// Domain randomisation: the object's mass times a factor drawn per episode from
+    /// `[lo, hi]` (`[1.0, 1.0]`: off).
+    pub mass_scale: [f32; 2],
+    /// Likewise the object's friction coefficient.
+    pub friction_scale: [f32; 2],
+    /// Control steps between an action and its effect (a real hand's bus and motor delay).
+    pub action_latency_steps: usize,
 }
 
 impl Default for EnvSection {
@@ -158,6 +165,9 @@ impl Default for EnvSection {
             noise_position_std_m: 0.0,
             perturb_force_std_n: 0.0,
             perturb_change_probability: 0.0,
+            mass_scale: env.randomization.mass_scale,
+            friction_scale: env.randomization.friction_scale,
+            action_latency_steps: env.randomization.action_latency_steps,
         }
     }
 }
@@ -182,6 +192,11 @@ impl EnvSection {
         env.perturbation = PerturbationConfig {
             force_std_n: self.perturb_force_std_n,
             change_probability: self.perturb_change_probability,
+        };
+        env.randomization = DomainRandomization {
+            mass_scale: self.mass_scale,
+            friction_scale: self.friction_scale,
+            action_latency_steps: self.action_latency_steps,
         };
         env
     }

@@ -1,0 +1,48 @@
+//! Domain randomisation on the real rapier world: the object's mass drawn per episode from
+//! its range (seeded), and the action latency.
+
+use vge_sim::{DomainRandomization, Env, EnvConfig, NUM_JOINTS};
+
+fn env_with(randomization: DomainRandomization) -> Env {
+    Env::new(EnvConfig { randomization, ..EnvConfig::default() }).expect("valid config")
+}
+
+fn mass_after_reset(env: &mut Env, seed: u64) -> f32 {
+    env.reset(seed).expect("reset");
+    env.world().expect("world after reset").object_mass_kg()
+}
+
+#[test]
+fn the_object_mass_is_drawn_per_episode_from_its_range_and_seeded() {
+    let nominal = mass_after_reset(&mut env_with(DomainRandomization::default()), 0);
+    let fixed = DomainRandomization { mass_scale: [2.0, 2.0], ..DomainRandomization::default() };
+    assert!((mass_after_reset(&mut env_with(fixed), 0) - 2.0 * nominal).abs() < 1e-5 * nominal);
+
+    let ranged = DomainRandomization { mass_scale: [0.5, 1.5], ..DomainRandomization::default() };
+    let mut env = env_with(ranged);
+    let masses: Vec<f32> = (0..6).map(|seed| mass_after_reset(&mut env, seed)).collect();
+    assert!(masses.iter().all(|m| (0.5 * nominal..=1.5 * nominal).contains(m)), "{masses:?}");
+    assert!(masses.windows(2).any(|w| (w[0] - w[1]).abs() > 1e-3 * nominal), "{masses:?}");
+    assert_eq!(mass_after_reset(&mut env, 3), masses[3], "same seed, same draw");
+}
+
+#[test]
+fn an_action_takes_effect_after_the_latency() {
+    let mut env = env_with(DomainRandomization { action_latency_steps: 2, ..DomainRandomization::default() });
+    env.reset(1).expect("reset");
+    let targets = |env: &Env| env.privileged().expect("state").q_target_rad;
+    let before = targets(&env);
+    let mut push = [0.0f32; NUM_JOINTS];
+    push[0] = 0.04;
+    env.step(&push).expect("step");
+    env.step(&[0.0; NUM_JOINTS]).expect("step");
+    assert_eq!(targets(&env)[0], before[0], "still in flight after 2 steps");
+    env.step(&[0.0; NUM_JOINTS]).expect("step");
+    assert!((targets(&env)[0] - (before[0] + 0.04)).abs() < 1e-6, "applied on the third step");
+
+    let bad = EnvConfig {
+        randomization: DomainRandomization { friction_scale: [1.2, 0.8], ..DomainRandomization::default() },
+        ..EnvConfig::default()
+    };
+    assert!(Env::new(bad).is_err(), "an empty range is refused");
+}
