@@ -13,6 +13,8 @@ pub enum LoadError {
     Invalid(#[from] PolicyError),
     #[error("the policy maps {obs} observations to {act} actions; the hand needs {OBS_DIM} -> {NUM_JOINTS}")]
     WrongDims { obs: usize, act: usize },
+    #[error("observation layout: {0}")]
+    WrongLayout(String),
 }
 
 /// Weight storage for a policy file: the runtime decodes weights into caller memory.
@@ -21,6 +23,9 @@ pub fn storage_for(bytes: &[u8]) -> Result<Vec<f32>, LoadError> {
     if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
         return Err(LoadError::WrongDims { obs: info.obs_dim, act: info.act_dim });
     }
+    // Same size is not same meaning: the slices must be the ones the bridge fills.
+    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
+        .map_err(LoadError::WrongLayout)?;
     Ok(vec![0.0; info.storage_len])
 }
 

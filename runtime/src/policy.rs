@@ -18,8 +18,14 @@ use serde::Deserialize;
 use crate::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH, Frame};
 use crate::{Activation, Layer, Mlp, PolicyError, RuntimeError};
 
+/// Layers a [`HandPolicy`] holds at most (the trainer refuses configs beyond it).
+pub const HAND_MAX_LAYERS: usize = 4;
+/// Width of any layer of a [`HandPolicy`] at most.
+pub const HAND_MAX_WIDTH: usize = 256;
+
 /// A policy with capacity for the dexterous-hand actors: up to 4 layers of width up to 256.
-pub type HandPolicy<'a> = Policy<'a, 4, 256>;
+/// `vge-bridge` and the firmware load hand policies as this type.
+pub type HandPolicy<'a> = Policy<'a, HAND_MAX_LAYERS, HAND_MAX_WIDTH>;
 
 /// `f32`s needed by [`Policy::load`] for a network `dims[0] -> dims[1] -> ... -> dims[n]`
 /// (weights, biases, observation mean and std, action scale and offset). Saturates on

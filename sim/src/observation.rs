@@ -32,6 +32,30 @@ pub const OBS_CONTACT_NORMAL: Range<usize> = 45..60;
 /// Normal force magnitudes (N), one per fingertip.
 pub const OBS_CONTACT_FORCE: Range<usize> = 60..65;
 
+/// The observation's named slices, in order: the names a policy file carries
+/// (`obs_layout`) and that the bridge and eval check before they run one.
+pub const OBS_LAYOUT: [(&str, Range<usize>); 5] = [
+    ("q_rad", OBS_Q),
+    ("q_target_rad", OBS_Q_TARGET),
+    ("contact_position_m", OBS_CONTACT_POSITION),
+    ("contact_normal", OBS_CONTACT_NORMAL),
+    ("contact_force_n", OBS_CONTACT_FORCE),
+];
+
+/// Whether a policy's observation layout (`(name, start, end)` per slice, in order) is the
+/// one [`build_observation`] fills; `Err` says where they differ.
+pub fn check_layout<'a>(slices: impl IntoIterator<Item = (&'a str, usize, usize)>) -> Result<(), String> {
+    let got: Vec<(&str, usize, usize)> = slices.into_iter().collect();
+    let want: Vec<(&str, usize, usize)> = OBS_LAYOUT.iter().map(|(n, r)| (*n, r.start, r.end)).collect();
+    if got == want {
+        return Ok(());
+    }
+    let show = |v: &[(&str, usize, usize)]| {
+        v.iter().map(|(n, a, b)| format!("{n} {a}..{b}")).collect::<Vec<_>>().join(", ")
+    };
+    Err(format!("the policy observes [{}], the hand provides [{}]", show(&got), show(&want)))
+}
+
 /// One fingertip's contact reading, in plain arrays so that non-simulator callers (the
 /// CAN bridge) need no math library.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -98,3 +98,41 @@ fn the_stored_gait_turns_the_cube_and_switches_contacts_through_the_bridge() {
     assert!(json["rotation_rad"].as_f64().is_some_and(|r| r > 2.0), "{report}");
     assert!(json["contact_switches"].as_u64().is_some_and(|n| n >= 5), "{report}");
 }
+
+/// A policy whose observation slices are in another order (same size, other meaning) is
+/// refused by eval and the bridge before it runs.
+#[test]
+fn a_policy_observing_another_layout_is_refused() {
+    let dir = std::env::temp_dir().join(format!("vge-layout-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let plain = dir.join("plain.vgep");
+    let out = Command::new(workspace_bin("vge"))
+        .args(["export", "--init", "--seed", "4", "--out"])
+        .arg(&plain)
+        .output()
+        .expect("vge export runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut file = PolicyFile::read(&plain).expect("valid");
+    // q_rad and q_target_rad are both 15 wide: swap their names.
+    let (a, b) = (file.obs_layout[0].name.clone(), file.obs_layout[1].name.clone());
+    file.obs_layout[0].name = b;
+    file.obs_layout[1].name = a;
+    let swapped = dir.join("swapped.vgep");
+    std::fs::write(&swapped, file.to_bytes().expect("encodes")).expect("write");
+
+    let eval = Command::new(workspace_bin("vge"))
+        .args(["eval", "--episodes", "1", "--episode-s", "0.5", "--policy"])
+        .arg(&swapped)
+        .output()
+        .expect("vge eval runs");
+    let err = String::from_utf8_lossy(&eval.stderr);
+    assert!(!eval.status.success() && err.contains("the policy observes [q_target_rad 0..15"), "{err}");
+    let run = Command::new(workspace_bin("vge-bridge"))
+        .args(["run", "--backend", "sim", "--duration", "1", "--policy"])
+        .arg(&swapped)
+        .output()
+        .expect("vge-bridge runs");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success() && err.contains("observation layout"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

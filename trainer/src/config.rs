@@ -528,6 +528,16 @@ impl Config {
         if s.hidden.is_empty() || s.hidden.iter().any(|&h| h <= 0) {
             return Err(invalid(format!("sac.hidden must be non-empty positive widths, got {:?}", s.hidden)));
         }
+        // A policy the deployment side cannot load is refused before hours of training.
+        use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
+        if s.hidden.len() + 1 > HAND_MAX_LAYERS || s.hidden.iter().any(|&h| h as usize > HAND_MAX_WIDTH) {
+            return Err(invalid(format!(
+                "sac.hidden = {:?}: vge-bridge and the firmware run actors of at most {} hidden layers of \
+                 width <= {HAND_MAX_WIDTH} (vge_runtime::HandPolicy)",
+                s.hidden,
+                HAND_MAX_LAYERS - 1
+            )));
+        }
         for (key, v) in [("sac.actor_lr", s.actor_lr), ("sac.critic_lr", s.critic_lr), ("sac.utd", s.utd)] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(invalid(format!("{key} must be a positive number, got {v}")));

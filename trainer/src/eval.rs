@@ -240,6 +240,8 @@ fn with_runtime_policy<T>(
             info.obs_dim, info.act_dim
         )));
     }
+    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
+        .map_err(EvalError::Policy)?;
     let mut env = env.clone();
     // Same episode duration at the policy's rate.
     let duration_s = env.episode_length_steps as f32 / env.control_hz;

@@ -4,9 +4,7 @@
 use tch::nn::VarStore;
 use vge_export::{ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyMeta, Provenance, export_policy};
 use vge_sim::EnvConfig;
-use vge_sim::observation::{
-    OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q, OBS_Q_TARGET,
-};
+use vge_sim::observation::{OBS_DIM, OBS_LAYOUT};
 
 /// Joint names within a finger, in joint order.
 pub const JOINT_NAMES: [&str; 3] = ["roll", "flex_prox", "flex_dist"];
@@ -28,13 +26,7 @@ pub fn hand_policy_meta(env: &EnvConfig, provenance: Provenance) -> PolicyMeta {
         .collect::<Vec<_>>();
     let act_dim = action_names.len();
     PolicyMeta {
-        obs_layout: vec![
-            slice("q_rad", OBS_Q),
-            slice("q_target_rad", OBS_Q_TARGET),
-            slice("contact_position_m", OBS_CONTACT_POSITION),
-            slice("contact_normal", OBS_CONTACT_NORMAL),
-            slice("contact_force_n", OBS_CONTACT_FORCE),
-        ],
+        obs_layout: OBS_LAYOUT.iter().map(|(name, range)| slice(name, range.clone())).collect(),
         action_names,
         obs_norm: ObsNorm::identity(OBS_DIM),
         action_scale: vec![env.max_action_rad; act_dim],

@@ -571,3 +571,20 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+#[test]
+fn a_network_the_deployed_runtime_cannot_hold_is_refused_before_training() {
+    let with_hidden = |hidden: &str| {
+        let mut c = Config::default();
+        apply_override(&mut c, &format!("sac.hidden={hidden}")).expect("parses");
+        c.validate()
+    };
+    assert!(
+        with_hidden("[256, 256, 256]").is_ok(),
+        "3 hidden layers of 256: 4 layers, the most HandPolicy holds"
+    );
+    for too_big in ["[512, 512]", "[64, 64, 64, 64]"] {
+        let err = with_hidden(too_big).expect_err(too_big).to_string();
+        assert!(err.contains("vge-bridge") && err.contains("256"), "{err}");
+    }
+}
