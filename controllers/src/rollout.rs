@@ -252,10 +252,6 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i.min(sorted.len() - 1)]
 }
 
-fn json_num(v: f64) -> String {
-    if v.is_finite() { format!("{v}") } else { "null".to_owned() }
-}
-
 impl RolloutSummary {
     /// One JSON object on one line (no trailing newline), keys: `kind`, `object`,
     /// `episodes`, `seed`, `mean_return`, `mean_rotation_rad`, `max_abs_rotation_rad`,
@@ -263,26 +259,24 @@ impl RolloutSummary {
     /// `controller_median_us`, `controller_p90_us`. Non-finite numbers are `null`.
     #[must_use]
     pub fn to_json_line(&self) -> String {
-        format!(
-            "{{\"kind\":\"{}\",\"object\":\"{}\",\"episodes\":{},\"seed\":{},\"mean_return\":{},\
-             \"mean_rotation_rad\":{},\"max_abs_rotation_rad\":{},\"mean_contacts\":{},\"drops\":{},\
-             \"mean_contact_switches\":{},\"mean_steps\":{},\"no_action_fraction\":{},\"controller_median_us\":{},\
-             \"controller_p90_us\":{}}}",
-            self.kind.name(),
-            self.object.name(),
-            self.episodes,
-            self.seed,
-            json_num(f64::from(self.mean_return)),
-            json_num(f64::from(self.mean_rotation_rad)),
-            json_num(f64::from(self.max_abs_rotation_rad)),
-            json_num(f64::from(self.mean_contacts)),
-            self.drops,
-            json_num(f64::from(self.mean_contact_switches)),
-            json_num(f64::from(self.mean_steps)),
-            json_num(f64::from(self.no_action_fraction)),
-            json_num(self.controller_median_us),
-            json_num(self.controller_p90_us),
-        )
+        // serde_json writes a non-finite number as null.
+        serde_json::json!({
+            "kind": self.kind.name(),
+            "object": self.object.name(),
+            "episodes": self.episodes,
+            "seed": self.seed,
+            "mean_return": self.mean_return,
+            "mean_rotation_rad": self.mean_rotation_rad,
+            "max_abs_rotation_rad": self.max_abs_rotation_rad,
+            "mean_contacts": self.mean_contacts,
+            "drops": self.drops,
+            "mean_contact_switches": self.mean_contact_switches,
+            "mean_steps": self.mean_steps,
+            "no_action_fraction": self.no_action_fraction,
+            "controller_median_us": self.controller_median_us,
+            "controller_p90_us": self.controller_p90_us,
+        })
+        .to_string()
     }
 }
 

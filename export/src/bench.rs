@@ -68,26 +68,23 @@ impl RuntimeBench {
 
     /// One JSON object on one line (no trailing newline).
     pub fn to_json_line(&self) -> String {
-        let dims: Vec<String> = self.dims.iter().map(usize::to_string).collect();
         let macs = self.macs();
-        format!(
-            concat!(
-                "{{\"bench\":\"runtime\",\"dims\":[{}],\"batch\":1,\"iters\":{},",
-                "\"runtime_ns\":{:.1},\"runtime_p99_ns\":{:.1},\"tch_ns\":{:.1},\"tch_p99_ns\":{:.1},",
-                "\"speedup\":{:.2},\"macs\":{},\"runtime_gflops\":{:.2},\"tch_threads\":{},\"max_abs_diff\":{:e}}}"
-            ),
-            dims.join(","),
-            self.iters,
-            self.runtime_ns,
-            self.runtime_p99_ns,
-            self.tch_ns,
-            self.tch_p99_ns,
-            self.tch_ns / self.runtime_ns,
-            macs,
-            2.0 * macs as f64 / self.runtime_ns,
-            self.tch_threads,
-            self.max_abs_diff,
-        )
+        serde_json::json!({
+            "bench": "runtime",
+            "dims": self.dims,
+            "batch": 1,
+            "iters": self.iters,
+            "runtime_ns": self.runtime_ns,
+            "runtime_p99_ns": self.runtime_p99_ns,
+            "tch_ns": self.tch_ns,
+            "tch_p99_ns": self.tch_p99_ns,
+            "speedup": self.tch_ns / self.runtime_ns,
+            "macs": macs,
+            "runtime_gflops": 2.0 * macs as f64 / self.runtime_ns,
+            "tch_threads": self.tch_threads,
+            "max_abs_diff": self.max_abs_diff,
+        })
+        .to_string()
     }
 }
 

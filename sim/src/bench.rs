@@ -58,27 +58,23 @@ impl SimBench {
     #[must_use]
     pub fn to_json_line(&self) -> String {
         let e = &self.settings.env;
-        format!(
-            concat!(
-                "{{\"bench\":\"sim\",\"control_steps_per_s_single\":{:.1},\"control_steps_per_s_vec\":{:.1},",
-                "\"speedup\":{:.3},\"physics_steps_per_s_single\":{:.1},\"resets_single\":{},",
-                "\"num_worlds\":{},\"threads\":{},\"steps_per_world\":{},\"control_hz\":{},\"physics_hz\":{},",
-                "\"solver_iterations\":{},\"physics_steps_per_control\":{},\"object\":\"{}\"}}"
-            ),
-            self.control_steps_per_s_single,
-            self.control_steps_per_s_vec,
-            self.speedup(),
-            self.physics_steps_per_s_single,
-            self.resets_single,
-            self.settings.num_worlds,
-            self.threads_used,
-            self.settings.steps_per_world,
-            e.control_hz,
-            e.physics.physics_hz,
-            e.physics.solver_iterations,
-            e.physics_steps_per_control(),
-            e.object.shape.name(),
-        )
+        serde_json::json!({
+            "bench": "sim",
+            "control_steps_per_s_single": self.control_steps_per_s_single,
+            "control_steps_per_s_vec": self.control_steps_per_s_vec,
+            "speedup": self.speedup(),
+            "physics_steps_per_s_single": self.physics_steps_per_s_single,
+            "resets_single": self.resets_single,
+            "num_worlds": self.settings.num_worlds,
+            "threads": self.threads_used,
+            "steps_per_world": self.settings.steps_per_world,
+            "control_hz": e.control_hz,
+            "physics_hz": e.physics.physics_hz,
+            "solver_iterations": e.physics.solver_iterations,
+            "physics_steps_per_control": e.physics_steps_per_control(),
+            "object": e.object.shape.name(),
+        })
+        .to_string()
     }
 }
 

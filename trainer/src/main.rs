@@ -592,16 +592,19 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
             }
             let r = bench_update::run(config, batch, 20, updates, seed)?;
             if json {
-                println!(
-                    "{{\"bench\":\"update\",\"algorithm\":\"{algorithm}\",\"layer_norm\":{layer_norm},\"updates_per_s\":{:.1},\"gflops\":{:.2},\"matmul_gflops\":{:.2},\"ratio_to_matmul\":{:.3},\"batch\":{},\"updates\":{},\"threads\":{}}}",
-                    r.updates_per_s,
-                    r.gflops,
-                    r.matmul_gflops,
-                    r.gflops / r.matmul_gflops,
-                    r.batch,
-                    r.updates,
-                    r.threads
-                );
+                let line = serde_json::json!({
+                    "bench": "update",
+                    "algorithm": algorithm,
+                    "layer_norm": layer_norm,
+                    "updates_per_s": r.updates_per_s,
+                    "gflops": r.gflops,
+                    "matmul_gflops": r.matmul_gflops,
+                    "ratio_to_matmul": r.gflops / r.matmul_gflops,
+                    "batch": r.batch,
+                    "updates": r.updates,
+                    "threads": r.threads,
+                });
+                println!("{line}");
             } else {
                 println!(
                     "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}",
