@@ -15,18 +15,23 @@ fn workspace_bin(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// An untrained hand policy from `vge export --init`, whose first layer then gets ±3e38 in
-/// every row's first two weights: any observation with those inputs at about 1 or more
-/// gives inf - inf = NaN in every unit.
-fn overflowing_policy(dir: &Path) -> PathBuf {
-    let plain = dir.join("plain.vgep");
+/// `vge export --init --seed SEED` into `dir`, read back.
+fn exported_init(dir: &Path, seed: u64) -> PolicyFile {
+    let plain = dir.join(format!("init-{seed}.vgep"));
     let out = Command::new(workspace_bin("vge"))
-        .args(["export", "--init", "--seed", "1", "--out"])
+        .args(["export", "--init", "--seed", &seed.to_string(), "--out"])
         .arg(&plain)
         .output()
         .expect("vge export runs");
     assert!(out.status.success(), "vge export failed: {}", String::from_utf8_lossy(&out.stderr));
-    let mut file = PolicyFile::read(&plain).expect("a valid policy file");
+    PolicyFile::read(&plain).expect("a valid policy file")
+}
+
+/// An untrained hand policy from `vge export --init`, whose first layer then gets ±3e38 in
+/// every row's first two weights: any observation with those inputs at about 1 or more
+/// gives inf - inf = NaN in every unit.
+fn overflowing_policy(dir: &Path) -> PathBuf {
+    let mut file = exported_init(dir, 1);
     let first = &mut file.layers[0];
     let n_in = first.in_dim as usize;
     for row in first.weights.chunks_exact_mut(n_in) {
@@ -105,14 +110,7 @@ fn the_stored_gait_turns_the_cube_and_switches_contacts_through_the_bridge() {
 fn a_policy_observing_another_layout_is_refused() {
     let dir = std::env::temp_dir().join(format!("vge-layout-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let plain = dir.join("plain.vgep");
-    let out = Command::new(workspace_bin("vge"))
-        .args(["export", "--init", "--seed", "4", "--out"])
-        .arg(&plain)
-        .output()
-        .expect("vge export runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let mut file = PolicyFile::read(&plain).expect("valid");
+    let mut file = exported_init(&dir, 4);
     // q_rad and q_target_rad are both 15 wide: swap their names.
     let (a, b) = (file.obs_layout[0].name.clone(), file.obs_layout[1].name.clone());
     file.obs_layout[0].name = b;

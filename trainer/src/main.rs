@@ -21,6 +21,24 @@ struct Cli {
     command: Command,
 }
 
+/// The episodes of the success test (`vge eval`, `vge robustness`).
+#[derive(Debug, Clone, Copy, Args)]
+struct EpisodeArgs {
+    #[arg(long, default_value_t = ObjectShape::Cube)]
+    object: ObjectShape,
+    /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Episode length in seconds of sim time.
+    #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODE_S)]
+    episode_s: f32,
+    /// Uniform noise (+-rad) on the initial grasp's roll and closing angles; 0 starts
+    /// every episode from the same grasp (then, without sensor noise or perturbations,
+    /// all episodes are the same).
+    #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
+    grasp_noise_rad: f32,
+}
+
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Train a policy with SAC (or TD3: `algorithm = "td3"`) and the configured behaviour
@@ -100,19 +118,8 @@ enum Command {
         /// Episodes to run (the success test uses 20).
         #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
         episodes: usize,
-        #[arg(long, default_value_t = ObjectShape::Cube)]
-        object: ObjectShape,
-        /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Episode length in seconds of sim time.
-        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODE_S)]
-        episode_s: f32,
-        /// Uniform noise (+-rad) on the initial grasp's roll and closing angles; 0 starts
-        /// every episode from the same grasp (then, without sensor noise or perturbations,
-        /// all episodes are the same).
-        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
-        grasp_noise_rad: f32,
+        #[command(flatten)]
+        episode: EpisodeArgs,
         /// Gaussian noise on observed joint positions (rad).
         #[arg(long, default_value_t = 0.0)]
         noise_q_rad: f32,
@@ -154,17 +161,9 @@ enum Command {
         /// Levels per axis, evenly from 0 to the paper's level (at least 2).
         #[arg(long, default_value_t = 5)]
         levels: usize,
-        #[arg(long, default_value_t = ObjectShape::Cube)]
-        object: ObjectShape,
-        /// Seed of the grasps and of the noise draws (episode k uses seed + k at every level).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Episode length in seconds of sim time.
-        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODE_S)]
-        episode_s: f32,
-        /// Uniform noise (+-rad) on the initial grasps, as in the success test.
-        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
-        grasp_noise_rad: f32,
+        /// The same episodes (seeds, grasps) run at every level.
+        #[command(flatten)]
+        episode: EpisodeArgs,
         /// Output folder (created).
         #[arg(long)]
         out: PathBuf,
@@ -394,10 +393,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval {
             policy,
             episodes,
-            object,
-            seed,
-            episode_s,
-            grasp_noise_rad,
+            episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
             noise_q_rad,
             noise_normal_frac,
             noise_position_m,
@@ -474,7 +470,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Robustness { policy, episodes, levels, object, seed, episode_s, grasp_noise_rad, out } => {
+        Command::Robustness {
+            policy,
+            episodes,
+            levels,
+            episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
+            out,
+        } => {
             use vge_trainer::robustness::{self, RobustnessOptions};
             anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
             anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
