@@ -79,6 +79,21 @@ fn tampered<F>(nodes: InProcessTransport, tamper: F) -> Tampered<F> {
     Tampered { inner: nodes, started: Instant::now(), tamper }
 }
 
+/// Runs the loop with `policy` on `bridge` against the lag emulator on `nodes` until `cfg`
+/// or a fault ends it, then lets the emulator finish.
+fn run_against_emulator<B: Transport, N: Transport + 'static, P: PolicyRunner>(
+    mut bridge: B,
+    nodes: N,
+    policy: &mut P,
+    cfg: &LoopConfig,
+) -> vge_bridge::control_loop::LoopReport {
+    let emulator = spawn_emulator(nodes, u64::MAX);
+    let report = run(&mut bridge, policy, cfg, &AtomicBool::new(false)).expect("loop runs");
+    drop(bridge);
+    emulator.join().expect("emulator thread");
+    report
+}
+
 fn decode(frame: &RawFrame) -> Message {
     Message::decode_frame(frame).expect("the emulator sends valid frames")
 }
@@ -127,12 +142,8 @@ impl PolicyRunner for NanPolicy {
 
 #[test]
 fn nan_actions_hold_the_last_safe_targets_then_halt() {
-    let (mut bridge, nodes) = InProcessTransport::pair();
-    let emulator = spawn_emulator(nodes, u64::MAX);
-    let report =
-        run(&mut bridge, &mut NanPolicy, &config(200.0, 1.0), &AtomicBool::new(false)).expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let (bridge, nodes) = InProcessTransport::pair();
+    let report = run_against_emulator(bridge, nodes, &mut NanPolicy, &config(200.0, 1.0));
     // Five failing periods are held; the sixth halts.
     assert_eq!(report.stop_reason, StopReason::PolicyFailure, "{report:?}");
     assert_eq!((report.steps, report.policy_errors, report.holds), (5, 6, 6));
@@ -221,7 +232,7 @@ fn loop_turns_the_simulated_cube_through_the_protocol() {
 
 #[test]
 fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
-    let (mut bridge, nodes) = InProcessTransport::pair();
+    let (bridge, nodes) = InProcessTransport::pair();
     // After 0.2 s, finger 2 reports its roll at 3.2 rad (0x7FFF counts: far outside its range).
     let nodes = tampered(nodes, |t, frame| match decode(&frame) {
         Message::JointPosition(p) if p.finger.index() == 2 && t > Duration::from_millis(200) => {
@@ -230,11 +241,8 @@ fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
         }
         _ => vec![Received::Frame(frame)],
     });
-    let emulator = spawn_emulator(nodes, u64::MAX);
     let mut policy = ConstantDelta { delta_rad: 0.001, ..hold_policy() };
-    let report = run(&mut bridge, &mut policy, &config(100.0, 3.0), &AtomicBool::new(false)).expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let report = run_against_emulator(bridge, nodes, &mut policy, &config(100.0, 3.0));
     assert_eq!(report.stop_reason, StopReason::ImplausibleState, "{report:?}");
     assert!(report.stop_detail.contains("node 2 (middle)"), "{}", report.stop_detail);
     assert!(report.link.implausible_frames >= 4, "{:?}", report.link);
@@ -245,7 +253,7 @@ fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
 
 #[test]
 fn stale_frames_are_dropped_and_counted_and_a_short_burst_only_holds() {
-    let (mut bridge, nodes) = InProcessTransport::pair();
+    let (bridge, nodes) = InProcessTransport::pair();
     // Three times, between 0.1 and 0.13 s, finger 4 also sends a position with a seq ten
     // commands old (as a node replaying its buffer would).
     let mut replays = 0;
@@ -262,11 +270,7 @@ fn stale_frames_are_dropped_and_counted_and_a_short_burst_only_holds() {
         }
         _ => vec![Received::Frame(frame)],
     });
-    let emulator = spawn_emulator(nodes, u64::MAX);
-    let report =
-        run(&mut bridge, &mut hold_policy(), &config(100.0, 0.5), &AtomicBool::new(false)).expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(100.0, 0.5));
     assert_eq!(report.stop_reason, StopReason::DurationReached, "{report:?}");
     assert_eq!(report.link.stale_frames, 3, "{:?}", report.link);
     assert!((1..=3).contains(&report.holds), "one hold per period with a stale frame: {report:?}");
@@ -279,7 +283,7 @@ fn stale_frames_are_dropped_and_counted_and_a_short_burst_only_holds() {
 #[test]
 fn a_node_whose_heartbeat_stops_or_sticks_halts_the_loop() {
     for stuck in [false, true] {
-        let (mut bridge, nodes) = InProcessTransport::pair();
+        let (bridge, nodes) = InProcessTransport::pair();
         // Node 1's heartbeat: after 0.3 s it stops, or its counter is frozen from the start.
         let nodes = tampered(nodes, move |t, frame| match decode(&frame) {
             Message::Heartbeat(h) if h.node == 1 && stuck => {
@@ -289,11 +293,7 @@ fn a_node_whose_heartbeat_stops_or_sticks_halts_the_loop() {
             Message::Heartbeat(h) if h.node == 1 && t > Duration::from_millis(300) => vec![],
             _ => vec![Received::Frame(frame)],
         });
-        let emulator = spawn_emulator(nodes, u64::MAX);
-        let report =
-            run(&mut bridge, &mut hold_policy(), &config(50.0, 3.0), &AtomicBool::new(false)).expect("runs");
-        drop(bridge);
-        emulator.join().expect("emulator thread");
+        let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(50.0, 3.0));
         assert_eq!(report.stop_reason, StopReason::HeartbeatLost, "stuck {stuck}: {report:?}");
         let want = if stuck {
             "heartbeat counter of node 1 (index) stuck at 7"
@@ -308,7 +308,7 @@ fn a_node_whose_heartbeat_stops_or_sticks_halts_the_loop() {
 
 #[test]
 fn bus_off_halts_and_other_error_frames_are_counted() {
-    let (mut bridge, nodes) = InProcessTransport::pair();
+    let (bridge, nodes) = InProcessTransport::pair();
     // Every node position answer comes with an error-passive report; after 0.2 s a bus-off.
     let nodes = tampered(nodes, |t, frame| match decode(&frame) {
         Message::JointPosition(p) if p.finger.index() == 0 => {
@@ -318,11 +318,7 @@ fn bus_off_halts_and_other_error_frames_are_counted() {
         }
         _ => vec![Received::Frame(frame)],
     });
-    let emulator = spawn_emulator(nodes, u64::MAX);
-    let report =
-        run(&mut bridge, &mut hold_policy(), &config(100.0, 3.0), &AtomicBool::new(false)).expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(100.0, 3.0));
     assert_eq!(report.stop_reason, StopReason::BusOff, "{report:?}");
     assert!(report.link.error_frames.bus_off >= 1, "{:?}", report.link);
     assert!(report.link.error_frames.controller >= 10, "{:?}", report.link);
@@ -331,17 +327,14 @@ fn bus_off_halts_and_other_error_frames_are_counted() {
 #[test]
 fn a_flood_beyond_the_receive_budget_halts_and_below_it_is_only_counted() {
     for (junk_per_frame, halts) in [(2usize, false), (80, true)] {
-        let (mut bridge, nodes) = InProcessTransport::pair();
+        let (bridge, nodes) = InProcessTransport::pair();
         let nodes = tampered(nodes, move |_, frame| {
             let mut out = vec![Received::Frame(frame)];
             out.extend((0..junk_per_frame).map(|_| Received::Frame(RawFrame { id: 0x000, data: [0; 8] })));
             out
         });
-        let emulator = spawn_emulator(nodes, u64::MAX);
         let cfg = LoopConfig { rx_budget: 256, ..config(50.0, 0.6) };
-        let report = run(&mut bridge, &mut hold_policy(), &cfg, &AtomicBool::new(false)).expect("runs");
-        drop(bridge);
-        emulator.join().expect("emulator thread");
+        let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &cfg);
         if halts {
             // 5 answers x 81 frames = 405 per command set (and 5 sets per query round): far
             // more than 256 per period, period after period.
@@ -381,12 +374,8 @@ impl Transport for FullQueue {
 #[test]
 fn a_transmit_queue_that_stays_full_halts_the_loop() {
     let (bridge, nodes) = InProcessTransport::pair();
-    let emulator = spawn_emulator(nodes, u64::MAX);
-    let mut bridge = FullQueue { inner: bridge, sent: 0, after: 200 };
-    let report =
-        run(&mut bridge, &mut hold_policy(), &config(100.0, 3.0), &AtomicBool::new(false)).expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let bridge = FullQueue { inner: bridge, sent: 0, after: 200 };
+    let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(100.0, 3.0));
     // The nodes fall silent without commands, so the watchdog may see it first: both are
     // the loop refusing to go on blind.
     assert!(matches!(report.stop_reason, StopReason::TxFailure | StopReason::Watchdog), "{report:?}");
@@ -411,12 +400,8 @@ impl PolicyRunner for Stall {
 
 #[test]
 fn a_late_loop_skips_the_periods_it_missed_instead_of_bursting() {
-    let (mut bridge, nodes) = InProcessTransport::pair();
-    let emulator = spawn_emulator(nodes, u64::MAX);
-    let report = run(&mut bridge, &mut Stall { calls: 0 }, &config(100.0, 0.5), &AtomicBool::new(false))
-        .expect("runs");
-    drop(bridge);
-    emulator.join().expect("emulator thread");
+    let (bridge, nodes) = InProcessTransport::pair();
+    let report = run_against_emulator(bridge, nodes, &mut Stall { calls: 0 }, &config(100.0, 0.5));
     // 35 ms late at 100 Hz: the stalled step misses, and the 3 periods that passed meanwhile
     // are skipped (not run late back to back); 50 periods, 46 or 47 steps.
     assert!(report.skipped_periods >= 2 && report.deadline_misses >= 3, "{report:?}");
