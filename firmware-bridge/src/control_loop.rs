@@ -29,12 +29,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use thiserror::Error;
-use vge_sim::kinematics::JointLimit;
+use vge_sim::kinematics::{FINGER_NAMES, JointLimit};
 use vge_sim::observation::{OBS_DIM, build_observation};
 
-use crate::hand_state::{HandState, HeartbeatProblem, Plausibility};
+use crate::hand_state::{Applied, HandState, HeartbeatProblem, Plausibility};
+use crate::heartbeat::HeartbeatClock;
 use crate::protocol::{
-    FingerId, HEARTBEAT_PERIOD_MS, HOST_NODE, Heartbeat, JointCommand, Message, NUM_FINGERS, NodeState,
+    FingerId, HEARTBEAT_PERIOD_MS, HOST_NODE, Heartbeat, JointCommand, Message, NodeState,
 };
 use crate::safety::{SafetyCounts, SafetyFilter};
 use crate::stats::Percentiles;
@@ -254,8 +255,7 @@ struct Io<'t, T: Transport> {
     counts: LinkCounts,
     /// Seq of the last command set sent; `None` before the first.
     seq: Option<u8>,
-    heartbeat_counter: u8,
-    next_heartbeat: Instant,
+    heartbeats: HeartbeatClock,
 }
 
 impl<T: Transport> Io<'_, T> {
@@ -268,7 +268,11 @@ impl<T: Transport> Io<'_, T> {
                 Received::Frame(f) => match Message::decode_frame(&f) {
                     Ok(m) => {
                         self.counts.messages_in += 1;
-                        self.state.apply(&m, now, &self.check, self.seq);
+                        match self.state.apply(&m, now, &self.check, self.seq) {
+                            Applied::Stale => self.counts.stale_frames += 1,
+                            Applied::Implausible => self.counts.implausible_frames += 1,
+                            Applied::Kept | Applied::Ignored => {}
+                        }
                     }
                     Err(_) => self.counts.bad_frames += 1,
                 },
@@ -318,13 +322,8 @@ impl<T: Transport> Io<'_, T> {
 
     /// The host's heartbeat, when one is due.
     fn heartbeat(&mut self, now: Instant, state: NodeState) -> Result<(), TransportError> {
-        if now < self.next_heartbeat {
-            return Ok(());
-        }
-        let period = Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS));
-        self.next_heartbeat = (self.next_heartbeat + period).max(now);
-        let beat = Heartbeat { node: HOST_NODE, state, counter: self.heartbeat_counter };
-        self.heartbeat_counter = self.heartbeat_counter.wrapping_add(1);
+        let Some(counter) = self.heartbeats.tick(now) else { return Ok(()) };
+        let beat = Heartbeat { node: HOST_NODE, state, counter };
         if self.send(&Message::Heartbeat(beat))? {
             self.counts.heartbeats_out += 1;
         }
@@ -341,8 +340,6 @@ fn wait_until(deadline: Instant, spin: Duration) {
         std::hint::spin_loop();
     }
 }
-
-const FINGER_NAMES: [&str; NUM_FINGERS as usize] = ["thumb", "index", "middle", "ring", "little"];
 
 /// Startup: disabled commands ask every node for its state until all have answered with
 /// positions, targets and a heartbeat. Returns the targets to start from: those the nodes
@@ -439,8 +436,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
         check,
         counts: LinkCounts::default(),
         seq: None,
-        heartbeat_counter: 0,
-        next_heartbeat: Instant::now(),
+        heartbeats: HeartbeatClock::new(Instant::now()),
     };
     let q_start = start_up(&mut io, config, stop)?;
     let mut safety = SafetyFilter::new(config.max_delta_rad, config.limits, q_start);
@@ -568,8 +564,6 @@ pub fn run<T: Transport, P: PolicyRunner>(
     let bus = io.transport.bus_counts();
     io.counts.frames_in = bus.frames_in;
     io.counts.frames_out = bus.frames_out;
-    io.counts.stale_frames = io.state.stale_frames;
-    io.counts.implausible_frames = io.state.implausible_frames;
     Ok(LoopReport {
         stop_reason,
         stop_detail,

@@ -3,8 +3,9 @@
 //!
 //! Readings are checked before they are kept (`Plausibility`): a frame whose seq lags the
 //! last command sent by more than a bound is stale, a joint position outside the joint's
-//! range plus a margin is implausible. Neither enters the state; both are counted and flag
-//! their finger as suspect until the loop takes the flags ([`HandState::take_suspects`]).
+//! range plus a margin is implausible. Neither enters the state; [`HandState::apply`] says
+//! which it was (the loop counts them), and both flag their finger as suspect until the loop
+//! takes the flags ([`HandState::take_suspects`]).
 
 use std::time::{Duration, Instant};
 
@@ -64,8 +65,6 @@ pub struct HandState {
     pub heartbeat: [Option<HeartbeatSeen>; FINGERS],
     /// Fingers that sent a stale or implausible frame since the last `take_suspects`.
     suspect: [bool; FINGERS],
-    pub stale_frames: u64,
-    pub implausible_frames: u64,
 }
 
 impl HandState {
@@ -83,7 +82,6 @@ impl HandState {
         {
             // Wrapping lag: a seq from the future (never sent) is a huge lag, also refused.
             if sent.wrapping_sub(seq) > check.max_seq_lag {
-                self.stale_frames += 1;
                 self.suspect[finger] = true;
                 return Applied::Stale;
             }
@@ -96,7 +94,6 @@ impl HandState {
                     !(l.lower_rad - check.margin_rad..=l.upper_rad + check.margin_rad).contains(&q)
                 });
                 if outside {
-                    self.implausible_frames += 1;
                     self.suspect[f] = true;
                     return Applied::Implausible;
                 }
@@ -325,7 +322,6 @@ mod tests {
         assert_eq!(s.apply(&position(0.0, 13), now, &check(), Some(12)), Applied::Stale, "never sent");
         assert_eq!(s.apply(&position(3.2767, 12), now, &check(), Some(12)), Applied::Implausible);
         assert_eq!(s.apply(&position(-0.61, 12), now, &check(), Some(12)), Applied::Implausible);
-        assert_eq!((s.stale_frames, s.implausible_frames), (2, 2));
         assert_eq!(s.q_rad[3], Some([0.0, 0.55, 0.0]), "only the plausible reading was kept");
         assert_eq!(s.take_suspects(), [false, false, false, true, false]);
         assert_eq!(s.take_suspects(), [false; 5], "taking clears");

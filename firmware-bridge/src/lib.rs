@@ -15,6 +15,8 @@ pub mod emulator;
 #[cfg(feature = "std")]
 pub mod hand_state;
 #[cfg(feature = "std")]
+pub mod heartbeat;
+#[cfg(feature = "std")]
 pub mod node_supervisor;
 #[cfg(feature = "std")]
 pub mod policy_runner;

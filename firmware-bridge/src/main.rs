@@ -206,13 +206,12 @@ fn main() -> ExitCode {
 /// The joint limits every target is clamped to (and positions are checked against).
 fn joint_limits_help() -> String {
     let limits = EnvConfig::default().hand.joint_limits();
-    let fingers = ["thumb", "index", "middle", "ring", "little"];
     let mut text = String::from(
         "Joint limits (rad) of the hand: the safety filter clamps every target to them, and a measured\n\
          position more than 0.1 rad outside them is implausible (dropped and counted; the loop holds,\n\
          and halts if it persists).\n  finger   roll              proximal flexion  distal flexion\n",
     );
-    for (f, name) in fingers.iter().enumerate() {
+    for (f, name) in vge_sim::kinematics::FINGER_NAMES.iter().enumerate() {
         text.push_str(&format!("  {name:<8}"));
         for l in &limits[3 * f..3 * f + 3] {
             text.push_str(&format!(" [{:+.3}, {:+.3}]", l.lower_rad, l.upper_rad));

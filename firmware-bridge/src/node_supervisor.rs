@@ -11,9 +11,10 @@
 
 use std::time::{Duration, Instant};
 
+use crate::heartbeat::HeartbeatClock;
 use crate::protocol::{
-    Fault, FaultCode, FingerId, HEARTBEAT_PERIOD_MS, Heartbeat, JointCommand, Message, NUM_FINGERS,
-    NodeState, ProtocolError, RawFrame, STATUS_ENABLED, STATUS_FAULT,
+    Fault, FaultCode, FingerId, Heartbeat, JointCommand, Message, NUM_FINGERS, NodeState, ProtocolError,
+    RawFrame, STATUS_ENABLED, STATUS_FAULT,
 };
 
 const FINGERS: usize = NUM_FINGERS as usize;
@@ -26,8 +27,7 @@ pub struct NodeSupervisor {
     fault: [Option<FaultCode>; FINGERS],
     last_command: [Option<Instant>; FINGERS],
     last_seq: [u8; FINGERS],
-    next_heartbeat: Instant,
-    heartbeat_counter: u8,
+    heartbeats: HeartbeatClock,
     /// Command-timeout faults raised so far (one per finger and occurrence).
     pub command_timeouts: u64,
     pub heartbeats_sent: u64,
@@ -42,8 +42,7 @@ impl NodeSupervisor {
             fault: [None; FINGERS],
             last_command: [None; FINGERS],
             last_seq: [0; FINGERS],
-            next_heartbeat: now,
-            heartbeat_counter: 0,
+            heartbeats: HeartbeatClock::new(now),
             command_timeouts: 0,
             heartbeats_sent: 0,
         }
@@ -106,10 +105,7 @@ impl NodeSupervisor {
                 frames.push(Message::Fault(fault).encode()?);
             }
         }
-        if now >= self.next_heartbeat {
-            let period = Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS));
-            // Catch up without bursting: the next beat is one period from now at the latest.
-            self.next_heartbeat = (self.next_heartbeat + period).max(now);
+        if let Some(counter) = self.heartbeats.tick(now) {
             for finger in FingerId::all() {
                 let f = usize::from(finger.index());
                 let state = match (self.fault[f], self.enabled[f]) {
@@ -117,18 +113,17 @@ impl NodeSupervisor {
                     (None, true) => NodeState::Enabled,
                     (None, false) => NodeState::Ready,
                 };
-                let beat = Heartbeat { node: finger.index(), state, counter: self.heartbeat_counter };
+                let beat = Heartbeat { node: finger.index(), state, counter };
                 frames.push(Message::Heartbeat(beat).encode()?);
                 self.heartbeats_sent += 1;
             }
-            self.heartbeat_counter = self.heartbeat_counter.wrapping_add(1);
         }
         Ok(frames)
     }
 
     /// How long until [`Self::poll`] has something to send, at most `cap` (a receive timeout).
     pub fn until_due(&self, now: Instant, cap: Duration) -> Duration {
-        self.next_heartbeat.saturating_duration_since(now).min(cap)
+        self.heartbeats.until_due(now, cap)
     }
 }
 

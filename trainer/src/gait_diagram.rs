@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use crate::eval::GaitTrace;
 use crate::plot::PlotError;
 
-const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+use vge_sim::kinematics::FINGER_NAMES as FINGERS;
 
 /// Draws `trace` into a PNG at `out`; `title` goes above the contacts.
 pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError> {

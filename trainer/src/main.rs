@@ -415,12 +415,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let mut env = EnvConfig::default();
             env.object.shape = object;
             let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
-            env.noise.q_std_rad = noise_q_rad;
-            env.noise.normal_std_frac = noise_normal_frac;
-            env.noise.position_std_m = noise_position_m;
-            env.perturbation.force_std_n = perturb_force_n;
-            if perturb_force_n > 0.0 && env.perturbation.change_probability == 0.0 {
-                env.perturbation.change_probability = 0.1;
+            // The robustness test's disturbances, set the one way it sets them.
+            use vge_trainer::robustness::Axis;
+            for (axis, level) in [
+                (Axis::JointNoise, noise_q_rad),
+                (Axis::NormalError, noise_normal_frac),
+                (Axis::PositionError, noise_position_m),
+                (Axis::Perturbation, perturb_force_n),
+            ] {
+                axis.apply(&mut env, level);
             }
             let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
                 .with_context(|| format!("evaluating {}", policy.display()))?;

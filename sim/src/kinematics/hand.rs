@@ -25,6 +25,8 @@ use super::error::KinematicsError;
 
 /// Number of fingers of the hand.
 pub const NUM_FINGERS: usize = 5;
+/// The fingers' names, in finger (and CAN node) order.
+pub const FINGER_NAMES: [&str; NUM_FINGERS] = ["thumb", "index", "middle", "ring", "little"];
 /// Joints per finger: roll, proximal flexion, distal flexion.
 pub const JOINTS_PER_FINGER: usize = 3;
 /// Degrees of freedom of the whole hand.
@@ -152,12 +154,11 @@ impl Default for HandModel {
     /// The hand of the paper sized for a 10 cm cube (numbers in the module docs): finger 0
     /// is the thumb at azimuth 180 deg, fingers 1..4 follow counter-clockwise every 72 deg.
     fn default() -> Self {
-        let names = ["thumb", "index", "middle", "ring", "little"];
         let fingers = std::array::from_fn(|i| {
             let azimuth_rad = std::f32::consts::PI + (i as f32) * 72f32.to_radians();
             let cap = if i == 0 { THUMB_TORQUE_CAP_NM } else { FINGER_TORQUE_CAP_NM };
             FingerModel::hanging_at_azimuth(
-                names[i],
+                FINGER_NAMES[i],
                 azimuth_rad,
                 NOMINAL_BASE_RADIUS_M,
                 NOMINAL_PALM_HEIGHT_M,
