@@ -485,6 +485,7 @@ fn tiny_config_with(total: u64, extra: &[&str]) -> Config {
         "run.checkpoint_interval=60",
         "run.eval_episodes=2",
         "run.eval_episode_s=1.0",
+        "run.eval_interval=70",
     ]
     .iter()
     .chain(extra)
@@ -552,6 +553,10 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert_eq!(metrics_without_speed(&part_dir), metrics_without_speed(&full_dir));
     let resumed_policy = std::fs::read(part_dir.join("policy.vgep")).expect("policy");
     assert!(resumed_policy == full_policy, "resumed actor differs from the uninterrupted one");
+    check_model_selection(&full_dir, &full_policy);
+    let best =
+        |d: &std::path::Path| std::fs::read_to_string(d.join("best-eval.json")).expect("best-eval.json");
+    assert_eq!(best(&part_dir), best(&full_dir), "model selection differs after a resume");
 
     // Same seed, same run; the exported policy runs on the runtime.
     let again_dir = tempdir("again");
@@ -570,6 +575,39 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     for d in [full_dir, part_dir, again_dir] {
         let _ = std::fs::remove_dir_all(d);
     }
+}
+
+/// The actor is kept at each periodic evaluation, and the one with the best evaluation
+/// (success, then return) is `policy-best.vgep`, reported on other episodes than it was
+/// selected on.
+fn check_model_selection(dir: &std::path::Path, final_policy: &[u8]) {
+    let snapshot = |step: u64| std::fs::read(dir.join(format!("snapshots/policy-{step}.vgep")));
+    assert!(snapshot(70).is_ok(), "snapshot at the first evaluation");
+    assert!(snapshot(140).expect("snapshot at the last evaluation") == final_policy);
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("best-eval.json")).expect("best-eval.json"))
+            .expect("json");
+    let selected = doc["selected_step"].as_u64().expect("selected_step");
+    let eval = std::fs::read_to_string(dir.join("eval.csv")).expect("eval.csv");
+    let rows: Vec<(u64, f64, f64)> = eval
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            (c[0].parse().expect("step"), c[4].parse().expect("success"), c[2].parse().expect("return"))
+        })
+        .collect();
+    assert_eq!(rows.iter().map(|r| r.0).collect::<Vec<_>>(), vec![70, 140]);
+    let best = rows.iter().max_by(|a, b| (a.1, a.2).partial_cmp(&(b.1, b.2)).expect("finite")).expect("rows");
+    assert_eq!(selected, best.0, "{eval}");
+    assert!(
+        std::fs::read(dir.join("policy-best.vgep")).expect("policy-best")
+            == snapshot(selected).expect("snapshot")
+    );
+    let validation = doc["validation_mean_return"].as_f64().expect("validation return");
+    assert!((validation - best.2).abs() < 1e-5);
+    // The test episodes are other grasps than the validation ones, so the return differs.
+    assert!(doc["mean_return"].as_f64().expect("test return") != validation, "{doc}");
 }
 
 #[test]
