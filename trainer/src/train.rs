@@ -992,7 +992,7 @@ mod tests {
         let parsed = parse_eval_rows(&format!(
             "{EVAL_HEADER}\n100,20,14.5,1.1,0.0500,0.3,3.0,6.8\n200,20,26.8,0.9,0.8000,1.0,3.1,11.6\n"
         ));
-        let steps: Vec<(u64, f64)> = parsed.unwrap().iter().map(|r| (r.step, r.success)).collect();
+        let steps: Vec<(u64, f64)> = parsed.expect("parses").iter().map(|r| (r.step, r.success)).collect();
         assert_eq!(steps, vec![(100, 0.05), (200, 0.8)]);
         assert!(parse_eval_rows(&format!("{EVAL_HEADER}\n100,20,x,1,0,0,0,0\n")).is_err());
     }
