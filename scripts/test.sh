@@ -3,7 +3,8 @@
 #
 # On first use it installs what it needs (Debian packages, the thumbv7em rustup target,
 # libtorch from PyPI wheels); later runs find them in place and go straight to the checks:
-#   formatting, clippy (-D warnings), the no_std runtime built for a Cortex-M4F,
+#   formatting, clippy (-D warnings), the dependency rules (no libtorch in the bridge or the
+#   controllers, no rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F,
 #   the workspace tests in release, the hardware-in-the-loop tests on vcan0, and
 #   `vge sweep --slurm` on a one-node Slurm cluster started on localhost.
 set -euo pipefail
@@ -65,6 +66,23 @@ for crate in vge-controllers vge-bridge; do
   fi
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
+
+step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
+# Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
+# description alone, not its physics (firmware-bridge/Cargo.toml). This overwrites
+# target/release/vge-bridge with the CAN-only binary; the test builds below put the full one back.
+can_only=(-p vge-bridge --no-default-features --features std)
+tree=$(cargo tree "${can_only[@]}" -e normal --prefix none)
+for dep in rapier3d rayon; do
+  if grep -q "^$dep " <<<"$tree"; then
+    echo "vge-bridge without its sim feature depends on $dep:"; cargo tree "${can_only[@]}" -e normal -i "$dep"; exit 1
+  fi
+done
+cargo clippy --release "${can_only[@]}" --all-targets -- -D warnings
+cargo build --release "${can_only[@]}"
+ls -l target/release/vge-bridge
+# Its command line: hand files, and a clear refusal of the simulator it does not have.
+cargo test --release "${can_only[@]}" --test cli
 
 step "no_std builds for thumbv7em-none-eabihf (Cortex-M4F): runtime, CAN protocol"
 cargo build --release -p vge-runtime --target thumbv7em-none-eabihf

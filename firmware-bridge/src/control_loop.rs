@@ -29,6 +29,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use thiserror::Error;
+use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
 use vge_sim::kinematics::{FINGER_NAMES, JointLimit};
 use vge_sim::observation::{OBS_DIM, build_observation};
 
@@ -83,7 +84,7 @@ impl LoopConfig {
             watchdog_periods: 5,
             startup_timeout: Duration::from_secs(5),
             halt_hold_periods: 3,
-            max_delta_rad: 0.05,
+            max_delta_rad: DEFAULT_MAX_ACTION_RAD,
             limits,
             spin: Duration::from_micros(200),
             // Five heartbeat periods: one late beat on a loaded host is not a lost node.

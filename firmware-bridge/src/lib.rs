@@ -1,9 +1,16 @@
 //! vge-bridge: runs an exported vge policy at a fixed control rate against the simulator or
 //! against a hand's joint controllers over SocketCAN.
 //!
-//! Without the default `std` feature this crate is only [`protocol`], `no_std`, so joint
-//! controller firmware can share the frame definitions. The bridge never links libtorch: it
-//! reads policy files with `vge-runtime` only.
+//! Features (both default):
+//! - `std`: the bridge for real hands over SocketCAN. It needs vge-sim's hand description
+//!   only (joint limits, observation layout), without the physics: no rapier3d. A real
+//!   hand's joint limits come from a hand file ([`hand_file`], `--hand FILE`).
+//! - `sim`: the simulated hand as well ([`sim_hand`]: `run --backend sim`, `emulate --model
+//!   sim`), with vge-sim's rapier3d physics.
+//!
+//! Without `std` this crate is only [`protocol`], `no_std`, so joint controller firmware can
+//! share the frame definitions. The bridge never links libtorch: it reads policy files with
+//! `vge-runtime` only.
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod protocol;
@@ -12,6 +19,8 @@ pub mod protocol;
 pub mod control_loop;
 #[cfg(feature = "std")]
 pub mod emulator;
+#[cfg(feature = "std")]
+pub mod hand_file;
 #[cfg(feature = "std")]
 pub mod hand_state;
 #[cfg(feature = "std")]
@@ -26,7 +35,7 @@ pub mod realtime;
 pub mod report;
 #[cfg(feature = "std")]
 pub mod safety;
-#[cfg(feature = "std")]
+#[cfg(feature = "sim")]
 pub mod sim_hand;
 #[cfg(feature = "std")]
 pub mod socketcan_io;

@@ -1,7 +1,9 @@
 //! `vge-bridge`: the deployment side of vge. Runs an exported policy file at a fixed control
-//! rate against the simulator or a hand's joint controllers over SocketCAN.
+//! rate against the simulator or a hand's joint controllers over SocketCAN. Built without the
+//! `sim` feature it drives real hands only: asking it for the simulator is an error that says
+//! so.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -13,12 +15,24 @@ use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use serde_json::{Value, json};
 use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
+use vge_bridge::hand_file::{self, JointLimits};
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
-use vge_bridge::report::json_line;
-use vge_bridge::sim_hand::{self, SimHand, SimHandSummary};
+use vge_bridge::report::{SimHandSummary, json_line};
+#[cfg(feature = "sim")]
+use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::{FdSocketCanTransport, InProcessTransport, Role, SocketCanTransport, Transport};
+use vge_sim::NUM_JOINTS;
+use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
 use vge_sim::observation::OBS_DIM;
-use vge_sim::{EnvConfig, NUM_JOINTS, ObjectShape};
+#[cfg(feature = "sim")]
+use vge_sim::{EnvConfig, ObjectShape};
+
+/// What `--object` parses into. Without the simulator the flag is still accepted, so that a
+/// command line meant for it is refused by [`no_sim`] with the reason, not as a stray flag.
+#[cfg(feature = "sim")]
+type ObjectArg = ObjectShape;
+#[cfg(not(feature = "sim"))]
+type ObjectArg = String;
 
 /// Exit status of `emulate` when a node faulted (e.g. the bridge stopped sending commands
 /// while the fingers were enabled): the summary is printed, and scripts see the fault.
@@ -61,7 +75,7 @@ struct LoopArgs {
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
     /// Largest joint-target change per step (rad), enforced whatever the policy says.
-    #[arg(long, default_value_t = EnvConfig::default().max_action_rad)]
+    #[arg(long, default_value_t = DEFAULT_MAX_ACTION_RAD)]
     max_delta_rad: f32,
     /// Periods without fresh joint state before the watchdog holds and stops.
     #[arg(long, default_value_t = 5)]
@@ -120,8 +134,17 @@ enum Command {
         /// Policy file written by `vge export` or `vge train`.
         #[arg(long)]
         policy: PathBuf,
+        /// The hand to drive. `sim` needs a vge-bridge built with the `sim` cargo feature (the
+        /// default build).
         #[arg(long, value_enum, default_value_t = Backend::Sim)]
         backend: Backend,
+        /// Hand file with the joint limits of the hand driven (TOML: `joint_limits_rad`, 15
+        /// [lower, upper] pairs in rad, finger-major; docs/can-protocol.md, Joint limits),
+        /// instead of the default hand's below. The safety filter clamps targets to them and
+        /// the plausibility check holds positions against them; the simulated hand keeps its
+        /// own.
+        #[arg(long, value_name = "FILE")]
+        hand: Option<PathBuf>,
         /// CAN interface (backend can).
         #[arg(long, default_value = "vcan0")]
         iface: String,
@@ -130,8 +153,8 @@ enum Command {
         #[arg(long)]
         fd: bool,
         /// Object in the simulated hand (backend sim).
-        #[arg(long, default_value_t = ObjectShape::Cube)]
-        object: ObjectShape,
+        #[arg(long, default_value = "cube")]
+        object: ObjectArg,
         /// Seed of the simulated episode (backend sim).
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -150,13 +173,15 @@ enum Command {
     Emulate {
         #[arg(long, default_value = "vcan0")]
         iface: String,
+        /// What the nodes are. `sim` needs a vge-bridge built with the `sim` cargo feature (the
+        /// default build).
         #[arg(long, value_enum, default_value_t = NodeModel::Sim)]
         model: NodeModel,
         /// Speak the CAN FD option (model sim): node states and hand commands as FD frames.
         #[arg(long)]
         fd: bool,
-        #[arg(long, default_value_t = ObjectShape::Cube)]
-        object: ObjectShape,
+        #[arg(long, default_value = "cube")]
+        object: ObjectArg,
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Stop after this many seconds without a frame.
@@ -189,7 +214,13 @@ enum Command {
 
 fn main() -> ExitCode {
     // `run --help` lists the joint limits of the hand, read from the one hand description.
-    let command = Cli::command().mut_subcommand("run", |c| c.after_long_help(joint_limits_help()));
+    let mut command = Cli::command().mut_subcommand("run", |c| c.after_long_help(joint_limits_help()));
+    if !cfg!(feature = "sim") {
+        command = command.after_help(
+            "This vge-bridge was built without the simulator (cargo feature `sim`): it drives real hands \
+             over CAN only and refuses `run --backend sim` and `emulate --model sim`.",
+        );
+    }
     let cli = match Cli::from_arg_matches(&command.get_matches()) {
         Ok(cli) => cli,
         Err(e) => e.exit(),
@@ -205,11 +236,12 @@ fn main() -> ExitCode {
 
 /// The joint limits every target is clamped to (and positions are checked against).
 fn joint_limits_help() -> String {
-    let limits = EnvConfig::default().hand.joint_limits();
+    let limits = hand_file::default_joint_limits();
     let mut text = String::from(
-        "Joint limits (rad) of the hand: the safety filter clamps every target to them, and a measured\n\
-         position more than 0.1 rad outside them is implausible (dropped and counted; the loop holds,\n\
-         and halts if it persists).\n  finger   roll              proximal flexion  distal flexion\n",
+        "Joint limits (rad) of the default hand (--hand FILE replaces them): the safety filter clamps\n\
+         every target to them, and a measured position more than 0.1 rad outside them is implausible\n\
+         (dropped and counted; the loop holds, and halts if it persists).\n  \
+         finger   roll              proximal flexion  distal flexion\n",
     );
     for (f, name) in vge_sim::kinematics::FINGER_NAMES.iter().enumerate() {
         text.push_str(&format!("  {name:<8}"));
@@ -237,7 +269,7 @@ fn positive_seconds(name: &str, s: f64, zero_ok: bool) -> anyhow::Result<Option<
     Ok((s > 0.0).then(|| Duration::from_secs_f64(s)))
 }
 
-fn loop_config(args: &LoopArgs, policy_hz: f32) -> anyhow::Result<LoopConfig> {
+fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::Result<LoopConfig> {
     let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
     anyhow::ensure!(rate_hz.is_finite() && rate_hz > 0.0, "--rate must be a positive number of Hz");
     if (rate_hz - f64::from(policy_hz)).abs() > 1e-3 {
@@ -251,11 +283,11 @@ fn loop_config(args: &LoopArgs, policy_hz: f32) -> anyhow::Result<LoopConfig> {
         duration: positive_seconds("duration", args.duration, true)?,
         watchdog_periods: args.watchdog_periods.max(1),
         max_delta_rad: args.max_delta_rad,
-        ..LoopConfig::new(rate_hz, EnvConfig::default().hand.joint_limits())
+        ..LoopConfig::new(rate_hz, limits)
     })
 }
 
-fn read_policy(path: &PathBuf) -> anyhow::Result<Vec<u8>> {
+fn read_policy(path: &Path) -> anyhow::Result<Vec<u8>> {
     std::fs::read(path).with_context(|| format!("reading policy file {}", path.display()))
 }
 
@@ -323,12 +355,20 @@ fn print_report(
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Run { policy, backend, iface, fd, object, seed, loop_args } => {
+        Command::Run { policy, backend, hand, iface, fd, object, seed, loop_args } => {
+            if backend == Backend::Sim && !cfg!(feature = "sim") {
+                return Err(no_sim("--backend sim (the default)"));
+            }
+            let limits = match &hand {
+                Some(path) => hand_file::load_joint_limits(path)
+                    .with_context(|| format!("hand file {}", path.display()))?,
+                None => hand_file::default_joint_limits(),
+            };
             let bytes = read_policy(&policy)?;
             let mut storage = storage_for(&bytes).with_context(|| format!("loading {}", policy.display()))?;
             let mut runner = RuntimePolicy::load(&bytes, &mut storage)
                 .with_context(|| format!("loading {}", policy.display()))?;
-            let cfg = loop_config(&loop_args, runner.control_hz())?;
+            let cfg = loop_config(&loop_args, runner.control_hz(), limits)?;
             let stop = stop_on_signal()?;
             loop_args.realtime.apply();
             match backend {
@@ -347,7 +387,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None);
                 }
                 Backend::Sim => {
-                    let (report, summary) = run_against_sim(&mut runner, &cfg, object, seed, &stop)?;
+                    let (report, summary) = run_against_sim(&mut runner, &cfg, &object, seed, &stop)?;
                     let extra = [("backend", json!("sim")), ("object", json!(object.to_string()))];
                     print_report(loop_args.json, &extra, &cfg, &report, Some(&summary));
                 }
@@ -358,6 +398,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let idle = positive_seconds("idle-timeout-s", idle_timeout_s, false)?.unwrap_or(Duration::MAX);
             let command_timeout =
                 positive_seconds("command-timeout-s", command_timeout_s, false)?.unwrap_or(Duration::MAX);
+            if model == NodeModel::Sim && !cfg!(feature = "sim") {
+                return Err(no_sim("--model sim (the default)"));
+            }
             let stop = stop_on_signal()?;
             anyhow::ensure!(!(fd && model == NodeModel::Lag), "--fd needs --model sim");
             let opening = || format!("opening CAN interface {iface}");
@@ -378,37 +421,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         "command_timeouts": stats.command_timeouts,
                     })
                 }
-                NodeModel::Sim => {
-                    let mut config = EnvConfig::default();
-                    config.object.shape = object;
-                    let mut hand = SimHand::new(config, seed, command_timeout)?;
-                    eprintln!(
-                        "vge-bridge: emulating the hand holding a {object} on {iface}{}",
-                        if fd { " (CAN FD)" } else { "" }
-                    );
-                    let (stats, bus) = if fd {
-                        let mut t = FdSocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
-                        (sim_hand::serve(&mut t, &mut hand, idle, &stop)?, t.bus_counts())
-                    } else {
-                        let mut t = SocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
-                        (sim_hand::serve(&mut t, &mut hand, idle, &stop)?, t.bus_counts())
-                    };
-                    let s = hand.summary();
-                    json!({
-                        "model": "sim",
-                        "frames_in": bus.frames_in,
-                        "frames_out": bus.frames_out,
-                        "messages_in": stats.frames_in,
-                        "messages_out": stats.frames_out,
-                        "bad_frames": stats.bad_frames,
-                        "heartbeats_sent": stats.heartbeats_sent,
-                        "command_timeouts": stats.command_timeouts,
-                        "sim_steps": s.steps,
-                        "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
-                        "contact_switches": s.contact_switches,
-                        "terminated": s.terminated,
-                    })
-                }
+                NodeModel::Sim => emulate_sim(&iface, fd, &object, seed, idle, command_timeout, &stop)?,
             };
             let timeouts = summary["command_timeouts"].as_u64().unwrap_or(0);
             if timeouts > 0 {
@@ -454,7 +467,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     let bytes = read_policy(path)?;
                     let mut storage = storage_for(&bytes)?;
                     let mut runner = RuntimePolicy::load(&bytes, &mut storage)?;
-                    let cfg = loop_config(&loop_args, rate as f32)?;
+                    let cfg = loop_config(&loop_args, rate as f32, hand_file::default_joint_limits())?;
                     (
                         control_loop::run(&mut bridge_end, &mut runner, &cfg, &stop)?,
                         cfg,
@@ -462,7 +475,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     )
                 }
                 None => {
-                    let cfg = loop_config(&loop_args, rate as f32)?;
+                    let cfg = loop_config(&loop_args, rate as f32, hand_file::default_joint_limits())?;
                     (control_loop::run(&mut bridge_end, &mut Hold, &cfg, &stop)?, cfg, "hold".to_owned())
                 }
             };
@@ -491,16 +504,96 @@ impl PolicyRunner for Hold {
     }
 }
 
+/// Why a command that needs the simulator cannot run in this build (`run` asks before it
+/// loads anything; the stand-ins below, compiled in its place, refuse too).
+fn no_sim(what: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{what} needs the simulator, and this vge-bridge was built without it (cargo feature `sim`, on \
+         by default): it drives real hands only, with `run --backend can` and `emulate --model lag`. \
+         Rebuild with the default features for the simulated hand"
+    )
+}
+
+/// Emulates the hand's nodes on `iface` with the simulated hand holding `object`; the summary.
+#[cfg(feature = "sim")]
+fn emulate_sim(
+    iface: &str,
+    fd: bool,
+    object: &ObjectShape,
+    seed: u64,
+    idle: Duration,
+    command_timeout: Duration,
+    stop: &AtomicBool,
+) -> anyhow::Result<Value> {
+    let mut config = EnvConfig::default();
+    config.object.shape = *object;
+    let mut hand = SimHand::new(config, seed, command_timeout)?;
+    eprintln!(
+        "vge-bridge: emulating the hand holding a {object} on {iface}{}",
+        if fd { " (CAN FD)" } else { "" }
+    );
+    let opening = || format!("opening CAN interface {iface}");
+    let (stats, bus) = if fd {
+        let mut t = FdSocketCanTransport::open(iface, Role::Nodes).with_context(opening)?;
+        (sim_hand::serve(&mut t, &mut hand, idle, stop)?, t.bus_counts())
+    } else {
+        let mut t = SocketCanTransport::open(iface, Role::Nodes).with_context(opening)?;
+        (sim_hand::serve(&mut t, &mut hand, idle, stop)?, t.bus_counts())
+    };
+    let s = hand.summary();
+    Ok(json!({
+        "model": "sim",
+        "frames_in": bus.frames_in,
+        "frames_out": bus.frames_out,
+        "messages_in": stats.frames_in,
+        "messages_out": stats.frames_out,
+        "bad_frames": stats.bad_frames,
+        "heartbeats_sent": stats.heartbeats_sent,
+        "command_timeouts": stats.command_timeouts,
+        "sim_steps": s.steps,
+        "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
+        "contact_switches": s.contact_switches,
+        "terminated": s.terminated,
+    }))
+}
+
+/// Stand-in without the simulator: refuses.
+#[cfg(not(feature = "sim"))]
+fn emulate_sim(
+    _: &str,
+    _: bool,
+    _: &ObjectArg,
+    _: u64,
+    _: Duration,
+    _: Duration,
+    _: &AtomicBool,
+) -> anyhow::Result<Value> {
+    Err(no_sim("--model sim (the default)"))
+}
+
+/// Stand-in without the simulator: refuses.
+#[cfg(not(feature = "sim"))]
+fn run_against_sim<P: PolicyRunner>(
+    _: &mut P,
+    _: &LoopConfig,
+    _: &ObjectArg,
+    _: u64,
+    _: &Arc<AtomicBool>,
+) -> anyhow::Result<(LoopReport, SimHandSummary)> {
+    Err(no_sim("--backend sim (the default)"))
+}
+
 /// Runs the loop against the simulated hand on a thread of its own, over the protocol.
+#[cfg(feature = "sim")]
 fn run_against_sim<P: PolicyRunner>(
     runner: &mut P,
     cfg: &LoopConfig,
-    object: ObjectShape,
+    object: &ObjectShape,
     seed: u64,
     stop: &Arc<AtomicBool>,
 ) -> anyhow::Result<(LoopReport, SimHandSummary)> {
     let mut env = EnvConfig::default();
-    env.object.shape = object;
+    env.object.shape = *object;
     let (mut bridge_end, mut nodes_end) = InProcessTransport::pair();
     let nodes_stop = Arc::new(AtomicBool::new(false));
     let nodes_flag = nodes_stop.clone();

@@ -3,7 +3,24 @@
 use serde_json::{Map, Value, json};
 
 use crate::control_loop::LoopReport;
-use crate::sim_hand::SimHandSummary;
+
+/// What happened to the object while the bridge drove the simulated hand (`sim_hand`, with
+/// the `sim` feature). Plain data, here beside the summary that prints it, so that a bridge
+/// built without the simulator prints the same summary less these fields.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SimHandSummary {
+    /// Control periods simulated.
+    pub steps: u64,
+    /// Net object rotation about +z (rad), unwrapped across ±π.
+    pub rotation_rad: f32,
+    /// Sum of the env's reward over the run.
+    pub total_reward: f32,
+    /// The env reported termination (drop, or too few fingertip contacts).
+    pub terminated: bool,
+    pub mean_tip_contacts: f32,
+    /// Fingertips that broke and remade contact with the object ([`vge_sim::gait`]).
+    pub contact_switches: u32,
+}
 
 /// Rounds to `digits` decimals, so the summary line stays short.
 fn round(v: f64, digits: i32) -> Value {

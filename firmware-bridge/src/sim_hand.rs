@@ -18,6 +18,7 @@ use vge_sim::{Env, EnvConfig, SimError};
 
 use crate::node_supervisor::NodeSupervisor;
 use crate::protocol::*;
+use crate::report::SimHandSummary;
 use crate::transport::{Received, Transport, TransportError};
 
 const FINGERS: usize = NUM_FINGERS as usize;
@@ -83,22 +84,6 @@ pub fn serve<T: Transport>(
     stats.command_timeouts = hand.nodes.command_timeouts;
     stats.heartbeats_sent = hand.nodes.heartbeats_sent;
     Ok(stats)
-}
-
-/// What happened to the object while the bridge drove the simulated hand.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SimHandSummary {
-    /// Control periods simulated.
-    pub steps: u64,
-    /// Net object rotation about +z (rad), unwrapped across ±π.
-    pub rotation_rad: f32,
-    /// Sum of the env's reward over the run.
-    pub total_reward: f32,
-    /// The env reported termination (drop, or too few fingertip contacts).
-    pub terminated: bool,
-    pub mean_tip_contacts: f32,
-    /// Fingertips that broke and remade contact with the object ([`vge_sim::gait`]).
-    pub contact_switches: u32,
 }
 
 #[derive(Debug)]

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use vge_bridge::control_loop::{LoopConfig, PolicyRunner, StopReason, run};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
+use vge_bridge::hand_file;
 use vge_bridge::protocol::{FingerId, Heartbeat, JointPosition, Message, RawFrame};
 use vge_bridge::transport::{BusCounts, ErrorClass, InProcessTransport, Received, Transport, TransportError};
 use vge_sim::kinematics::JointLimit;
@@ -184,8 +185,10 @@ fn no_hand_at_all_is_a_startup_error() {
 }
 
 /// Rolls every finger by a fixed step: in grasp, that turns the object about +z.
+#[cfg(feature = "sim")]
 struct RollRamp;
 
+#[cfg(feature = "sim")]
 impl PolicyRunner for RollRamp {
     type Error = Infallible;
     fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; 15], Infallible> {
@@ -197,6 +200,7 @@ impl PolicyRunner for RollRamp {
     }
 }
 
+#[cfg(feature = "sim")]
 #[test]
 fn loop_turns_the_simulated_cube_through_the_protocol() {
     use std::sync::atomic::Ordering;
@@ -249,6 +253,44 @@ fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
     // The held steps did not move the targets: the policy ran only before the fault.
     assert_eq!(policy.calls, report.steps - (report.holds - report.policy_errors));
     assert!(report.holds >= 4 && report.steps < 60, "{report:?}");
+}
+
+#[test]
+fn a_hand_files_joint_limits_are_the_ones_positions_are_checked_against() {
+    // After start-up, finger 1 reports its proximal flexion at 0.4 rad: inside the default
+    // hand's range, outside a real hand whose index finger flexes to 0.2 rad (+0.1 margin).
+    let report_with = |limits| {
+        let (bridge, nodes) = InProcessTransport::pair();
+        let nodes = tampered(nodes, |t, frame| match decode(&frame) {
+            Message::JointPosition(p) if p.finger.index() == 1 && t > Duration::from_millis(200) => {
+                let moved = JointPosition { q_rad: [0.0, 0.4, 0.0], ..p };
+                vec![Received::Frame(Message::JointPosition(moved).encode().expect("in range"))]
+            }
+            _ => vec![Received::Frame(frame)],
+        });
+        let cfg = LoopConfig { limits, ..config(100.0, 1.0) };
+        run_against_emulator(bridge, nodes, &mut hold_policy(), &cfg)
+    };
+    let default = report_with(hand_file::default_joint_limits());
+    assert_eq!(default.stop_reason, StopReason::DurationReached, "{default:?}");
+    assert_eq!(default.link.implausible_frames, 0);
+
+    // The default hand's limits, but joint 4 (index.flex_prox) flexes to 0.2 rad only.
+    let row = |j: usize| match (j, j % 3) {
+        (4, _) => "[-0.3, 0.2]",
+        (_, 0) => "[-0.5, 0.5]",
+        _ => "[-0.3, 1.6]",
+    };
+    let text = format!("joint_limits_rad = [{}]\n", (0..15).map(row).collect::<Vec<_>>().join(", "));
+    let path = std::env::temp_dir().join(format!("vge-bridge-hand-{}.toml", std::process::id()));
+    std::fs::write(&path, text).expect("writes the hand file");
+    let limits = hand_file::load_joint_limits(&path).expect("a valid hand file");
+    let _ = std::fs::remove_file(&path);
+    assert_eq!(limits[4], JointLimit { lower_rad: -0.3, upper_rad: 0.2 });
+    let real = report_with(limits);
+    assert_eq!(real.stop_reason, StopReason::ImplausibleState, "{real:?}");
+    assert!(real.stop_detail.contains("node 1 (index)"), "{}", real.stop_detail);
+    assert!(real.link.implausible_frames > 0, "{:?}", real.link);
 }
 
 #[test]

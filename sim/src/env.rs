@@ -23,6 +23,8 @@ use nalgebra::{Isometry3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::action::DEFAULT_MAX_ACTION_RAD;
+use crate::angle::wrap_angle_rad;
 use crate::error::SimError;
 use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
 use crate::objects::ObjectConfig;
@@ -156,7 +158,7 @@ impl Default for EnvConfig {
             physics: PhysicsConfig::default(),
             object: ObjectConfig::default(),
             control_hz: 20.0,
-            max_action_rad: 0.05,
+            max_action_rad: DEFAULT_MAX_ACTION_RAD,
             episode_length_steps: 400,
             min_contacts: 0,
             reward_min_contacts: 3,
@@ -601,33 +603,4 @@ fn close_finger(world: &HandWorld, finger: usize, roll: f32) -> Result<Option<f3
         }
     }
     Ok(Some(lo))
-}
-
-/// Angle wrapped to (-pi, pi]: the one helper every yaw difference in vge goes through
-/// (env, eval, rollouts, the bridge's sim summary).
-pub fn wrap_angle_rad(a: f32) -> f32 {
-    use std::f32::consts::PI;
-    let a = a % (2.0 * PI);
-    if a > PI {
-        a - 2.0 * PI
-    } else if a <= -PI {
-        a + 2.0 * PI
-    } else {
-        a
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::wrap_angle_rad;
-    use std::f32::consts::PI;
-
-    #[test]
-    fn wraps_angles_into_minus_pi_exclusive_to_pi_inclusive() {
-        assert!((wrap_angle_rad(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-5);
-        assert!((wrap_angle_rad(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-5);
-        assert_eq!(wrap_angle_rad(0.25), 0.25);
-        assert_eq!(wrap_angle_rad(PI), PI);
-        assert_eq!(wrap_angle_rad(-PI), PI);
-    }
 }

@@ -4,18 +4,34 @@
 //! (the rapier3d world, the in-grasp controllers) derives what it needs from that data
 //! through the same forward kinematics, so the physics and the controllers cannot
 //! disagree about where a fingertip is.
+//!
+//! # Features
+//! - `physics` (default): the rapier3d world and everything built on it ([`world`],
+//!   [`objects`], [`env`], [`vec_env`], [`bench`]). Without it the crate is the hand
+//!   description alone, with no rapier3d or rayon: [`kinematics`] (geometry, joint limits),
+//!   the observation layout and its builder ([`observation`]), the action's default step
+//!   ([`action`]), contact switches ([`gait`]) and [`wrap_angle_rad`]; what the bridge needs
+//!   to drive a real hand (`vge-bridge` without its `sim` feature).
 
+pub mod action;
+pub mod angle;
+#[cfg(feature = "physics")]
 pub mod bench;
+#[cfg(feature = "physics")]
 pub mod env;
 pub mod error;
 pub mod gait;
 pub mod kinematics;
+#[cfg(feature = "physics")]
 pub mod objects;
 pub mod observation;
+#[cfg(feature = "physics")]
 pub mod vec_env;
+#[cfg(feature = "physics")]
 pub mod world;
 
-pub use env::wrap_angle_rad;
+pub use angle::wrap_angle_rad;
+#[cfg(feature = "physics")]
 pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
     ResetInfo, StepInfo, StepResult,
@@ -25,7 +41,10 @@ pub use kinematics::{
     Contact, FingerModel, HandModel, JOINTS_PER_FINGER, JointLimit, KinematicsError, NOMINAL_CUBE_SIDE_M,
     NUM_FINGERS, NUM_JOINTS, grasp_map,
 };
+#[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{FingertipReading, OBS_DIM, build_observation};
+#[cfg(feature = "physics")]
 pub use vec_env::VecEnv;
+#[cfg(feature = "physics")]
 pub use world::{ContactReading, HandWorld, ObjectState, PhysicsConfig};

@@ -29,6 +29,10 @@ pub const NUM_FINGERS: usize = 5;
 pub const FINGER_NAMES: [&str; NUM_FINGERS] = ["thumb", "index", "middle", "ring", "little"];
 /// Joints per finger: roll, proximal flexion, distal flexion.
 pub const JOINTS_PER_FINGER: usize = 3;
+/// A finger's joints' names, in joint order: a joint of the hand is named
+/// `{finger}.{joint}`, e.g. `index.flex_prox` (the policy's action names, the bridge's
+/// messages).
+pub const JOINT_NAMES: [&str; JOINTS_PER_FINGER] = ["roll", "flex_prox", "flex_dist"];
 /// Degrees of freedom of the whole hand.
 pub const NUM_JOINTS: usize = NUM_FINGERS * JOINTS_PER_FINGER;
 

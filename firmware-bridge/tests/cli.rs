@@ -1,0 +1,77 @@
+//! The `vge-bridge` command line where it refuses before touching a bus: bad hand files, and
+//! the simulator asked of a build without it.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn bridge(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vge-bridge")).args(args).output().expect("runs vge-bridge")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A hand file in the temp dir, unique to this test, removed when dropped.
+struct HandFile(PathBuf);
+
+impl HandFile {
+    fn new(name: &str, text: &str) -> Self {
+        let path = std::env::temp_dir().join(format!("vge-bridge-cli-{}-{name}.toml", std::process::id()));
+        std::fs::write(&path, text).expect("writes the hand file");
+        Self(path)
+    }
+}
+
+impl Drop for HandFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[test]
+fn run_refuses_a_bad_hand_file_naming_the_file_and_the_joint() {
+    let mut rows = vec!["[-0.5, 0.5]"; 15];
+    rows[4] = "[1.6, -0.3]";
+    let inverted = HandFile::new("inverted", &format!("joint_limits_rad = [{}]", rows.join(", ")));
+    let short = HandFile::new("short", &format!("joint_limits_rad = [{}]", rows[..14].join(", ")));
+    for (file, what) in [
+        (&inverted, "joint 4 (index.flex_prox): lower limit 1.6 rad is not below upper limit -0.3 rad"),
+        (&short, "joint_limits_rad lists 14 joints; the hand has 15"),
+    ] {
+        let hand = file.0.to_str().expect("utf-8 path");
+        let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--backend", "can", "--hand", hand]);
+        assert!(!out.status.success());
+        let err = stderr(&out);
+        assert!(err.contains(&format!("hand file {hand}")) && err.contains(what), "{err}");
+    }
+    let out =
+        bridge(&["run", "--policy", "/nonexistent.vgep", "--backend", "can", "--hand", "/nonexistent.toml"]);
+    assert!(stderr(&out).contains("hand file /nonexistent.toml: reading the hand file"), "{}", stderr(&out));
+}
+
+#[test]
+fn run_help_documents_the_hand_file_and_the_default_limits() {
+    let out = bridge(&["run", "--help"]);
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(help.contains("--hand <FILE>") && help.contains("joint_limits_rad"), "{help}");
+    assert!(help.contains("thumb    [-0.500, +0.500] [-0.300, +1.600] [-0.300, +1.600]"), "{help}");
+}
+
+#[cfg(not(feature = "sim"))]
+#[test]
+fn without_the_sim_feature_asking_for_the_simulator_is_a_clear_error() {
+    for args in [
+        &["run", "--policy", "/nonexistent.vgep"][..],
+        &["run", "--policy", "/nonexistent.vgep", "--backend", "sim", "--object", "sphere"],
+        &["emulate", "--model", "sim"],
+    ] {
+        let out = bridge(args);
+        assert!(!out.status.success());
+        let err = stderr(&out);
+        assert!(
+            err.contains("needs the simulator, and this vge-bridge was built without it"),
+            "{args:?}: {err}"
+        );
+    }
+}
