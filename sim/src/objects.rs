@@ -10,8 +10,9 @@ use rapier3d::math::{Pose, Rotation, Vector};
 
 use crate::error::SimError;
 
-/// Which object is grasped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+/// Which object is grasped. Configs spell it as [`ObjectShape::name`] does (`"cube"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ObjectShape {
     /// A cube (the paper's default).
     #[default]

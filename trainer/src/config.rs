@@ -77,7 +77,9 @@ impl Method {
     }
 }
 
-/// Controller kind as it appears in configs.
+/// Controller kind as it appears in configs. It mirrors
+/// [`ControllerKind`](crate::controllers::ControllerKind) because vge-controllers has no
+/// serde (the objects, in contrast, are vge-sim's [`ObjectShape`] itself).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControllerName {
@@ -96,34 +98,12 @@ impl ControllerName {
     }
 }
 
-/// Object names as they appear in configs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ObjectName {
-    Cube,
-    Sphere,
-    Cylinder,
-    Dodecahedron,
-    Icosahedron,
-}
-
-impl ObjectName {
-    pub fn shape(self) -> ObjectShape {
-        match self {
-            Self::Cube => ObjectShape::Cube,
-            Self::Sphere => ObjectShape::Sphere,
-            Self::Cylinder => ObjectShape::Cylinder,
-            Self::Dodecahedron => ObjectShape::Dodecahedron,
-            Self::Icosahedron => ObjectShape::Icosahedron,
-        }
-    }
-}
-
-/// The environment. Env `i` of the vector gets `objects[i % objects.len()]`.
+/// The environment. Env `i` of the vector gets `objects[i % objects.len()]`, each spelt as
+/// [`ObjectShape::name`] gives it (`"cube"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EnvSection {
-    pub objects: Vec<ObjectName>,
+    pub objects: Vec<ObjectShape>,
     pub control_hz: f32,
     pub episode_length: usize,
     pub max_action_rad: f32,
@@ -153,7 +133,7 @@ impl Default for EnvSection {
     fn default() -> Self {
         let env = EnvConfig::default();
         Self {
-            objects: vec![ObjectName::Cube],
+            objects: vec![ObjectShape::Cube],
             control_hz: env.control_hz,
             episode_length: env.episode_length_steps,
             max_action_rad: env.max_action_rad,
@@ -176,8 +156,9 @@ impl EnvSection {
     /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length).
     pub fn env_config(&self, index: usize) -> EnvConfig {
         let mut env = EnvConfig::default();
-        let object = self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectName::Cube);
-        env.object = ObjectConfig::of(object.shape());
+        let object =
+            self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectShape::Cube);
+        env.object = ObjectConfig::of(object);
         env.control_hz = self.control_hz;
         env.episode_length_steps = self.episode_length;
         env.max_action_rad = self.max_action_rad;
@@ -278,6 +259,16 @@ impl Default for SacSection {
 pub enum AlgorithmName {
     Sac,
     Td3,
+}
+
+impl AlgorithmName {
+    /// The name as configs spell it (`"sac"`, `"td3"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sac => "sac",
+            Self::Td3 => "td3",
+        }
+    }
 }
 
 /// TD3's noises (fractions of the action scale) and actor delay.
@@ -500,112 +491,182 @@ impl Config {
         }
     }
 
-    /// Checks every field; the message names the key.
+    /// Checks every field; the message names the key. Sections are checked in file order
+    /// (the top-level keys, then env, sac, td3, vge, fge, bc, run), each by its own validator.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let c = self;
-        if c.num_envs == 0 {
-            return Err(invalid("num_envs must be at least 1"));
-        }
-        if c.total_steps == 0 {
-            return Err(invalid("total_steps must be at least 1"));
-        }
-        if c.method.queries_controller() && c.controller.is_none() {
-            return Err(invalid(format!(
-                "method {:?} queries a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
-                c.method.name()
-            )));
-        }
-        if c.env.objects.is_empty() {
-            return Err(invalid("env.objects must name at least one object"));
-        }
-        for i in 0..c.env.objects.len() {
-            c.env.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
-        }
-        if c.env.max_action_rad.is_nan() || c.env.max_action_rad <= 0.0 {
-            return Err(invalid("env.max_action_rad must be > 0"));
-        }
-        let s = &c.sac;
-        if s.hidden.is_empty() || s.hidden.iter().any(|&h| h <= 0) {
-            return Err(invalid(format!("sac.hidden must be non-empty positive widths, got {:?}", s.hidden)));
-        }
-        // A policy the deployment side cannot load is refused before hours of training.
-        use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
-        if s.hidden.len() + 1 > HAND_MAX_LAYERS || s.hidden.iter().any(|&h| h as usize > HAND_MAX_WIDTH) {
-            return Err(invalid(format!(
-                "sac.hidden = {:?}: vge-bridge and the firmware run actors of at most {} hidden layers of \
-                 width <= {HAND_MAX_WIDTH} (vge_runtime::HandPolicy)",
-                s.hidden,
-                HAND_MAX_LAYERS - 1
-            )));
-        }
-        for (key, v) in [("sac.actor_lr", s.actor_lr), ("sac.critic_lr", s.critic_lr), ("sac.utd", s.utd)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(invalid(format!("{key} must be a positive number, got {v}")));
-            }
-        }
-        if !(s.gamma > 0.0 && s.gamma <= 1.0) {
-            return Err(invalid(format!("sac.gamma must be in (0, 1], got {}", s.gamma)));
-        }
-        if !(s.tau > 0.0 && s.tau <= 1.0) {
-            return Err(invalid(format!("sac.tau must be in (0, 1], got {}", s.tau)));
-        }
-        match s.alpha {
-            Alpha::Fixed(a) if !(a.is_finite() && a >= 0.0) => {
-                return Err(invalid(format!("sac.alpha must be >= 0 or \"auto\", got {a}")));
-            }
-            Alpha::Named(_) if !(s.initial_alpha.is_finite() && s.initial_alpha > 0.0) => {
-                return Err(invalid("sac.initial_alpha must be > 0 with alpha = \"auto\""));
-            }
-            _ => {}
-        }
-        if s.batch == 0 {
-            return Err(invalid("sac.batch must be at least 1"));
-        }
-        if s.buffer_size < s.batch {
-            return Err(invalid(format!(
-                "sac.buffer_size {} is smaller than sac.batch {}",
-                s.buffer_size, s.batch
-            )));
-        }
-        if s.threads < 0 {
-            return Err(invalid("sac.threads must be >= 0"));
-        }
-        if c.algorithm == AlgorithmName::Td3 {
-            let t = &c.td3;
-            for (key, v) in [
-                ("td3.explore_std", t.explore_std),
-                ("td3.target_noise_std", t.target_noise_std),
-                ("td3.target_noise_clip", t.target_noise_clip),
-            ] {
-                if !(v.is_finite() && v >= 0.0) {
-                    return Err(invalid(format!("{key} must be finite and >= 0, got {v}")));
-                }
-            }
-            if t.policy_delay == 0 {
-                return Err(invalid("td3.policy_delay must be at least 1"));
-            }
-            if c.sac.alpha != Alpha::Fixed(0.0) {
+        self.validate_top_level()?;
+        self.env.validate()?;
+        self.sac.validate()?;
+        if self.algorithm == AlgorithmName::Td3 {
+            self.td3.validate()?;
+            if self.sac.alpha != Alpha::Fixed(0.0) {
                 return Err(invalid(
                     "sac.alpha is SAC's entropy coefficient: leave it at 0 with algorithm = \"td3\"",
                 ));
             }
         }
-        if c.vge.horizon == 0 {
+        self.vge.validate()?;
+        self.fge.validate()?;
+        self.bc.validate()?;
+        self.run.validate()
+    }
+
+    /// The keys outside any section.
+    fn validate_top_level(&self) -> Result<(), ConfigError> {
+        if self.num_envs == 0 {
+            return Err(invalid("num_envs must be at least 1"));
+        }
+        if self.total_steps == 0 {
+            return Err(invalid("total_steps must be at least 1"));
+        }
+        if self.method.queries_controller() && self.controller.is_none() {
+            return Err(invalid(format!(
+                "method {:?} queries a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
+                self.method.name()
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl EnvSection {
+    /// `[env]`: every object's sim configuration must be valid.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.objects.is_empty() {
+            return Err(invalid("env.objects must name at least one object"));
+        }
+        for i in 0..self.objects.len() {
+            self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
+        }
+        if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
+            return Err(invalid("env.max_action_rad must be > 0"));
+        }
+        Ok(())
+    }
+}
+
+impl SacSection {
+    /// `[sac]` (also the sizes, rates and buffer of TD3).
+    fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_hidden()?;
+        for (key, v) in
+            [("sac.actor_lr", self.actor_lr), ("sac.critic_lr", self.critic_lr), ("sac.utd", self.utd)]
+        {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(format!("{key} must be a positive number, got {v}")));
+            }
+        }
+        if !(self.gamma > 0.0 && self.gamma <= 1.0) {
+            return Err(invalid(format!("sac.gamma must be in (0, 1], got {}", self.gamma)));
+        }
+        if !(self.tau > 0.0 && self.tau <= 1.0) {
+            return Err(invalid(format!("sac.tau must be in (0, 1], got {}", self.tau)));
+        }
+        match self.alpha {
+            Alpha::Fixed(a) if !(a.is_finite() && a >= 0.0) => {
+                return Err(invalid(format!("sac.alpha must be >= 0 or \"auto\", got {a}")));
+            }
+            Alpha::Named(_) if !(self.initial_alpha.is_finite() && self.initial_alpha > 0.0) => {
+                return Err(invalid("sac.initial_alpha must be > 0 with alpha = \"auto\""));
+            }
+            _ => {}
+        }
+        if self.batch == 0 {
+            return Err(invalid("sac.batch must be at least 1"));
+        }
+        if self.buffer_size < self.batch {
+            return Err(invalid(format!(
+                "sac.buffer_size {} is smaller than sac.batch {}",
+                self.buffer_size, self.batch
+            )));
+        }
+        if self.threads < 0 {
+            return Err(invalid("sac.threads must be >= 0"));
+        }
+        Ok(())
+    }
+
+    /// `sac.hidden`: positive widths, and an actor the deployment side can load (refused
+    /// before hours of training).
+    fn validate_hidden(&self) -> Result<(), ConfigError> {
+        use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
+        if self.hidden.is_empty() || self.hidden.iter().any(|&h| h <= 0) {
+            return Err(invalid(format!(
+                "sac.hidden must be non-empty positive widths, got {:?}",
+                self.hidden
+            )));
+        }
+        if self.hidden.len() + 1 > HAND_MAX_LAYERS || self.hidden.iter().any(|&h| h as usize > HAND_MAX_WIDTH)
+        {
+            return Err(invalid(format!(
+                "sac.hidden = {:?}: vge-bridge and the firmware run actors of at most {} hidden layers of \
+                 width <= {HAND_MAX_WIDTH} (vge_runtime::HandPolicy)",
+                self.hidden,
+                HAND_MAX_LAYERS - 1
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Td3Section {
+    /// `[td3]` (checked only with `algorithm = "td3"`).
+    fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [
+            ("td3.explore_std", self.explore_std),
+            ("td3.target_noise_std", self.target_noise_std),
+            ("td3.target_noise_clip", self.target_noise_clip),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(format!("{key} must be finite and >= 0, got {v}")));
+            }
+        }
+        if self.policy_delay == 0 {
+            return Err(invalid("td3.policy_delay must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+impl VgeSection {
+    /// `[vge]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.horizon == 0 {
             return Err(invalid("vge.horizon (H) must be at least 1"));
         }
-        let f = &c.fge;
-        for (key, p) in [("fge.p_start", f.p_start), ("fge.p_end", f.p_end)] {
+        Ok(())
+    }
+}
+
+impl FgeSection {
+    /// `[fge]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        for (key, p) in [("fge.p_start", self.p_start), ("fge.p_end", self.p_end)] {
             if !(0.0..=1.0).contains(&p) {
                 return Err(invalid(format!("{key} must be a probability, got {p}")));
             }
         }
-        if f.decay_end < f.decay_start {
+        if self.decay_end < self.decay_start {
             return Err(invalid("fge.decay_end must not be before fge.decay_start"));
         }
-        if !(c.bc.beta_start.is_finite() && c.bc.beta_start >= 0.0) {
-            return Err(invalid(format!("bc.beta_start must be >= 0, got {}", c.bc.beta_start)));
+        Ok(())
+    }
+}
+
+impl BcSection {
+    /// `[bc]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.beta_start.is_finite() && self.beta_start >= 0.0) {
+            return Err(invalid(format!("bc.beta_start must be >= 0, got {}", self.beta_start)));
         }
-        if c.run.log_interval == 0 {
+        Ok(())
+    }
+}
+
+impl RunSection {
+    /// `[run]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.log_interval == 0 {
             return Err(invalid("run.log_interval must be at least 1"));
         }
         Ok(())

@@ -4,31 +4,40 @@
 
 use std::path::Path;
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::eval::GaitTrace;
-use crate::plot::PlotError;
+use crate::plot::{PlotError, draw_err};
 
 use vge_sim::kinematics::FINGER_NAMES as FINGERS;
+
+/// The area one chart is drawn on.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
 /// Draws `trace` into a PNG at `out`; `title` goes above the contacts.
 pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError> {
     crate::plot::load_font()?;
-    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
     let root = BitMapBackend::new(out, (1400, 700)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    root.fill(&WHITE).map_err(draw_err)?;
     let (top, bottom) = root.split_vertically(330);
     let dt = f64::from(trace.dt_s);
     let t_end = (trace.tip_contacts.len() as f64 * dt).max(dt);
+    draw_contacts(&top, trace, title, t_end)?;
+    draw_rotation(&bottom, trace, t_end)?;
+    root.present().map_err(draw_err)
+}
 
-    // Contacts: finger f's bar spans [f + 0.1, f + 0.9] wherever it touches.
-    let mut contacts = ChartBuilder::on(&top)
+/// Contacts: finger f's bar spans [f + 0.15, f + 0.85] wherever it touches.
+fn draw_contacts(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Result<(), PlotError> {
+    let dt = f64::from(trace.dt_s);
+    let mut contacts = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 22))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(70)
         .build_cartesian_2d(0.0..t_end, 0.0..FINGERS.len() as f64)
-        .map_err(|e| draw_err(&e))?;
+        .map_err(draw_err)?;
     contacts
         .configure_mesh()
         .disable_y_mesh()
@@ -43,58 +52,66 @@ pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError>
         })
         .x_desc("time (s)")
         .draw()
-        .map_err(|e| draw_err(&e))?;
+        .map_err(draw_err)?;
     for (f, _) in FINGERS.iter().enumerate() {
         let color = Palette99::pick(f).to_rgba();
-        // One rectangle per run of contact steps.
-        let mut runs = Vec::new();
-        let mut start = None;
-        for (k, c) in trace.tip_contacts.iter().enumerate() {
-            match (c[f], start) {
-                (true, None) => start = Some(k),
-                (false, Some(s)) => {
-                    runs.push((s, k));
-                    start = None;
-                }
-                _ => {}
-            }
-        }
-        if let Some(s) = start {
-            runs.push((s, trace.tip_contacts.len()));
-        }
         let y = f as f64;
         contacts
-            .draw_series(runs.into_iter().map(|(a, b)| {
+            .draw_series(contact_runs(&trace.tip_contacts, f).into_iter().map(|(a, b)| {
                 Rectangle::new([(a as f64 * dt, y + 0.15), (b as f64 * dt, y + 0.85)], color.filled())
             }))
-            .map_err(|e| draw_err(&e))?;
+            .map_err(draw_err)?;
     }
+    Ok(())
+}
 
-    // Rotation, with the 2 pi of the success test marked.
+/// The runs of steps `[start, end)` in which finger `f` touches the object.
+fn contact_runs(tip_contacts: &[[bool; vge_sim::NUM_FINGERS]], f: usize) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut start = None;
+    for (k, c) in tip_contacts.iter().enumerate() {
+        match (c[f], start) {
+            (true, None) => start = Some(k),
+            (false, Some(s)) => {
+                runs.push((s, k));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        runs.push((s, tip_contacts.len()));
+    }
+    runs
+}
+
+/// Rotation, with the 2 pi of the success test marked.
+fn draw_rotation(area: &Area, trace: &GaitTrace, t_end: f64) -> Result<(), PlotError> {
+    let dt = f64::from(trace.dt_s);
     let rot_max = trace.rotation_rad.iter().copied().fold(2.0 * std::f64::consts::PI, f64::max);
     let rot_min = trace.rotation_rad.iter().copied().fold(0.0, f64::min);
-    let mut rotation = ChartBuilder::on(&bottom)
+    let mut rotation = ChartBuilder::on(area)
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(70)
         .build_cartesian_2d(0.0..t_end, rot_min..rot_max * 1.05)
-        .map_err(|e| draw_err(&e))?;
+        .map_err(draw_err)?;
     rotation
         .configure_mesh()
         .x_desc("time (s)")
         .y_desc("object rotation about z (rad)")
         .draw()
-        .map_err(|e| draw_err(&e))?;
+        .map_err(draw_err)?;
     rotation
         .draw_series(LineSeries::new(
             trace.rotation_rad.iter().enumerate().map(|(k, r)| ((k + 1) as f64 * dt, *r)),
             BLUE.stroke_width(2),
         ))
-        .map_err(|e| draw_err(&e))?;
+        .map_err(draw_err)?;
     let two_pi = 2.0 * std::f64::consts::PI;
     rotation
         .draw_series(DashedLineSeries::new([(0.0, two_pi), (t_end, two_pi)], 8, 6, BLACK.stroke_width(1)))
-        .map_err(|e| draw_err(&e))?
+        .map_err(draw_err)?
         .label("2 pi: a success")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     rotation
@@ -103,6 +120,5 @@ pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError>
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()
-        .map_err(|e| draw_err(&e))?;
-    root.present().map_err(|e| draw_err(&e))
+        .map_err(draw_err)
 }

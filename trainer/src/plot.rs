@@ -8,8 +8,12 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use thiserror::Error;
+
+use crate::config::{AlgorithmName, ConfigError, parse_with_overrides};
 
 #[derive(Debug, Error)]
 pub enum PlotError {
@@ -23,6 +27,9 @@ pub enum PlotError {
     Font(String),
     #[error("drawing: {0}")]
     Draw(String),
+    /// A run's `config.toml` that the config parser cannot read (the message names the file).
+    #[error(transparent)]
+    Config(#[from] ConfigError),
 }
 
 /// One run's curves, from its `metrics.csv` and `eval.csv`.
@@ -102,34 +109,15 @@ fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> 
 
 /// Reads one run directory.
 pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
-    let config = read(&dir.join("config.toml"))?;
-    let field = |key: &str| {
-        config.lines().find_map(|l| l.strip_prefix(key).map(|v| v.trim().trim_matches('"').to_owned()))
-    };
-    let mut experiment = field("name = ").unwrap_or_else(|| dir.display().to_string());
-    // A run of a SAC config switched to TD3 (`--set algorithm="td3"`) is another experiment.
-    if let Some(algorithm) = field("algorithm = ").filter(|a| a != "sac" && !experiment.contains(a.as_str()))
-    {
-        experiment = format!("{experiment} ({algorithm})");
-    }
-    let cols = csv_columns(&dir.join("metrics.csv"), &["step", "return", "rotation", "controller_share"])?;
-    let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] = cols
-        .try_into()
-        .map_err(|_| PlotError::Csv { path: dir.join("metrics.csv"), message: "columns".into() })?;
+    let experiment = experiment(dir)?;
     let metrics = dir.join("metrics.csv");
+    let cols = csv_columns(&metrics, &["step", "return", "rotation", "controller_share"])?;
+    let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] =
+        cols.try_into().map_err(|_| PlotError::Csv { path: metrics.clone(), message: "columns".into() })?;
     let optional = |name: &str| csv_columns(&metrics, &[name]).ok().and_then(|c| c.into_iter().next());
     let (mean_q, mc_return) =
         (optional("mean_q").unwrap_or_default(), optional("mc_return").unwrap_or_default());
-    let final_path = dir.join("final-eval.json");
-    let final_eval: Option<FinalEvalFields> = if final_path.exists() {
-        let text = read(&final_path)?;
-        Some(
-            serde_json::from_str(&text)
-                .map_err(|e| PlotError::Csv { path: final_path, message: e.to_string() })?,
-        )
-    } else {
-        None
-    };
+    let final_eval = read_final_eval(dir)?;
     let eval = dir.join("eval.csv");
     let final_success = match &final_eval {
         Some(f) => Some(f.success_rate),
@@ -149,6 +137,31 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
     })
+}
+
+/// The experiment of the run in `dir`: the `name` of its `config.toml`, read with the
+/// config parser (so a file it cannot read is an error naming the file; keys left out take
+/// the config's defaults). A run of a SAC config switched to TD3 (`--set algorithm="td3"`)
+/// is another experiment: the learner is appended unless the name already says it.
+fn experiment(dir: &Path) -> Result<String, PlotError> {
+    let path = dir.join("config.toml");
+    let config = parse_with_overrides(&read(&path)?, &path.display().to_string(), &[])?;
+    let algorithm = config.algorithm.name();
+    Ok(if config.algorithm != AlgorithmName::Sac && !config.name.contains(algorithm) {
+        format!("{} ({algorithm})", config.name)
+    } else {
+        config.name
+    })
+}
+
+/// The run's `final-eval.json`, if it finished.
+fn read_final_eval(dir: &Path) -> Result<Option<FinalEvalFields>, PlotError> {
+    let path = dir.join("final-eval.json");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = read(&path)?;
+    serde_json::from_str(&text).map(Some).map_err(|e| PlotError::Csv { path, message: e.to_string() })
 }
 
 /// One point of a group's curve: step, mean, min and max over its runs.
@@ -211,6 +224,22 @@ pub(crate) fn load_font() -> Result<(), PlotError> {
         .map_err(|_| PlotError::Font("DejaVuSans.ttf is not a usable font".into()))
 }
 
+/// Runs grouped by experiment, in name order.
+type Groups<'a> = BTreeMap<&'a str, Vec<&'a RunCurves>>;
+
+/// One series of a run (e.g. its mean returns).
+type Series = fn(&RunCurves) -> &[f64];
+
+/// A group's curve in one panel: the experiment, its points, and whether it is the panel's
+/// second (dashed) series.
+type Curve<'a> = (&'a str, Vec<SpreadPoint>, bool);
+
+type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+pub(crate) fn draw_err(e: impl std::fmt::Display) -> PlotError {
+    PlotError::Draw(e.to_string())
+}
+
 /// Draws return, rotation and controller share against env steps for every experiment in
 /// `runs` into a PNG at `out`; returns the markdown success table.
 pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
@@ -218,15 +247,13 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
         return Err(PlotError::NoRuns);
     }
     load_font()?;
-    let mut groups: BTreeMap<&str, Vec<&RunCurves>> = BTreeMap::new();
+    let mut groups: Groups = BTreeMap::new();
     for r in runs {
         groups.entry(r.experiment.as_str()).or_default().push(r);
     }
-    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
     let root = BitMapBackend::new(out, (2000, 450)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    root.fill(&WHITE).map_err(draw_err)?;
     let panels = root.split_evenly((1, 4));
-    type Series = fn(&RunCurves) -> &[f64];
     // Each panel: a title and its series (a second one, e.g. Monte-Carlo returns beside
     // mean Q, is drawn dashed in the same colour).
     let specs: [(&str, Series, Option<Series>); 4] = [
@@ -236,82 +263,107 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
         ("mean Q (solid) vs Monte-Carlo return (dashed)", |r| &r.mean_q, Some(|r| &r.mc_return)),
     ];
     for (panel, (title, series, second)) in panels.iter().zip(specs) {
-        let mut curves: Vec<(&str, Vec<SpreadPoint>, bool)> =
+        let mut curves: Vec<Curve> =
             groups.iter().map(|(name, rs)| (*name, spread(rs, series), false)).collect();
         if let Some(second) = second {
             curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
         }
-        let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
-        let (y_min, y_max) = curves
-            .iter()
-            .flat_map(|(_, c, _)| c.iter().flat_map(|p| [p.min, p.max]))
-            .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
-        let pad = 0.05 * (y_max - y_min).max(1e-3);
-        let mut chart = ChartBuilder::on(panel)
-            .caption(title, ("sans-serif", 20))
-            .margin(10)
-            .x_label_area_size(35)
-            .y_label_area_size(55)
-            .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))
-            .map_err(|e| draw_err(&e))?;
-        // Steps in thousands or millions: full numbers run into each other on the axis.
-        let steps_label = |x: &f64| {
-            if x_max >= 2e6 { format!("{:.1}M", x / 1e6) } else { format!("{:.0}k", x / 1e3) }
-        };
-        chart
-            .configure_mesh()
-            .x_desc("env steps")
-            .x_labels(6)
-            .x_label_formatter(&steps_label)
-            .draw()
-            .map_err(|e| draw_err(&e))?;
-        for (i, (name, c, dashed)) in curves.iter().enumerate() {
-            let color = Palette99::pick(i % groups.len()).to_rgba();
-            if *dashed {
-                chart
-                    .draw_series(DashedLineSeries::new(
-                        c.iter().map(|p| (p.step, p.mean)),
-                        8,
-                        5,
-                        color.stroke_width(2),
-                    ))
-                    .map_err(|e| draw_err(&e))?;
-                continue;
-            }
-            chart
-                .draw_series(std::iter::once(Polygon::new(
-                    c.iter()
-                        .map(|p| (p.step, p.max))
-                        .chain(c.iter().rev().map(|p| (p.step, p.min)))
-                        .collect::<Vec<_>>(),
-                    color.mix(0.2),
-                )))
-                .map_err(|e| draw_err(&e))?;
-            chart
-                .draw_series(LineSeries::new(c.iter().map(|p| (p.step, p.mean)), color.stroke_width(2)))
-                .map_err(|e| draw_err(&e))?
-                .label(format!("{name} ({} runs)", groups[name].len()))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| draw_err(&e))?;
+        draw_panel(panel, title, &curves, &groups)?;
     }
-    root.present().map_err(|e| draw_err(&e))?;
+    root.present().map_err(draw_err)?;
+    Ok(success_table(&groups))
+}
 
+/// One panel: axes fitted to `curves`, each group's mean line over its min-max band (or a
+/// dashed mean line for a second series), and the legend.
+fn draw_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    title: &str,
+    curves: &[Curve],
+    groups: &Groups,
+) -> Result<(), PlotError> {
+    let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
+    let (y_min, y_max) = curves
+        .iter()
+        .flat_map(|(_, c, _)| c.iter().flat_map(|p| [p.min, p.max]))
+        .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    let pad = 0.05 * (y_max - y_min).max(1e-3);
+    let mut chart = ChartBuilder::on(panel)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(55)
+        .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))
+        .map_err(draw_err)?;
+    // Steps in thousands or millions: full numbers run into each other on the axis.
+    let steps_label =
+        |x: &f64| if x_max >= 2e6 { format!("{:.1}M", x / 1e6) } else { format!("{:.0}k", x / 1e3) };
+    chart
+        .configure_mesh()
+        .x_desc("env steps")
+        .x_labels(6)
+        .x_label_formatter(&steps_label)
+        .draw()
+        .map_err(draw_err)?;
+    for (i, (name, c, dashed)) in curves.iter().enumerate() {
+        let color = Palette99::pick(i % groups.len()).to_rgba();
+        if *dashed {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    c.iter().map(|p| (p.step, p.mean)),
+                    8,
+                    5,
+                    color.stroke_width(2),
+                ))
+                .map_err(draw_err)?;
+        } else {
+            draw_band_and_mean(&mut chart, c, color, format!("{name} ({} runs)", groups[name].len()))?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(draw_err)
+}
+
+/// A group's min-max band (light) and its mean line, labelled in the legend.
+fn draw_band_and_mean(
+    chart: &mut Chart,
+    c: &[SpreadPoint],
+    color: RGBAColor,
+    label: String,
+) -> Result<(), PlotError> {
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            c.iter()
+                .map(|p| (p.step, p.max))
+                .chain(c.iter().rev().map(|p| (p.step, p.min)))
+                .collect::<Vec<_>>(),
+            color.mix(0.2),
+        )))
+        .map_err(draw_err)?;
+    chart
+        .draw_series(LineSeries::new(c.iter().map(|p| (p.step, p.mean)), color.stroke_width(2)))
+        .map_err(draw_err)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+    Ok(())
+}
+
+/// The markdown table of final success rates, one row per experiment.
+fn success_table(groups: &Groups) -> String {
     let mut table = String::from(
         "| experiment | runs | final success rate (mean) | runs that learned |\n|---|---|---|---|\n",
     );
-    for (name, rs) in &groups {
+    for (name, rs) in groups {
         let rates: Vec<f64> = rs.iter().filter_map(|r| r.final_success).collect();
         let mean = if rates.is_empty() { f64::NAN } else { rates.iter().sum::<f64>() / rates.len() as f64 };
         let learned = rs.iter().filter(|r| r.learned() == Some(true)).count();
         table.push_str(&format!("| {name} | {} | {mean:.2} | {learned}/{} |\n", rs.len(), rates.len()));
     }
-    Ok(table)
+    table
 }
 
 /// One row per run: `run,experiment,learned,success_rate,env_steps,wall_s` (empty fields
