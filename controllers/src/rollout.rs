@@ -141,73 +141,58 @@ pub struct EpisodeStats {
 }
 
 /// Resets `env` with `seed`, resets `controller` with a generator seeded from `seed`,
-/// and runs one episode; `on_step` sees every step.
+/// and runs one episode through the env's episode loop ([`Env::run_episode`]); `on_step`
+/// sees every step.
 pub fn run_episode(
     env: &mut Env,
     controller: &mut dyn Controller,
     seed: u64,
     mut on_step: impl FnMut(&StepTrace, &Env),
 ) -> Result<EpisodeStats, SimError> {
-    env.reset(seed)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_c0de_0000_0000);
     controller.reset(&mut rng);
-    let start_state = env.privileged().ok_or(SimError::NotReset)?;
-    let mut yaw = start_state.object.yaw_rad();
-    let mut switches = vge_sim::gait::ContactSwitches::new(start_state.contacts.map(|c| c.is_some()));
-    let (mut rotation, mut ret, mut contact_sum) = (0.0f32, 0.0f32, 0usize);
-    let mut stats = EpisodeStats {
-        episode_return: 0.0,
-        rotation_rad: 0.0,
-        mean_contacts: 0.0,
-        steps: 0,
-        dropped: false,
-        no_action_steps: 0,
-        contact_switches: 0,
-        controller_s: Vec::with_capacity(env.config().episode_length_steps),
-    };
-    loop {
+    let mut controller_s = Vec::with_capacity(env.config().episode_length_steps);
+    let mut no_action_steps = 0;
+    // What the controller did this step, for the trace.
+    let last = std::cell::Cell::new(([0.0f32; NUM_JOINTS], false, 0.0f64));
+    let act = |env: &Env, _: &[f32; vge_sim::OBS_DIM]| {
         let state = env.privileged().ok_or(SimError::NotReset)?;
         let start = Instant::now();
-        let input = ControllerInput::from_privileged(state);
-        let acted = controller.act(&input, &mut rng);
+        let acted = controller.act(&ControllerInput::from_privileged(state), &mut rng);
         let elapsed = start.elapsed().as_secs_f64();
-        stats.controller_s.push(elapsed);
+        controller_s.push(elapsed);
+        no_action_steps += usize::from(acted.is_err());
         let action = acted.as_ref().copied().unwrap_or([0.0; NUM_JOINTS]);
-        if acted.is_err() {
-            stats.no_action_steps += 1;
-        }
-        let StepResult { reward, terminated, truncated, info, .. } = env.step(&action)?;
-        rotation += vge_sim::wrap_angle_rad(info.object_yaw_rad - yaw);
-        yaw = info.object_yaw_rad;
-        ret += reward;
-        contact_sum += info.num_tip_contacts;
-        stats.steps += 1;
-        let in_contact =
-            env.privileged().map_or([false; vge_sim::NUM_FINGERS], |s| s.contacts.map(|c| c.is_some()));
-        switches.update(in_contact);
+        last.set((action, acted.is_ok(), elapsed));
+        Ok::<_, SimError>(action)
+    };
+    let trace = |env: &Env, r: &StepResult, tracker: &vge_sim::EpisodeTracker| {
+        let (action, acted, controller_s) = last.get();
         on_step(
             &StepTrace {
-                step: info.step,
+                step: r.info.step,
                 action,
-                acted: acted.is_ok(),
-                contacts: info.num_tip_contacts,
-                in_contact,
-                rotation_rad: rotation,
-                reward,
-                controller_s: elapsed,
+                acted,
+                contacts: r.info.num_tip_contacts,
+                in_contact: r.info.tip_contacts,
+                rotation_rad: tracker.rotation_rad() as f32,
+                reward: r.reward,
+                controller_s,
             },
             env,
         );
-        if terminated || truncated {
-            stats.dropped = terminated;
-            break;
-        }
-    }
-    stats.episode_return = ret;
-    stats.contact_switches = switches.count;
-    stats.rotation_rad = rotation;
-    stats.mean_contacts = contact_sum as f32 / stats.steps.max(1) as f32;
-    Ok(stats)
+    };
+    let outcome = env.run_episode(seed, act, trace)?;
+    Ok(EpisodeStats {
+        episode_return: outcome.episode_return as f32,
+        rotation_rad: outcome.rotation_rad as f32,
+        mean_contacts: outcome.mean_contacts as f32,
+        steps: outcome.length,
+        dropped: outcome.terminated,
+        no_action_steps,
+        contact_switches: outcome.contact_switches,
+        controller_s,
+    })
 }
 
 /// Mean figures over a rollout.

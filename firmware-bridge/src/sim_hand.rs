@@ -91,10 +91,9 @@ pub struct SimHand {
     env: Env,
     obs: [f32; OBS_DIM],
     pending: [Option<JointCommand>; FINGERS],
-    last_yaw_rad: f32,
-    contact_sum: f32,
-    switches: vge_sim::gait::ContactSwitches,
-    summary: SimHandSummary,
+    /// The run's accounting, as every episode loop of vge keeps it ([`vge_sim::episode`]).
+    tracker: vge_sim::EpisodeTracker,
+    terminated: bool,
     /// The nodes' protocol duties; `serve` polls it for heartbeats and timeouts.
     pub nodes: NodeSupervisor,
 }
@@ -105,16 +104,13 @@ impl SimHand {
     pub fn new(config: EnvConfig, seed: u64, command_timeout: Duration) -> Result<Self, SimHandError> {
         let mut env = Env::new(config)?;
         let (obs, _) = env.reset(seed)?;
-        let last_yaw_rad = env.privileged().map(|s| s.object.yaw_rad()).unwrap_or(0.0);
-        let touching = env.privileged().map(|s| s.contacts.map(|c| c.is_some())).unwrap_or_default();
+        let tracker = env.episode_tracker()?;
         Ok(Self {
             env,
             obs,
             pending: [None; FINGERS],
-            last_yaw_rad,
-            contact_sum: 0.0,
-            switches: vge_sim::gait::ContactSwitches::new(touching),
-            summary: SimHandSummary::default(),
+            tracker,
+            terminated: false,
             nodes: NodeSupervisor::new(command_timeout, Instant::now()),
         })
     }
@@ -124,10 +120,15 @@ impl SimHand {
     }
 
     pub fn summary(&self) -> SimHandSummary {
-        let mut s = self.summary;
-        s.mean_tip_contacts = if s.steps == 0 { 0.0 } else { self.contact_sum / s.steps as f32 };
-        s.contact_switches = self.switches.count;
-        s
+        let o = self.tracker.outcome(self.terminated);
+        SimHandSummary {
+            steps: o.length as u64,
+            rotation_rad: o.rotation_rad as f32,
+            total_reward: o.episode_return as f32,
+            terminated: o.terminated,
+            mean_tip_contacts: o.mean_contacts as f32,
+            contact_switches: o.contact_switches,
+        }
     }
 
     /// Takes one message received at `now`; returns the frames the nodes send in reply.
@@ -163,14 +164,8 @@ impl SimHand {
         self.pending = [None; FINGERS];
         let result = self.env.step(&action)?;
         self.obs = result.obs;
-        let yaw = result.info.object_yaw_rad;
-        self.summary.rotation_rad += vge_sim::wrap_angle_rad(yaw - self.last_yaw_rad);
-        self.last_yaw_rad = yaw;
-        self.summary.steps += 1;
-        self.summary.total_reward += result.reward;
-        self.summary.terminated |= result.terminated;
-        self.contact_sum += result.info.num_tip_contacts as f32;
-        self.switches.update(result.info.tip_contacts);
+        self.tracker.record(result.reward, result.info.object_yaw_rad, result.info.tip_contacts);
+        self.terminated |= result.terminated;
         let all: Vec<FingerId> = FingerId::all().collect();
         self.state_frames(&all, cmd.seq)
     }

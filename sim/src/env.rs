@@ -25,6 +25,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::action::DEFAULT_MAX_ACTION_RAD;
 use crate::angle::wrap_angle_rad;
+use crate::episode::{EpisodeOutcome, EpisodeTracker};
 use crate::error::SimError;
 use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
 use crate::objects::ObjectConfig;
@@ -570,6 +571,40 @@ impl Env {
         self.state = Some(state);
         let obs = self.observe(&state);
         Ok(StepResult { obs, reward, terminated, truncated, info })
+    }
+}
+
+/// The one episode loop (training accounts its parallel envs step by step with the same
+/// [`EpisodeTracker`]; `vge eval`, the controller rollouts and the bridge's sim backend run
+/// episodes through this).
+impl Env {
+    /// A tracker for the episode the last reset began.
+    pub fn episode_tracker(&self) -> Result<EpisodeTracker, SimError> {
+        let s = self.privileged().ok_or(SimError::NotReset)?;
+        Ok(EpisodeTracker::start(s.object.yaw_rad(), s.contacts.map(|c| c.is_some())))
+    }
+
+    /// Resets with `seed`, then steps with `act(env, obs)` until the env ends the episode (a
+    /// drop or the time limit); `on_step(env, result, tracker)` sees each step once it is
+    /// recorded.
+    pub fn run_episode<E: From<SimError>>(
+        &mut self,
+        seed: u64,
+        mut act: impl FnMut(&Self, &[f32; OBS_DIM]) -> Result<[f32; NUM_JOINTS], E>,
+        mut on_step: impl FnMut(&Self, &StepResult, &EpisodeTracker),
+    ) -> Result<EpisodeOutcome, E> {
+        let (mut obs, _) = self.reset(seed)?;
+        let mut tracker = self.episode_tracker()?;
+        loop {
+            let action = act(self, &obs)?;
+            let r = self.step(&action)?;
+            tracker.record(r.reward, r.info.object_yaw_rad, r.info.tip_contacts);
+            on_step(self, &r, &tracker);
+            if r.terminated || r.truncated {
+                return Ok(tracker.outcome(r.terminated));
+            }
+            obs = r.obs;
+        }
     }
 }
 

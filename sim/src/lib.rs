@@ -19,6 +19,7 @@ pub mod angle;
 pub mod bench;
 #[cfg(feature = "physics")]
 pub mod env;
+pub mod episode;
 pub mod error;
 pub mod gait;
 pub mod kinematics;
@@ -36,6 +37,7 @@ pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
     ResetInfo, StepInfo, StepResult,
 };
+pub use episode::{EpisodeOutcome, EpisodeTracker};
 pub use error::SimError;
 pub use kinematics::{
     Contact, FingerModel, HandModel, JOINTS_PER_FINGER, JointLimit, KinematicsError, NOMINAL_CUBE_SIDE_M,

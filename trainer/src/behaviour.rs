@@ -214,6 +214,33 @@ impl Behaviour {
             }
             return Ok(out);
         }
+        let drawn = self.draw_sources(ctx, controllers, ctl_rngs, q, rng, &mut out)?;
+        self.continue_segments(ctx, controllers, ctl_rngs, &drawn, &mut out);
+        let bc = self.method.uses_bc();
+        for d in &mut out {
+            if d.source == Source::Controller {
+                self.stats.controller_steps += 1;
+                if bc {
+                    d.bc_target = Some(d.action);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The envs whose segment ended draw their source (VGE: by the softmax over Q of the
+    /// learner's and the controller's action, one Q query for all; FGE: by the schedule) and
+    /// start a segment of H steps; returns which envs drew.
+    fn draw_sources(
+        &mut self,
+        ctx: &StepContext<'_>,
+        controllers: &mut [Box<dyn Controller + Send>],
+        ctl_rngs: &mut [ChaCha8Rng],
+        q: &mut QFn<'_>,
+        rng: &mut ChaCha8Rng,
+        out: &mut [Decision],
+    ) -> Result<Vec<usize>, BehaviourError> {
+        let n = ctx.obs.len();
         let vge = matches!(self.method, Method::Vge | Method::VgeBc);
         // Envs drawing a source this step, and for VGE the controller's proposal.
         let mut drawing: Vec<(usize, Option<[f32; NUM_JOINTS]>)> = Vec::new();
@@ -264,10 +291,23 @@ impl Behaviour {
             }
             self.segments[i].remaining -= 1;
         }
+        Ok(drawing.iter().map(|d| d.0).collect())
+    }
+
+    /// The envs inside a segment follow its source for one more step.
+    fn continue_segments(
+        &mut self,
+        ctx: &StepContext<'_>,
+        controllers: &mut [Box<dyn Controller + Send>],
+        ctl_rngs: &mut [ChaCha8Rng],
+        drawn: &[usize],
+        out: &mut [Decision],
+    ) {
+        let n = ctx.obs.len();
         // Envs continuing a segment.
         #[allow(clippy::needless_range_loop)]
         for i in 0..n.min(self.segments.len()) {
-            if drawing.iter().any(|d| d.0 == i) {
+            if drawn.contains(&i) {
                 continue;
             }
             let seg = self.segments[i];
@@ -279,16 +319,6 @@ impl Behaviour {
             }
             self.segments[i].remaining -= 1;
         }
-        let bc = self.method.uses_bc();
-        for d in &mut out {
-            if d.source == Source::Controller {
-                self.stats.controller_steps += 1;
-                if bc {
-                    d.bc_target = Some(d.action);
-                }
-            }
-        }
-        Ok(out)
     }
 
     /// `p_psi` of each drawing env (0 where the controller had no action), from one Q query.

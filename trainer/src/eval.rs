@@ -78,22 +78,7 @@ impl EvalReport {
     }
 }
 
-/// One episode's figures.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct EpisodeOutcome {
-    pub episode_return: f64,
-    pub rotation_rad: f64,
-    pub terminated: bool,
-    pub mean_contacts: f64,
-    pub contact_switches: u32,
-    pub length: usize,
-}
-
-impl EpisodeOutcome {
-    pub fn success(&self) -> bool {
-        !self.terminated && self.rotation_rad >= std::f64::consts::TAU
-    }
-}
+pub use vge_sim::EpisodeOutcome;
 
 /// A policy: fills the action for an observation (shared by the episodes run side by side).
 pub type PolicyFn<'a> = dyn Fn(&[f32; OBS_DIM], &mut [f32; NUM_JOINTS]) -> Result<(), String> + Sync + 'a;
@@ -144,32 +129,12 @@ pub fn run_episode_traced(
     mut on_step: impl FnMut([bool; vge_sim::NUM_FINGERS], f64),
 ) -> Result<EpisodeOutcome, EvalError> {
     let mut env = Env::new(env_config.clone())?;
-    let (mut obs, _) = env.reset(seed)?;
-    let start = env.privileged().ok_or(SimError::NotReset)?;
-    let mut yaw = start.object.yaw_rad();
-    let mut switches = crate::gait::ContactSwitches::new(start.contacts.map(|c| c.is_some()));
-    let mut out = EpisodeOutcome::default();
-    let mut contacts = 0usize;
-    let mut action = [0.0f32; NUM_JOINTS];
-    loop {
-        policy(&obs, &mut action).map_err(EvalError::Policy)?;
-        let r = env.step(&action)?;
-        out.episode_return += f64::from(r.reward);
-        out.rotation_rad += f64::from(vge_sim::wrap_angle_rad(r.info.object_yaw_rad - yaw));
-        yaw = r.info.object_yaw_rad;
-        contacts += r.info.num_tip_contacts;
-        switches.update(r.info.tip_contacts);
-        on_step(r.info.tip_contacts, out.rotation_rad);
-        out.length += 1;
-        obs = r.obs;
-        if r.terminated || r.truncated {
-            out.terminated = r.terminated;
-            break;
-        }
-    }
-    out.mean_contacts = contacts as f64 / out.length.max(1) as f64;
-    out.contact_switches = switches.count;
-    Ok(out)
+    let act = |_: &Env, obs: &[f32; OBS_DIM]| {
+        let mut action = [0.0f32; NUM_JOINTS];
+        policy(obs, &mut action).map_err(EvalError::Policy)?;
+        Ok::<_, EvalError>(action)
+    };
+    env.run_episode(seed, act, |_, r, tracker| on_step(r.info.tip_contacts, tracker.rotation_rad()))
 }
 
 /// Means over episode outcomes.

@@ -1,5 +1,6 @@
-//! vge-trainer: Soft Actor-Critic in tch with value-guided exploration (VGE) for
-//! finger-gaiting, and the `vge` command.
+//! vge-trainer: Soft Actor-Critic and TD3 in tch ([`sac`]) with value-guided exploration
+//! ([`behaviour`]) for finger-gaiting, the training loop ([`train`]), the success test
+//! ([`eval`]), and the `vge` command.
 
 pub mod behaviour;
 pub mod bench_update;

@@ -1,6 +1,6 @@
 //! `vge`: train, evaluate, export and inspect finger-gaiting policies.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, bail};
@@ -111,34 +111,7 @@ enum Command {
     /// 20 episodes of 30 s from initial grasps randomised by +-0.02 rad; an episode succeeds
     /// when the object turns >= 2 pi about z without a drop, and a seed has learned when its
     /// policy succeeds in >= 50% of them. Episodes run side by side on all cores.
-    Eval {
-        /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
-        #[arg(long)]
-        policy: PathBuf,
-        /// Episodes to run (the success test uses 20).
-        #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
-        episodes: usize,
-        #[command(flatten)]
-        episode: EpisodeArgs,
-        /// Gaussian noise on observed joint positions (rad).
-        #[arg(long, default_value_t = 0.0)]
-        noise_q_rad: f32,
-        /// Noise on contact normals, as a fraction of their length.
-        #[arg(long, default_value_t = 0.0)]
-        noise_normal_frac: f32,
-        /// Gaussian noise on contact positions (m).
-        #[arg(long, default_value_t = 0.0)]
-        noise_position_m: f32,
-        /// Random external force on the object, std per axis (N).
-        #[arg(long, default_value_t = 0.0)]
-        perturb_force_n: f32,
-        /// Also draw the gait diagram of the first episode (seed --seed) into this PNG: each
-        /// finger's contact over time above the object's rotation.
-        #[arg(long)]
-        plot: Option<PathBuf>,
-        #[arg(long)]
-        json: bool,
-    },
+    Eval(EvalArgs),
     /// The paper's robustness test (Fig. 4): return, success and drops of a policy against the
     /// level of one disturbance at a time.
     ///
@@ -151,23 +124,7 @@ enum Command {
     /// DIR/robustness.png.
     ///
     /// Example: vge robustness --policy runs/fg/seed-0/policy.vgep --episodes 10 --out rob/
-    Robustness {
-        /// The policy file.
-        #[arg(long)]
-        policy: PathBuf,
-        /// Episodes per level.
-        #[arg(long, default_value_t = 10)]
-        episodes: usize,
-        /// Levels per axis, evenly from 0 to the paper's level (at least 2).
-        #[arg(long, default_value_t = 5)]
-        levels: usize,
-        /// The same episodes (seeds, grasps) run at every level.
-        #[command(flatten)]
-        episode: EpisodeArgs,
-        /// Output folder (created).
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Robustness(RobustnessArgs),
     /// Write a policy file (postcard, see docs/policy-format.md) from an actor.
     ///
     /// The file carries the actor's layers, the hand's observation and action layouts, the
@@ -186,31 +143,83 @@ enum Command {
     /// detach/re-attach trajectory of one finger) or FG (both). Prints mean return,
     /// mean_rotation_rad (object rotation about z per episode), mean fingertip contacts,
     /// drops (episodes ended early) and the controller's cost per call.
-    Controller {
-        #[arg(long, value_parser = parse_controller_kind)]
-        kind: ControllerKind,
-        #[arg(long, default_value_t = ObjectShape::Cube)]
-        object: ObjectShape,
-        #[arg(long, default_value_t = 10)]
-        episodes: usize,
-        /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
-        /// without noise or perturbation every episode (and every seed) is the same.
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Episode length in seconds of sim time.
-        #[arg(long, default_value_t = 10.0)]
-        episode_s: f32,
-        /// Randomise the initial grasp per episode (pose noise, rad); 0 starts every
-        /// episode from the same grasp.
-        #[arg(long, default_value_t = 0.02)]
-        grasp_noise_rad: f32,
-        /// Print one JSON line instead of a summary.
-        #[arg(long)]
-        json: bool,
-    },
+    Controller(ControllerArgs),
     /// Measure vge's hot paths on this machine.
     #[command(subcommand)]
     Bench(Bench),
+}
+
+#[derive(Debug, Args)]
+struct EvalArgs {
+    /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
+    #[arg(long)]
+    policy: PathBuf,
+    /// Episodes to run (the success test uses 20).
+    #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
+    episodes: usize,
+    #[command(flatten)]
+    episode: EpisodeArgs,
+    /// Gaussian noise on observed joint positions (rad).
+    #[arg(long, default_value_t = 0.0)]
+    noise_q_rad: f32,
+    /// Noise on contact normals, as a fraction of their length.
+    #[arg(long, default_value_t = 0.0)]
+    noise_normal_frac: f32,
+    /// Gaussian noise on contact positions (m).
+    #[arg(long, default_value_t = 0.0)]
+    noise_position_m: f32,
+    /// Random external force on the object, std per axis (N).
+    #[arg(long, default_value_t = 0.0)]
+    perturb_force_n: f32,
+    /// Also draw the gait diagram of the first episode (seed --seed) into this PNG: each
+    /// finger's contact over time above the object's rotation.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Args)]
+struct RobustnessArgs {
+    /// The policy file.
+    #[arg(long)]
+    policy: PathBuf,
+    /// Episodes per level.
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    /// Levels per axis, evenly from 0 to the paper's level (at least 2).
+    #[arg(long, default_value_t = 5)]
+    levels: usize,
+    /// The same episodes (seeds, grasps) run at every level.
+    #[command(flatten)]
+    episode: EpisodeArgs,
+    /// Output folder (created).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct ControllerArgs {
+    #[arg(long, value_parser = parse_controller_kind)]
+    kind: ControllerKind,
+    #[arg(long, default_value_t = ObjectShape::Cube)]
+    object: ObjectShape,
+    #[arg(long, default_value_t = 10)]
+    episodes: usize,
+    /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
+    /// without noise or perturbation every episode (and every seed) is the same.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Episode length in seconds of sim time.
+    #[arg(long, default_value_t = 10.0)]
+    episode_s: f32,
+    /// Randomise the initial grasp per episode (pose noise, rad); 0 starts every
+    /// episode from the same grasp.
+    #[arg(long, default_value_t = 0.02)]
+    grasp_noise_rad: f32,
+    /// Print one JSON line instead of a summary.
+    #[arg(long)]
+    json: bool,
 }
 
 fn parse_seed_range(s: &str) -> Result<std::ops::Range<u64>, String> {
@@ -390,168 +399,176 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Eval {
-            policy,
-            episodes,
-            episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
-            noise_q_rad,
-            noise_normal_frac,
-            noise_position_m,
-            perturb_force_n,
-            plot,
-            json,
-        } => {
-            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
-            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
-            for (name, v) in [
-                ("noise-q-rad", noise_q_rad),
-                ("noise-normal-frac", noise_normal_frac),
-                ("noise-position-m", noise_position_m),
-                ("perturb-force-n", perturb_force_n),
-                ("grasp-noise-rad", grasp_noise_rad),
-            ] {
-                anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
-            }
-            let mut env = EnvConfig::default();
-            env.object.shape = object;
-            let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
-            // The robustness test's disturbances, set the one way it sets them.
-            use vge_trainer::robustness::Axis;
-            for (axis, level) in [
-                (Axis::JointNoise, noise_q_rad),
-                (Axis::NormalError, noise_normal_frac),
-                (Axis::PositionError, noise_position_m),
-                (Axis::Perturbation, perturb_force_n),
-            ] {
-                axis.apply(&mut env, level);
-            }
-            let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
-                .with_context(|| format!("evaluating {}", policy.display()))?;
-            if let Some(png) = &plot {
-                let bytes =
-                    std::fs::read(&policy).with_context(|| format!("reading {}", policy.display()))?;
-                let trace = vge_trainer::eval::trace_policy_bytes(&bytes, &env, seed)
-                    .with_context(|| format!("tracing {}", policy.display()))?;
-                let o = &trace.outcome;
-                let title = format!(
-                    "{}: episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
-                    policy.display(),
-                    o.rotation_rad,
-                    o.length as f32 * trace.dt_s,
-                    o.contact_switches,
-                    if o.terminated { ", dropped" } else { "" }
-                );
-                vge_trainer::gait_diagram::plot(&trace, &title, png)
-                    .with_context(|| format!("drawing {}", png.display()))?;
-                eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
-            }
-            if json {
-                println!("{}", report.to_json_line());
-            } else {
-                println!(
-                    "{} episodes of {episode_s} s on the {object}, policy {}",
-                    report.episodes,
-                    policy.display()
-                );
-                println!("  mean return        {:.3}", report.mean_return);
-                println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
-                println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
-                println!("  dropped            {:.2} of episodes", report.drop_rate);
-                println!(
-                    "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
-                    report.mean_contact_switches
-                );
-                println!(
-                    "  mean contacts      {:.2}; mean length {:.0} steps",
-                    report.mean_contacts, report.mean_length
-                );
-                let verdict = if report.learned() { "learned" } else { "not learned" };
-                println!(
-                    "  verdict            {verdict} (success >= {:.0}% of episodes)",
-                    100.0 * vge_trainer::eval::LEARNED_SUCCESS_RATE
-                );
-            }
-            Ok(())
-        }
-        Command::Robustness {
-            policy,
-            episodes,
-            levels,
-            episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
-            out,
-        } => {
-            use vge_trainer::robustness::{self, RobustnessOptions};
-            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
-            anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
-            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
-            anyhow::ensure!(
-                grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0,
-                "--grasp-noise-rad must be >= 0"
-            );
-            let bytes = std::fs::read(&policy)
-                .with_context(|| format!("reading policy file {}", policy.display()))?;
-            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-            let mut base = EnvConfig::default();
-            base.object.shape = object;
-            let options = RobustnessOptions { episodes, episode_s, grasp_noise_rad, seed, levels };
-            let total = 1 + robustness::Axis::ALL.len() * (levels - 1);
-            eprintln!(
-                "vge robustness: {total} evaluations of {episodes} episodes x {episode_s} s on the {object}"
-            );
-            let report = robustness::run(&bytes, &base, &options, |r| {
-                eprintln!(
-                    "  {:<22} {:>9.4}  return {:>8.3} ({:>5.1}% of clean)  success {:.2}  drops {:.2}",
-                    r.axis,
-                    r.level,
-                    r.mean_return,
-                    100.0 * r.return_fraction,
-                    r.success_rate,
-                    r.drop_rate
-                );
-            })
-            .with_context(|| format!("evaluating {}", policy.display()))?;
-            let csv = out.join("robustness.csv");
-            std::fs::write(&csv, robustness::to_csv(&report))
-                .with_context(|| format!("writing {}", csv.display()))?;
-            let json = out.join("robustness.json");
-            let text = serde_json::to_string_pretty(&report).context("serialising the report")?;
-            std::fs::write(&json, text).with_context(|| format!("writing {}", json.display()))?;
-            let png = out.join("robustness.png");
-            robustness::plot(&report, &png).with_context(|| format!("drawing {}", png.display()))?;
-            println!("wrote {}, {} and {}", csv.display(), json.display(), png.display());
-            Ok(())
-        }
-        Command::Controller { kind, object, episodes, seed, episode_s, grasp_noise_rad, json } => {
-            anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
-            anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
-            anyhow::ensure!(
-                grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0,
-                "--grasp-noise-rad must be >= 0"
-            );
-            let mut options = RolloutOptions::default();
-            options.env.episode_length_steps = (episode_s * options.env.control_hz).round().max(1.0) as usize;
-            options.env.grasp.pose_noise_rad = grasp_noise_rad;
-            let summary = rollout::run_with(kind, object, episodes, seed, &options, |i, e| {
-                if !json {
-                    eprintln!(
-                        "episode {}/{episodes}: return {:.3}, rotation {:.3} rad, {:.2} contacts{}",
-                        i + 1,
-                        e.episode_return,
-                        e.rotation_rad,
-                        e.mean_contacts,
-                        if e.dropped { ", ended early" } else { "" }
-                    );
-                }
-            })?;
-            if json {
-                println!("{}", summary.to_json_line());
-            } else {
-                println!("{summary}");
-            }
-            Ok(())
-        }
+        Command::Eval(args) => eval(args),
+        Command::Robustness(args) => robustness(args),
+        Command::Controller(args) => controller(args),
         Command::Bench(bench) => run_bench(bench),
     }
+}
+
+fn eval(args: EvalArgs) -> anyhow::Result<()> {
+    let EvalArgs {
+        policy,
+        episodes,
+        episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
+        noise_q_rad,
+        noise_normal_frac,
+        noise_position_m,
+        perturb_force_n,
+        plot,
+        json,
+    } = args;
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+    for (name, v) in [
+        ("noise-q-rad", noise_q_rad),
+        ("noise-normal-frac", noise_normal_frac),
+        ("noise-position-m", noise_position_m),
+        ("perturb-force-n", perturb_force_n),
+        ("grasp-noise-rad", grasp_noise_rad),
+    ] {
+        anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
+    }
+    let mut env = EnvConfig::default();
+    env.object.shape = object;
+    let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
+    // The robustness test's disturbances, set the one way it sets them.
+    use vge_trainer::robustness::Axis;
+    for (axis, level) in [
+        (Axis::JointNoise, noise_q_rad),
+        (Axis::NormalError, noise_normal_frac),
+        (Axis::PositionError, noise_position_m),
+        (Axis::Perturbation, perturb_force_n),
+    ] {
+        axis.apply(&mut env, level);
+    }
+    let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
+        .with_context(|| format!("evaluating {}", policy.display()))?;
+    if let Some(png) = &plot {
+        draw_gait_diagram(&policy, &env, seed, png)?;
+    }
+    if json {
+        println!("{}", report.to_json_line());
+    } else {
+        print_eval_report(&report, &policy, episode_s, object);
+    }
+    Ok(())
+}
+
+/// `vge eval --plot`: the gait diagram of the episode with seed `seed`.
+fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> anyhow::Result<()> {
+    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let trace = vge_trainer::eval::trace_policy_bytes(&bytes, env, seed)
+        .with_context(|| format!("tracing {}", policy.display()))?;
+    let o = &trace.outcome;
+    let title = format!(
+        "{}: episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+        policy.display(),
+        o.rotation_rad,
+        o.length as f32 * trace.dt_s,
+        o.contact_switches,
+        if o.terminated { ", dropped" } else { "" }
+    );
+    vge_trainer::gait_diagram::plot(&trace, &title, png)
+        .with_context(|| format!("drawing {}", png.display()))?;
+    eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
+    Ok(())
+}
+
+fn print_eval_report(
+    report: &vge_trainer::eval::EvalReport,
+    policy: &Path,
+    episode_s: f32,
+    object: ObjectShape,
+) {
+    println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
+    println!("  mean return        {:.3}", report.mean_return);
+    println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
+    println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
+    println!("  dropped            {:.2} of episodes", report.drop_rate);
+    println!(
+        "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
+        report.mean_contact_switches
+    );
+    println!("  mean contacts      {:.2}; mean length {:.0} steps", report.mean_contacts, report.mean_length);
+    let verdict = if report.learned() { "learned" } else { "not learned" };
+    println!(
+        "  verdict            {verdict} (success >= {:.0}% of episodes)",
+        100.0 * vge_trainer::eval::LEARNED_SUCCESS_RATE
+    );
+}
+
+fn robustness(args: RobustnessArgs) -> anyhow::Result<()> {
+    let RobustnessArgs {
+        policy,
+        episodes,
+        levels,
+        episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
+        out,
+    } = args;
+    use vge_trainer::robustness::{self, RobustnessOptions};
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
+    anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+    anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
+    let bytes =
+        std::fs::read(&policy).with_context(|| format!("reading policy file {}", policy.display()))?;
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let mut base = EnvConfig::default();
+    base.object.shape = object;
+    let options = RobustnessOptions { episodes, episode_s, grasp_noise_rad, seed, levels };
+    let total = 1 + robustness::Axis::ALL.len() * (levels - 1);
+    eprintln!("vge robustness: {total} evaluations of {episodes} episodes x {episode_s} s on the {object}");
+    let report = robustness::run(&bytes, &base, &options, |r| {
+        eprintln!(
+            "  {:<22} {:>9.4}  return {:>8.3} ({:>5.1}% of clean)  success {:.2}  drops {:.2}",
+            r.axis,
+            r.level,
+            r.mean_return,
+            100.0 * r.return_fraction,
+            r.success_rate,
+            r.drop_rate
+        );
+    })
+    .with_context(|| format!("evaluating {}", policy.display()))?;
+    let csv = out.join("robustness.csv");
+    std::fs::write(&csv, robustness::to_csv(&report))
+        .with_context(|| format!("writing {}", csv.display()))?;
+    let json = out.join("robustness.json");
+    let text = serde_json::to_string_pretty(&report).context("serialising the report")?;
+    std::fs::write(&json, text).with_context(|| format!("writing {}", json.display()))?;
+    let png = out.join("robustness.png");
+    robustness::plot(&report, &png).with_context(|| format!("drawing {}", png.display()))?;
+    println!("wrote {}, {} and {}", csv.display(), json.display(), png.display());
+    Ok(())
+}
+
+fn controller(args: ControllerArgs) -> anyhow::Result<()> {
+    let ControllerArgs { kind, object, episodes, seed, episode_s, grasp_noise_rad, json } = args;
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+    anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
+    let mut options = RolloutOptions::default();
+    options.env.episode_length_steps = (episode_s * options.env.control_hz).round().max(1.0) as usize;
+    options.env.grasp.pose_noise_rad = grasp_noise_rad;
+    let summary = rollout::run_with(kind, object, episodes, seed, &options, |i, e| {
+        if !json {
+            eprintln!(
+                "episode {}/{episodes}: return {:.3}, rotation {:.3} rad, {:.2} contacts{}",
+                i + 1,
+                e.episode_return,
+                e.rotation_rad,
+                e.mean_contacts,
+                if e.dropped { ", ended early" } else { "" }
+            );
+        }
+    })?;
+    if json {
+        println!("{}", summary.to_json_line());
+    } else {
+        println!("{summary}");
+    }
+    Ok(())
 }
 
 fn export(args: ExportArgs) -> anyhow::Result<()> {
@@ -775,29 +792,21 @@ fn sweep_slurm(args: &SweepArgs, sweep: &vge_trainer::sweep::Sweep) -> anyhow::R
     Ok(())
 }
 
-fn train(
+/// The run `vge train` works on: a new one (`--config`, `--out`, refused where a run already
+/// is) or the one in `--resume DIR`, with the overrides applied.
+fn train_target(
+    resume: Option<PathBuf>,
     config: Option<PathBuf>,
     out: Option<PathBuf>,
-    resume: Option<PathBuf>,
-    seed: Option<u64>,
-    steps: Option<u64>,
     overrides: &[String],
-    stop: &std::sync::atomic::AtomicBool,
-) -> anyhow::Result<bool> {
-    use vge_trainer::{config as cfg, train as tr};
-    let mut overrides = overrides.to_vec();
-    if let Some(seed) = seed {
-        overrides.push(format!("seed={seed}"));
-    }
-    if let Some(steps) = steps {
-        overrides.push(format!("total_steps={steps}"));
-    }
-    let (config, out_dir, resuming) = match (resume, config, out) {
+) -> anyhow::Result<(vge_trainer::config::Config, PathBuf, bool)> {
+    use vge_trainer::config as cfg;
+    Ok(match (resume, config, out) {
         (Some(dir), _, _) => {
             let text = std::fs::read_to_string(dir.join("config.toml"))
                 .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
             let config =
-                cfg::parse_with_overrides(&text, &dir.join("config.toml").display().to_string(), &overrides)?;
+                cfg::parse_with_overrides(&text, &dir.join("config.toml").display().to_string(), overrides)?;
             config.validate()?;
             (config, dir, true)
         }
@@ -808,11 +817,14 @@ fn train(
                     out.display()
                 );
             }
-            (cfg::load_config(&path, &overrides)?, out, false)
+            (cfg::load_config(&path, overrides)?, out, false)
         }
         _ => bail!("give --config and --out, or --resume DIR"),
-    };
-    let bar = indicatif::ProgressBar::new(config.total_steps);
+    })
+}
+
+fn progress_bar(total_steps: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(total_steps);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
             "{elapsed_precise} [{bar:30}] {pos}/{len} steps ({eta} left) {msg}",
@@ -820,6 +832,28 @@ fn train(
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
         .progress_chars("=> "),
     );
+    bar
+}
+
+fn train(
+    config: Option<PathBuf>,
+    out: Option<PathBuf>,
+    resume: Option<PathBuf>,
+    seed: Option<u64>,
+    steps: Option<u64>,
+    overrides: &[String],
+    stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<bool> {
+    use vge_trainer::train as tr;
+    let mut overrides = overrides.to_vec();
+    if let Some(seed) = seed {
+        overrides.push(format!("seed={seed}"));
+    }
+    if let Some(steps) = steps {
+        overrides.push(format!("total_steps={steps}"));
+    }
+    let (config, out_dir, resuming) = train_target(resume, config, out, &overrides)?;
+    let bar = progress_bar(config.total_steps);
     let resumed_from = if resuming { vge_trainer::sweep::checkpoint_step(&out_dir) } else { None };
     eprintln!(
         "training {} ({:?} + {:?}, {:?}, seed {}) into {}{}",

@@ -528,6 +528,7 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     let parts = t.learner_s + t.behaviour_s + t.sim_s + t.update_s + t.eval_s + t.checkpoint_s;
     assert!(parts <= t.total_s * 1.001 && parts > 0.5 * t.total_s, "{t}");
     let full_policy = std::fs::read(full_dir.join("policy.vgep")).expect("policy");
+    check_fingerprint(&full_dir, &format!("fingerprint-{name}.csv"));
     // The warm-up statistics normalise the observations, and the file carries them.
     let file = vge_export::PolicyFile::from_bytes(&full_policy).expect("policy file");
     assert!(file.obs_std.iter().any(|&s| (s - 1.0).abs() > 1e-3), "obs std left at identity");
@@ -574,6 +575,35 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert!(report.to_json_line().starts_with("{\"episodes\":1,"));
     for d in [full_dir, part_dir, again_dir] {
         let _ = std::fs::remove_dir_all(d);
+    }
+}
+
+/// The metrics of the short run against the stored ones (`tests/fixtures/`): refactors must
+/// not change what training does. Counts must match exactly; real numbers to a relative
+/// 1e-3, because libtorch's kernels round differently on other CPUs (the stored file was
+/// written on an AMD EPYC; `VGE_BLESS=1` rewrites it after an intended change of behaviour).
+fn check_fingerprint(dir: &std::path::Path, fixture: &str) {
+    let fixture = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(fixture);
+    let got = metrics_without_speed(dir).join("\n") + "\n";
+    if std::env::var_os("VGE_BLESS").is_some() {
+        std::fs::create_dir_all(fixture.parent().expect("parent")).expect("fixtures dir");
+        std::fs::write(&fixture, &got).expect("write fingerprint");
+    }
+    let want = std::fs::read_to_string(&fixture).expect("stored fingerprint (VGE_BLESS=1 writes it)");
+    let (got, want): (Vec<&str>, Vec<&str>) = (got.lines().collect(), want.lines().collect());
+    assert_eq!(got.len(), want.len(), "metrics rows differ from {}", fixture.display());
+    assert_eq!(got[0], want[0], "metrics header");
+    for (g, w) in got.iter().zip(&want).skip(1) {
+        let (gc, wc): (Vec<&str>, Vec<&str>) = (g.split(',').collect(), w.split(',').collect());
+        assert_eq!(gc.len(), wc.len(), "{g}\n{w}");
+        for ((a, b), column) in gc.iter().zip(&wc).zip(want[0].split(',')) {
+            let same = match (a.parse::<f64>(), b.parse::<f64>()) {
+                _ if a.is_empty() || b.is_empty() || !a.contains('.') => a == b,
+                (Ok(x), Ok(y)) => (x - y).abs() <= 1e-3 * y.abs().max(1e-3),
+                _ => false,
+            };
+            assert!(same, "{column}: {a} now, {b} stored in {}\nnow:    {g}\nstored: {w}", fixture.display());
+        }
     }
 }
 

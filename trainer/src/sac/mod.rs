@@ -4,6 +4,10 @@
 //! VGE uses) or tuned to a target entropy. Or TD3 (Fujimoto et al. 2018; CleanRL's
 //! `td3_continuous_action`), the paper's second learner: the same twin critics, a
 //! deterministic actor (the mean head), target-policy smoothing and delayed actor updates.
+//!
+//! This module holds what both share (the learner's networks and optimisers, the critic
+//! step, the BC weights, the target updates, checkpoints); each algorithm's update reads in
+//! its own file: `soft_actor_critic.rs` and `td3.rs`.
 
 use std::path::Path;
 
@@ -14,6 +18,11 @@ use tch::{Device, Kind, Tensor};
 
 use crate::nets::{GaussianActor, NetSpec, TwinCritic};
 use crate::optim::{Adam, flatten_storage};
+
+mod soft_actor_critic;
+mod td3;
+
+use td3::TargetActor;
 
 /// How the entropy coefficient α is set.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -142,33 +151,6 @@ pub struct UpdateStats {
     pub bc_loss: f64,
     pub alpha: f64,
     pub mean_q: f64,
-}
-
-/// TD3's target actor: a frozen copy of the actor whose trainable tensors live in one flat
-/// buffer laid out as the actor optimiser's (both in name order), for a one-op Polyak update.
-#[derive(Debug)]
-struct TargetActor {
-    vs: nn::VarStore,
-    actor: GaussianActor,
-    flat: Tensor,
-}
-
-impl TargetActor {
-    fn new(online: &nn::VarStore, config: &SacConfig) -> Result<Self, tch::TchError> {
-        let mut vs = nn::VarStore::new(online.device());
-        let actor = GaussianActor::new(&vs.root(), &config.net, &config.action_scale);
-        vs.copy(online)?;
-        let online_vars = online.variables();
-        let mut named: Vec<(String, Tensor)> = vs
-            .variables()
-            .into_iter()
-            .filter(|(name, _)| online_vars.get(name).is_some_and(Tensor::requires_grad))
-            .collect();
-        named.sort_by(|a, b| a.0.cmp(&b.0));
-        let flat = flatten_storage(&named.into_iter().map(|(_, t)| t).collect::<Vec<_>>());
-        vs.freeze();
-        Ok(Self { vs, actor, flat })
-    }
 }
 
 // The files of a checkpoint that [`Sac::save`] writes (checkpoint.rs lists them in its manifest).
@@ -380,79 +362,6 @@ impl Sac {
         }
     }
 
-    /// SAC: one gradient step of the critics, the actor (plus the BC term when the batch has
-    /// one) and α, then the target update.
-    fn update_sac(&mut self, batch: &Batch) -> UpdateStats {
-        let rows = batch.obs.size()[0];
-        let act = self.config.net.act_dim;
-        let (eps_next, eps_pi) = match self.seed {
-            Some(seed) => {
-                let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, self.updates, 0x5ac) as u64);
-                (Some(standard_normal(&mut rng, rows, act)), Some(standard_normal(&mut rng, rows, act)))
-            }
-            None => (None, None),
-        };
-        self.updates += 1;
-        let alpha = self.alpha;
-        let bc_weight = self.bc_weight(batch);
-
-        // log π is needed for a non-zero or tuned α only.
-        let with_log_prob = alpha != 0.0 || self.log_alpha.is_some();
-        let q_next: Tensor = tch::no_grad(|| {
-            let next = self.actor.sample_opt(&batch.next_obs, eps_next.as_ref(), with_log_prob);
-            let q_next = self.target.min_q(&batch.next_obs, &next.action);
-            match next.log_prob.filter(|_| alpha != 0.0) {
-                Some(log_prob) => q_next - alpha * log_prob,
-                None => q_next,
-            }
-        });
-        let (critic_loss, q) = self.critic_step(batch, &q_next);
-
-        // The actor's loss needs gradients through the critic's input, not its weights.
-        self.critic_vs.freeze();
-        let (pi, bc_loss) = match (&batch.bc, &bc_weight) {
-            (Some(bc), Some(weight)) => {
-                let (pi, log_prob_data) = self.actor.sample_and_log_prob_of(
-                    &batch.obs,
-                    &bc_target(bc, self.actor.action_scale()),
-                    eps_pi.as_ref(),
-                    with_log_prob,
-                );
-                let bc_loss = (weight * log_prob_data).mean(Kind::Float) * -bc.beta;
-                (pi, Some(bc_loss))
-            }
-            _ => (self.actor.sample_opt(&batch.obs, eps_pi.as_ref(), with_log_prob), None),
-        };
-        let q_pi = self.critic.min_q(&batch.obs, &pi.action);
-        let rl_loss = match &pi.log_prob {
-            Some(log_prob) if alpha != 0.0 => (alpha * log_prob - &q_pi).mean(Kind::Float),
-            _ => -q_pi.mean(Kind::Float),
-        };
-        let actor_loss = match &bc_loss {
-            Some(bc) => &rl_loss + bc,
-            None => rl_loss.shallow_clone(),
-        };
-        self.actor_opt.backward_step(&actor_loss);
-        self.critic_vs.unfreeze();
-
-        if let (Some((log_alpha, opt, target_entropy)), Some(log_prob)) = (&mut self.log_alpha, &pi.log_prob)
-        {
-            let log_prob = log_prob.detach();
-            let alpha_loss = (-log_alpha.exp() * (log_prob + *target_entropy)).mean(Kind::Float);
-            opt.backward_step(&alpha_loss);
-            self.alpha = log_alpha.exp().double_value(&[0]);
-        }
-
-        self.soft_update_target();
-        UpdateStats {
-            critic_loss: critic_loss.double_value(&[]),
-            actor_loss: rl_loss.double_value(&[]),
-            bc_loss: bc_loss.map_or(0.0, |t| t.double_value(&[])),
-            alpha,
-            mean_q: q.mean(Kind::Float).double_value(&[]),
-        }
-    }
-
     /// One gradient step of both critics towards `r + γ (1 − done) q_next`; returns the
     /// loss and the twins' Q-values of the batch before the step (`[2, batch, 1]`, detached).
     fn critic_step(&mut self, batch: &Batch, q_next: &Tensor) -> (Tensor, Tensor) {
@@ -463,77 +372,6 @@ impl Sac {
         let critic_loss = (&q - y.unsqueeze(0)).square().mean(Kind::Float) * TwinCritic::TWINS as f64;
         self.critic_opt.backward_step(&critic_loss);
         (critic_loss, q.detach())
-    }
-
-    /// TD3: one critic step towards `r + γ min Q'(s', clip(μ'(s') + clip(ε))`; every
-    /// `policy_delay` updates an actor step on `-Q₁(s, μ(s))` (plus the BC term) and the
-    /// Polyak update of both targets.
-    ///
-    /// BC for a deterministic actor: with a Gaussian of fixed σ around μ(s), `-log π(a|s)`
-    /// is `‖a − μ(s)‖² / 2σ²` up to a constant, so the value-weighted term becomes
-    /// `beta · mean(mask · Q(s,a) · ‖(a − μ(s)) / scale‖²)` (σ absorbed into beta).
-    fn update_td3(
-        &mut self,
-        batch: &Batch,
-        noise_std: f64,
-        noise_clip: f64,
-        policy_delay: u64,
-    ) -> UpdateStats {
-        let rows = batch.obs.size()[0];
-        let act = self.config.net.act_dim;
-        let eps = match self.seed {
-            Some(seed) => {
-                let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, self.updates, 0x7d3) as u64);
-                standard_normal(&mut rng, rows, act)
-            }
-            None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
-        };
-        self.updates += 1;
-        let bc_weight = self.bc_weight(batch);
-        let scale = self.actor.action_scale().shallow_clone();
-        let target_actor = match &self.target_actor {
-            Some(target) => &target.actor,
-            None => unreachable!("TD3 learners are built with a target actor"),
-        };
-
-        let q_next: Tensor = tch::no_grad(|| {
-            let noise = (eps * noise_std).clamp(-noise_clip, noise_clip);
-            let next =
-                (target_actor.deterministic(&batch.next_obs) / &scale + noise).clamp(-1.0, 1.0) * &scale;
-            self.target.min_q(&batch.next_obs, &next)
-        });
-        let (critic_loss, q) = self.critic_step(batch, &q_next);
-
-        let mut bc_value = 0.0;
-        if self.updates.is_multiple_of(policy_delay.max(1)) {
-            self.critic_vs.freeze();
-            let mu = self.actor.deterministic(&batch.obs);
-            let rl_loss = -self.critic.q_values(&batch.obs, &mu).get(0).mean(Kind::Float);
-            let actor_loss = match (&batch.bc, &bc_weight) {
-                (Some(bc), Some(weight)) => {
-                    let sq = ((bc_target(bc, &scale) - &mu) / &scale).square().sum_dim_intlist(
-                        -1,
-                        true,
-                        Kind::Float,
-                    );
-                    let bc_loss = (weight * sq).mean(Kind::Float) * bc.beta;
-                    bc_value = bc_loss.double_value(&[]);
-                    &rl_loss + bc_loss
-                }
-                _ => rl_loss.shallow_clone(),
-            };
-            self.actor_opt.backward_step(&actor_loss);
-            self.critic_vs.unfreeze();
-            self.last_actor_loss = rl_loss.double_value(&[]);
-            self.soft_update_target();
-        }
-        UpdateStats {
-            critic_loss: critic_loss.double_value(&[]),
-            actor_loss: self.last_actor_loss,
-            bc_loss: bc_value,
-            alpha: 0.0,
-            mean_q: q.mean(Kind::Float).double_value(&[]),
-        }
     }
 
     /// The BC term's weights `mask · min Q(s, a_controller)` from the critics before this

@@ -1,0 +1,130 @@
+//! One episode's accounting, shared by every loop that runs episodes (training's envs,
+//! `vge eval`, the controller rollouts, the bridge's sim summary) so that they all measure
+//! return, rotation, contacts and contact switches the same way.
+//!
+//! Rotation is the object's yaw unwrapped step by step ([`crate::wrap_angle_rad`] of each
+//! step's difference), so several turns add up; sums are kept in f64 so that a 30 s episode
+//! loses nothing to rounding.
+
+use serde::Serialize;
+
+use crate::NUM_FINGERS;
+use crate::gait::ContactSwitches;
+
+/// One episode's figures.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct EpisodeOutcome {
+    /// Sum of the rewards.
+    pub episode_return: f64,
+    /// Object rotation about world z over the episode (rad, unwrapped; positive = the
+    /// rewarded sense).
+    pub rotation_rad: f64,
+    /// The env ended it early (a drop), as opposed to the time limit.
+    pub terminated: bool,
+    /// Mean number of fingertips touching the object after each step.
+    pub mean_contacts: f64,
+    /// Fingertips that broke and remade contact ([`ContactSwitches`]).
+    pub contact_switches: u32,
+    /// Control steps run.
+    pub length: usize,
+}
+
+impl EpisodeOutcome {
+    /// The success test: a full turn (2π) about z without a drop.
+    #[must_use]
+    pub fn success(&self) -> bool {
+        !self.terminated && self.rotation_rad >= std::f64::consts::TAU
+    }
+}
+
+/// Accumulates one episode step by step.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EpisodeTracker {
+    episode_return: f64,
+    rotation_rad: f64,
+    contact_sum: u64,
+    length: usize,
+    yaw_rad: f32,
+    switches: ContactSwitches,
+}
+
+impl EpisodeTracker {
+    /// An episode that starts with the object at `yaw_rad` and fingertips `touching`.
+    #[must_use]
+    pub fn start(yaw_rad: f32, touching: [bool; NUM_FINGERS]) -> Self {
+        Self { yaw_rad, switches: ContactSwitches::new(touching), ..Self::default() }
+    }
+
+    /// Records one step: its reward, the object's yaw and the fingertips touching after it.
+    /// Returns the contact switches completed on this step.
+    pub fn record(&mut self, reward: f32, yaw_rad: f32, touching: [bool; NUM_FINGERS]) -> u32 {
+        self.episode_return += f64::from(reward);
+        self.rotation_rad += f64::from(crate::wrap_angle_rad(yaw_rad - self.yaw_rad));
+        self.yaw_rad = yaw_rad;
+        self.contact_sum += touching.iter().filter(|&&t| t).count() as u64;
+        self.length += 1;
+        self.switches.update(touching)
+    }
+
+    /// Object rotation about z so far (rad, unwrapped).
+    #[must_use]
+    pub fn rotation_rad(&self) -> f64 {
+        self.rotation_rad
+    }
+
+    /// Steps recorded so far.
+    #[must_use]
+    pub fn length(&self) -> usize {
+        self.length
+    }
+
+    /// The episode's figures, ended by a drop (`terminated`) or the time limit.
+    #[must_use]
+    pub fn outcome(&self, terminated: bool) -> EpisodeOutcome {
+        EpisodeOutcome {
+            episode_return: self.episode_return,
+            rotation_rad: self.rotation_rad,
+            terminated,
+            mean_contacts: self.contact_sum as f64 / self.length.max(1) as f64,
+            contact_switches: self.switches.count,
+            length: self.length,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_unwraps_across_pi_and_turns_add_up() {
+        let mut t = EpisodeTracker::start(3.0, [true; NUM_FINGERS]);
+        // 0.3 rad per step across the ±π seam, 25 steps: 7.5 rad, more than a turn.
+        let mut yaw = 3.0f32;
+        for _ in 0..25 {
+            yaw = crate::wrap_angle_rad(yaw + 0.3);
+            t.record(1.0, yaw, [true; NUM_FINGERS]);
+        }
+        let o = t.outcome(false);
+        assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
+        assert!(o.success());
+        assert!(!t.outcome(true).success(), "a drop never succeeds");
+        assert_eq!((o.length, o.episode_return, o.mean_contacts), (25, 25.0, 5.0));
+    }
+
+    #[test]
+    fn contacts_average_and_switches_count() {
+        let touching = [true, true, true, true, false];
+        let mut t = EpisodeTracker::start(0.0, touching);
+        let detached = [false, true, true, true, false];
+        let mut completed = 0;
+        for _ in 0..crate::gait::MIN_DETACH_STEPS {
+            completed += t.record(0.0, 0.0, detached);
+        }
+        completed += t.record(0.0, 0.0, touching);
+        let o = t.outcome(false);
+        assert_eq!((completed, o.contact_switches), (1, 1));
+        assert!((o.mean_contacts - (3.0 * 3.0 + 4.0) / 4.0).abs() < 1e-12);
+        assert!(!o.success(), "no rotation");
+    }
+}

@@ -1,0 +1,196 @@
+//! The collector: the training envs side by side, what each env's episode has done so far,
+//! and the controllers the behaviour policy may follow in them. It turns actions into
+//! replay transitions and finished episodes into the metrics window.
+
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use tch::Tensor;
+use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, OBS_DIM, SimError};
+
+use super::TrainError;
+use super::metrics::Window;
+use crate::behaviour::{Behaviour, Decision, StepContext};
+use crate::config::Config;
+use crate::controllers::{Controller, ControllerInput, IgmConfig};
+use crate::replay::ReplayBuffer;
+use crate::sac::{Sac, mix_seed, standard_normal};
+
+/// Salt of the behaviour-noise seeds.
+const SALT_ACT: u64 = 0xac7;
+
+/// One env's episode so far.
+#[derive(Debug, Clone, Default)]
+struct EnvEpisode {
+    tracker: EpisodeTracker,
+    /// The rewards so far (for the episode's discounted Monte-Carlo returns).
+    rewards: Vec<f32>,
+}
+
+pub(super) struct Collector {
+    envs: Vec<Env>,
+    /// The current observation of each env.
+    obs: Vec<[f32; OBS_DIM]>,
+    episodes: Vec<EnvEpisode>,
+    /// One controller per env (none for RL), each with its own generator.
+    controllers: Vec<Box<dyn Controller + Send>>,
+    ctl_rngs: Vec<ChaCha8Rng>,
+    max_action_rad: f32,
+    seed: u64,
+}
+
+impl Collector {
+    /// The envs of `config`, not reset yet ([`Self::reset_all`]).
+    pub fn new(config: &Config) -> Result<Self, TrainError> {
+        let n = config.num_envs;
+        let env_configs: Vec<_> = (0..n).map(|i| config.env.env_config(i)).collect();
+        let controllers = match config.controller.filter(|_| config.method.queries_controller()) {
+            Some(c) => {
+                let kind = c.kind();
+                env_configs.iter().map(|e| kind.build(e, IgmConfig::default(), config.cs_config(e))).collect()
+            }
+            None => Vec::new(),
+        };
+        Ok(Self {
+            envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
+            obs: vec![[0.0; OBS_DIM]; n],
+            episodes: vec![EnvEpisode::default(); n],
+            controllers,
+            ctl_rngs: (0..n).map(|_| ChaCha8Rng::seed_from_u64(0)).collect(),
+            max_action_rad: config.env.max_action_rad,
+            seed: config.seed,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.envs.len()
+    }
+
+    pub fn reset_all(&mut self, behaviour: &mut Behaviour, rng: &mut ChaCha8Rng) -> Result<(), TrainError> {
+        let all: Vec<usize> = (0..self.len()).collect();
+        self.reset(&all, behaviour, rng)
+    }
+
+    /// Resets envs `which`, drawing each one's env seed and controller seed from `rng` in
+    /// order.
+    fn reset(
+        &mut self,
+        which: &[usize],
+        behaviour: &mut Behaviour,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(), TrainError> {
+        let mut seeds = vec![None; self.len()];
+        for &i in which {
+            seeds[i] = Some(rng.next_u64());
+            self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
+            behaviour.episode_reset(i);
+        }
+        let resets: Vec<Option<[f32; OBS_DIM]>> = self
+            .envs
+            .par_iter_mut()
+            .zip(seeds.par_iter())
+            .map(|(env, s)| s.map(|s| env.reset(s).map(|(o, _)| o)).transpose())
+            .collect::<Result<_, SimError>>()?;
+        for (i, o) in resets.into_iter().enumerate() {
+            if let Some(o) = o {
+                self.obs[i] = o;
+                self.episodes[i] =
+                    EnvEpisode { tracker: self.envs[i].episode_tracker()?, rewards: Vec::new() };
+            }
+        }
+        Ok(())
+    }
+
+    /// The learner's behaviour action in every env: uniform in the warm-up, else the actor's
+    /// exploration action with noise seeded from (seed, step).
+    pub fn learner_actions(
+        &self,
+        sac: &Sac,
+        step: u64,
+        warmup: u64,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<[f32; NUM_JOINTS]>, TrainError> {
+        let (n, max) = (self.len(), self.max_action_rad);
+        if step < warmup {
+            return Ok((0..n).map(|_| std::array::from_fn(|_| rng.random_range(-max..=max))).collect());
+        }
+        let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
+        let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
+        let t = Tensor::from_slice(self.obs.as_flattened()).view([n as i64, OBS_DIM as i64]);
+        let v = Vec::<f32>::try_from(sac.behaviour_action(&t, &eps).contiguous().view(-1))?;
+        Ok(v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect())
+    }
+
+    /// The executed action of every env: the behaviour policy's choice between the learner's
+    /// action and the controller's (Q from `sac`'s critic), clipped to the action bound. A
+    /// non-finite action stops the run.
+    pub fn behaviour_actions(
+        &mut self,
+        behaviour: &mut Behaviour,
+        sac: &Sac,
+        step: u64,
+        learner: &[[f32; NUM_JOINTS]],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<Decision>, TrainError> {
+        let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
+            self.envs.iter().map(|e| e.privileged().map(ControllerInput::from_privileged)).collect()
+        } else {
+            vec![None; self.len()]
+        };
+        let ctx = StepContext { step, obs: &self.obs, learner, inputs: &inputs };
+        let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+            let rows = o.len() as i64;
+            let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
+            let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
+            Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
+        };
+        let mut decisions = behaviour.act(&ctx, &mut self.controllers, &mut self.ctl_rngs, &mut q, rng)?;
+        for (env, d) in decisions.iter_mut().enumerate() {
+            if let Some(&value) = d.action.iter().find(|v| !v.is_finite()) {
+                return Err(TrainError::NonFiniteAction { step, env, value });
+            }
+            for v in &mut d.action {
+                *v = v.clamp(-self.max_action_rad, self.max_action_rad);
+            }
+        }
+        Ok(decisions)
+    }
+
+    /// Steps every env with its decision (in parallel), stores the transitions, accounts the
+    /// steps and the finished episodes in `window`, and resets the finished envs. Returns the
+    /// number of episodes that finished.
+    pub fn step(
+        &mut self,
+        decisions: &[Decision],
+        replay: &mut ReplayBuffer,
+        window: &mut Window,
+        gamma: f64,
+        behaviour: &mut Behaviour,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<u64, TrainError> {
+        let results: Vec<_> = self
+            .envs
+            .par_iter_mut()
+            .zip(decisions.par_iter())
+            .map(|(env, d)| env.step(&d.action))
+            .collect::<Result<Vec<_>, SimError>>()?;
+        let mut finished = Vec::new();
+        for (i, (r, d)) in results.iter().zip(decisions).enumerate() {
+            let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
+            replay.push(&self.obs[i], &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
+            let episode = &mut self.episodes[i];
+            window.switches +=
+                u64::from(episode.tracker.record(r.reward, r.info.object_yaw_rad, r.info.tip_contacts));
+            episode.rewards.push(r.reward);
+            self.obs[i] = r.obs;
+            if r.terminated || r.truncated {
+                window.add_episode(&episode.tracker.outcome(r.terminated), &episode.rewards, gamma);
+                finished.push(i);
+            }
+        }
+        if !finished.is_empty() {
+            self.reset(&finished, behaviour, rng)?;
+        }
+        Ok(finished.len() as u64)
+    }
+}

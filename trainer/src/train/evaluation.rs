@@ -1,0 +1,277 @@
+//! Evaluations during and after training, on the exported actor and the runtime, and model
+//! selection: every periodic evaluation keeps its actor in `snapshots/`, and at the end the
+//! snapshot with the best validation evaluation is reported on held-out test grasps
+//! (`policy-best.vgep`, `best-eval.json`) apart from the final policy (`final-eval.json`).
+
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use vge_export::Provenance;
+
+use super::{TrainError, io_err};
+use crate::config::Config;
+use crate::eval::{EpisodeOutcome, EvalReport};
+use crate::policy_export::export_hand_actor;
+use crate::sac::Sac;
+
+/// The actor of `sac` encoded as a policy file (hand metadata from
+/// [`crate::policy_export`], provenance with the config hash, seed and steps).
+pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, TrainError> {
+    let hidden: Vec<usize> = config.sac.hidden.iter().map(|&h| h as usize).collect();
+    let provenance = Provenance {
+        vge_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config_hash: config.hash_hex(),
+        seed: config.seed,
+        steps,
+    };
+    Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
+}
+
+/// The success test ([`crate::eval`]) of an exported actor (policy-file bytes) on the
+/// runtime: `run.eval_episodes` episodes of `run.eval_episode_s` from grasps randomised by
+/// `run.eval_grasp_noise_rad`, seeded from the config's seed only (training is not
+/// perturbed).
+fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<EvalReport, TrainError> {
+    let run = &config.run;
+    let env = crate::eval::success_test_env(
+        &config.env.env_config(0),
+        run.eval_episode_s,
+        run.eval_grasp_noise_rad,
+    );
+    let eval_seed = match set {
+        EpisodeSet::Validation => config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1),
+        EpisodeSet::Test => config.seed.wrapping_mul(1_000_033).wrapping_add(0x7e57),
+    };
+    Ok(crate::eval::eval_policy_bytes(bytes, &env, run.eval_episodes.max(1), eval_seed)?)
+}
+
+/// Which grasps an evaluation draws: the periodic (and final) evaluations share one set, the
+/// validation episodes a snapshot is selected on; the selected snapshot is then reported on
+/// the test set, which nothing was selected on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EpisodeSet {
+    Validation,
+    Test,
+}
+
+const SNAPSHOT_DIR: &str = "snapshots";
+
+fn snapshot_path(out_dir: &Path, step: u64) -> PathBuf {
+    out_dir.join(SNAPSHOT_DIR).join(format!("policy-{step}.vgep"))
+}
+
+/// One row of `eval.csv`, as model selection reads it.
+#[derive(Debug, Clone, Copy)]
+struct EvalRow {
+    step: u64,
+    mean_return: f64,
+    success: f64,
+}
+
+/// The evaluation row model selection picks: highest success rate, then highest return, then
+/// the earlier step.
+fn best_eval_row(rows: &[EvalRow]) -> Option<EvalRow> {
+    rows.iter().copied().fold(None, |best: Option<EvalRow>, r| match best {
+        Some(b) if (b.success, b.mean_return) >= (r.success, r.mean_return) => Some(b),
+        _ => Some(r),
+    })
+}
+
+/// What `best-eval.json` holds: which snapshot was selected on the validation episodes, and
+/// its success test on the held-out test episodes.
+#[derive(Debug, Serialize)]
+struct BestEval<'a> {
+    selected_step: u64,
+    validation_success_rate: f64,
+    validation_mean_return: f64,
+    /// Whether the selected policy learned on the test episodes.
+    learned: bool,
+    success_rate: f64,
+    episodes: usize,
+    mean_return: f64,
+    mean_rotation_rad: f64,
+    drop_rate: f64,
+    mean_contact_switches: f64,
+    per_episode: &'a [EpisodeOutcome],
+}
+
+/// Model selection ([module docs](self)): copies the best snapshot to `policy-best.vgep` and
+/// writes its test-set evaluation to `best-eval.json`. A run without periodic evaluations
+/// (or without their snapshots, as runs older than this rule) has nothing to select from.
+fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainError> {
+    let csv_path = out_dir.join("eval.csv");
+    if !csv_path.exists() {
+        return Ok(());
+    }
+    let text = std::fs::read_to_string(&csv_path).map_err(io_err(&csv_path))?;
+    let rows = parse_eval_rows(&text).map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?;
+    let Some(best) = best_eval_row(&rows) else { return Ok(()) };
+    let snapshot = snapshot_path(out_dir, best.step);
+    let bytes = match std::fs::read(&snapshot) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            eprintln!("model selection skipped: {} is missing", snapshot.display());
+            return Ok(());
+        }
+        Err(e) => return Err(io_err(&snapshot)(e)),
+    };
+    let r = evaluate_policy(config, &bytes, EpisodeSet::Test)?;
+    let path = out_dir.join("policy-best.vgep");
+    std::fs::write(&path, &bytes).map_err(io_err(&path))?;
+    let doc = BestEval {
+        selected_step: best.step,
+        validation_success_rate: best.success,
+        validation_mean_return: best.mean_return,
+        learned: r.learned(),
+        success_rate: r.success_rate,
+        episodes: r.episodes,
+        mean_return: r.mean_return,
+        mean_rotation_rad: r.mean_rotation_rad,
+        drop_rate: r.drop_rate,
+        mean_contact_switches: r.mean_contact_switches,
+        per_episode: &r.per_episode,
+    };
+    let path = out_dir.join("best-eval.json");
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
+    std::fs::write(&path, text + "\n").map_err(io_err(&path))
+}
+
+/// `eval.csv` as written by [`append_eval_row`] (columns found by name in the header).
+fn parse_eval_rows(text: &str) -> Result<Vec<EvalRow>, String> {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).ok_or(format!("no column {name}"));
+    let (step_i, return_i, success_i) = (col("step")?, col("return")?, col("success")?);
+    lines
+        .filter(|l| !l.trim().is_empty())
+        .enumerate()
+        .map(|(i, line)| {
+            let cells: Vec<&str> = line.split(',').collect();
+            let cell = |j: usize| cells.get(j).copied().ok_or(format!("row {}: too few cells", i + 1));
+            let bad = |e: &dyn std::fmt::Display| format!("row {}: {e}", i + 1);
+            Ok(EvalRow {
+                step: cell(step_i)?.parse().map_err(|e| bad(&e))?,
+                mean_return: cell(return_i)?.parse().map_err(|e| bad(&e))?,
+                success: cell(success_i)?.parse().map_err(|e| bad(&e))?,
+            })
+        })
+        .collect()
+}
+
+const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
+
+/// Appends one evaluation to `eval.csv`.
+fn append_eval_row(out_dir: &Path, step: u64, r: &EvalReport) -> Result<(), TrainError> {
+    let path = out_dir.join("eval.csv");
+    let new = !path.exists();
+    let mut f = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
+    let mut text = String::new();
+    if new {
+        text.push_str(EVAL_HEADER);
+        text.push('\n');
+    }
+    text.push_str(&format!(
+        "{step},{},{:.6},{:.6},{:.4},{:.4},{:.4},{:.4}\n",
+        r.episodes,
+        r.mean_return,
+        r.mean_rotation_rad,
+        r.success_rate,
+        r.drop_rate,
+        r.mean_contacts,
+        r.mean_contact_switches
+    ));
+    f.write_all(text.as_bytes()).map_err(io_err(&path))
+}
+
+/// What `final-eval.json` holds: the final policy's success test, and what it cost.
+#[derive(Debug, Serialize)]
+struct FinalEval<'a> {
+    /// Whether the seed learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`]).
+    learned: bool,
+    success_rate: f64,
+    episodes: usize,
+    episode_s: f32,
+    grasp_noise_rad: f32,
+    mean_return: f64,
+    mean_rotation_rad: f64,
+    drop_rate: f64,
+    mean_contact_switches: f64,
+    env_steps: u64,
+    wall_s: f64,
+    per_episode: &'a [EpisodeOutcome],
+}
+
+fn write_final_eval(
+    out_dir: &Path,
+    config: &Config,
+    r: &EvalReport,
+    env_steps: u64,
+    wall_s: f64,
+) -> Result<(), TrainError> {
+    let path = out_dir.join("final-eval.json");
+    let doc = FinalEval {
+        learned: r.learned(),
+        success_rate: r.success_rate,
+        episodes: r.episodes,
+        episode_s: config.run.eval_episode_s,
+        grasp_noise_rad: config.run.eval_grasp_noise_rad,
+        mean_return: r.mean_return,
+        mean_rotation_rad: r.mean_rotation_rad,
+        drop_rate: r.drop_rate,
+        mean_contact_switches: r.mean_contact_switches,
+        env_steps,
+        wall_s,
+        per_episode: &r.per_episode,
+    };
+    let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
+    std::fs::write(&path, text + "\n").map_err(io_err(&path))
+}
+
+/// The periodic evaluation at `step`: the actor (policy-file `bytes`) on the validation
+/// episodes, a row of `eval.csv`, and the actor kept as a snapshot.
+pub(super) fn periodic(out_dir: &Path, config: &Config, step: u64, bytes: &[u8]) -> Result<(), TrainError> {
+    let report = evaluate_policy(config, bytes, EpisodeSet::Validation)?;
+    append_eval_row(out_dir, step, &report)?;
+    let dir = out_dir.join(SNAPSHOT_DIR);
+    std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
+    let path = snapshot_path(out_dir, step);
+    std::fs::write(&path, bytes).map_err(io_err(&path))
+}
+
+/// The end of a run: `policy.vgep`, its evaluation (`final-eval.json`) and model selection.
+pub(super) fn finish(
+    out_dir: &Path,
+    config: &Config,
+    bytes: &[u8],
+    step: u64,
+    wall_s: f64,
+) -> Result<PathBuf, TrainError> {
+    let path = out_dir.join("policy.vgep");
+    std::fs::write(&path, bytes).map_err(io_err(&path))?;
+    let report = evaluate_policy(config, bytes, EpisodeSet::Validation)?;
+    write_final_eval(out_dir, config, &report, step, wall_s)?;
+    select_best_snapshot(out_dir, config)?;
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_selection_takes_success_then_return_then_the_earlier_step() {
+        let row = |step, mean_return, success| EvalRow { step, mean_return, success };
+        assert!(best_eval_row(&[]).is_none());
+        let rows =
+            [row(1, 50.0, 0.2), row(2, 40.0, 0.8), row(3, 90.0, 0.8), row(4, 90.0, 0.8), row(5, 300.0, 0.1)];
+        assert_eq!(best_eval_row(&rows).map(|r| r.step), Some(3));
+        let parsed = parse_eval_rows(&format!(
+            "{EVAL_HEADER}\n100,20,14.5,1.1,0.0500,0.3,3.0,6.8\n200,20,26.8,0.9,0.8000,1.0,3.1,11.6\n"
+        ));
+        let steps: Vec<(u64, f64)> = parsed.expect("parses").iter().map(|r| (r.step, r.success)).collect();
+        assert_eq!(steps, vec![(100, 0.05), (200, 0.8)]);
+        assert!(parse_eval_rows(&format!("{EVAL_HEADER}\n100,20,x,1,0,0,0,0\n")).is_err());
+    }
+}

@@ -1,0 +1,163 @@
+//! The metrics window: sums over the env steps since the last `metrics.csv` row, and the
+//! row they become.
+
+use serde::{Deserialize, Serialize};
+use vge_sim::EpisodeOutcome;
+
+use crate::behaviour::BehaviourStats;
+use crate::sac::UpdateStats;
+
+pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,beta,updates,steps_per_s";
+
+/// Sums over the current metrics window.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub(super) struct Window {
+    pub episodes: u64,
+    ret: f64,
+    rotation: f64,
+    contacts: f64,
+    successes: u64,
+    updates: u64,
+    critic_loss: f64,
+    actor_loss: f64,
+    bc_loss: f64,
+    alpha: f64,
+    mean_q: f64,
+    pub steps: u64,
+    pub controller_steps: u64,
+    selections: u64,
+    p_psi_sum: f64,
+    /// Fingertip contact switches completed ([`vge_sim::gait`]).
+    pub switches: u64,
+    /// Discounted Monte-Carlo returns of the visited states of the finished episodes (sum,
+    /// count, largest): what the critic's mean Q should stay within.
+    mc_return_sum: f64,
+    mc_return_count: u64,
+    mc_return_max: Option<f64>,
+}
+
+impl Window {
+    /// A finished episode, with its rewards for the Monte-Carlo returns.
+    pub fn add_episode(&mut self, outcome: &EpisodeOutcome, rewards: &[f32], gamma: f64) {
+        self.episodes += 1;
+        self.ret += outcome.episode_return;
+        self.rotation += outcome.rotation_rad;
+        self.contacts += outcome.mean_contacts;
+        self.successes += u64::from(outcome.success());
+        let (sum, count, max) = discounted_returns(rewards, gamma);
+        self.mc_return_sum += sum;
+        self.mc_return_count += count;
+        self.mc_return_max = match (self.mc_return_max, max) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+    }
+
+    /// One gradient update.
+    pub fn add_update(&mut self, st: &UpdateStats) {
+        self.updates += 1;
+        self.critic_loss += st.critic_loss;
+        self.actor_loss += st.actor_loss;
+        self.bc_loss += st.bc_loss;
+        self.alpha += st.alpha;
+        self.mean_q += st.mean_q;
+    }
+
+    /// What the behaviour policy did between two snapshots of its counters.
+    pub fn add_behaviour(&mut self, before: &BehaviourStats, after: &BehaviourStats) {
+        self.steps += after.steps - before.steps;
+        self.controller_steps += after.controller_steps - before.controller_steps;
+        self.selections += after.selections - before.selections;
+        self.p_psi_sum += after.p_psi_sum - before.p_psi_sum;
+    }
+
+    /// Mean return and rotation per finished episode (0 without one).
+    pub fn mean_return_and_rotation(&self) -> (f64, f64) {
+        let e = self.episodes.max(1) as f64;
+        (self.ret / e, self.rotation / e)
+    }
+
+    /// One metrics row: `(column, value)` in [`METRICS_HEADER`] order after `step`; `None`
+    /// where the window had nothing to average (no finished episode, no update).
+    pub fn values(
+        &self,
+        episodes: u64,
+        beta: f64,
+        updates: u64,
+        sps: f64,
+    ) -> Vec<(&'static str, Option<f64>)> {
+        let w = self;
+        let e = w.episodes.max(1) as f64;
+        let u = w.updates.max(1) as f64;
+        let per_episode = |x: f64| (w.episodes > 0).then_some(x / e);
+        let per_update = |x: f64| (w.updates > 0).then_some(x / u);
+        vec![
+            ("episodes", Some(episodes as f64)),
+            ("return", per_episode(w.ret)),
+            ("rotation", per_episode(w.rotation)),
+            ("contacts", per_episode(w.contacts)),
+            ("success", per_episode(w.successes as f64)),
+            ("controller_share", Some(w.controller_steps as f64 / w.steps.max(1) as f64)),
+            ("p_psi", (w.selections > 0).then(|| w.p_psi_sum / w.selections as f64)),
+            ("switches_per_1k", Some(1000.0 * w.switches as f64 / w.steps.max(1) as f64)),
+            ("critic_loss", per_update(w.critic_loss)),
+            ("actor_loss", per_update(w.actor_loss)),
+            ("bc_loss", per_update(w.bc_loss)),
+            ("alpha", per_update(w.alpha)),
+            ("mean_q", per_update(w.mean_q)),
+            ("mc_return", (w.mc_return_count > 0).then(|| w.mc_return_sum / w.mc_return_count as f64)),
+            ("mc_return_max", w.mc_return_max),
+            ("beta", Some(beta)),
+            ("updates", Some(updates as f64)),
+            ("steps_per_s", Some(sps)),
+        ]
+    }
+}
+
+/// Sum, count and largest of the discounted returns `G_t = r_t + γ G_{t+1}` of every step
+/// of an episode (no bootstrap past its end).
+pub(super) fn discounted_returns(rewards: &[f32], gamma: f64) -> (f64, u64, Option<f64>) {
+    let mut g = 0.0f64;
+    let (mut sum, mut max) = (0.0f64, None::<f64>);
+    for &r in rewards.iter().rev() {
+        g = f64::from(r) + gamma * g;
+        sum += g;
+        max = Some(max.map_or(g, |m| m.max(g)));
+    }
+    (sum, rewards.len() as u64, max)
+}
+
+/// The CSV line of a metrics row.
+pub(super) fn csv_row(step: u64, values: &[(&str, Option<f64>)]) -> String {
+    let mut line = step.to_string();
+    for (name, v) in values {
+        line.push(',');
+        match (*name, v) {
+            (_, None) => {}
+            ("episodes" | "updates", Some(x)) => line.push_str(&format!("{x:.0}")),
+            ("steps_per_s", Some(x)) => line.push_str(&format!("{x:.1}")),
+            (_, Some(x)) => line.push_str(&format!("{x:.6}")),
+        }
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metrics_columns_match_the_csv_header() {
+        let names: Vec<&str> = Window::default().values(0, 0.0, 0, 0.0).iter().map(|(n, _)| *n).collect();
+        assert_eq!(format!("step,{}", names.join(",")), METRICS_HEADER);
+    }
+
+    #[test]
+    fn discounted_returns_bootstrap_nothing_past_the_end() {
+        let (sum, count, max) = discounted_returns(&[1.0, 0.0, 2.0], 0.5);
+        // G = [1 + 0.5 * (0 + 0.5 * 2), 0 + 0.5 * 2, 2] = [1.5, 1, 2]
+        assert_eq!((sum, count, max), (4.5, 3, Some(2.0)));
+        assert_eq!(discounted_returns(&[], 0.9), (0.0, 0, None));
+    }
+}

@@ -1,0 +1,428 @@
+//! The training loop: N envs stepped in parallel, the behaviour policy ([`crate::behaviour`]),
+//! the replay buffer, `utd` SAC/TD3 updates per transition, a metrics CSV written as it
+//! goes, checkpoints, resume, a stop flag, and the final actor exported as `DIR/policy.vgep`.
+//!
+//! [`train`] is the loop and reads as the paper's Algorithm 2; each concept it uses has its
+//! own module: `collector` (the envs, their episodes, acting and storing transitions),
+//! `metrics` (the window behind each `metrics.csv` row), `run_folder` (the files a run
+//! writes as it goes, the checkpoint), `state` (`state.toml`: counters and the generator),
+//! `evaluation` (periodic and final evaluations, model selection).
+//!
+//! Output directory:
+//! - `config.toml`: the effective configuration;
+//! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
+//! - `tensorboard/`: the metrics rows as TensorBoard scalars (`train/<column>`), one event
+//!   file per session (`tensorboard --logdir DIR`);
+//! - `eval.csv`: deterministic evaluations of the actor every `run.eval_interval` steps;
+//! - `checkpoint/`: `state.toml` (counters, generator state, metric window), `actor.ot`,
+//!   `critic.ot`, `target.ot`, `target_actor.ot` (TD3), `optim.ot` (Adam moments, α),
+//!   `replay.bin` (optional), and `manifest.json` (every file's length and CRC-32). It is
+//!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole, and
+//!   a resume verifies every file against the manifest first: a damaged, truncated or
+//!   unverifiable checkpoint is refused with the file's name, never resumed
+//!   ([`crate::checkpoint`]);
+//! - `policy.vgep`: the exported actor at the end;
+//! - `snapshots/policy-<step>.vgep`: the actor exported at each periodic evaluation;
+//! - `policy-best.vgep`, `best-eval.json`: model selection, reported apart from the final
+//!   policy. The snapshot with the best periodic evaluation (success, then return; these are
+//!   the validation episodes) is run again on held-out test episodes drawn from another
+//!   seed, so that the selection does not inflate the number it reports. Training itself is
+//!   unchanged by it.
+//!
+//! Determinism and resume: every random draw comes from the run's ChaCha8 generator (env
+//! reset seeds, controller generators, source draws, warm-up actions, replay indices) or
+//! from libtorch's generator reseeded from (seed, counter) before each use (behaviour
+//! samples per step, updates per update index), so libtorch's generator state need not be
+//! saved. Physics state cannot be saved, so a checkpoint ends every env's episode (a
+//! truncation: bootstrapped, not terminal) and all envs reset from the generator right after
+//! it, in an uninterrupted run exactly as in a resumed one. Resuming from a periodic
+//! checkpoint therefore reproduces the uninterrupted run bit for bit (tested). A stop
+//! (Ctrl-C) checkpoints at the current step: the resumed run is then the run whose
+//! checkpoint boundary fell at that step.
+
+mod collector;
+mod evaluation;
+mod metrics;
+mod run_folder;
+mod state;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use tch::Device;
+use thiserror::Error;
+use vge_sim::{NUM_JOINTS, OBS_DIM, SimError};
+
+use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, bc_beta};
+use crate::checkpoint::CheckpointError;
+use crate::config::{Config, ConfigError};
+use crate::eval::EvalError;
+use crate::replay::{ReplayBuffer, ReplayError};
+use crate::sac::Sac;
+use collector::Collector;
+pub use evaluation::export_actor;
+use run_folder::RunFolder;
+use state::{Counters, TrainState};
+
+#[derive(Debug, Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("libtorch: {0}")]
+    Tch(#[from] tch::TchError),
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    #[error("export: {0}")]
+    Export(#[from] vge_export::ExportError),
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("resume: {0}")]
+    Resume(String),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error("behaviour policy: {0}")]
+    Behaviour(#[from] BehaviourError),
+    #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
+    NonFiniteAction { step: u64, env: usize, value: f32 },
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io { path: path.display().to_string(), source }
+}
+
+/// What the progress callback sees (every loop iteration, i.e. every `num_envs` steps).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    pub step: u64,
+    pub total_steps: u64,
+    /// Env steps per second since this session (start or resume) began.
+    pub steps_per_s: f64,
+    pub episodes: u64,
+    /// Of the last metrics window.
+    pub mean_return: f64,
+    pub mean_rotation_rad: f64,
+    pub controller_share: f64,
+    pub updates: u64,
+}
+
+/// How a call of [`train`] ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainSummary {
+    pub steps: u64,
+    pub updates: u64,
+    pub episodes: u64,
+    /// The stop flag ended it (checkpoint saved, no policy exported).
+    pub stopped: bool,
+    /// `DIR/policy.vgep` when training finished.
+    pub policy: Option<PathBuf>,
+    pub behaviour: BehaviourStats,
+    /// Where this session's wall time went.
+    pub times: PhaseTimes,
+}
+
+/// Wall-clock seconds per phase of the training loop, this session: what limits its speed.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// The actor's behaviour actions (one batched forward per step of all envs).
+    pub learner_s: f64,
+    /// The behaviour policy: controller calls (QP, kinematics) and the critic's Q queries.
+    pub behaviour_s: f64,
+    /// Physics: stepping the envs (in parallel), replay pushes, episode resets, logging.
+    pub sim_s: f64,
+    /// Gradient updates, with minibatch sampling.
+    pub update_s: f64,
+    /// Periodic deterministic evaluations.
+    pub eval_s: f64,
+    /// Checkpoints (networks, optimisers, replay buffer).
+    pub checkpoint_s: f64,
+    pub total_s: f64,
+}
+
+impl std::fmt::Display for PhaseTimes {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let total = self.total_s.max(1e-9);
+        let parts = [
+            ("updates", self.update_s),
+            ("simulation", self.sim_s),
+            ("controllers + Q", self.behaviour_s),
+            ("actor", self.learner_s),
+            ("evaluation", self.eval_s),
+            ("checkpoints", self.checkpoint_s),
+        ];
+        let shown: Vec<String> =
+            parts.iter().map(|(name, t)| format!("{name} {t:.1} s ({:.0}%)", 100.0 * t / total)).collect();
+        write!(f, "{:.1} s: {}", self.total_s, shown.join(", "))
+    }
+}
+
+/// Smallest std the observation normaliser divides by: a centimetre for contact positions,
+/// and nothing that never varied in the warm-up gets amplified more than 100x.
+const OBS_MIN_STD: f32 = 1e-2;
+
+/// The effective configuration stored in a run directory (for `--resume DIR`).
+pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
+    let path = dir.join("config.toml");
+    let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+    let config = Config::from_toml_str(&text)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// Trains `config` into `out_dir`. With `resume`, continues from `out_dir/checkpoint` (the
+/// config may raise `total_steps`; other changes make the run a different one). `stop` is
+/// polled every iteration: when set, a checkpoint is saved and the call returns with
+/// `stopped = true`. `progress` is called every iteration.
+///
+/// The loop is the paper's Algorithm 2: the learner proposes an action in every env, the
+/// behaviour policy follows the learner or the controller (every H steps, by a softmax over
+/// the critic's Q, until the hard stop), the transitions go to the replay buffer with the
+/// controller's action beside them for BC, and `utd` updates follow each env step.
+pub fn train(
+    config: &Config,
+    out_dir: &Path,
+    resume: bool,
+    stop: &AtomicBool,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<TrainSummary, TrainError> {
+    let mut t = Trainer::new(config, out_dir, resume)?;
+    let mut stopped = false;
+    while t.c.step < config.total_steps {
+        if stop.load(Ordering::SeqCst) {
+            stopped = true;
+            break;
+        }
+        let learner = t.collector.learner_actions(&t.sac, t.c.step, config.sac.warmup, &mut t.rng)?;
+        t.lap(Phase::Learner);
+        let stats_before = t.behaviour.stats;
+        let decisions =
+            t.collector.behaviour_actions(&mut t.behaviour, &t.sac, t.c.step, &learner, &mut t.rng)?;
+        t.lap(Phase::Behaviour);
+        let (replay, window) = (&mut t.replay, &mut t.c.window);
+        let finished =
+            t.collector.step(&decisions, replay, window, config.sac.gamma, &mut t.behaviour, &mut t.rng)?;
+        t.c.episodes += finished;
+        t.c.window.add_behaviour(&stats_before, &t.behaviour.stats);
+        let prev_step = t.c.step;
+        t.c.step += t.collector.len() as u64;
+        t.lap(Phase::Sim);
+        t.update()?;
+        t.lap(Phase::Update);
+        t.periodic(prev_step, progress)?;
+    }
+    t.finish(stopped)
+}
+
+/// A phase of [`PhaseTimes`].
+#[derive(Debug, Clone, Copy)]
+enum Phase {
+    Learner,
+    Behaviour,
+    Sim,
+    Update,
+    Eval,
+    Checkpoint,
+}
+
+/// A training session: the learner, its data, the envs and the run's folder.
+struct Trainer<'a> {
+    config: &'a Config,
+    sac: Sac,
+    replay: ReplayBuffer,
+    behaviour: Behaviour,
+    collector: Collector,
+    rng: ChaCha8Rng,
+    c: Counters,
+    folder: RunFolder,
+    config_hash: String,
+    /// Wall time of the earlier sessions of this run (s).
+    previous_wall_s: f64,
+    session_start: Instant,
+    session_first_step: u64,
+    /// The step of the last checkpoint written or resumed from.
+    checkpointed_at: Option<u64>,
+    times: PhaseTimes,
+    clock: Instant,
+}
+
+impl<'a> Trainer<'a> {
+    /// A fresh run, or the run in `out_dir` resumed from its checkpoint; envs reset.
+    fn new(config: &'a Config, out_dir: &Path, resume: bool) -> Result<Self, TrainError> {
+        config.validate()?;
+        std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
+        if config.sac.threads > 0 {
+            tch::set_num_threads(config.sac.threads);
+        }
+        let mut sac = Sac::new_seeded(config.sac_config(), Device::Cpu, config.seed)?;
+        let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
+        let mut behaviour = Behaviour::from_config(config);
+        let mut collector = Collector::new(config)?;
+        let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let (mut c, mut previous_wall_s) = (Counters::default(), 0.0);
+        if resume {
+            // Every file is checked against the manifest before any is read.
+            let state = run_folder::load_checkpoint(out_dir, &mut sac, &mut replay)?;
+            rng = state.rng()?;
+            c = state.counters();
+            behaviour.stats = state.behaviour_stats();
+            previous_wall_s = state.wall_s;
+        }
+        let folder = RunFolder::open(out_dir, config, c.step, resume)?;
+        collector.reset_all(&mut behaviour, &mut rng)?;
+        let now = Instant::now();
+        Ok(Self {
+            config,
+            sac,
+            replay,
+            behaviour,
+            collector,
+            rng,
+            session_first_step: c.step,
+            checkpointed_at: resume.then_some(c.step),
+            c,
+            folder,
+            config_hash: config.hash_hex(),
+            previous_wall_s,
+            session_start: now,
+            times: PhaseTimes::default(),
+            clock: now,
+        })
+    }
+
+    /// Adds the time since the last lap to `phase`.
+    fn lap(&mut self, phase: Phase) {
+        let now = Instant::now();
+        let t = &mut self.times;
+        let slot = match phase {
+            Phase::Learner => &mut t.learner_s,
+            Phase::Behaviour => &mut t.behaviour_s,
+            Phase::Sim => &mut t.sim_s,
+            Phase::Update => &mut t.update_s,
+            Phase::Eval => &mut t.eval_s,
+            Phase::Checkpoint => &mut t.checkpoint_s,
+        };
+        *slot += (now - self.clock).as_secs_f64();
+        self.clock = now;
+    }
+
+    /// `utd` gradient updates per env step once the warm-up is over (the observation
+    /// statistics fixed before the first).
+    fn update(&mut self) -> Result<(), TrainError> {
+        let config = self.config;
+        let batch_size = config.sac.batch;
+        if self.c.step < config.sac.warmup || self.replay.len() < batch_size {
+            return Ok(());
+        }
+        if self.sac.updates() == 0 && config.sac.normalize_obs {
+            // Once; afterwards the statistics live in the networks' var stores and come back
+            // with a checkpoint.
+            let (mean, std) = self.replay.obs_stats(OBS_MIN_STD);
+            self.sac.set_obs_normalisation(&mean, &std);
+        }
+        let beta = self.beta();
+        self.c.updates_due += self.collector.len() as f64 * config.sac.utd;
+        while self.c.updates_due >= 1.0 {
+            self.c.updates_due -= 1.0;
+            let batch = self.replay.sample(batch_size, &mut self.rng, (beta > 0.0).then_some(beta))?;
+            let st = self.sac.update(&batch);
+            self.c.window.add_update(&st);
+        }
+        Ok(())
+    }
+
+    /// BC's weight at the current step (0 for methods without BC).
+    fn beta(&self) -> f64 {
+        if self.config.method.uses_bc() { bc_beta(&self.config.bc, self.c.step) } else { 0.0 }
+    }
+
+    /// What happens on intervals of env steps, after the step from `prev_step`: a metrics
+    /// row, an evaluation, progress, a checkpoint.
+    fn periodic(&mut self, prev_step: u64, progress: &mut dyn FnMut(&Progress)) -> Result<(), TrainError> {
+        let (config, step) = (self.config, self.c.step);
+        let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
+        let steps_per_s =
+            (step - self.session_first_step) as f64 / self.session_start.elapsed().as_secs_f64().max(1e-9);
+        if crossed(config.run.log_interval) || step >= config.total_steps {
+            let values = self.c.window.values(self.c.episodes, self.beta(), self.sac.updates(), steps_per_s);
+            self.folder.log(step, &values)?;
+            self.c.last_window = std::mem::take(&mut self.c.window);
+        }
+        if crossed(config.run.eval_interval) {
+            self.lap(Phase::Sim);
+            let bytes = export_actor(config, &self.sac, step)?;
+            evaluation::periodic(self.folder.dir(), config, step, &bytes)?;
+            self.lap(Phase::Eval);
+        }
+        let (mean_return, mean_rotation_rad) = self.c.last_window.mean_return_and_rotation();
+        let last = &self.c.last_window;
+        progress(&Progress {
+            step,
+            total_steps: config.total_steps,
+            steps_per_s,
+            episodes: self.c.episodes,
+            mean_return,
+            mean_rotation_rad,
+            controller_share: last.controller_steps as f64 / last.steps.max(1) as f64,
+            updates: self.sac.updates(),
+        });
+        if crossed(config.run.checkpoint_interval) && step < config.total_steps {
+            self.lap(Phase::Sim);
+            self.checkpoint()?;
+            self.lap(Phase::Checkpoint);
+            // A checkpoint ends every episode (module docs).
+            self.collector.reset_all(&mut self.behaviour, &mut self.rng)?;
+        }
+        self.lap(Phase::Sim);
+        Ok(())
+    }
+
+    fn checkpoint(&mut self) -> Result<(), TrainError> {
+        let wall_s = self.previous_wall_s + self.session_start.elapsed().as_secs_f64();
+        let state = TrainState::capture(
+            &self.c,
+            &self.rng,
+            &self.config_hash,
+            &self.behaviour.stats,
+            self.config.run.save_replay,
+            wall_s,
+        );
+        self.folder.checkpoint(&self.sac, &self.replay, &state)?;
+        self.checkpointed_at = Some(self.c.step);
+        Ok(())
+    }
+
+    /// Ends the session: a checkpoint, and unless stopped, the exported policy with its
+    /// evaluations.
+    fn finish(mut self, stopped: bool) -> Result<TrainSummary, TrainError> {
+        // A checkpoint taken at this very step holds the state before the env resets that
+        // followed it: keep it, so that a resume redoes those resets exactly.
+        if self.checkpointed_at != Some(self.c.step) {
+            self.checkpoint()?;
+        }
+        let policy = if stopped {
+            None
+        } else {
+            let eval_start = Instant::now();
+            let bytes = export_actor(self.config, &self.sac, self.c.step)?;
+            let wall_s = self.previous_wall_s + self.session_start.elapsed().as_secs_f64();
+            let path = evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, wall_s)?;
+            self.times.eval_s += eval_start.elapsed().as_secs_f64();
+            Some(path)
+        };
+        Ok(TrainSummary {
+            steps: self.c.step,
+            updates: self.sac.updates(),
+            episodes: self.c.episodes,
+            stopped,
+            policy,
+            behaviour: self.behaviour.stats,
+            times: PhaseTimes { total_s: self.session_start.elapsed().as_secs_f64(), ..self.times },
+        })
+    }
+}
