@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use vge_controllers::qp::{bench_contact_force_qp, grasp_map_f64};
+use vge_controllers::qp::grasp_map_f64;
 use vge_controllers::{
     Controller, ControllerError, ControllerInput, CsConfig, CsController, FgController, FingerContact,
     IgmConfig, IgmController, QpError, TipContact, contact_force_qp, igm::damped_least_squares, igm_step,
@@ -126,14 +126,8 @@ fn qp_degenerate_sets_are_typed_errors() {
     assert!(matches!(contact_force_qp(&wrong, &ring(3).1), Err(QpError::DimensionMismatch { .. })));
 }
 
-#[test]
-fn qp_cost_per_call() {
-    for k in 3..=5 {
-        let us = bench_contact_force_qp(k, 200).expect("solvable");
-        println!("contact-force QP, k = {k}: {us:.1} us per call ({k} clarabel solves)");
-        assert!(us.is_finite() && us > 0.0);
-    }
-}
+// The QP's and the controllers' cost per call: `vge bench controllers` (issue 15: timings
+// live in benchmarks, not tests).
 
 // ---------------------------------------------------------------- hand at a grasp
 
@@ -444,32 +438,4 @@ fn fg_is_igm_on_the_others_plus_cs_on_the_switching_finger() {
     let mut igm_ctl = IgmController::new(hand, IgmConfig::default());
     assert_eq!(fresh.act(&three, &mut rng), igm_ctl.act(&three, &mut rng));
     assert!(fresh.cs.plan().is_none());
-}
-
-#[test]
-fn igm_and_fg_cost_per_call() {
-    let g = cube_grasp(1.0);
-    let config = IgmConfig::default();
-    for k in [3usize, 4, 5] {
-        let contacts: Vec<_> = g.contacts.iter().take(k).copied().collect();
-        let n = 200;
-        let start = std::time::Instant::now();
-        for _ in 0..n {
-            std::hint::black_box(igm_step(&g.hand, &g.q, &contacts, Vector3::zeros(), &config).expect("igm"));
-        }
-        let us = start.elapsed().as_secs_f64() * 1e6 / n as f64;
-        println!("IGM step, k = {k}: {us:.1} us per call");
-    }
-    let input = input_from(&g, &[0, 1, 2, 3, 4]);
-    let mut fg = FgController::new(g.hand.clone(), config, CsConfig::default());
-    let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let n = 200;
-    let start = std::time::Instant::now();
-    for _ in 0..n {
-        std::hint::black_box(fg.act(&input, &mut rng).expect("fg"));
-    }
-    println!(
-        "FG act, 5 contacts (IGM on 4): {:.1} us per call",
-        start.elapsed().as_secs_f64() * 1e6 / n as f64
-    );
 }

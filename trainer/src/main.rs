@@ -358,6 +358,18 @@ enum Bench {
         #[arg(long, default_value_t = 20_000)]
         iters: usize,
     },
+    /// The sub-skill controllers' cost per call, which the behaviour policy pays every step
+    /// until the hard stop: the contact-force QP alone for 3, 4 and 5 contacts (clarabel),
+    /// and IGM, CS and FG on the simulated cube (the adapter from the sim state included;
+    /// median and 90th percentile over every step of the rollout).
+    Controllers {
+        /// Print one JSON line instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Rollout episodes per controller (10 s each).
+        #[arg(long, default_value_t = 2)]
+        episodes: usize,
+    },
 }
 
 fn main() -> ExitCode {
@@ -571,6 +583,39 @@ fn controller(args: ControllerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `vge bench controllers`.
+fn bench_controllers(json: bool, episodes: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    let mut doc = serde_json::Map::new();
+    for k in 3..=5usize {
+        let us = vge_trainer::controllers::qp::bench_contact_force_qp(k, 200)
+            .with_context(|| format!("contact-force QP with {k} contacts"))?;
+        doc.insert(format!("qp_{k}_contacts_us"), serde_json::json!(us));
+        if !json {
+            println!("contact-force QP, {k} contacts: {us:>8.1} us per call");
+        }
+    }
+    let mut options = RolloutOptions::default();
+    options.env.episode_length_steps = (10.0 * options.env.control_hz).round() as usize;
+    for kind in ControllerKind::ALL {
+        let s = rollout::run_with(kind, ObjectShape::Cube, episodes, 0, &options, |_, _| {})?;
+        doc.insert(format!("{kind}_median_us"), serde_json::json!(s.controller_median_us));
+        doc.insert(format!("{kind}_p90_us"), serde_json::json!(s.controller_p90_us));
+        if !json {
+            println!(
+                "{:<3} on the cube: median {:>8.1} us, p90 {:>8.1} us per call",
+                kind.name().to_uppercase(),
+                s.controller_median_us,
+                s.controller_p90_us
+            );
+        }
+    }
+    if json {
+        println!("{}", serde_json::Value::Object(doc));
+    }
+    Ok(())
+}
+
 fn export(args: ExportArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.hidden.iter().all(|&h| h > 0), "--hidden widths must be positive");
     let env = EnvConfig::default();
@@ -664,6 +709,7 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                 );
             }
         }
+        Bench::Controllers { json, episodes } => bench_controllers(json, episodes)?,
         Bench::Runtime { json, iters } => {
             anyhow::ensure!(iters > 0, "--iters must be at least 1");
             let config = vge_export::bench::BenchConfig { iters, ..Default::default() };

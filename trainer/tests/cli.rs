@@ -35,6 +35,38 @@ fn bench_update_prints_one_json_line_per_learner() {
 }
 
 #[test]
+fn bench_controllers_reports_every_cost_and_refuses_zero_episodes() {
+    let out = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args(["bench", "controllers", "--json", "--episodes", "1"])
+        .output()
+        .expect("vge runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    for key in [
+        "qp_3_contacts_us",
+        "qp_4_contacts_us",
+        "qp_5_contacts_us",
+        "igm_median_us",
+        "igm_p90_us",
+        "cs_median_us",
+        "cs_p90_us",
+        "fg_median_us",
+        "fg_p90_us",
+    ] {
+        let v = doc[key].as_f64().unwrap_or_else(|| panic!("{key} missing in {doc}"));
+        assert!(v.is_finite() && v > 0.0, "{key} = {v}");
+    }
+    // IGM solves contact-force QPs every call; CS reads a precomputed trajectory.
+    assert!(doc["igm_median_us"].as_f64() > doc["cs_median_us"].as_f64(), "{doc}");
+    let bad = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args(["bench", "controllers", "--episodes", "0"])
+        .output()
+        .expect("vge runs");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--episodes"));
+}
+
+#[test]
 fn plot_groups_runs_by_experiment_and_learner_and_tabulates_success() {
     let root = std::env::temp_dir().join(format!("vge-plot-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
