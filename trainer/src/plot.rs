@@ -52,6 +52,23 @@ pub struct RunCurves {
     /// Env steps and wall time of the finished run (from `final-eval.json`).
     pub env_steps: Option<u64>,
     pub wall_s: Option<f64>,
+    /// Model selection (`best-eval.json`): the snapshot with the best periodic evaluation and
+    /// its success rate on held-out test grasps; None for runs without snapshots.
+    pub selected: Option<Selected>,
+}
+
+/// The fields of `best-eval.json` that the plot reads.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+pub struct Selected {
+    pub selected_step: u64,
+    /// On the test grasps, which the selection never saw.
+    pub success_rate: f64,
+}
+
+impl Selected {
+    pub fn learned(&self) -> bool {
+        self.success_rate >= crate::eval::LEARNED_SUCCESS_RATE
+    }
 }
 
 impl RunCurves {
@@ -136,6 +153,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         final_success,
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
+        selected: read_json(&dir.join("best-eval.json"))?,
     })
 }
 
@@ -156,12 +174,18 @@ fn experiment(dir: &Path) -> Result<String, PlotError> {
 
 /// The run's `final-eval.json`, if it finished.
 fn read_final_eval(dir: &Path) -> Result<Option<FinalEvalFields>, PlotError> {
-    let path = dir.join("final-eval.json");
+    read_json(&dir.join("final-eval.json"))
+}
+
+/// A JSON file of a run, if it exists.
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>, PlotError> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = read(&path)?;
-    serde_json::from_str(&text).map(Some).map_err(|e| PlotError::Csv { path, message: e.to_string() })
+    let text = read(path)?;
+    serde_json::from_str(&text)
+        .map(Some)
+        .map_err(|e| PlotError::Csv { path: path.to_owned(), message: e.to_string() })
 }
 
 /// One point of a group's curve: step, mean, min and max over its runs.
@@ -355,21 +379,37 @@ fn draw_band_and_mean(
 /// The markdown table of final success rates, one row per experiment.
 fn success_table(groups: &Groups) -> String {
     let mut table = String::from(
-        "| experiment | runs | final success rate (mean) | runs that learned |\n|---|---|---|---|\n",
+        "| experiment | runs | final success rate (mean) | runs that learned | selected snapshot: success on test grasps (mean) | learned |\n|---|---|---|---|---|---|\n",
     );
+    let mean = |v: &[f64]| if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 };
     for (name, rs) in groups {
         let rates: Vec<f64> = rs.iter().filter_map(|r| r.final_success).collect();
-        let mean = if rates.is_empty() { f64::NAN } else { rates.iter().sum::<f64>() / rates.len() as f64 };
         let learned = rs.iter().filter(|r| r.learned() == Some(true)).count();
-        table.push_str(&format!("| {name} | {} | {mean:.2} | {learned}/{} |\n", rs.len(), rates.len()));
+        let selected: Vec<Selected> = rs.iter().filter_map(|r| r.selected).collect();
+        let selected_cells = if selected.is_empty() {
+            "- | -".to_owned()
+        } else {
+            let rates: Vec<f64> = selected.iter().map(|s| s.success_rate).collect();
+            let learned = selected.iter().filter(|s| s.learned()).count();
+            format!("{:.2} | {learned}/{}", mean(&rates), selected.len())
+        };
+        table.push_str(&format!(
+            "| {name} | {} | {:.2} | {learned}/{} | {selected_cells} |\n",
+            rs.len(),
+            mean(&rates),
+            rates.len()
+        ));
     }
     table
 }
 
-/// One row per run: `run,experiment,learned,success_rate,env_steps,wall_s` (empty fields
-/// where a run has no final evaluation).
+/// One row per run: `run,experiment,learned,success_rate,env_steps,wall_s`, then model
+/// selection's `selected_step,selected_success_rate,selected_learned` (empty fields where a
+/// run has no final evaluation or no selection).
 pub fn success_csv(runs: &[RunCurves]) -> String {
-    let mut text = String::from("run,experiment,learned,success_rate,env_steps,wall_s\n");
+    let mut text = String::from(
+        "run,experiment,learned,success_rate,env_steps,wall_s,selected_step,selected_success_rate,selected_learned\n",
+    );
     let opt = |v: Option<String>| v.unwrap_or_default();
     for r in runs {
         let run = r
@@ -377,12 +417,15 @@ pub fn success_csv(runs: &[RunCurves]) -> String {
             .file_name()
             .map_or_else(|| r.dir.display().to_string(), |n| n.to_string_lossy().into_owned());
         text.push_str(&format!(
-            "{run},{},{},{},{},{}\n",
+            "{run},{},{},{},{},{},{},{},{}\n",
             r.experiment,
             opt(r.learned().map(|l| l.to_string())),
             opt(r.final_success.map(|s| format!("{s:.4}"))),
             opt(r.env_steps.map(|s| s.to_string())),
             opt(r.wall_s.map(|s| format!("{s:.0}"))),
+            opt(r.selected.map(|s| s.selected_step.to_string())),
+            opt(r.selected.map(|s| format!("{:.4}", s.success_rate))),
+            opt(r.selected.map(|s| s.learned().to_string())),
         ));
     }
     text

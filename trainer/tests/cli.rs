@@ -96,6 +96,9 @@ fn plot_groups_runs_by_experiment_and_learner_and_tabulates_success() {
     // The second SAC seed finished: its final evaluation (55%) decides, not its last eval.csv row.
     let final_eval = "{\"success_rate\": 0.55, \"env_steps\": 5000, \"wall_s\": 12.0, \"learned\": true}";
     std::fs::write(dirs[1].join("final-eval.json"), final_eval).expect("final eval");
+    // Its model selection: the snapshot at 3000 succeeds in 70% of the test grasps.
+    let best_eval = "{\"selected_step\": 3000, \"success_rate\": 0.7, \"learned\": true}";
+    std::fs::write(dirs[1].join("best-eval.json"), best_eval).expect("best eval");
     let png = root.join("curves.png");
     let csv = root.join("success.csv");
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_vge"));
@@ -103,13 +106,19 @@ fn plot_groups_runs_by_experiment_and_learner_and_tabulates_success() {
     let out = cmd.output().expect("vge plot");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let table = String::from_utf8_lossy(&out.stdout);
-    assert!(table.contains("| cube | 2 | 0.28 | 1/2 |"), "two SAC seeds in one row, one learned:\n{table}");
-    assert!(table.contains("| cube (td3) | 1 | 0.60 | 1/1 |"), "the TD3 run apart:\n{table}");
+    assert!(
+        table.contains("| cube | 2 | 0.28 | 1/2 | 0.70 | 1/1 |"),
+        "two SAC seeds in one row, one learned, one with a selection:\n{table}"
+    );
+    assert!(table.contains("| cube (td3) | 1 | 0.60 | 1/1 | - | - |"), "the TD3 run apart:\n{table}");
     let rows = std::fs::read_to_string(&csv).expect("success.csv");
     let rows: Vec<&str> = rows.lines().collect();
-    assert_eq!(rows[0], "run,experiment,learned,success_rate,env_steps,wall_s");
-    assert!(rows[1].ends_with(",cube,false,0.0000,,"), "{}", rows[1]);
-    assert!(rows[2].ends_with(",cube,true,0.5500,5000,12"), "{}", rows[2]);
+    assert_eq!(
+        rows[0],
+        "run,experiment,learned,success_rate,env_steps,wall_s,selected_step,selected_success_rate,selected_learned"
+    );
+    assert!(rows[1].ends_with(",cube,false,0.0000,,,,,"), "{}", rows[1]);
+    assert!(rows[2].ends_with(",cube,true,0.5500,5000,12,3000,0.7000,true"), "{}", rows[2]);
     let bytes = std::fs::read(&png).expect("png written");
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
     let _ = std::fs::remove_dir_all(&root);
