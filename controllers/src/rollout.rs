@@ -18,12 +18,15 @@ use std::time::Instant;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
 use vge_sim::{Env, EnvConfig, NUM_JOINTS, ObjectConfig, ObjectShape, SimError, StepResult};
 
 use super::{Controller, ControllerInput, CsConfig, CsController, FgController, IgmConfig, IgmController};
 
-/// Which controller to roll out.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// Which controller to roll out (or to guide training with). Serialised as [`Self::name`]
+/// gives it (`"fg"`, as configs spell it; serde, unlike [`FromStr`], is case-sensitive).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum ControllerKind {
     /// In-grasp manipulation.
     Igm,
@@ -45,6 +48,13 @@ impl ControllerKind {
             Self::Cs => "cs",
             Self::Fg => "fg",
         }
+    }
+
+    /// Itself. Transitional: the trainer's collector still calls `kind()` on the config's
+    /// controller, which was a mirror enum of this one; remove once it no longer does.
+    #[must_use]
+    pub const fn kind(self) -> Self {
+        self
     }
 
     /// The controller with the given configurations (`cs.control_period_s` should be the

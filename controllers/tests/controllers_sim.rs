@@ -123,3 +123,14 @@ fn rollout_summaries_and_cost_per_call() {
     assert!(rollout::run(ControllerKind::Igm, ObjectShape::Cube, 0, 0, &options).is_err());
     assert_eq!("FG".parse::<ControllerKind>(), Ok(ControllerKind::Fg));
 }
+
+#[test]
+fn controller_kind_serialises_as_configs_spell_it() {
+    // The trainer's configs say `controller = "fg"`; their hashes depend on this spelling.
+    for kind in ControllerKind::ALL {
+        let json = serde_json::to_string(&kind).expect("serialise");
+        assert_eq!(json, format!("\"{}\"", kind.name()));
+        assert_eq!(serde_json::from_str::<ControllerKind>(&json).expect("deserialise"), kind);
+    }
+    assert!(serde_json::from_str::<ControllerKind>("\"FG\"").is_err(), "case-sensitive, as configs were");
+}

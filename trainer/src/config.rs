@@ -77,27 +77,6 @@ impl Method {
     }
 }
 
-/// Controller kind as it appears in configs. It mirrors
-/// [`ControllerKind`](crate::controllers::ControllerKind) because vge-controllers has no
-/// serde (the objects, in contrast, are vge-sim's [`ObjectShape`] itself).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ControllerName {
-    Igm,
-    Cs,
-    Fg,
-}
-
-impl ControllerName {
-    pub fn kind(self) -> ControllerKind {
-        match self {
-            Self::Igm => ControllerKind::Igm,
-            Self::Cs => ControllerKind::Cs,
-            Self::Fg => ControllerKind::Fg,
-        }
-    }
-}
-
 /// The environment. Env `i` of the vector gets `objects[i % objects.len()]`, each spelt as
 /// [`ObjectShape::name`] gives it (`"cube"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -392,8 +371,8 @@ pub struct Config {
     pub total_steps: u64,
     pub num_envs: usize,
     pub method: Method,
-    /// Required for fge, vge, vge-bc.
-    pub controller: Option<ControllerName>,
+    /// Required for fge, vge, vge-bc; spelt as [`ControllerKind::name`] gives it (`"fg"`).
+    pub controller: Option<ControllerKind>,
     pub algorithm: AlgorithmName,
     pub env: EnvSection,
     pub sac: SacSection,
@@ -412,7 +391,7 @@ impl Default for Config {
             total_steps: 6_000_000,
             num_envs: 8,
             method: Method::Vge,
-            controller: Some(ControllerName::Fg),
+            controller: Some(ControllerKind::Fg),
             algorithm: AlgorithmName::Sac,
             env: EnvSection::default(),
             sac: SacSection::default(),
