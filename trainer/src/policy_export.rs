@@ -4,10 +4,8 @@
 use tch::nn::VarStore;
 use vge_export::{ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyMeta, Provenance, export_policy};
 use vge_sim::EnvConfig;
+use vge_sim::kinematics::JOINT_NAMES;
 use vge_sim::observation::{OBS_DIM, OBS_LAYOUT};
-
-/// Joint names within a finger, in joint order.
-pub const JOINT_NAMES: [&str; 3] = ["roll", "flex_prox", "flex_dist"];
 
 fn slice(name: &str, range: std::ops::Range<usize>) -> ObsSlice {
     // The observation is 65 floats: the casts are exact.
