@@ -239,6 +239,7 @@ pub struct RolloutSummary {
     pub controller_p90_us: f64,
 }
 
+// vge-export's bench::percentile is nearest rank, ceil(pn); this rounds (n-1)p. No crate of ours is shared.
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
