@@ -50,13 +50,6 @@ impl ControllerKind {
         }
     }
 
-    /// Itself. Transitional: the trainer's collector still calls `kind()` on the config's
-    /// controller, which was a mirror enum of this one; remove once it no longer does.
-    #[must_use]
-    pub const fn kind(self) -> Self {
-        self
-    }
-
     /// The controller with the given configurations (`cs.control_period_s` should be the
     /// env's control period: [`CsConfig::for_env`]).
     #[must_use]

@@ -45,8 +45,7 @@ impl Collector {
         let n = config.num_envs;
         let env_configs: Vec<_> = (0..n).map(|i| config.env.env_config(i)).collect();
         let controllers = match config.controller.filter(|_| config.method.queries_controller()) {
-            Some(c) => {
-                let kind = c.kind();
+            Some(kind) => {
                 env_configs.iter().map(|e| kind.build(e, IgmConfig::default(), config.cs_config(e))).collect()
             }
             None => Vec::new(),
