@@ -232,13 +232,15 @@ pub struct RolloutSummary {
     pub controller_p90_us: f64,
 }
 
-// vge-export's bench::percentile is nearest rank, ceil(pn); this rounds (n-1)p. No crate of ours is shared.
+/// Nearest-rank percentile of sorted samples, as vge-export's bench and the bridge's
+/// statistics compute it (three copies of four lines: those crates share no crate of ours
+/// but the no_std runtime, where a std helper does not belong).
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }
-    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
+    let rank = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
 }
 
 impl RolloutSummary {

@@ -148,7 +148,7 @@ pub fn run(config: &BenchConfig) -> Result<RuntimeBench, ExportError> {
 }
 
 /// Nearest-rank percentile; NaN for no samples.
-// vge-controllers' rollout::percentile rounds (n-1)p instead; no crate of ours is shared (runtime: no_std).
+// The same definition as vge-controllers' rollout and the bridge's statistics (no shared crate).
 fn percentile(samples: &mut [f64], q: f64) -> f64 {
     if samples.is_empty() {
         return f64::NAN;
