@@ -92,30 +92,29 @@ fn read(path: &Path) -> Result<String, PlotError> {
 
 /// Columns of a CSV with a header row, by name. An empty field (a metrics window in which
 /// no episode ended) repeats the column's previous value (0 before any).
-fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
+pub(crate) fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
+    let bad = |message: String| PlotError::Csv { path: path.to_owned(), message };
     let text = read(path)?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let mut reader =
+        csv::ReaderBuilder::new().flexible(true).trim(csv::Trim::All).from_reader(text.as_bytes());
+    let header = reader.headers().map_err(|e| bad(e.to_string()))?.clone();
     let index: Vec<usize> = names
         .iter()
-        .map(|n| {
-            header
-                .iter()
-                .position(|h| h == n)
-                .ok_or_else(|| PlotError::Csv { path: path.to_owned(), message: format!("no column `{n}`") })
-        })
+        .map(|n| header.iter().position(|h| h == *n).ok_or_else(|| bad(format!("no column `{n}`"))))
         .collect::<Result<_, _>>()?;
     let mut columns = vec![Vec::new(); names.len()];
-    for (row, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let fields: Vec<&str> = line.split(',').collect();
+    for (row, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| bad(e.to_string()))?;
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
         for (col, &i) in index.iter().enumerate() {
-            let field = fields.get(i).map(|f| f.trim()).unwrap_or("");
+            let field = record.get(i).unwrap_or("");
             let value = if field.is_empty() {
                 columns[col].last().copied().unwrap_or(0.0)
             } else {
-                field.parse::<f64>().map_err(|_| PlotError::Csv {
-                    path: path.to_owned(),
-                    message: format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]),
+                field.parse::<f64>().map_err(|_| {
+                    bad(format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]))
                 })?
             };
             columns[col].push(value);

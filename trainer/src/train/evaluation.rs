@@ -105,8 +105,14 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     if !csv_path.exists() {
         return Ok(());
     }
-    let text = std::fs::read_to_string(&csv_path).map_err(io_err(&csv_path))?;
-    let rows = parse_eval_rows(&text).map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?;
+    let columns = crate::plot::csv_columns(&csv_path, &["step", "return", "success"])
+        .map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?;
+    let rows: Vec<EvalRow> = match columns.as_slice() {
+        [step, ret, success] => (0..step.len())
+            .map(|i| EvalRow { step: step[i] as u64, mean_return: ret[i], success: success[i] })
+            .collect(),
+        _ => Vec::new(),
+    };
     let Some(best) = best_eval_row(&rows) else { return Ok(()) };
     let snapshot = snapshot_path(out_dir, best.step);
     let bytes = match std::fs::read(&snapshot) {
@@ -136,28 +142,6 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     let path = out_dir.join("best-eval.json");
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
     std::fs::write(&path, text + "\n").map_err(io_err(&path))
-}
-
-/// `eval.csv` as written by [`append_eval_row`] (columns found by name in the header).
-fn parse_eval_rows(text: &str) -> Result<Vec<EvalRow>, String> {
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).ok_or(format!("no column {name}"));
-    let (step_i, return_i, success_i) = (col("step")?, col("return")?, col("success")?);
-    lines
-        .filter(|l| !l.trim().is_empty())
-        .enumerate()
-        .map(|(i, line)| {
-            let cells: Vec<&str> = line.split(',').collect();
-            let cell = |j: usize| cells.get(j).copied().ok_or(format!("row {}: too few cells", i + 1));
-            let bad = |e: &dyn std::fmt::Display| format!("row {}: {e}", i + 1);
-            Ok(EvalRow {
-                step: cell(step_i)?.parse().map_err(|e| bad(&e))?,
-                mean_return: cell(return_i)?.parse().map_err(|e| bad(&e))?,
-                success: cell(success_i)?.parse().map_err(|e| bad(&e))?,
-            })
-        })
-        .collect()
 }
 
 const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
@@ -267,11 +251,5 @@ mod tests {
         let rows =
             [row(1, 50.0, 0.2), row(2, 40.0, 0.8), row(3, 90.0, 0.8), row(4, 90.0, 0.8), row(5, 300.0, 0.1)];
         assert_eq!(best_eval_row(&rows).map(|r| r.step), Some(3));
-        let parsed = parse_eval_rows(&format!(
-            "{EVAL_HEADER}\n100,20,14.5,1.1,0.0500,0.3,3.0,6.8\n200,20,26.8,0.9,0.8000,1.0,3.1,11.6\n"
-        ));
-        let steps: Vec<(u64, f64)> = parsed.expect("parses").iter().map(|r| (r.step, r.success)).collect();
-        assert_eq!(steps, vec![(100, 0.05), (200, 0.8)]);
-        assert!(parse_eval_rows(&format!("{EVAL_HEADER}\n100,20,x,1,0,0,0,0\n")).is_err());
     }
 }
