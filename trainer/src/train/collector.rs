@@ -193,3 +193,45 @@ impl Collector {
         Ok(finished.len() as u64)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use tch::Device;
+
+    use super::*;
+    use crate::config::apply_override;
+
+    /// An actor that outputs NaN (here: weights poisoned) stops the run with an error naming
+    /// the step and the env; the NaN is never clipped into a valid action.
+    #[test]
+    fn a_non_finite_learner_action_stops_the_run_naming_the_step() {
+        let mut config = Config::default();
+        for o in ["num_envs=2", "method=rl", "sac.hidden=[16, 16]"] {
+            apply_override(&mut config, o).expect(o);
+        }
+        config.validate().expect("valid");
+        let sac = Sac::new_seeded(config.sac_config(), Device::Cpu, 0).expect("learner");
+        tch::no_grad(|| {
+            for (_, mut t) in sac.actor_vs.variables() {
+                let _ = t.fill_(f64::NAN);
+            }
+        });
+        let mut behaviour = Behaviour::from_config(&config);
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut collector = Collector::new(&config).expect("envs");
+        collector.reset_all(&mut behaviour, &mut rng).expect("reset");
+        let step = 12_345;
+        let learner = collector.learner_actions(&sac, step, 0, &mut rng).expect("forward");
+        assert!(learner.iter().flatten().all(|v| v.is_nan()), "the poisoned actor outputs NaN");
+        let err = collector.behaviour_actions(&mut behaviour, &sac, step, &learner, &mut rng);
+        match err {
+            Err(TrainError::NonFiniteAction { step: s, env: 0, value }) => {
+                assert_eq!(s, step);
+                assert!(value.is_nan());
+            }
+            other => panic!("expected NonFiniteAction at step {step}, got {other:?}"),
+        }
+        let message = TrainError::NonFiniteAction { step, env: 0, value: f32::NAN }.to_string();
+        assert!(message.contains("12345") && message.contains("not finite"), "{message}");
+    }
+}
