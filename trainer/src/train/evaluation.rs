@@ -4,7 +4,6 @@
 //! (`policy-best.vgep`, `best-eval.json`) apart from the final policy (`final-eval.json`).
 
 use std::fs::File;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
@@ -150,23 +149,26 @@ const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,
 fn append_eval_row(out_dir: &Path, step: u64, r: &EvalReport) -> Result<(), TrainError> {
     let path = out_dir.join("eval.csv");
     let new = !path.exists();
-    let mut f = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
-    let mut text = String::new();
+    let file = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
+    let mut writer = csv::WriterBuilder::new().has_headers(false).from_writer(file);
+    let csv_err = |e: csv::Error| io_err(&path)(std::io::Error::other(e));
     if new {
-        text.push_str(EVAL_HEADER);
-        text.push('\n');
+        writer.write_record(EVAL_HEADER.split(',')).map_err(csv_err)?;
     }
-    text.push_str(&format!(
-        "{step},{},{:.6},{:.6},{:.4},{:.4},{:.4},{:.4}\n",
-        r.episodes,
-        r.mean_return,
-        r.mean_rotation_rad,
-        r.success_rate,
-        r.drop_rate,
-        r.mean_contacts,
-        r.mean_contact_switches
-    ));
-    f.write_all(text.as_bytes()).map_err(io_err(&path))
+    let fraction = |x: f64| format!("{x:.4}");
+    writer
+        .write_record([
+            step.to_string(),
+            r.episodes.to_string(),
+            format!("{:.6}", r.mean_return),
+            format!("{:.6}", r.mean_rotation_rad),
+            fraction(r.success_rate),
+            fraction(r.drop_rate),
+            fraction(r.mean_contacts),
+            fraction(r.mean_contact_switches),
+        ])
+        .map_err(csv_err)?;
+    writer.flush().map_err(io_err(&path))
 }
 
 /// What `final-eval.json` holds: the final policy's success test, and what it cost.

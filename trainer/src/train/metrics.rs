@@ -128,19 +128,17 @@ pub(super) fn discounted_returns(rewards: &[f32], gamma: f64) -> (f64, u64, Opti
     (sum, rewards.len() as u64, max)
 }
 
-/// The CSV line of a metrics row.
-pub(super) fn csv_row(step: u64, values: &[(&str, Option<f64>)]) -> String {
-    let mut line = step.to_string();
-    for (name, v) in values {
-        line.push(',');
-        match (*name, v) {
-            (_, None) => {}
-            ("episodes" | "updates", Some(x)) => line.push_str(&format!("{x:.0}")),
-            ("steps_per_s", Some(x)) => line.push_str(&format!("{x:.1}")),
-            (_, Some(x)) => line.push_str(&format!("{x:.6}")),
-        }
-    }
-    line
+/// The CSV fields of a metrics row: counts whole, speed to 0.1, the rest to 6 decimals,
+/// empty where the window had nothing to average.
+pub(super) fn csv_fields(step: u64, values: &[(&str, Option<f64>)]) -> Vec<String> {
+    let mut fields = vec![step.to_string()];
+    fields.extend(values.iter().map(|(name, v)| match (*name, v) {
+        (_, None) => String::new(),
+        ("episodes" | "updates", Some(x)) => format!("{x:.0}"),
+        ("steps_per_s", Some(x)) => format!("{x:.1}"),
+        (_, Some(x)) => format!("{x:.6}"),
+    }));
+    fields
 }
 
 #[cfg(test)]

@@ -2,10 +2,10 @@
 //! training goes, and the checkpoint (module docs of [`super`] list every file).
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 
-use super::metrics::{METRICS_HEADER, csv_row};
+use super::metrics::{METRICS_HEADER, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
 use crate::checkpoint;
@@ -17,7 +17,7 @@ use crate::tensorboard::EventWriter;
 pub(super) struct RunFolder {
     dir: PathBuf,
     metrics_path: PathBuf,
-    metrics: BufWriter<File>,
+    metrics: csv::Writer<File>,
     events: EventWriter,
 }
 
@@ -43,7 +43,8 @@ impl RunFolder {
         }
         let file =
             File::options().append(true).create(true).open(&metrics_path).map_err(io_err(&metrics_path))?;
-        Ok(Self { dir: dir.to_owned(), metrics_path, metrics: BufWriter::new(file), events })
+        let metrics = csv::WriterBuilder::new().has_headers(false).from_writer(file);
+        Ok(Self { dir: dir.to_owned(), metrics_path, metrics, events })
     }
 
     pub fn dir(&self) -> &Path {
@@ -54,7 +55,8 @@ impl RunFolder {
     /// (the empty ones left out).
     pub fn log(&mut self, step: u64, values: &[(&str, Option<f64>)]) -> Result<(), TrainError> {
         let path = &self.metrics_path;
-        writeln!(self.metrics, "{}", csv_row(step, values)).map_err(io_err(path))?;
+        let csv_err = |e: csv::Error| io_err(path)(std::io::Error::other(e));
+        self.metrics.write_record(csv_fields(step, values)).map_err(csv_err)?;
         self.metrics.flush().map_err(io_err(path))?;
         let scalars: Vec<(String, f64)> =
             values.iter().filter_map(|(n, v)| v.map(|x| (format!("train/{n}"), x))).collect();
