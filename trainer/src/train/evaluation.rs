@@ -216,27 +216,40 @@ fn write_final_eval(
 }
 
 /// The periodic evaluation at `step`: the actor (policy-file `bytes`) on the validation
-/// episodes, a row of `eval.csv`, and the actor kept as a snapshot.
-pub(super) fn periodic(out_dir: &Path, config: &Config, step: u64, bytes: &[u8]) -> Result<(), TrainError> {
+/// episodes, a row of `eval.csv`, and the actor kept as a snapshot. Returns the report.
+pub(super) fn periodic(
+    out_dir: &Path,
+    config: &Config,
+    step: u64,
+    bytes: &[u8],
+) -> Result<EvalReport, TrainError> {
     let report = evaluate_policy(config, bytes, EpisodeSet::Validation)?;
     append_eval_row(out_dir, step, &report)?;
     let dir = out_dir.join(SNAPSHOT_DIR);
     std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
     let path = snapshot_path(out_dir, step);
-    std::fs::write(&path, bytes).map_err(io_err(&path))
+    std::fs::write(&path, bytes).map_err(io_err(&path))?;
+    Ok(report)
 }
 
 /// The end of a run: `policy.vgep`, its evaluation (`final-eval.json`) and model selection.
+/// `evaluated` is the validation report of these very `bytes` when a periodic evaluation
+/// already ran them at this step (the evaluation is deterministic: the same episodes again
+/// would give the same report).
 pub(super) fn finish(
     out_dir: &Path,
     config: &Config,
     bytes: &[u8],
     step: u64,
     wall_s: f64,
+    evaluated: Option<EvalReport>,
 ) -> Result<PathBuf, TrainError> {
     let path = out_dir.join("policy.vgep");
     std::fs::write(&path, bytes).map_err(io_err(&path))?;
-    let report = evaluate_policy(config, bytes, EpisodeSet::Validation)?;
+    let report = match evaluated {
+        Some(report) => report,
+        None => evaluate_policy(config, bytes, EpisodeSet::Validation)?,
+    };
     write_final_eval(out_dir, config, &report, step, wall_s)?;
     select_best_snapshot(out_dir, config)?;
     Ok(path)

@@ -13,7 +13,7 @@ pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub(super) struct Window {
-    pub episodes: u64,
+    episodes: u64,
     ret: f64,
     rotation: f64,
     contacts: f64,
@@ -24,8 +24,8 @@ pub(super) struct Window {
     bc_loss: f64,
     alpha: f64,
     mean_q: f64,
-    pub steps: u64,
-    pub controller_steps: u64,
+    steps: u64,
+    controller_steps: u64,
     selections: u64,
     p_psi_sum: f64,
     /// Fingertip contact switches completed ([`vge_sim::gait`]).
@@ -72,6 +72,11 @@ impl Window {
         self.p_psi_sum += after.p_psi_sum - before.p_psi_sum;
     }
 
+    /// Share of the window's env steps that followed the controller.
+    pub fn controller_share(&self) -> f64 {
+        self.controller_steps as f64 / self.steps.max(1) as f64
+    }
+
     /// Mean return and rotation per finished episode (0 without one).
     pub fn mean_return_and_rotation(&self) -> (f64, f64) {
         let e = self.episodes.max(1) as f64;
@@ -98,7 +103,7 @@ impl Window {
             ("rotation", per_episode(w.rotation)),
             ("contacts", per_episode(w.contacts)),
             ("success", per_episode(w.successes as f64)),
-            ("controller_share", Some(w.controller_steps as f64 / w.steps.max(1) as f64)),
+            ("controller_share", Some(w.controller_share())),
             ("p_psi", (w.selections > 0).then(|| w.p_psi_sum / w.selections as f64)),
             ("switches_per_1k", Some(1000.0 * w.switches as f64 / w.steps.max(1) as f64)),
             ("critic_loss", per_update(w.critic_loss)),

@@ -249,6 +249,8 @@ struct Trainer<'a> {
     checkpointed_at: Option<u64>,
     times: PhaseTimes,
     clock: Instant,
+    /// This session's latest periodic evaluation (step, report).
+    last_evaluation: Option<(u64, crate::eval::EvalReport)>,
 }
 
 impl<'a> Trainer<'a> {
@@ -292,6 +294,7 @@ impl<'a> Trainer<'a> {
             session_start: now,
             times: PhaseTimes::default(),
             clock: now,
+            last_evaluation: None,
         })
     }
 
@@ -356,7 +359,8 @@ impl<'a> Trainer<'a> {
         if crossed(config.run.eval_interval) {
             self.lap(Phase::Sim);
             let bytes = export_actor(config, &self.sac, step)?;
-            evaluation::periodic(self.folder.dir(), config, step, &bytes)?;
+            let report = evaluation::periodic(self.folder.dir(), config, step, &bytes)?;
+            self.last_evaluation = Some((step, report));
             self.lap(Phase::Eval);
         }
         let (mean_return, mean_rotation_rad) = self.c.last_window.mean_return_and_rotation();
@@ -368,7 +372,7 @@ impl<'a> Trainer<'a> {
             episodes: self.c.episodes,
             mean_return,
             mean_rotation_rad,
-            controller_share: last.controller_steps as f64 / last.steps.max(1) as f64,
+            controller_share: last.controller_share(),
             updates: self.sac.updates(),
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
@@ -411,7 +415,10 @@ impl<'a> Trainer<'a> {
             let eval_start = Instant::now();
             let bytes = export_actor(self.config, &self.sac, self.c.step)?;
             let wall_s = self.previous_wall_s + self.session_start.elapsed().as_secs_f64();
-            let path = evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, wall_s)?;
+            // The periodic evaluation at this very step ran the same actor on the same episodes.
+            let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
+            let path =
+                evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, wall_s, evaluated)?;
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)
         };
