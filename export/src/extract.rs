@@ -24,7 +24,7 @@ impl ExportedLayer {
         Layer {
             in_dim: self.in_dim,
             out_dim: self.out_dim,
-            weights: &self.weights,
+            weights: vge_runtime::Weights::F32(&self.weights),
             bias: &self.bias,
             activation: self.activation,
         }

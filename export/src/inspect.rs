@@ -3,8 +3,8 @@
 use std::fmt;
 use std::path::Path;
 
-use vge_runtime::PolicyError;
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
+use vge_runtime::{PolicyError, WeightType};
 
 use crate::{ExportError, PolicyFile};
 
@@ -17,7 +17,9 @@ pub struct InspectReport {
     pub checksum_computed: u32,
     /// `None` when the runtime accepts the file; else why it does not (checksum, a field).
     pub runtime_error: Option<PolicyError>,
-    /// The decoded payload.
+    /// How the weight matrices are stored (`f32` in version 1).
+    pub weight_type: WeightType,
+    /// The decoded payload (quantised weights as the values they stand for).
     pub policy: PolicyFile,
 }
 
@@ -36,8 +38,12 @@ impl InspectReport {
         self.policy.num_params()
     }
 
-    /// Bytes of RAM `vge_runtime::Policy::load` needs for the decoded parameters.
+    /// Bytes of RAM `vge_runtime::Policy::load` needs for the parameters: none for version
+    /// 2 (read in place), every `f32` for version 1 (copied).
     pub fn storage_bytes(&self) -> usize {
+        if self.format_version >= 2 {
+            return 0;
+        }
         let p = &self.policy;
         (self.num_params()
             + p.obs_mean.len()
@@ -55,16 +61,14 @@ pub fn report(bytes: &[u8]) -> Result<InspectReport, ExportError> {
     let covered = bytes.get(..bytes.len() - format::TRAILER_LEN).unwrap_or(&[]);
     let computed = format::crc32(covered);
     let runtime_error = vge_runtime::policy::inspect(bytes).err();
-    let policy: PolicyFile = match postcard::from_bytes(frame.payload) {
-        Ok(p) => p,
-        Err(e) => return Err(runtime_error.map_or(ExportError::Decode(e), ExportError::Format)),
-    };
+    let (policy, weight_type) = PolicyFile::decode(bytes, false)?;
     Ok(InspectReport {
         file_len: bytes.len(),
         format_version: frame.version,
         checksum_stored: frame.checksum,
         checksum_computed: computed,
         runtime_error,
+        weight_type,
         policy,
     })
 }
@@ -137,7 +141,16 @@ impl fmt::Display for InspectReport {
                 range(&l.bias)
             )?;
         }
-        writeln!(f, "runtime RAM for parameters: {} bytes", self.storage_bytes())?;
+        writeln!(f, "weights:    {}", self.weight_type)?;
+        if self.format_version >= 2 {
+            writeln!(
+                f,
+                "runtime RAM for parameters: none (read in place from the {}-byte file)",
+                self.file_len
+            )?;
+        } else {
+            writeln!(f, "runtime RAM for parameters: {} bytes (version 1: copied)", self.storage_bytes())?;
+        }
         let layout: Vec<String> =
             p.obs_layout.iter().map(|s| format!("{} {}..{}", s.name, s.start, s.end)).collect();
         writeln!(f, "obs ({}):   {}", p.obs_dim, layout.join(", "))?;

@@ -9,11 +9,14 @@ mod actor;
 pub mod bench;
 mod error;
 mod extract;
+pub mod firmware;
 pub mod inspect;
 mod policy_file;
+pub mod quantise;
+mod v2;
 
 pub use actor::{ActorSpec, TchActor, build_actor};
 pub use error::ExportError;
 pub use extract::{ExportedActor, ExportedLayer, extract_actor};
 pub use policy_file::{LayerRecord, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, export_policy};
-pub use vge_runtime::Activation;
+pub use vge_runtime::{Activation, WeightType};

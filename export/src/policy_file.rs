@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use tch::nn::VarStore;
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
-use vge_runtime::{Activation, PolicyError};
+use vge_runtime::{Activation, PolicyError, WeightType};
 
 use crate::{ActorSpec, ExportError, ExportedActor, ExportedLayer, extract_actor};
 
@@ -117,7 +117,7 @@ impl PolicyMeta {
     }
 }
 
-fn activation_code(a: Activation) -> u8 {
+pub(crate) fn activation_code(a: Activation) -> u8 {
     match a {
         Activation::Identity => ACT_IDENTITY,
         Activation::Relu => ACT_RELU,
@@ -191,16 +191,29 @@ impl PolicyFile {
         self.layers.iter().map(|l| l.weights.len() + l.bias.len()).sum()
     }
 
-    /// Encodes the file (header, postcard payload, CRC-32) and checks that the `no_std`
-    /// runtime accepts it; invalid metadata (a layout that does not cover the observation,
-    /// a non-positive std, ...) is reported as [`ExportError::Format`].
+    /// Encodes the file in the current format (version 2, `f32` weights) and checks that the
+    /// `no_std` runtime accepts it; invalid metadata (a layout that does not cover the
+    /// observation, a non-positive std, ...) is reported as [`ExportError::Format`].
     pub fn to_bytes(&self) -> Result<Vec<u8>, ExportError> {
+        self.encode(WeightType::F32)
+    }
+
+    /// Encodes the file as version 2 with the weight matrices stored as `weights` (`f16`
+    /// rounds to nearest, `i8` quantises each row with its own scale; biases, normalisation
+    /// and action scaling stay `f32`).
+    pub fn encode(&self, weights: WeightType) -> Result<Vec<u8>, ExportError> {
+        crate::v2::encode(self, weights)
+    }
+
+    /// Encodes the file as version 1 (postcard payload, every array copied on load), for
+    /// readers that predate version 2.
+    pub fn to_bytes_v1(&self) -> Result<Vec<u8>, ExportError> {
         let payload = postcard::to_allocvec(self).map_err(ExportError::Encode)?;
         let len = u32::try_from(payload.len()).map_err(|_| {
             ExportError::InvalidSpec(format!("payload of {} bytes exceeds 4 GiB", payload.len()))
         })?;
         let mut out = Vec::with_capacity(payload.len() + format::HEADER_LEN + format::TRAILER_LEN);
-        out.extend_from_slice(&format::header(len));
+        out.extend_from_slice(&format::header(1, len));
         out.extend_from_slice(&payload);
         let crc = format::crc32(&out);
         out.extend_from_slice(&crc.to_le_bytes());
@@ -208,11 +221,22 @@ impl PolicyFile {
         Ok(out)
     }
 
-    /// Decodes and fully validates a policy file (the same checks as the runtime).
+    /// Decodes and fully validates a policy file of either version (the same checks as the
+    /// runtime). Quantised weights come back as the `f32` values they stand for.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, ExportError> {
-        vge_runtime::policy::inspect(bytes)?;
-        let frame = format::check_frame(bytes)?;
-        postcard::from_bytes(frame.payload).map_err(ExportError::Decode)
+        Self::decode(bytes, true).map(|(file, _)| file)
+    }
+
+    /// [`PolicyFile::from_bytes`] that also returns the stored weight type, and checks the
+    /// CRC only when `verify_crc` (so that `vge inspect` can still show a damaged file).
+    pub fn decode(bytes: &[u8], verify_crc: bool) -> Result<(Self, WeightType), ExportError> {
+        let frame = format::check_frame_with(bytes, verify_crc)?;
+        if frame.version == 1 {
+            vge_runtime::policy::decode(bytes, verify_crc, |_, _| ())?;
+            let file = postcard::from_bytes(frame.payload).map_err(ExportError::Decode)?;
+            return Ok((file, WeightType::F32));
+        }
+        crate::v2::decode(bytes, verify_crc)
     }
 
     /// Writes the encoded file to `path`.
@@ -232,7 +256,7 @@ impl PolicyFile {
 }
 
 /// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`
-/// and encodes it with `meta` as a policy file.
+/// and encodes it with `meta` as a policy file (version 2, `f32` weights).
 pub fn export_policy(
     vs: &VarStore,
     prefix: &str,

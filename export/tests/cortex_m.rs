@@ -1,10 +1,11 @@
-//! A real exported policy on an emulated Cortex-M4F: exports a seeded tch actor
-//! 65 -> 256 -> 256 -> 15 to a policy file with vge-export, builds `runtime/firmware-m4` for
-//! `thumbv7em-none-eabihf` with `VGE_POLICY` pointing at it (the firmware embeds the file
-//! and loads it with `vge_runtime::Policy::load`), runs it in
+//! A real exported policy on an emulated Cortex-M4F, for every weight type: exports a seeded
+//! tch actor 65 -> 256 -> 256 -> 15 to version-2 policy files (f32, f16, i8) with
+//! vge-export, builds `runtime/firmware-m4` for `thumbv7em-none-eabihf` around each (the
+//! firmware embeds the file in flash and reads its arrays in place), runs it in
 //! `qemu-system-arm -machine mps2-an386`, parses the observations and actions it prints over
-//! semihosting, and checks them against the host `vge_runtime::Policy` (max abs diff <= 1e-6)
-//! and tch (<= 1e-5). A firmware built with a corrupted file must reject it and exit 1.
+//! semihosting, and checks them against the host `vge_runtime::Policy` of the same file
+//! (max abs diff <= 1e-6) and against tch (f32 <= 1e-5; f16 and i8 within their rounding). A
+//! firmware built with a corrupted file must reject it and exit 1.
 //!
 //! Here rather than in vge-tests because it needs tch, which this crate already links (with
 //! the libtorch rpath from its build.rs); vge-tests stays free of libtorch.
@@ -13,22 +14,21 @@
 //! rustup target; scripts/test.sh installs both. Missing either is a failure, not a skip.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::thread;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use tch::nn::{Module, VarStore};
 use tch::{Device, Tensor};
-use vge_export::{ActorSpec, ObsNorm, ObsSlice, PolicyMeta, Provenance, build_actor, export_policy};
-use vge_runtime::HandPolicy;
+use vge_export::firmware::{self, FirmwareRun};
+use vge_export::{
+    ActorSpec, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor, export_policy,
+};
+use vge_runtime::{AlignedBytes, HandPolicy};
 
 const OBS_DIM: usize = 65;
 const ACT_DIM: usize = 15;
 /// Observations the firmware evaluates (`N_CASES` in runtime/firmware-m4/src/main.rs).
 const N_CASES: usize = 8;
-const QEMU: &str = "qemu-system-arm";
 const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 const TOLERANCE: f32 = 1e-6;
 
@@ -36,84 +36,12 @@ fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
 }
 
-/// Builds the firmware with `VGE_POLICY=policy` into `target/firmware-m4`; returns the ELF.
-fn build_firmware(policy: &Path) -> PathBuf {
-    let root = workspace_root();
-    let target_dir = root.join("target/firmware-m4");
-    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    // Run from the firmware folder so that its .cargo/config.toml (target, linker script)
-    // applies. Not --locked: its own Cargo.lock follows vge-runtime's dependencies. Also
-    // drop flags meant for the host build (e.g. -C target-cpu=native).
-    let status = Command::new(cargo)
-        .current_dir(root.join("runtime/firmware-m4"))
-        .args(["build", "--release"])
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .env("VGE_POLICY", policy)
-        .env_remove("RUSTFLAGS")
-        .env_remove("CARGO_ENCODED_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_RUSTFLAGS")
-        .env_remove("CARGO_BUILD_TARGET")
-        .status()
-        .expect("run cargo to build runtime/firmware-m4");
-    assert!(
-        status.success(),
-        "building runtime/firmware-m4 failed ({status}); it needs `rustup target add thumbv7em-none-eabihf`"
-    );
-    target_dir.join("thumbv7em-none-eabihf/release/vge-firmware-m4")
-}
-
-/// Runs the firmware under qemu; returns (exit code, stdout).
-fn run_qemu(elf: &Path) -> (i32, String) {
-    let mut child = Command::new(QEMU)
-        .args(["-cpu", "cortex-m4", "-machine", "mps2-an386", "-nographic", "-monitor", "none"])
-        .args(["-semihosting-config", "enable=on,target=native", "-kernel"])
-        .arg(elf)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| {
-            panic!(
-                "cannot start {QEMU}: {e}. Install it: apt-get install -y --no-install-recommends qemu-system-arm"
-            )
-        });
-    let mut stdout = child.stdout.take().unwrap();
-    let reader = thread::spawn(move || {
-        let mut s = String::new();
-        stdout.read_to_string(&mut s).unwrap();
-        s
-    });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if start.elapsed() > QEMU_TIMEOUT {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("{QEMU} did not exit within {QEMU_TIMEOUT:?}");
-        }
-        thread::sleep(Duration::from_millis(20));
-    };
-    let mut stderr = String::new();
-    child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
-    let out = reader.join().unwrap();
-    let code = status.code().unwrap_or_else(|| panic!("{QEMU} killed by a signal; stderr: {stderr}"));
-    eprintln!("{QEMU} exited {code}; stderr: {stderr}");
-    (code, out)
-}
-
-/// `<tag> <case> <hex f32 bits>...` lines, in order.
-fn parse(out: &str, tag: &str) -> Vec<Vec<f32>> {
-    out.lines()
-        .filter_map(|l| l.strip_prefix(tag).and_then(|r| r.strip_prefix(' ')))
-        .enumerate()
-        .map(|(i, rest)| {
-            let mut words = rest.split_whitespace();
-            assert_eq!(words.next().unwrap().parse::<usize>().unwrap(), i, "case number of {tag} line");
-            words.map(|w| f32::from_bits(u32::from_str_radix(w, 16).unwrap())).collect()
-        })
-        .collect()
+fn build_and_run(policy: &Path) -> FirmwareRun {
+    let target_dir = workspace_root().join("target/firmware-m4");
+    let elf = firmware::build(policy, &target_dir).unwrap();
+    let run = firmware::run(&elf, QEMU_TIMEOUT).unwrap();
+    eprintln!("qemu-system-arm exited {}", run.exit_code);
+    run
 }
 
 #[test]
@@ -143,77 +71,89 @@ fn cortex_m4f_firmware_runs_exported_policy_like_host_runtime() {
             steps: 0,
         },
     };
-    let bytes = export_policy(&vs, "actor", &spec, meta).unwrap();
-    let info = vge_runtime::policy::inspect(&bytes).unwrap();
+    let f32_bytes = export_policy(&vs, "actor", &spec, meta).unwrap();
+    let file = PolicyFile::from_bytes(&f32_bytes).unwrap();
 
     let dir = workspace_root().join("target/firmware-m4");
     std::fs::create_dir_all(&dir).unwrap();
-    let policy_path = dir.join("actor-test.vgep");
-    std::fs::write(&policy_path, &bytes).unwrap();
 
     // First a file with one bit flipped in a weight of the middle layer: the firmware must
     // reject it (checksum) and exit 1 through semihosting, which qemu passes on, so a failing
-    // firmware fails this test. (One test, not two: both builds share target/firmware-m4.)
-    let mut corrupted = bytes.clone();
-    corrupted[bytes.len() / 2] ^= 0x10;
+    // firmware fails this test. (One test: every build shares target/firmware-m4.)
+    let mut corrupted = f32_bytes.clone();
+    corrupted[f32_bytes.len() / 2] ^= 0x10;
     let corrupted_path = dir.join("actor-corrupted.vgep");
     std::fs::write(&corrupted_path, &corrupted).unwrap();
-    let (code, out) = run_qemu(&build_firmware(&corrupted_path));
-    assert_eq!(code, 1, "a corrupted policy file must fail the firmware; output:\n{out}");
-    assert!(out.contains("error: ChecksumMismatch"), "{out}");
+    let run = build_and_run(&corrupted_path);
+    assert_eq!(run.exit_code, 1, "a corrupted policy file must fail the firmware; output:\n{}", run.output);
+    assert!(run.output.contains("error: checksum mismatch"), "{}", run.output);
 
-    let elf = build_firmware(&policy_path);
-    let (code, out) = run_qemu(&elf);
-    assert_eq!(code, 0, "firmware exit status (semihosting); output:\n{out}");
-    assert!(
-        out.contains(&format!("policy file {} bytes, storage {} f32", bytes.len(), info.storage_len)),
-        "firmware embeds our file and sizes its storage from it:\n{out}"
-    );
-    assert!(out.contains(&format!("crc32 {:08x}", info.checksum)), "{out}");
+    // The reference: tch's forward of the f32 actor, on the firmware's observations.
+    let tch_forward = |obs: &[Vec<f32>]| -> Vec<f32> {
+        let flat: Vec<f32> = obs.concat();
+        let y = tch::no_grad(|| {
+            let x = Tensor::from_slice(&flat).reshape([obs.len() as i64, OBS_DIM as i64]);
+            let x = ((x - Tensor::from_slice(&mean)) / Tensor::from_slice(&std))
+                .clamp(-f64::from(clip), f64::from(clip));
+            actor.forward(&x) * Tensor::from_slice(&scale) + Tensor::from_slice(&offset)
+        });
+        Vec::<f32>::try_from(&y.flatten(0, -1)).unwrap()
+    };
 
-    let obs = parse(&out, "obs");
-    let act = parse(&out, "act");
-    assert_eq!(obs.len(), N_CASES, "observation lines:\n{out}");
-    assert_eq!(act.len(), obs.len());
+    // (weight type, bound on |firmware - tch|): f16 rounds each weight to 11 bits, i8 to 8 bits
+    // per row and each layer input to 8 bits, so their bounds are those of their rounding.
+    for (weights, tch_bound) in [(WeightType::F32, 1e-5f32), (WeightType::F16, 5e-3), (WeightType::I8, 5e-2)]
+    {
+        let bytes = file.encode(weights).unwrap();
+        let info = vge_runtime::policy::inspect(&bytes).unwrap();
+        let path = dir.join(format!("actor-test-{weights}.vgep"));
+        std::fs::write(&path, &bytes).unwrap();
+        let run = build_and_run(&path);
+        let out = &run.output;
+        assert_eq!(run.exit_code, 0, "{weights}: firmware exit status (semihosting); output:\n{out}");
+        assert!(
+            out.contains(&format!("policy file {} bytes, storage 0 f32", bytes.len())),
+            "{weights}: the firmware embeds our file and reads it in place:\n{out}"
+        );
+        assert!(out.contains(&format!("format 2, weights {weights}, crc32 {:08x}", info.checksum)), "{out}");
+        // In place: no weight in RAM, only the forward pass's buffers on the stack.
+        let static_ram = run.value("static_ram_bytes").unwrap();
+        assert!(static_ram < 1024, "{weights}: {static_ram} bytes of static RAM");
 
-    let mut storage = vec![0.0f32; info.storage_len];
-    let policy = HandPolicy::load(&bytes, &mut storage).unwrap();
-    let (mut max_diff, mut identical, mut n) = (0.0f32, 0usize, 0usize);
-    let mut host_all = Vec::new();
-    for (o, a) in obs.iter().zip(&act) {
-        assert_eq!((o.len(), a.len()), (OBS_DIM, ACT_DIM));
-        let mut host = [0.0f32; ACT_DIM];
-        policy.forward(o, &mut host).unwrap();
-        for (h, m) in host.iter().zip(a) {
-            max_diff = max_diff.max((h - m).abs());
-            identical += usize::from(h.to_bits() == m.to_bits());
-            n += 1;
+        let obs = run.vectors("obs").unwrap();
+        let act = run.vectors("act").unwrap();
+        assert_eq!(obs.len(), N_CASES, "observation lines:\n{out}");
+        assert_eq!(act.len(), obs.len());
+
+        let aligned = AlignedBytes::new(&bytes);
+        let policy = HandPolicy::load(&aligned, &mut []).unwrap();
+        let (mut max_diff, mut identical, mut n) = (0.0f32, 0usize, 0usize);
+        let mut host_all = Vec::new();
+        for (o, a) in obs.iter().zip(&act) {
+            assert_eq!((o.len(), a.len()), (OBS_DIM, ACT_DIM));
+            let mut host = [0.0f32; ACT_DIM];
+            policy.forward(o, &mut host).unwrap();
+            for (h, m) in host.iter().zip(a) {
+                max_diff = max_diff.max((h - m).abs());
+                identical += usize::from(h.to_bits() == m.to_bits());
+                n += 1;
+            }
+            host_all.extend_from_slice(&host);
         }
-        host_all.extend_from_slice(&host);
+        let expected = tch_forward(&obs);
+        let act_flat: Vec<f32> = act.concat();
+        let tch_diff = expected.iter().zip(&act_flat).map(|(e, a)| (e - a).abs()).fold(0.0f32, f32::max);
+        eprintln!(
+            "{weights}: cortex-m4f vs host runtime: max abs diff {max_diff:e}, {identical}/{n} bit-identical; \
+             vs tch: {tch_diff:e}; file {} bytes, flash {} bytes, RAM {} bytes, {:.0} instructions per forward",
+            bytes.len(),
+            run.flash_bytes().unwrap(),
+            run.ram_bytes().unwrap(),
+            run.instructions_per_forward().unwrap()
+        );
+        assert!(max_diff <= TOLERANCE, "{weights}: max abs diff {max_diff:e} > {TOLERANCE:e}");
+        assert!(tch_diff <= tch_bound, "{weights}: firmware vs tch max abs diff {tch_diff:e}");
+        // Some outputs are well away from 0: the comparison is not trivially of zeros.
+        assert!(host_all.iter().zip(&offset.repeat(N_CASES)).any(|(h, o)| (h - o).abs() > 0.01));
     }
-
-    // And tch's forward of the same actor on the same observations (the parity bound).
-    let obs_flat: Vec<f32> = obs.concat();
-    let expected = tch::no_grad(|| {
-        let x = Tensor::from_slice(&obs_flat).reshape([N_CASES as i64, OBS_DIM as i64]);
-        let x = ((x - Tensor::from_slice(&mean)) / Tensor::from_slice(&std))
-            .clamp(-f64::from(clip), f64::from(clip));
-        actor.forward(&x) * Tensor::from_slice(&scale) + Tensor::from_slice(&offset)
-    });
-    let expected = Vec::<f32>::try_from(&expected.flatten(0, -1)).unwrap();
-    let act_flat: Vec<f32> = act.concat();
-    let tch_diff = expected.iter().zip(&act_flat).map(|(e, a)| (e - a).abs()).fold(0.0f32, f32::max);
-
-    eprintln!(
-        "cortex-m4f vs host runtime: max abs diff {max_diff:e}, {identical}/{n} actions bit-identical; \
-         vs tch: {tch_diff:e}; policy file {} bytes",
-        bytes.len()
-    );
-    if let Some(line) = out.lines().find(|l| l.starts_with("stack_peak_bytes")) {
-        eprintln!("firmware {line}");
-    }
-    assert!(max_diff <= TOLERANCE, "max abs diff {max_diff:e} > {TOLERANCE:e}");
-    assert!(tch_diff <= 1e-5, "firmware vs tch max abs diff {tch_diff:e}");
-    // Some outputs are well away from 0: the comparison is not trivially of zeros.
-    assert!(host_all.iter().zip(&offset.repeat(N_CASES)).any(|(h, o)| (h - o).abs() > 0.01));
 }

@@ -21,6 +21,7 @@ use vge_bridge::report::{SimHandSummary, json_line};
 #[cfg(feature = "sim")]
 use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::{FdSocketCanTransport, InProcessTransport, Role, SocketCanTransport, Transport};
+use vge_runtime::AlignedBytes;
 use vge_sim::NUM_JOINTS;
 use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
 use vge_sim::observation::OBS_DIM;
@@ -287,8 +288,10 @@ fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::
     })
 }
 
-fn read_policy(path: &Path) -> anyhow::Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("reading policy file {}", path.display()))
+/// The file's bytes at an aligned address, so that a version-2 policy is used in place.
+fn read_policy(path: &Path) -> anyhow::Result<AlignedBytes> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading policy file {}", path.display()))?;
+    Ok(AlignedBytes::new(&bytes))
 }
 
 fn print_report(

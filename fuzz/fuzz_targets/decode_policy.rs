@@ -2,16 +2,25 @@
 //! (from the repository root; seeds in `fuzz/seeds/`).
 //!
 //! An input starting with the magic is decoded as a whole file. Any other input is taken as a
-//! payload and framed with a valid header and CRC-32 first, so that mutations get past the
-//! checksum into the postcard decoder and the field validation. Whatever loads is run on an
+//! format version (its first byte: odd 1, even 2) and a payload, framed with a valid header
+//! and CRC-32 first, so that mutations get past the checksum into the postcard decoder, the
+//! version-2 array layout and the field validation. Every file is loaded from a 16-byte
+//! aligned copy (version 2 reads its arrays in place) and from a copy one byte off (which
+//! version 2 must refuse with a typed error, never a panic). Whatever loads is run on an
 //! observation taken from the input.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use vge_runtime::Policy;
 use vge_runtime::format::{MAGIC, crc32, header};
+use vge_runtime::{AlignedBytes, Policy};
 
 fn exercise(file: &[u8], storage: &mut [f32]) {
+    let mut shifted = vec![0u8; file.len() + 1];
+    shifted[1..].copy_from_slice(file);
+    let shifted = AlignedBytes::new(&shifted);
+    let _ = Policy::<4, 64>::load(&shifted[1..], storage);
+    let aligned = AlignedBytes::new(file);
+    let file = aligned.as_bytes();
     let info = vge_runtime::policy::inspect(file);
     let loaded = Policy::<4, 64>::load(file, storage);
     if let (Ok(info), Ok(policy)) = (info, loaded) {
@@ -34,10 +43,13 @@ fuzz_target!(|data: &[u8]| {
     let mut storage = vec![0.0f32; 8192];
     if data.starts_with(&MAGIC) {
         exercise(data, &mut storage);
-    } else if let Ok(len) = u32::try_from(data.len()) {
-        let mut file = Vec::with_capacity(data.len() + 20);
-        file.extend_from_slice(&header(len));
-        file.extend_from_slice(data);
+    } else if let Some((&version, payload)) = data.split_first()
+        && let Ok(len) = u32::try_from(payload.len())
+    {
+        let version = if version % 2 == 1 { 1 } else { 2 };
+        let mut file = Vec::with_capacity(payload.len() + 20);
+        file.extend_from_slice(&header(version, len));
+        file.extend_from_slice(payload);
         let crc = crc32(&file);
         file.extend_from_slice(&crc.to_le_bytes());
         exercise(&file, &mut storage);

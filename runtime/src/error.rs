@@ -26,6 +26,10 @@ pub enum RuntimeError {
     BiasLen { layer: usize, expected: usize, got: usize },
     /// A weight is NaN or infinite.
     NonFiniteWeight { layer: usize, index: usize },
+    /// An `i8` layer's row scales are not `out_dim` long.
+    ScaleLen { layer: usize, expected: usize, got: usize },
+    /// An `i8` layer's row scale is NaN, infinite or not > 0.
+    BadScale { layer: usize, index: usize },
     /// A bias is NaN or infinite.
     NonFiniteBias { layer: usize, index: usize },
     /// The observation slice has the wrong length.
@@ -65,6 +69,12 @@ impl fmt::Display for RuntimeError {
             }
             Self::NonFiniteWeight { layer, index } => {
                 write!(f, "layer {layer} weight {index} is not finite")
+            }
+            Self::ScaleLen { layer, expected, got } => {
+                write!(f, "layer {layer} has {got} row scales, expected {expected}")
+            }
+            Self::BadScale { layer, index } => {
+                write!(f, "layer {layer} row scale {index} is not finite and > 0")
             }
             Self::NonFiniteBias { layer, index } => {
                 write!(f, "layer {layer} bias {index} is not finite")
@@ -122,6 +132,15 @@ pub enum PolicyError {
     UnknownActivation { layer: usize, code: u8 },
     /// The caller's storage holds fewer `f32` than the policy needs.
     StorageTooSmall { needed: usize, got: usize },
+    /// A version-2 header names a weight type this runtime does not know.
+    UnknownWeightType { code: u8 },
+    /// Padding before an aligned array (version 2) is not zero.
+    NonZeroPadding { offset: usize },
+    /// A version-2 array is not aligned in memory for its type, so it cannot be used in
+    /// place: the file bytes must start at an address aligned to 16 (see `TENSOR_ALIGN`).
+    Misaligned { field: &'static str, file_offset: usize, align: usize },
+    /// Arrays are little-endian; a big-endian target cannot use them in place.
+    InPlaceNeedsLittleEndian { field: &'static str },
     /// The network was rejected by, or failed in, the MLP runtime.
     Runtime(RuntimeError),
 }
@@ -140,7 +159,7 @@ impl fmt::Display for PolicyError {
             }
             Self::BadMagic => write!(f, "not a vge policy file (bad magic)"),
             Self::UnsupportedVersion { found, supported } => {
-                write!(f, "format version {found} is not supported (this runtime reads {supported})")
+                write!(f, "format version {found} is not supported (this runtime reads 1 to {supported})")
             }
             Self::UnsupportedFlags { flags } => write!(f, "unsupported header flags {flags:#06x}"),
             Self::LengthMismatch { payload_len, file_len } => write!(
@@ -169,6 +188,17 @@ impl fmt::Display for PolicyError {
             }
             Self::StorageTooSmall { needed, got } => {
                 write!(f, "policy needs storage for {needed} f32, got {got}")
+            }
+            Self::UnknownWeightType { code } => write!(f, "unknown weight type code {code}"),
+            Self::NonZeroPadding { offset } => {
+                write!(f, "non-zero padding byte at payload offset {offset}")
+            }
+            Self::Misaligned { field, file_offset, align } => write!(
+                f,
+                "`{field}` at file offset {file_offset} is not {align}-byte aligned in memory: load the file from a 16-byte aligned buffer"
+            ),
+            Self::InPlaceNeedsLittleEndian { field } => {
+                write!(f, "`{field}` cannot be used in place on a big-endian target")
             }
             Self::Runtime(e) => write!(f, "{e}"),
         }

@@ -3,7 +3,7 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"VGEPOLCY"
-//! 8       2     format version, u16 little-endian (FORMAT_VERSION)
+//! 8       2     format version, u16 little-endian (1 or 2)
 //! 10      2     flags, u16 little-endian, must be 0
 //! 12      4     payload length N, u32 little-endian
 //! 16      N     payload: postcard encoding of the policy (see `policy.rs`)
@@ -14,8 +14,10 @@ use crate::PolicyError;
 
 /// First eight bytes of every policy file.
 pub const MAGIC: [u8; 8] = *b"VGEPOLCY";
-/// The format version this runtime reads and `vge-export` writes.
-pub const FORMAT_VERSION: u16 = 1;
+/// The newest format version: the one `vge-export` writes (arrays aligned, used in place).
+pub const FORMAT_VERSION: u16 = 2;
+/// The oldest version this runtime still reads (arrays copied into caller storage).
+pub const OLDEST_VERSION: u16 = 1;
 /// Bytes before the payload: magic, version, flags, payload length.
 pub const HEADER_LEN: usize = 16;
 /// Bytes after the payload: the CRC-32.
@@ -87,10 +89,10 @@ pub fn crc32(data: &[u8]) -> u32 {
     c.finish()
 }
 
-/// The 16 header bytes for a payload of `payload_len` bytes.
-pub fn header(payload_len: u32) -> [u8; HEADER_LEN] {
+/// The 16 header bytes of a version-`version` file with a payload of `payload_len` bytes.
+pub fn header(version: u16, payload_len: u32) -> [u8; HEADER_LEN] {
     let mut h = [0u8; HEADER_LEN];
-    let v = FORMAT_VERSION.to_le_bytes();
+    let v = version.to_le_bytes();
     let n = payload_len.to_le_bytes();
     let fields: [&[u8]; 4] = [&MAGIC, &v, &[0, 0], &n];
     let mut i = 0;
@@ -134,7 +136,7 @@ pub fn check_frame_with(bytes: &[u8], verify_crc: bool) -> Result<Frame<'_>, Pol
         return Err(PolicyError::BadMagic);
     }
     let version = le_u16(bytes, 8).ok_or(PolicyError::TooShort { len: bytes.len(), min })?;
-    if version != FORMAT_VERSION {
+    if !(OLDEST_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(PolicyError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
     }
     let flags = le_u16(bytes, 10).ok_or(PolicyError::TooShort { len: bytes.len(), min })?;

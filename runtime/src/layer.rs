@@ -2,7 +2,7 @@
 
 use nalgebra::{ComplexField, DVectorView, DVectorViewMut, Dyn, MatrixView};
 
-use crate::RuntimeError;
+use crate::{RuntimeError, Weights};
 
 /// Element-wise non-linearity applied after a layer's affine map.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -42,7 +42,7 @@ impl Activation {
 pub struct Layer<'a> {
     pub in_dim: usize,
     pub out_dim: usize,
-    pub weights: &'a [f32],
+    pub weights: Weights<'a>,
     pub bias: &'a [f32],
     pub activation: Activation,
 }
@@ -62,8 +62,20 @@ impl<'a> Layer<'a> {
         if self.bias.len() != self.out_dim {
             return Err(RuntimeError::BiasLen { layer: index, expected: self.out_dim, got: self.bias.len() });
         }
-        if let Some(i) = self.weights.iter().position(|w| !w.is_finite()) {
-            return Err(RuntimeError::NonFiniteWeight { layer: index, index: i });
+        if let Weights::I8 { row_scale, .. } = self.weights
+            && row_scale.len() != self.out_dim
+        {
+            return Err(RuntimeError::ScaleLen {
+                layer: index,
+                expected: self.out_dim,
+                got: row_scale.len(),
+            });
+        }
+        if let Some(i) = self.weights.first_invalid() {
+            return Err(match self.weights {
+                Weights::I8 { .. } => RuntimeError::BadScale { layer: index, index: i },
+                _ => RuntimeError::NonFiniteWeight { layer: index, index: i },
+            });
         }
         if let Some(i) = self.bias.iter().position(|b| !b.is_finite()) {
             return Err(RuntimeError::NonFiniteBias { layer: index, index: i });
@@ -71,12 +83,21 @@ impl<'a> Layer<'a> {
         Ok(())
     }
 
-    /// Computes `y = activation(W x + b)`.
+    /// Computes `y = activation(W x + b)` with nalgebra's product, for `f32` layers too
+    /// narrow for the kernels' chunks; other weight types go through [`crate::kernel`].
     ///
     /// The layer must have passed [`Layer::validate`]; sizes are re-checked here (cheaply)
     /// so that a mismatch is an error rather than a panic inside nalgebra.
     /// `index` labels errors.
-    pub(crate) fn apply(&self, index: usize, x: &[f32], y: &mut [f32]) -> Result<(), RuntimeError> {
+    pub(crate) fn apply_narrow_f32(
+        &self,
+        index: usize,
+        x: &[f32],
+        y: &mut [f32],
+    ) -> Result<(), RuntimeError> {
+        let Weights::F32(weights) = self.weights else {
+            return Err(RuntimeError::WeightLen { layer: index, expected: 0, got: self.weights.len() });
+        };
         let (n_in, n_out) = (self.in_dim, self.out_dim);
         if x.len() != n_in {
             return Err(RuntimeError::DimMismatch { layer: index, expected_in: x.len(), got_in: n_in });
@@ -86,15 +107,15 @@ impl<'a> Layer<'a> {
         }
         let layer = index;
         let n_w = n_in.checked_mul(n_out).ok_or(RuntimeError::SizeOverflow { layer })?;
-        if self.weights.len() != n_w {
-            return Err(RuntimeError::WeightLen { layer, expected: n_w, got: self.weights.len() });
+        if weights.len() != n_w {
+            return Err(RuntimeError::WeightLen { layer, expected: n_w, got: weights.len() });
         }
         if self.bias.len() != n_out {
             return Err(RuntimeError::BiasLen { layer, expected: n_out, got: self.bias.len() });
         }
 
         // Row-major out×in is column-major in×out: view it as Wᵀ and use the transposed product.
-        let w_t = MatrixView::<f32, Dyn, Dyn>::from_slice_generic(self.weights, Dyn(n_in), Dyn(n_out));
+        let w_t = MatrixView::<f32, Dyn, Dyn>::from_slice_generic(weights, Dyn(n_in), Dyn(n_out));
         let xv = DVectorView::<f32>::from_slice(x, n_in);
         for (yo, b) in y.iter_mut().zip(self.bias) {
             *yo = *b;

@@ -2,12 +2,13 @@
 
 use heapless::Vec;
 
-use crate::{Layer, RuntimeError};
+use crate::kernel::{self, LANES};
+use crate::{Layer, RuntimeError, Weights};
 
 /// A multi-layer perceptron with at most `MAX_LAYERS` layers, each at most `MAX_WIDTH` wide.
 ///
-/// Evaluation uses two `[f32; MAX_WIDTH]` ping-pong buffers on the stack (`8 * MAX_WIDTH`
-/// bytes) and never allocates.
+/// Evaluation uses two `[f32; MAX_WIDTH]` ping-pong buffers and one `[i8; MAX_WIDTH]` on the
+/// stack (`9 * MAX_WIDTH` bytes) and never allocates.
 #[derive(Debug, Clone)]
 pub struct Mlp<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> {
     layers: Vec<Layer<'a>, MAX_LAYERS>,
@@ -80,6 +81,8 @@ impl<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> Mlp<'a, MAX_LAYERS, MA
         }
 
         let mut buf_a = [0.0f32; MAX_WIDTH];
+        // Quantised input of an `i8` layer.
+        let mut q_buf = [0i8; MAX_WIDTH];
         let mut buf_b = [0.0f32; MAX_WIDTH];
         let mut src: &mut [f32; MAX_WIDTH] = &mut buf_a;
         let mut dst: &mut [f32; MAX_WIDTH] = &mut buf_b;
@@ -106,11 +109,12 @@ impl<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> Mlp<'a, MAX_LAYERS, MA
                 dim: layer.out_dim,
                 max: MAX_WIDTH,
             })?;
-            if layer.in_dim < LANES {
+            if layer.in_dim < LANES && matches!(layer.weights, Weights::F32(_)) {
                 // Too narrow for one chunk: nalgebra's generic product does as well.
                 narrow(layer, i, x, y)?;
             } else {
-                dense(layer, i, x, y)?;
+                kernel::affine(layer, i, x, &mut q_buf, y)?;
+                crate::layer::activate(layer.activation, i, y)?;
             }
             len = layer.out_dim;
             core::mem::swap(&mut src, &mut dst);
@@ -127,94 +131,8 @@ impl<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> Mlp<'a, MAX_LAYERS, MA
     }
 }
 
-/// Lanes per accumulator block in [`dense`]: 16 `f32` (one AVX-512 register, two AVX ones,
-/// four SSE/NEON ones). LLVM vectorises the lane-wise loops below for whatever the target
-/// has, without reassociating: the summation order is fixed by this source, so every target
-/// (x86-64, thumbv7em) computes bit-identical results.
-const LANES: usize = 16;
-/// Output rows per call of [`rows`]. Each row is still summed on its own (row-outer,
-/// chunk-inner), so `ROWS` does not change any result, only the code LLVM emits: on the
-/// 65-256-256-15 bench 2 beat 4 by ~12% on the default x86-64 target (7.45 -> 6.5 us) and
-/// ~10% with target-cpu=native (4.3 -> 3.9 us); 1, 3, 6 and 8 were slower, and chunk-outer
-/// interleavings of the rows lost vectorisation.
-const ROWS: usize = 2;
-
-/// `y = activation(W x + b)` for one layer: the forward pass's kernel.
-///
-/// `W` is row-major `out × in`, so each output is a dot product of a contiguous weight row
-/// with `x`. Rows are taken `ROWS` at a time, each with `LANES` independent partial sums
-/// (`LANES` independent accumulators per row hide the add latency);
-/// the tail of a row shorter than `LANES` and the last `out % ROWS` rows go through the same
-/// code with fewer rows. Every weight is read once, so at batch 1 the layer is bound by how
-/// fast the weights stream from cache.
-fn dense(layer: &Layer<'_>, index: usize, x: &[f32], y: &mut [f32]) -> Result<(), RuntimeError> {
-    let (n_in, n_out) = (layer.in_dim, layer.out_dim);
-    if x.len() != n_in {
-        return Err(RuntimeError::DimMismatch { layer: index, expected_in: x.len(), got_in: n_in });
-    }
-    if y.len() != n_out {
-        return Err(RuntimeError::ActionLen { expected: n_out, got: y.len() });
-    }
-    let n_w = n_in.checked_mul(n_out).ok_or(RuntimeError::SizeOverflow { layer: index })?;
-    if layer.weights.len() != n_w {
-        return Err(RuntimeError::WeightLen { layer: index, expected: n_w, got: layer.weights.len() });
-    }
-    if layer.bias.len() != n_out {
-        return Err(RuntimeError::BiasLen { layer: index, expected: n_out, got: layer.bias.len() });
-    }
-
-    let (x_chunks, x_tail) = x.as_chunks::<LANES>();
-    let row_block = n_in.checked_mul(ROWS).ok_or(RuntimeError::SizeOverflow { layer: index })?;
-    let mut w_blocks = layer.weights.chunks_exact(row_block);
-    let mut y_blocks = y.chunks_exact_mut(ROWS);
-    let mut b_blocks = layer.bias.chunks_exact(ROWS);
-    for ((w, yb), b) in (&mut w_blocks).zip(&mut y_blocks).zip(&mut b_blocks) {
-        rows::<ROWS>(w, b, x_chunks, x_tail, yb);
-    }
-    for ((w, yo), b) in
-        w_blocks.remainder().chunks_exact(n_in).zip(y_blocks.into_remainder()).zip(b_blocks.remainder())
-    {
-        rows::<1>(w, core::slice::from_ref(b), x_chunks, x_tail, core::slice::from_mut(yo));
-    }
-
-    crate::layer::activate(layer.activation, index, y)
-}
-
-/// Kept out of line so that nalgebra's code does not change how [`dense`] is optimised.
+/// Kept out of line so that nalgebra's code does not change how the kernels are optimised.
 #[inline(never)]
 fn narrow(layer: &Layer<'_>, index: usize, x: &[f32], y: &mut [f32]) -> Result<(), RuntimeError> {
-    layer.apply(index, x, y)
-}
-
-/// `y[r] = b[r] + w_r · x` for the `R` rows of `w` (row-major, `R × x.len()`), where `x` is
-/// given as `LANES`-wide chunks plus a tail. Callers pass `R` rows, `R` biases and `R` outputs.
-#[inline(always)]
-fn rows<const R: usize>(w: &[f32], b: &[f32], x_chunks: &[[f32; LANES]], x_tail: &[f32], y: &mut [f32]) {
-    let n_in = x_chunks.len() * LANES + x_tail.len();
-    let mut acc = [[0.0f32; LANES]; R];
-    let mut tail = [0.0f32; R];
-    for ((acc, tail), w_row) in acc.iter_mut().zip(tail.iter_mut()).zip(w.chunks_exact(n_in)) {
-        let (w_chunks, w_tail) = w_row.as_chunks::<LANES>();
-        for (wc, xc) in w_chunks.iter().zip(x_chunks) {
-            for ((a, wv), xv) in acc.iter_mut().zip(wc).zip(xc) {
-                *a += wv * xv;
-            }
-        }
-        for (wv, xv) in w_tail.iter().zip(x_tail) {
-            *tail += wv * xv;
-        }
-    }
-    for (((yo, acc), tail), b) in y.iter_mut().zip(&acc).zip(&tail).zip(b) {
-        // Pairwise reduction of the lanes, in a fixed order.
-        let mut lanes = *acc;
-        let mut width = LANES;
-        while width > 1 {
-            width /= 2;
-            let (lo, hi) = lanes.split_at_mut(width);
-            for (l, h) in lo.iter_mut().zip(hi.iter()) {
-                *l += *h;
-            }
-        }
-        *yo = b + (lanes.first().copied().unwrap_or(0.0) + tail);
-    }
+    layer.apply_narrow_f32(index, x, y)
 }

@@ -1,12 +1,12 @@
 //! Host tests for the MLP runtime: hand-computed networks and every error path.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
-use vge_runtime::{Activation, Layer, Mlp, PolicyMlp, RuntimeError};
+use vge_runtime::{Activation, Layer, Mlp, PolicyMlp, RuntimeError, Weights};
 
 type Small<'a> = Mlp<'a, 4, 8>;
 
 fn layer<'a>(in_dim: usize, out_dim: usize, w: &'a [f32], b: &'a [f32], act: Activation) -> Layer<'a> {
-    Layer { in_dim, out_dim, weights: w, bias: b, activation: act }
+    Layer { in_dim, out_dim, weights: Weights::F32(w), bias: b, activation: act }
 }
 
 // 3×2 row-major: rows [1,2], [3,4], [5,6]. Non-square, so a transposed layout would fail.
@@ -100,12 +100,11 @@ fn policy_sized_matches_naive_reference() {
     for _ in 0..20 {
         let obs: Vec<f32> = (0..65).map(|_| next() * 30.0).collect();
         let mut x: Vec<f64> = obs.iter().map(|&v| f64::from(v)).collect();
-        for l in &layers {
+        for (l, (w, _)) in layers.iter().zip(&params) {
             x = (0..l.out_dim)
                 .map(|o| {
-                    let s: f64 =
-                        (0..l.in_dim).map(|i| f64::from(l.weights[o * l.in_dim + i]) * x[i]).sum::<f64>()
-                            + f64::from(l.bias[o]);
+                    let s: f64 = (0..l.in_dim).map(|i| f64::from(w[o * l.in_dim + i]) * x[i]).sum::<f64>()
+                        + f64::from(l.bias[o]);
                     match l.activation {
                         Activation::Identity => s,
                         Activation::Relu => s.max(0.0),
@@ -263,4 +262,124 @@ fn errors_display() {
     let e = RuntimeError::DimMismatch { layer: 1, expected_in: 3, got_in: 2 };
     assert_eq!(e.to_string(), "layer 1 takes 2 inputs but the previous layer outputs 3");
     assert_eq!(RuntimeError::NonFiniteObs { index: 4 }.to_string(), "observation 4 is not finite");
+}
+
+/// A 65-256-256-15 network's parameters from a fixed LCG, weights in [-0.1, 0.1).
+fn hand_sized_params() -> Vec<(Vec<f32>, Vec<f32>)> {
+    let mut state = 0x9E37_79B9_u32;
+    let mut next = || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f32 / (1u32 << 24) as f32 * 0.2 - 0.1
+    };
+    [65usize, 256, 256, 15]
+        .windows(2)
+        .map(|d| ((0..d[0] * d[1]).map(|_| next()).collect(), (0..d[1]).map(|_| next()).collect()))
+        .collect()
+}
+
+const ACTS: [Activation; 3] = [Activation::Relu, Activation::Relu, Activation::Tanh];
+
+fn observation(k: usize) -> Vec<f32> {
+    (0..65).map(|i| ((i * 7 + k * 13) % 31) as f32 / 5.0 - 3.0).collect()
+}
+
+#[test]
+fn f16_kernel_equals_the_f32_kernel_on_the_widened_weights() {
+    let params = hand_sized_params();
+    let halves: Vec<Vec<u16>> =
+        params.iter().map(|(w, _)| w.iter().map(|v| half_bits(*v)).collect()).collect();
+    let widened: Vec<Vec<f32>> =
+        halves.iter().map(|h| h.iter().map(|b| vge_runtime::f16_to_f32(*b)).collect()).collect();
+    let dims = [65usize, 256, 256, 15];
+    let f16_layers: Vec<Layer<'_>> = (0..3)
+        .map(|k| Layer {
+            in_dim: dims[k],
+            out_dim: dims[k + 1],
+            weights: Weights::F16(&halves[k]),
+            bias: &params[k].1,
+            activation: ACTS[k],
+        })
+        .collect();
+    let f32_layers: Vec<Layer<'_>> =
+        (0..3).map(|k| layer(dims[k], dims[k + 1], &widened[k], &params[k].1, ACTS[k])).collect();
+    let (a, b) = (PolicyMlp::new(&f16_layers).unwrap(), PolicyMlp::new(&f32_layers).unwrap());
+    for k in 0..10 {
+        let (mut ya, mut yb) = ([0.0f32; 15], [0.0f32; 15]);
+        a.forward(&observation(k), &mut ya).unwrap();
+        b.forward(&observation(k), &mut yb).unwrap();
+        assert_eq!(ya, yb, "same summation order, so bit-identical");
+    }
+}
+
+/// binary16 bits of `v` (|v| < 65504): round-to-nearest-even on the f32 bits for normal
+/// values, `|v| * 2^24` rounded for subnormal ones, so the test does not lean on the code it
+/// checks.
+fn half_bits(v: f32) -> u16 {
+    let bits = v.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    let exp = ((bits >> 23) & 0xFF) as i32 - 127 + 15;
+    assert!(exp < 31, "{v} outside the f16 range");
+    if exp < 1 {
+        return sign | (f64::from(v.abs()) * 2f64.powi(24)).round() as u16;
+    }
+    let mant = bits & 0x7F_FFFF;
+    let mut h = ((exp as u32) << 10) | (mant >> 13);
+    let rest = mant & 0x1FFF;
+    if rest > 0x1000 || (rest == 0x1000 && h & 1 == 1) {
+        h += 1;
+    }
+    sign | h as u16
+}
+
+#[test]
+fn i8_kernel_matches_the_dequantised_network_within_its_input_rounding() {
+    let params = hand_sized_params();
+    let dims = [65usize, 256, 256, 15];
+    // Per-row symmetric quantisation, as vge-export writes it.
+    let quantised: Vec<(Vec<i8>, Vec<f32>)> = params
+        .iter()
+        .zip(dims.windows(2))
+        .map(|((w, _), d)| {
+            let mut q = Vec::new();
+            let mut s = Vec::new();
+            for row in w.chunks(d[0]) {
+                let scale = row.iter().fold(0.0f32, |m, v| m.max(v.abs())) / 127.0;
+                q.extend(row.iter().map(|v| (v / scale).round() as i8));
+                s.push(scale);
+            }
+            (q, s)
+        })
+        .collect();
+    let layers: Vec<Layer<'_>> = (0..3)
+        .map(|k| Layer {
+            in_dim: dims[k],
+            out_dim: dims[k + 1],
+            weights: Weights::I8 { q: &quantised[k].0, row_scale: &quantised[k].1 },
+            bias: &params[k].1,
+            activation: ACTS[k],
+        })
+        .collect();
+    let mlp = PolicyMlp::new(&layers).unwrap();
+    for k in 0..10 {
+        let obs = observation(k);
+        // Reference in f64 with the dequantised weights and exact (unquantised) inputs.
+        let mut x: Vec<f64> = obs.iter().map(|&v| f64::from(v)).collect();
+        for (l, (q, s)) in layers.iter().zip(&quantised) {
+            x = (0..l.out_dim)
+                .map(|o| {
+                    let dot: f64 =
+                        (0..l.in_dim).map(|i| f64::from(s[o]) * f64::from(q[o * l.in_dim + i]) * x[i]).sum();
+                    let v = dot + f64::from(l.bias[o]);
+                    if l.activation == Activation::Tanh { v.tanh() } else { v.max(0.0) }
+                })
+                .collect();
+        }
+        let mut y = [0.0f32; 15];
+        mlp.forward(&obs, &mut y).unwrap();
+        let max_diff = y.iter().zip(&x).map(|(a, b)| (f64::from(*a) - b).abs()).fold(0.0, f64::max);
+        // Each layer's input is rounded to 1/254 of its largest value; through three layers
+        // that moves these tanh outputs by ~1e-2 at most.
+        assert!(max_diff < 2e-2, "observation {k}: max diff {max_diff}");
+        assert!(max_diff > 0.0, "the input quantisation must show");
+    }
 }

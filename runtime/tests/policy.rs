@@ -1,5 +1,6 @@
-//! Policy-file decoding against the byte-level test vector of `docs/policy-format.md`
-//! (written by hand, independently of `vge-export`'s serde encoder), and every framing error.
+//! Version-1 policy-file decoding against the byte-level test vector of
+//! `docs/policy-format.md` (written by hand, independently of `vge-export`'s serde encoder),
+//! and every framing error. Version 2: `policy_v2.rs`.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
 use vge_runtime::format::{self, FORMAT_VERSION, crc32};
@@ -101,12 +102,14 @@ fn framing_errors_are_typed() {
     let mut bad = ok.clone();
     bad[0] = b'X';
     assert_eq!(load(&bad), Err(PolicyError::BadMagic));
-    let mut bad = ok.clone();
-    bad[8] = 2;
-    assert_eq!(
-        load(&refix(bad)),
-        Err(PolicyError::UnsupportedVersion { found: 2, supported: FORMAT_VERSION })
-    );
+    for version in [0, 3] {
+        let mut bad = ok.clone();
+        bad[8] = version;
+        assert_eq!(
+            load(&refix(bad)),
+            Err(PolicyError::UnsupportedVersion { found: u16::from(version), supported: FORMAT_VERSION })
+        );
+    }
     let mut bad = ok.clone();
     bad[11] = 0x80;
     assert_eq!(load(&refix(bad)), Err(PolicyError::UnsupportedFlags { flags: 0x8000 }));

@@ -212,8 +212,10 @@ fn with_runtime_policy<T>(
     let duration_s = env.episode_length_steps as f32 / env.control_hz;
     env.control_hz = info.control_hz;
     env.episode_length_steps = (duration_s * env.control_hz).round().max(1.0) as usize;
+    // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
+    let aligned = vge_runtime::AlignedBytes::new(bytes);
     let mut storage = vec![0.0f32; info.storage_len];
-    let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(bytes, &mut storage)
+    let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(&aligned, &mut storage)
         .map_err(|e| EvalError::Policy(e.to_string()))?;
     f(&env, &|obs, action| policy.forward(obs, action).map_err(|e| e.to_string()))
 }
