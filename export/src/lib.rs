@@ -10,6 +10,7 @@ pub mod bench;
 mod error;
 mod extract;
 pub mod firmware;
+pub mod firmware_bench;
 pub mod inspect;
 mod policy_file;
 pub mod quantise;

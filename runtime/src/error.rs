@@ -30,6 +30,8 @@ pub enum RuntimeError {
     ScaleLen { layer: usize, expected: usize, got: usize },
     /// An `i8` layer's row scale is NaN, infinite or not > 0.
     BadScale { layer: usize, index: usize },
+    /// An `i8` layer has more inputs than its `i32` sums can hold exactly.
+    TooWideForI8 { layer: usize, in_dim: usize, max: usize },
     /// A bias is NaN or infinite.
     NonFiniteBias { layer: usize, index: usize },
     /// The observation slice has the wrong length.
@@ -75,6 +77,9 @@ impl fmt::Display for RuntimeError {
             }
             Self::BadScale { layer, index } => {
                 write!(f, "layer {layer} row scale {index} is not finite and > 0")
+            }
+            Self::TooWideForI8 { layer, in_dim, max } => {
+                write!(f, "i8 layer {layer} has {in_dim} inputs, at most {max} fit its i32 sums")
             }
             Self::NonFiniteBias { layer, index } => {
                 write!(f, "layer {layer} bias {index} is not finite")

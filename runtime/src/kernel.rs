@@ -13,12 +13,17 @@ use crate::{Layer, RuntimeError};
 /// every target (x86-64 with or without AVX, thumbv7em) computes bit-identical results.
 pub(crate) const LANES: usize = 16;
 
-/// Output rows per call of [`rows_f`]. Each row is still summed on its own, so `ROWS` does
-/// not change any result, only the code LLVM emits: on the 65-256-256-15 bench 2 beat 4 by
-/// ~12% on the default x86-64 target (7.45 -> 6.5 us) and ~10% with target-cpu=native
-/// (4.3 -> 3.9 us); 1, 3, 6 and 8 were slower, and chunk-outer interleavings of the rows lost
-/// vectorisation.
+/// Output rows per call of [`rows_f`] on the portable path. Each row is still summed on its
+/// own, so the row count does not change any result, only the code LLVM emits: on the
+/// 65-256-256-15 bench 2 beat 4 by ~12% on the default x86-64 target (SSE2: 16 xmm
+/// registers hold 2 rows x 4 registers of accumulators) (7.45 -> 6.5 us); 1, 3, 6 and 8
+/// were slower, and chunk-outer interleavings of the rows lost vectorisation.
 const ROWS: usize = 2;
+
+/// Rows per call on the AVX-512 path ([`dispatch`]): one zmm register accumulates a row, so
+/// 8 rows give 8 independent add chains (enough to hide the add latency) in 32 registers.
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+const ROWS_AVX512: usize = 8;
 
 /// Rows per call of the `i8` kernel: integer sums are exact in any order.
 const ROWS_I8: usize = 4;
@@ -29,13 +34,13 @@ pub(crate) fn affine(
     layer: &Layer<'_>,
     index: usize,
     x: &[f32],
-    q_buf: &mut [i8],
+    q_buf: &mut [i16],
     y: &mut [f32],
 ) -> Result<(), RuntimeError> {
     check_dims(layer, index, x, y)?;
     match layer.weights {
-        Weights::F32(w) => dense_f(w, layer.bias, x, y, |v| v),
-        Weights::F16(w) => dense_f(w, layer.bias, x, y, weights::f16_to_f32),
+        Weights::F32(w) => dense_f32(w, layer.bias, x, y),
+        Weights::F16(w) => dense_f::<ROWS, u16>(w, layer.bias, x, y, weights::f16_to_f32),
         Weights::I8 { q, row_scale } => {
             let max = q_buf.len();
             let q_x = q_buf.get_mut(..x.len()).ok_or(RuntimeError::WidthExceedsCapacity {
@@ -66,25 +71,76 @@ fn check_dims(layer: &Layer<'_>, index: usize, x: &[f32], y: &[f32]) -> Result<(
     if layer.bias.len() != n_out {
         return Err(RuntimeError::BiasLen { layer: index, expected: n_out, got: layer.bias.len() });
     }
-    if let Weights::I8 { row_scale, .. } = layer.weights
-        && row_scale.len() != n_out
-    {
-        return Err(RuntimeError::ScaleLen { layer: index, expected: n_out, got: row_scale.len() });
+    if let Weights::I8 { row_scale, .. } = layer.weights {
+        if row_scale.len() != n_out {
+            return Err(RuntimeError::ScaleLen { layer: index, expected: n_out, got: row_scale.len() });
+        }
+        if n_in > weights::I8_MAX_IN_DIM {
+            return Err(RuntimeError::TooWideForI8 {
+                layer: index,
+                in_dim: n_in,
+                max: weights::I8_MAX_IN_DIM,
+            });
+        }
     }
     Ok(())
 }
 
-/// Floating-point kernel: rows `ROWS` at a time, each with `LANES` independent partial sums
+/// The `f32` kernel: with the `std` feature on x86-64, the AVX-512 build of the same code
+/// when this CPU has it (bit-identical results: only the row blocking differs); else the
+/// portable build, vectorised for the compile-time target.
+#[inline(always)]
+fn dense_f32(w: &[f32], bias: &[f32], x: &[f32], y: &mut [f32]) {
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if dispatch::has_avx512() {
+        // SAFETY: the function only differs from the portable one by being compiled with
+        // AVX-512F enabled, and `has_avx512` checked at run time that this CPU has AVX-512F.
+        #[allow(unsafe_code)]
+        unsafe {
+            dispatch::dense_f32_avx512(w, bias, x, y)
+        };
+        return;
+    }
+    dense_f::<ROWS, f32>(w, bias, x, y, |v| v);
+}
+
+/// Run-time CPU dispatch of the host build (`std` feature: feature detection needs std).
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+mod dispatch {
+    extern crate std;
+
+    use std::sync::OnceLock;
+
+    /// Whether this CPU has AVX-512F (detected once).
+    pub(super) fn has_avx512() -> bool {
+        static HAS: OnceLock<bool> = OnceLock::new();
+        *HAS.get_or_init(|| std::is_x86_feature_detected!("avx512f"))
+    }
+
+    /// [`super::dense_f`] compiled for AVX-512F, with [`super::ROWS_AVX512`] rows per block.
+    #[target_feature(enable = "avx512f")]
+    pub(super) fn dense_f32_avx512(w: &[f32], bias: &[f32], x: &[f32], y: &mut [f32]) {
+        super::dense_f::<{ super::ROWS_AVX512 }, f32>(w, bias, x, y, |v| v);
+    }
+}
+
+/// Floating-point kernel: rows `R` at a time, each with `LANES` independent partial sums
 /// (they hide the add latency); `widen` turns a stored weight into `f32` as it is read.
 #[inline(always)]
-fn dense_f<W: Copy>(w: &[W], bias: &[f32], x: &[f32], y: &mut [f32], widen: impl Fn(W) -> f32 + Copy) {
+fn dense_f<const R: usize, W: Copy>(
+    w: &[W],
+    bias: &[f32],
+    x: &[f32],
+    y: &mut [f32],
+    widen: impl Fn(W) -> f32 + Copy,
+) {
     let n_in = x.len();
     let (x_chunks, x_tail) = x.as_chunks::<LANES>();
-    let mut w_blocks = w.chunks_exact(n_in.saturating_mul(ROWS).max(1));
-    let mut y_blocks = y.chunks_exact_mut(ROWS);
-    let mut b_blocks = bias.chunks_exact(ROWS);
+    let mut w_blocks = w.chunks_exact(n_in.saturating_mul(R).max(1));
+    let mut y_blocks = y.chunks_exact_mut(R);
+    let mut b_blocks = bias.chunks_exact(R);
     for ((w, yb), b) in (&mut w_blocks).zip(&mut y_blocks).zip(&mut b_blocks) {
-        rows_f::<ROWS, W>(w, b, x_chunks, x_tail, yb, widen);
+        rows_f::<R, W>(w, b, x_chunks, x_tail, yb, widen);
     }
     for ((w, yo), b) in w_blocks
         .remainder()
@@ -141,14 +197,14 @@ fn reduce(acc: &[f32; LANES]) -> f32 {
     lanes.first().copied().unwrap_or(0.0)
 }
 
-/// `i8` kernel: quantise `x` into `q_x` (one scale), sum `q_w · q_x` exactly in `i32` (at
-/// most 127 · 127 · in_dim, far from overflow for any width a policy can have), then
+/// `i8` kernel: quantise `x` into `q_x` (`i16`, one scale), sum `q_w · q_x` exactly in `i32`
+/// (at most 127 · 32767 · in_dim, and `in_dim <= I8_MAX_IN_DIM` is checked at load), then
 /// `y[r] = b[r] + (row_scale[r] · x_scale) · sum_r`.
 #[inline(always)]
-fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_x: &mut [i8], y: &mut [f32]) {
+fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_x: &mut [i16], y: &mut [f32]) {
     let n_in = x.len();
     let x_scale = weights::quantise_input(x, q_x);
-    let q_x: &[i8] = q_x;
+    let q_x: &[i16] = q_x;
     let mut w_blocks = q.chunks_exact(n_in.saturating_mul(ROWS_I8).max(1));
     let mut y_blocks = y.chunks_exact_mut(ROWS_I8);
     let mut s_blocks = row_scale.chunks_exact(ROWS_I8);
@@ -169,7 +225,7 @@ fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_x: &mut [i8]
 }
 
 #[inline(always)]
-fn rows_i8<const R: usize>(w: &[i8], s: &[f32], b: &[f32], q_x: &[i8], x_scale: f32, y: &mut [f32]) {
+fn rows_i8<const R: usize>(w: &[i8], s: &[f32], b: &[f32], q_x: &[i16], x_scale: f32, y: &mut [f32]) {
     let mut acc = [0i32; R];
     for (acc, w_row) in acc.iter_mut().zip(w.chunks_exact(q_x.len().max(1))) {
         for (wv, xv) in w_row.iter().zip(q_x) {

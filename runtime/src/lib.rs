@@ -46,4 +46,4 @@ pub use error::{PolicyError, RuntimeError};
 pub use layer::{Activation, Layer};
 pub use mlp::{Mlp, PolicyMlp};
 pub use policy::{HandPolicy, ObsLayout, ObsSlice, Policy, PolicyInfo, Provenance, storage_len};
-pub use weights::{WeightType, Weights, f16_is_finite, f16_to_f32};
+pub use weights::{I8_MAX_IN_DIM, WeightType, Weights, f16_is_finite, f16_to_f32};

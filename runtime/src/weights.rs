@@ -9,8 +9,11 @@ pub enum WeightType {
     /// significant digits).
     F16,
     /// Signed 8-bit with one `f32` scale per output row: `w[r][c] = scale[r] * q[r][c]`.
-    /// The layer input is quantised to `i8` too (one scale per call, `max|x| / 127`), the
-    /// products are summed in `i32`, and the sum is scaled back to `f32` with the bias.
+    /// The layer input is quantised to `i16` (one scale per call, `max|x| / 32767`: its
+    /// rounding is negligible beside the weights'), the products are summed exactly in `i32`
+    /// (hence at most [`I8_MAX_IN_DIM`] inputs), and the sum is scaled back to `f32` with the
+    /// bias. The same scheme as CMSIS-NN's `s8` kernels, which widen inputs to `q15` to
+    /// multiply.
     I8,
 }
 
@@ -105,6 +108,9 @@ impl Weights<'_> {
     }
 }
 
+/// Most inputs an `i8` layer may have: `127 · 32767 · n` must fit in an `i32` sum.
+pub const I8_MAX_IN_DIM: usize = (i32::MAX as usize) / (127 * 32767);
+
 /// Whether a binary16 bit pattern is finite (its exponent field is not all ones).
 #[inline]
 pub const fn f16_is_finite(h: u16) -> bool {
@@ -126,22 +132,23 @@ pub fn f16_to_f32(h: u16) -> f32 {
     f32::from_bits(magnitude.to_bits() | (u32::from(h & 0x8000) << 16))
 }
 
-/// Quantises `x` to `i8` with one symmetric scale `max|x| / 127` (round half away from zero),
-/// writing the codes to `q`; returns the scale (0 when `x` is all zeros, so every code is 0).
+/// Quantises `x` to `i16` with one symmetric scale `max|x| / 32767` (round half away from
+/// zero), writing the codes to `q`; returns the scale (0 when `x` is all zeros, so every code
+/// is 0).
 #[inline]
-pub(crate) fn quantise_input(x: &[f32], q: &mut [i8]) -> f32 {
+pub(crate) fn quantise_input(x: &[f32], q: &mut [i16]) -> f32 {
     let max_abs = x.iter().fold(0.0f32, |m, v| if v.abs() > m { v.abs() } else { m });
     if max_abs == 0.0 {
         q.fill(0);
         return 0.0;
     }
-    let inv = 127.0 / max_abs;
+    let inv = 32767.0 / max_abs;
     for (qi, xi) in q.iter_mut().zip(x) {
         let v = xi * inv;
-        // `as` saturates, and |v| <= 127 by construction; the +-0.5 rounds half away from 0.
-        *qi = if v >= 0.0 { (v + 0.5) as i8 } else { (v - 0.5) as i8 };
+        // `as` saturates, and |v| <= 32767 by construction; the +-0.5 rounds half away from 0.
+        *qi = if v >= 0.0 { (v + 0.5) as i16 } else { (v - 0.5) as i16 };
     }
-    max_abs / 127.0
+    max_abs / 32767.0
 }
 
 #[cfg(test)]
@@ -178,12 +185,13 @@ mod tests {
 
     #[test]
     fn input_quantisation_is_symmetric_and_rounds_half_away() {
-        let mut q = [0i8; 5];
-        // max |x| = 127: the scale is 1 and every product below is exact.
-        let s = quantise_input(&[127.0, -127.0, 63.5, 0.0, -0.5], &mut q);
+        let mut q = [0i16; 5];
+        // max |x| = 32767: the scale is 1 and every product below is exact.
+        let s = quantise_input(&[32767.0, -32767.0, 63.5, 0.0, -0.5], &mut q);
         assert_eq!(s, 1.0);
-        assert_eq!(q, [127, -127, 64, 0, -1]);
+        assert_eq!(q, [32767, -32767, 64, 0, -1]);
         assert_eq!(quantise_input(&[0.0; 3], &mut q[..3]), 0.0);
+        assert_eq!(I8_MAX_IN_DIM, 516);
         assert_eq!(q[..3], [0, 0, 0]);
     }
 }

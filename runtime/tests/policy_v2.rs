@@ -129,8 +129,8 @@ fn f16_weights_are_widened_exactly() {
 #[test]
 fn i8_weights_follow_the_documented_scheme() {
     // Row scale 0.5 / 127: 0.5 -> 127, -0.25 -> -63.5 -> -64. Normalised input (1, 1)
-    // quantises to (127, 127) with scale 1 / 127, so the sum is 127 * 127 - 64 * 127 = 8001
-    // and the affine output 0.125 + (0.5 / 127) * (1 / 127) * 8001 = 0.125 + 31.5 / 127.
+    // quantises to (32767, 32767) with scale 1 / 32767, so the sum is 63 * 32767 and the
+    // affine output 0.125 + (0.5 / 127) * (1 / 32767) * 63 * 32767 = 0.125 + 31.5 / 127.
     let s = 0.5f32 / 127.0;
     let b = with_weights(WeightType::I8.code(), &[127, (-64i8).to_le_bytes()[0]], Some(s));
     assert_eq!(vge_runtime::policy::inspect(&b).unwrap().weight_type, WeightType::I8);

@@ -260,15 +260,25 @@ fn json_f64(line: &str, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("no number `{key}` in {line}"))
 }
 
-/// An untrained but real policy file, exported from a seeded tch actor by `vge export`.
+/// An untrained but real policy file (format version 2, f32 weights), exported from a seeded
+/// tch actor by `vge export`.
 fn exported_policy(seed: u64) -> std::path::PathBuf {
-    let path = std::env::temp_dir().join(format!("vge-hil-policy-{seed}-{}.vgep", std::process::id()));
+    exported_policy_as(seed, "f32")
+}
+
+/// [`exported_policy`] with its weights stored as `weights` (`f32`, `f16` or `i8`).
+fn exported_policy_as(seed: u64, weights: &str) -> std::path::PathBuf {
+    let path =
+        std::env::temp_dir().join(format!("vge-hil-policy-{seed}-{weights}-{}.vgep", std::process::id()));
     let out = std::process::Command::new(workspace_bin("vge"))
-        .args(["export", "--init", "--seed", &seed.to_string(), "--out"])
+        .args(["export", "--init", "--weights", weights, "--seed", &seed.to_string(), "--out"])
         .arg(&path)
         .output()
         .expect("vge export runs");
     assert!(out.status.success(), "vge export failed: {}", String::from_utf8_lossy(&out.stderr));
+    let bytes = std::fs::read(&path).expect("read the policy file");
+    let info = vge_runtime::policy::inspect(&bytes).expect("a valid policy file");
+    assert_eq!((info.format_version, info.weight_type.name()), (2, weights));
     path
 }
 
@@ -440,7 +450,8 @@ fn closed_loop_over_can_fd_turns_the_object_as_the_in_process_sim_does() {
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn stopping_the_emulator_fires_the_bridge_watchdog() {
     let iface = hil_iface();
-    let policy = exported_policy(4);
+    // i8 weights: the bridge runs every weight type (f16 below).
+    let policy = exported_policy_as(4, "i8");
     let mut emulator = spawn_emulator(&iface, 1, 30.0);
     thread::sleep(Duration::from_millis(500));
     let killer = thread::spawn(move || {
@@ -464,7 +475,7 @@ fn stopping_the_emulator_fires_the_bridge_watchdog() {
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn bad_frames_from_a_third_socket_are_counted_and_ignored() {
     let iface = hil_iface();
-    let policy = exported_policy(5);
+    let policy = exported_policy_as(5, "f16");
     let emulator = spawn_emulator(&iface, 2, 2.0);
     thread::sleep(Duration::from_millis(500));
     let injector_iface = iface.clone();

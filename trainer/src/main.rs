@@ -287,13 +287,23 @@ struct SweepArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("source").required(true).args(["actor", "init", "policy"]))]
 struct ExportArgs {
     /// Actor variables saved by tch (`VarStore::save`, names `actor.l{i}`, `actor.mean`, ...).
-    #[arg(long, conflicts_with = "init", required_unless_present = "init")]
+    #[arg(long)]
     actor: Option<PathBuf>,
     /// Export a freshly initialised (untrained) actor instead, e.g. to test a deployment path.
     #[arg(long)]
     init: bool,
+    /// Re-encode an existing policy file (any version) instead, e.g. a trained run's
+    /// policy.vgep as i8 for a microcontroller; its provenance is kept.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["seed", "hidden", "steps"])]
+    policy: Option<PathBuf>,
+    /// How the weight matrices are stored (format version 2): f32 (exact), f16 (half the
+    /// flash, ~3 significant digits) or i8 (a quarter, per-row scales; inputs quantised per
+    /// layer). See docs/policy-format.md.
+    #[arg(long, value_enum, default_value_t = Weights::F32)]
+    weights: Weights,
     /// Seed of the initialisation (--init) and recorded as provenance.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -348,6 +358,26 @@ enum Bench {
         /// Threads for the vectorized run (0: all cores).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+    },
+    /// The policy on a Cortex-M4F (runtime/firmware-m4 under qemu-system-arm -icount), as
+    /// f32, f16 and i8 weights: flash and RAM of the firmware (linked against the STM32F405's
+    /// 1 MiB flash and 128 KiB SRAM), instructions per forward, and the largest action
+    /// difference from tch's f32 forward on the host. Needs the thumbv7em-none-eabihf target
+    /// and qemu-system-arm (scripts/test.sh installs both); builds three firmwares (minutes).
+    Firmware {
+        /// Print one JSON line per weight type instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Policy file to measure (e.g. a run's policy.vgep); default: a seeded untrained
+        /// 65-256-256-15 actor.
+        #[arg(long, value_name = "FILE")]
+        policy: Option<PathBuf>,
+        /// Host observations compared with tch.
+        #[arg(long, default_value_t = 10_000)]
+        observations: usize,
+        /// Seed of the untrained actor and of the observations.
+        #[arg(long, default_value_t = 0)]
+        seed: i64,
     },
     /// Policy forward latency at batch 1 (65-256-256-15): the no_std runtime against tch.
     Runtime {
@@ -616,7 +646,39 @@ fn bench_controllers(json: bool, episodes: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `vge export --weights`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Weights {
+    F32,
+    F16,
+    I8,
+}
+
+impl From<Weights> for vge_export::WeightType {
+    fn from(w: Weights) -> Self {
+        match w {
+            Weights::F32 => Self::F32,
+            Weights::F16 => Self::F16,
+            Weights::I8 => Self::I8,
+        }
+    }
+}
+
 fn export(args: ExportArgs) -> anyhow::Result<()> {
+    let weights = vge_export::WeightType::from(args.weights);
+    let bytes = match &args.policy {
+        Some(path) => vge_export::PolicyFile::read(path)
+            .with_context(|| format!("reading policy file {}", path.display()))?
+            .encode(weights)?,
+        None => export_actor(&args, weights)?,
+    };
+    std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
+    println!("wrote {} ({} bytes, {weights} weights, format version 2)", args.out.display(), bytes.len());
+    Ok(())
+}
+
+/// The policy file of a saved (`--actor`) or fresh (`--init`) actor.
+fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::Result<Vec<u8>> {
     anyhow::ensure!(args.hidden.iter().all(|&h| h > 0), "--hidden widths must be positive");
     let env = EnvConfig::default();
     let mut vs = nn::VarStore::new(Device::Cpu);
@@ -641,9 +703,10 @@ fn export(args: ExportArgs) -> anyhow::Result<()> {
         steps: args.steps,
     };
     let bytes = policy_export::export_hand_actor(&vs, &args.hidden, &env, provenance)?;
-    std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
-    println!("wrote {} ({} bytes)", args.out.display(), bytes.len());
-    Ok(())
+    if weights == vge_export::WeightType::F32 {
+        return Ok(bytes);
+    }
+    Ok(vge_export::PolicyFile::from_bytes(&bytes)?.encode(weights)?)
 }
 
 fn run_bench(bench: Bench) -> anyhow::Result<()> {
@@ -710,6 +773,9 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
             }
         }
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes)?,
+        Bench::Firmware { json, policy, observations, seed } => {
+            bench_firmware(json, policy, observations, seed)?
+        }
         Bench::Runtime { json, iters } => {
             anyhow::ensure!(iters > 0, "--iters must be at least 1");
             let config = vge_export::bench::BenchConfig { iters, ..Default::default() };
@@ -724,6 +790,48 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+fn bench_firmware(json: bool, policy: Option<PathBuf>, observations: usize, seed: i64) -> anyhow::Result<()> {
+    anyhow::ensure!(observations > 0, "--observations must be at least 1");
+    let file = match &policy {
+        Some(path) => vge_export::PolicyFile::read(path)
+            .with_context(|| format!("reading policy file {}", path.display()))?,
+        None => vge_export::firmware_bench::seeded_policy(seed)?,
+    };
+    let target_dir = std::env::temp_dir().join("vge-bench-firmware");
+    let rows =
+        vge_export::firmware_bench::run(&file, &target_dir, observations, seed, |msg| eprintln!("{msg}"))?;
+    if json {
+        for r in &rows {
+            println!("{}", r.to_json_line());
+        }
+        return Ok(());
+    }
+    println!(
+        "Cortex-M4F (qemu mps2-an386, STM32F405 memory sizes), policy {}",
+        match &policy {
+            Some(p) => p.display().to_string(),
+            None => format!("untrained, seed {seed}"),
+        }
+    );
+    println!(
+        "weights  file B   flash B   RAM B  instructions  ms@168MHz  max|diff| vs tch ({observations} obs)"
+    );
+    for r in &rows {
+        println!(
+            "{:<6} {:>8} {:>9} {:>7} {:>13.0} {:>10.2}  {:.2e}",
+            r.weights.name(),
+            r.file_bytes,
+            r.flash_bytes,
+            r.ram_bytes,
+            r.instructions_per_forward,
+            r.instructions_per_forward / vge_export::firmware_bench::CLOCK_HZ * 1e3,
+            r.max_abs_diff
+        );
+    }
+    println!("(ms at one instruction per cycle: an estimate; RAM = static + stack peak)");
     Ok(())
 }
 

@@ -186,6 +186,10 @@ fn check_params(layer: usize, raw: &RawLayer<'_>, n_w: usize) -> Result<(), Poli
             halves.iter().position(|h| !crate::f16_is_finite(u16::from_le_bytes(*h)))
         }
         RawWeights::I8 { row_scale, .. } => {
+            if raw.in_dim > crate::I8_MAX_IN_DIM {
+                let (in_dim, max) = (raw.in_dim, crate::I8_MAX_IN_DIM);
+                return Err(RuntimeError::TooWideForI8 { layer, in_dim, max }.into());
+            }
             if row_scale.len() != raw.out_dim {
                 return Err(
                     RuntimeError::ScaleLen { layer, expected: raw.out_dim, got: row_scale.len() }.into()
