@@ -20,21 +20,25 @@ pub(crate) const LANES: usize = 16;
 /// were slower, and chunk-outer interleavings of the rows lost vectorisation.
 const ROWS: usize = 2;
 
-/// Rows per call on the AVX-512 path ([`dispatch`]): one zmm register accumulates a row, so
-/// 8 rows give 8 independent add chains (enough to hide the add latency) in 32 registers.
+/// Rows per call on the AVX-512 path ([`dispatch`]): one zmm register accumulates a row's
+/// `LANES`. Measured on the 65-256-256-15 bench (AMD EPYC, `vge bench runtime`): 2 rows
+/// 6.5 us, 4 rows 6.9-7.1 us, 8 rows 9.5 us (LLVM then vectorises across the rows with
+/// gathers); the portable SSE2 build 9.2-9.5 us. Two rows are two add chains, so the path is
+/// bound by the add latency: more chains need another summation order (see issue 17).
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
-const ROWS_AVX512: usize = 8;
+const ROWS_AVX512: usize = 2;
 
 /// Rows per call of the `i8` kernel: integer sums are exact in any order.
 const ROWS_I8: usize = 4;
 
 /// `y = W x + b` for one layer (no activation), dispatching on the weight type. `q_buf` is
-/// scratch for the quantised input of an `i8` layer (at least `x.len()` long).
+/// scratch for the quantised input of an `i8` layer (two `i16` codes per word, so at least
+/// `x.len() / 2` words).
 pub(crate) fn affine(
     layer: &Layer<'_>,
     index: usize,
     x: &[f32],
-    q_buf: &mut [i16],
+    q_buf: &mut [u32],
     y: &mut [f32],
 ) -> Result<(), RuntimeError> {
     check_dims(layer, index, x, y)?;
@@ -42,13 +46,12 @@ pub(crate) fn affine(
         Weights::F32(w) => dense_f32(w, layer.bias, x, y),
         Weights::F16(w) => dense_f::<ROWS, u16>(w, layer.bias, x, y, weights::f16_to_f32),
         Weights::I8 { q, row_scale } => {
-            let max = q_buf.len();
-            let q_x = q_buf.get_mut(..x.len()).ok_or(RuntimeError::WidthExceedsCapacity {
-                layer: index,
-                dim: x.len(),
-                max,
-            })?;
-            dense_i8(q, row_scale, layer.bias, x, q_x, y);
+            // `q_buf` holds two `i16` codes per word.
+            let max = q_buf.len().saturating_mul(2);
+            if x.len() > max {
+                return Err(RuntimeError::WidthExceedsCapacity { layer: index, dim: x.len(), max });
+            }
+            dense_i8(q, row_scale, layer.bias, x, q_buf, y);
         }
     }
     Ok(())
@@ -197,14 +200,20 @@ fn reduce(acc: &[f32; LANES]) -> f32 {
     lanes.first().copied().unwrap_or(0.0)
 }
 
-/// `i8` kernel: quantise `x` into `q_x` (`i16`, one scale), sum `q_w · q_x` exactly in `i32`
-/// (at most 127 · 32767 · in_dim, and `in_dim <= I8_MAX_IN_DIM` is checked at load), then
-/// `y[r] = b[r] + (row_scale[r] · x_scale) · sum_r`.
+/// `i8` kernel: quantise `x` into `i16` codes in `q_buf` (one scale), sum `q_w · q_x` exactly
+/// in `i32` (at most 127 · 32767 · in_dim, and `in_dim <= I8_MAX_IN_DIM` is checked at load),
+/// then `y[r] = b[r] + (row_scale[r] · x_scale) · sum_r`. Integer sums are exact in any order,
+/// so the Cortex-M DSP build ([`dsp`]) gives the same results as the portable one.
 #[inline(always)]
-fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_x: &mut [i16], y: &mut [f32]) {
+fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_buf: &mut [u32], y: &mut [f32]) {
     let n_in = x.len();
+    let q16: &mut [i16] = bytemuck::cast_slice_mut(q_buf);
+    let Some(q_x) = q16.get_mut(..n_in) else { return };
     let x_scale = weights::quantise_input(x, q_x);
-    let q_x: &[i16] = q_x;
+    #[cfg(all(feature = "armv7em-dsp", target_arch = "arm"))]
+    dsp::interleave(q_x);
+    let q_x: &[i16] = bytemuck::cast_slice(q_buf);
+    let q_x = q_x.get(..n_in).unwrap_or(&[]);
     let mut w_blocks = q.chunks_exact(n_in.saturating_mul(ROWS_I8).max(1));
     let mut y_blocks = y.chunks_exact_mut(ROWS_I8);
     let mut s_blocks = row_scale.chunks_exact(ROWS_I8);
@@ -224,6 +233,8 @@ fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_x: &mut [i16
     }
 }
 
+/// The `R` rows' `y = b + (s · x_scale) · (q_w · q_x)`, portable.
+#[cfg(not(all(feature = "armv7em-dsp", target_arch = "arm")))]
 #[inline(always)]
 fn rows_i8<const R: usize>(w: &[i8], s: &[f32], b: &[f32], q_x: &[i16], x_scale: f32, y: &mut [f32]) {
     let mut acc = [0i32; R];
@@ -232,7 +243,128 @@ fn rows_i8<const R: usize>(w: &[i8], s: &[f32], b: &[f32], q_x: &[i16], x_scale:
             *acc += i32::from(*wv) * i32::from(*xv);
         }
     }
-    for (((yo, acc), s), b) in y.iter_mut().zip(&acc).zip(s).zip(b) {
+    scale_rows(&acc, s, b, x_scale, y);
+}
+
+#[inline(always)]
+fn scale_rows(acc: &[i32], s: &[f32], b: &[f32], x_scale: f32, y: &mut [f32]) {
+    for (((yo, acc), s), b) in y.iter_mut().zip(acc).zip(s).zip(b) {
         *yo = b + (s * x_scale) * *acc as f32;
     }
 }
+
+/// The `i8` rows on a Cortex-M4/M7 (ARMv7E-M, feature `armv7em-dsp`): two multiply-accumulates
+/// per instruction with the DSP extension's SMLAD, on 16-bit halves.
+///
+/// Four `i8` weights load as one word; SXTB16 sign-extends bytes 0 and 2 into its two
+/// halves, SXTB16 ROR 8 bytes 1 and 3. [`interleave`] stores each group of four input codes
+/// in the matching order `x0 x2 | x1 x3`, so each word pair meets its inputs with two SMLADs.
+/// Rows are taken `R` at a time so that each input word is loaded once for `R` rows. Stable
+/// Rust has no intrinsics for these instructions (`core::arch::arm`'s are unstable), hence
+/// three one-instruction `asm!` blocks: register in, register out, nothing else touched.
+#[cfg(all(feature = "armv7em-dsp", target_arch = "arm"))]
+mod dsp {
+    use core::arch::asm;
+
+    /// `[x0, x1, x2, x3]` -> `[x0, x2, x1, x3]` for each full group of four; the rest stays.
+    pub(super) fn interleave(q_x: &mut [i16]) {
+        let (groups, _) = q_x.as_chunks_mut::<4>();
+        for g in groups {
+            g.swap(1, 2);
+        }
+    }
+
+    #[inline(always)]
+    fn sxtb16(x: u32) -> u32 {
+        let r: u32;
+        // SAFETY: one register-to-register instruction of ARMv7E-M (the feature's contract):
+        // no memory, no stack, no flags.
+        #[allow(unsafe_code)]
+        unsafe {
+            asm!("sxtb16 {r}, {x}", r = lateout(reg) r, x = in(reg) x, options(pure, nomem, nostack, preserves_flags))
+        };
+        r
+    }
+
+    #[inline(always)]
+    fn sxtb16_ror8(x: u32) -> u32 {
+        let r: u32;
+        // SAFETY: as `sxtb16`.
+        #[allow(unsafe_code)]
+        unsafe {
+            asm!("sxtb16 {r}, {x}, ror #8", r = lateout(reg) r, x = in(reg) x, options(pure, nomem, nostack, preserves_flags))
+        };
+        r
+    }
+
+    #[inline(always)]
+    fn smlad(a: u32, b: u32, acc: i32) -> i32 {
+        let r: i32;
+        // SAFETY: register-only, no memory or stack. It may set the sticky Q flag on overflow
+        // (not `preserves_flags`), which nothing reads; the sums cannot overflow anyway
+        // (`I8_MAX_IN_DIM`).
+        #[allow(unsafe_code)]
+        unsafe {
+            asm!("smlad {r}, {a}, {b}, {acc}", r = lateout(reg) r, a = in(reg) a, b = in(reg) b, acc = in(reg) acc, options(pure, nomem, nostack))
+        };
+        r
+    }
+
+    /// The two SMLADs of one group of four weights against its interleaved inputs.
+    #[inline(always)]
+    fn group(acc: i32, w: &[i8; 4], x02: u32, x13: u32) -> i32 {
+        let packed = u32::from_le_bytes(w.map(|v| v as u8));
+        smlad(sxtb16_ror8(packed), x13, smlad(sxtb16(packed), x02, acc))
+    }
+
+    /// Rows four at a time share each input load; each row's slices are walked by one
+    /// zipped iterator, so the loop has one end test (per-row iterators made LLVM spill the
+    /// accumulators). Other row counts go one row at a time. The interleaved input groups are
+    /// read as word pairs: `q_x` lies in the caller's `u32` buffer, so the cast cannot fail
+    /// (if it did, the same sums would come from one row at a time, slower).
+    #[inline(always)]
+    pub(super) fn rows_i8<const R: usize>(
+        w: &[i8],
+        s: &[f32],
+        b: &[f32],
+        q_x: &[i16],
+        x_scale: f32,
+        y: &mut [f32],
+    ) {
+        let n_in = q_x.len().max(1);
+        let (x_groups, x_tail) = q_x.as_chunks::<4>();
+        let x_words: Option<&[[u32; 2]]> = bytemuck::try_cast_slice(x_groups).ok();
+        let mut acc = [0i32; R];
+        if let (Some(x_words), [r0, r1, r2, r3], [a0, a1, a2, a3]) = (
+            x_words,
+            [0, 1, 2, 3].map(|k| w.get(k * n_in..(k + 1) * n_in).unwrap_or(&[]).as_chunks::<4>().0),
+            &mut acc[..],
+        ) && R == 4
+        {
+            for ((((&[x02, x13], w0), w1), w2), w3) in x_words.iter().zip(r0).zip(r1).zip(r2).zip(r3) {
+                *a0 = group(*a0, w0, x02, x13);
+                *a1 = group(*a1, w1, x02, x13);
+                *a2 = group(*a2, w2, x02, x13);
+                *a3 = group(*a3, w3, x02, x13);
+            }
+        } else {
+            for (a, row) in acc.iter_mut().zip(w.chunks_exact(n_in)) {
+                for (xg, wg) in x_groups.iter().zip(row.as_chunks::<4>().0) {
+                    let half = |v: i16| u32::from(v as u16);
+                    let (x02, x13) = (half(xg[0]) | (half(xg[1]) << 16), half(xg[2]) | (half(xg[3]) << 16));
+                    *a = group(*a, wg, x02, x13);
+                }
+            }
+        }
+        for (a, row) in acc.iter_mut().zip(w.chunks_exact(n_in)) {
+            let (_, w_tail) = row.as_chunks::<4>();
+            for (wv, xv) in w_tail.iter().zip(x_tail) {
+                *a += i32::from(*wv) * i32::from(*xv);
+            }
+        }
+        super::scale_rows(&acc, s, b, x_scale, y);
+    }
+}
+
+#[cfg(all(feature = "armv7em-dsp", target_arch = "arm"))]
+use dsp::rows_i8;

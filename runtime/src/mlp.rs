@@ -7,8 +7,8 @@ use crate::{Layer, RuntimeError, Weights};
 
 /// A multi-layer perceptron with at most `MAX_LAYERS` layers, each at most `MAX_WIDTH` wide.
 ///
-/// Evaluation uses two `[f32; MAX_WIDTH]` ping-pong buffers and one `[i16; MAX_WIDTH]` on the
-/// stack (`10 * MAX_WIDTH` bytes) and never allocates.
+/// Evaluation uses two `[f32; MAX_WIDTH]` ping-pong buffers and one `[u32; MAX_WIDTH]` on the
+/// stack (`12 * MAX_WIDTH` bytes) and never allocates.
 #[derive(Debug, Clone)]
 pub struct Mlp<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> {
     layers: Vec<Layer<'a>, MAX_LAYERS>,
@@ -81,8 +81,10 @@ impl<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> Mlp<'a, MAX_LAYERS, MA
         }
 
         let mut buf_a = [0.0f32; MAX_WIDTH];
-        // Quantised input of an `i8` layer.
-        let mut q_buf = [0i16; MAX_WIDTH];
+        // Quantised input of an `i8` layer: `i16` codes, two per word (words keep the DSP
+        // kernel's pairs aligned). Twice the room needed; a generic `MAX_WIDTH / 2` needs
+        // unstable const generics.
+        let mut q_buf = [0u32; MAX_WIDTH];
         let mut buf_b = [0.0f32; MAX_WIDTH];
         let mut src: &mut [f32; MAX_WIDTH] = &mut buf_a;
         let mut dst: &mut [f32; MAX_WIDTH] = &mut buf_b;
