@@ -5,11 +5,11 @@
 use tch::Device;
 use tch::nn::VarStore;
 use vge_export::{
-    ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, build_actor,
+    ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor,
     export_policy, extract_actor, inspect,
 };
 use vge_runtime::format::crc32;
-use vge_runtime::{HandPolicy, PolicyError, RuntimeError};
+use vge_runtime::{AlignedBytes, HandPolicy, PolicyError, RuntimeError};
 
 const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
 const JOINTS: [&str; 3] = ["roll", "flex1", "flex2"];
@@ -84,14 +84,32 @@ fn round_trip_write_read() {
     std::fs::remove_file(&path).unwrap();
     assert!(matches!(PolicyFile::read(&path), Err(ExportError::Io { .. })));
 
-    // The no_std runtime sees the same metadata.
+    // Every weight type and version decodes to the same model (quantised weights to what they
+    // stand for), and f32 in both versions exactly.
+    let v1 = file.to_bytes_v1().unwrap();
+    assert_eq!(PolicyFile::decode(&v1, true).unwrap(), (file.clone(), WeightType::F32));
+    for weights in [WeightType::F16, WeightType::I8] {
+        let (back, stored) = PolicyFile::decode(&file.encode(weights).unwrap(), true).unwrap();
+        assert_eq!(stored, weights);
+        let max_err =
+            back.layers.iter().zip(&file.layers).flat_map(|(a, b)| a.weights.iter().zip(&b.weights));
+        let max_err = max_err.map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        assert!(max_err > 0.0 && max_err < 0.01, "{weights}: max weight error {max_err}");
+        assert_eq!((back.obs_mean, &back.layers[0].bias), (file.obs_mean.clone(), &file.layers[0].bias));
+    }
+
+    // The no_std runtime sees the same metadata: version 2 in place from an aligned buffer,
+    // version 1 copied into storage.
+    let aligned = AlignedBytes::new(&bytes);
+    let policy = HandPolicy::load(&aligned, &mut []).unwrap();
     let mut storage = vec![0.0f32; vge_runtime::storage_len(&[65, 32, 32, 15])];
     let storage_len = storage.len();
-    let policy = HandPolicy::load(&bytes, &mut storage).unwrap();
+    let old = HandPolicy::load(&v1, &mut storage).unwrap();
+    assert_eq!((old.info().format_version, old.info().storage_len), (1, storage_len));
     let info = policy.info();
     assert_eq!((info.obs_dim, info.act_dim, info.num_layers), (65, 15, 3));
     assert_eq!(info.num_params, file.num_params());
-    assert_eq!(info.storage_len, storage_len);
+    assert_eq!((info.format_version, info.storage_len), (2, 0));
     assert_eq!(info.control_hz, 20.0);
     assert_eq!(info.obs_clip, Some(5.0));
     assert_eq!(info.provenance.config_hash, "3f2a9c0d5e6b7a81");
@@ -108,10 +126,12 @@ fn inspect_reports_everything() {
     let bytes = small_file();
     let r = inspect::report(&bytes).unwrap();
     assert!(r.checksum_ok() && r.is_valid());
-    assert_eq!((r.format_version, r.file_len, r.num_params()), (1, bytes.len(), 65 * 16 + 16 + 16 * 15 + 15));
+    assert_eq!((r.format_version, r.file_len, r.num_params()), (2, bytes.len(), 65 * 16 + 16 + 16 * 15 + 15));
     let text = r.to_string();
     for needle in [
-        "format version 1",
+        "format version 2",
+        "weights:    f32",
+        "runtime RAM for parameters: none",
         "ok (loadable by vge-runtime)",
         "seed 42, 2000000 steps",
         "65 -> 16 -> 15 (2 layers, 1311 parameters)",
@@ -122,8 +142,9 @@ fn inspect_reports_everything() {
     ] {
         assert!(text.contains(needle), "{needle:?} not in\n{text}");
     }
+    // A flipped bit in a weight (the middle of the file): still described, flagged.
     let mut bad = bytes.clone();
-    bad[100] ^= 0x10;
+    bad[bytes.len() / 2] ^= 0x10;
     let r = inspect::report(&bad).unwrap();
     assert!(!r.checksum_ok() && !r.is_valid());
     assert!(r.to_string().contains("CRC-32 MISMATCH"), "{r}");
@@ -171,24 +192,23 @@ fn wrong_magic_and_version_are_rejected() {
     bad[..8].copy_from_slice(b"VGEPOLCZ");
     assert!(matches!(PolicyFile::from_bytes(&bad), Err(ExportError::Format(PolicyError::BadMagic))));
     let mut bad = bytes.clone();
-    bad[8..10].copy_from_slice(&2u16.to_le_bytes());
+    bad[8..10].copy_from_slice(&3u16.to_le_bytes());
     refix(&mut bad);
     assert!(matches!(
         PolicyFile::from_bytes(&bad),
-        Err(ExportError::Format(PolicyError::UnsupportedVersion { found: 2, supported: 1 }))
+        Err(ExportError::Format(PolicyError::UnsupportedVersion { found: 3, supported: 2 }))
     ));
     let mut storage = vec![0.0f32; 4096];
     assert_eq!(
         HandPolicy::load(&bad, &mut storage).unwrap_err(),
-        PolicyError::UnsupportedVersion { found: 2, supported: 1 }
+        PolicyError::UnsupportedVersion { found: 3, supported: 2 }
     );
 }
 
 #[test]
 fn nan_observation_is_an_error() {
-    let bytes = small_file();
-    let mut storage = vec![0.0f32; 4096];
-    let policy = HandPolicy::load(&bytes, &mut storage).unwrap();
+    let bytes = AlignedBytes::new(&small_file());
+    let policy = HandPolicy::load(&bytes, &mut []).unwrap();
     let mut obs = vec![0.1f32; 65];
     let mut action = [9.0f32; 15];
     policy.forward(&obs, &mut action).unwrap();

@@ -32,9 +32,11 @@ fn runtime_policy_matches_tch_on_10000_observations() {
         control_hz: 20.0,
         provenance: Provenance { vge_version: "0.1.0".into(), config_hash: "x".into(), seed: 11, steps: 1 },
     };
-    let bytes = export_policy(&vs, "actor", &spec, meta).unwrap();
+    // In a 16-byte aligned buffer, as the bridge and the firmware hold it: version 2's arrays
+    // are read in place.
+    let bytes = vge_runtime::AlignedBytes::new(&export_policy(&vs, "actor", &spec, meta).unwrap());
 
-    let mut storage = vec![0.0f32; vge_runtime::storage_len(&[65, 256, 256, 15])];
+    let mut storage: Vec<f32> = Vec::new();
     let t0 = Instant::now();
     let reps = 20;
     for _ in 0..reps {

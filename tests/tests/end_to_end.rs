@@ -57,7 +57,7 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
     let policy_path = summary.policy.expect("a finished run exports its policy");
 
     // 2. The policy file is what vge-runtime loads.
-    let bytes = std::fs::read(&policy_path).expect("policy file");
+    let bytes = vge_runtime::AlignedBytes::new(&std::fs::read(&policy_path).expect("policy file"));
     let mut storage = storage_for(&bytes).expect("valid policy file for the hand");
     let mut runner = RuntimePolicy::load(&bytes, &mut storage).expect("loads");
     assert_eq!(runner.control_hz(), config.env.control_hz);
