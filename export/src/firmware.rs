@@ -41,13 +41,20 @@ pub fn source_dir() -> PathBuf {
 }
 
 /// Builds the firmware embedding `policy` into `target_dir` (a cargo target folder of its
-/// own: it builds for `thumbv7em-none-eabihf`); returns the ELF.
-pub fn build(policy: &Path, target_dir: &Path) -> Result<PathBuf, FirmwareError> {
+/// own: it builds for `thumbv7em-none-eabihf`); returns the ELF. `opt_level` overrides the
+/// firmware's release `opt-level` (3): `"s"` or `"z"` trade speed for flash.
+pub fn build(policy: &Path, target_dir: &Path, opt_level: Option<&str>) -> Result<PathBuf, FirmwareError> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     // Run from the firmware folder so that its .cargo/config.toml (target, linker script)
     // applies. Not --locked: its own Cargo.lock follows vge-runtime's dependencies. Flags
     // meant for the host build (e.g. -C target-cpu=native) are dropped.
-    let status = Command::new(cargo)
+    let mut command = Command::new(cargo);
+    if let Some(level) = opt_level {
+        command.env("CARGO_PROFILE_RELEASE_OPT_LEVEL", level);
+    } else {
+        command.env_remove("CARGO_PROFILE_RELEASE_OPT_LEVEL");
+    }
+    let status = command
         .current_dir(source_dir())
         .args(["build", "--release", "--quiet"])
         .env("CARGO_TARGET_DIR", target_dir)

@@ -46,6 +46,8 @@ pub struct FirmwareBenchRow {
     pub firmware_vs_host_max_abs_diff: f32,
     /// Host observations compared with tch.
     pub observations: usize,
+    /// The firmware's `opt-level` (`"3"` unless overridden).
+    pub opt_level: String,
 }
 
 /// Clock of the STM32F405 the instruction counts are scaled to (an estimate: real cycles per
@@ -68,17 +70,20 @@ impl FirmwareBenchRow {
             "max_abs_diff": self.max_abs_diff,
             "firmware_vs_host_max_abs_diff": self.firmware_vs_host_max_abs_diff,
             "observations": self.observations,
+            "opt_level": self.opt_level,
         })
         .to_string()
     }
 }
 
-/// Runs `policy` as each weight type: builds and runs the firmware in `target_dir` (a cargo
-/// target folder of its own) and compares the host runtime with tch on `observations`
-/// observations drawn from `seed` (normalised values uniform in [-3, 3)).
+/// Runs `policy` as each weight type: builds (with `opt_level`, default 3) and runs the
+/// firmware in `target_dir` (a cargo target folder of its own) and compares the host runtime
+/// with tch on `observations` observations drawn from `seed` (normalised values uniform in
+/// [-3, 3)).
 pub fn run(
     policy: &PolicyFile,
     target_dir: &Path,
+    opt_level: Option<&str>,
     observations: usize,
     seed: i64,
     mut progress: impl FnMut(&str),
@@ -92,7 +97,7 @@ pub fn run(
         let bytes = policy.encode(weights)?;
         let path = target_dir.join(format!("bench-{weights}.vgep"));
         std::fs::write(&path, &bytes)?;
-        let elf = firmware::build(&path, target_dir)?;
+        let elf = firmware::build(&path, target_dir, opt_level)?;
         let fw = firmware::run(&elf, Duration::from_secs(300))?;
         if fw.exit_code != 0 {
             return Err(FirmwareBenchError::FirmwareFailed {
@@ -126,6 +131,7 @@ pub fn run(
             max_abs_diff,
             firmware_vs_host_max_abs_diff: firmware_vs_host,
             observations,
+            opt_level: opt_level.unwrap_or("3").to_owned(),
         });
     }
     Ok(rows)

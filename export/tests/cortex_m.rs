@@ -38,7 +38,7 @@ fn workspace_root() -> PathBuf {
 
 fn build_and_run(policy: &Path) -> FirmwareRun {
     let target_dir = workspace_root().join("target/firmware-m4");
-    let elf = firmware::build(policy, &target_dir).unwrap();
+    let elf = firmware::build(policy, &target_dir, None).unwrap();
     let run = firmware::run(&elf, QEMU_TIMEOUT).unwrap();
     eprintln!("qemu-system-arm exited {}", run.exit_code);
     run

@@ -378,6 +378,10 @@ enum Bench {
         /// Seed of the untrained actor and of the observations.
         #[arg(long, default_value_t = 0)]
         seed: i64,
+        /// The firmware's optimisation level: 3 (default, fastest) or s / z (smaller flash,
+        /// more instructions).
+        #[arg(long, value_parser = ["3", "2", "s", "z"])]
+        opt_level: Option<String>,
     },
     /// Policy forward latency at batch 1 (65-256-256-15): the no_std runtime against tch.
     Runtime {
@@ -773,8 +777,8 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
             }
         }
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes)?,
-        Bench::Firmware { json, policy, observations, seed } => {
-            bench_firmware(json, policy, observations, seed)?
+        Bench::Firmware { json, policy, observations, seed, opt_level } => {
+            bench_firmware(json, policy, observations, seed, opt_level.as_deref())?
         }
         Bench::Runtime { json, iters } => {
             anyhow::ensure!(iters > 0, "--iters must be at least 1");
@@ -793,7 +797,13 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn bench_firmware(json: bool, policy: Option<PathBuf>, observations: usize, seed: i64) -> anyhow::Result<()> {
+fn bench_firmware(
+    json: bool,
+    policy: Option<PathBuf>,
+    observations: usize,
+    seed: i64,
+    opt_level: Option<&str>,
+) -> anyhow::Result<()> {
     anyhow::ensure!(observations > 0, "--observations must be at least 1");
     let file = match &policy {
         Some(path) => vge_export::PolicyFile::read(path)
@@ -801,8 +811,9 @@ fn bench_firmware(json: bool, policy: Option<PathBuf>, observations: usize, seed
         None => vge_export::firmware_bench::seeded_policy(seed)?,
     };
     let target_dir = std::env::temp_dir().join("vge-bench-firmware");
-    let rows =
-        vge_export::firmware_bench::run(&file, &target_dir, observations, seed, |msg| eprintln!("{msg}"))?;
+    let rows = vge_export::firmware_bench::run(&file, &target_dir, opt_level, observations, seed, |msg| {
+        eprintln!("{msg}")
+    })?;
     if json {
         for r in &rows {
             println!("{}", r.to_json_line());
@@ -810,7 +821,8 @@ fn bench_firmware(json: bool, policy: Option<PathBuf>, observations: usize, seed
         return Ok(());
     }
     println!(
-        "Cortex-M4F (qemu mps2-an386, STM32F405 memory sizes), policy {}",
+        "Cortex-M4F (qemu mps2-an386, STM32F405 memory sizes), opt-level {}, policy {}",
+        opt_level.unwrap_or("3"),
         match &policy {
             Some(p) => p.display().to_string(),
             None => format!("untrained, seed {seed}"),
