@@ -1,5 +1,6 @@
-//! Fuzzes the `no_std` policy decoder: `RUSTC_BOOTSTRAP=1 cargo fuzz run decode_policy`
-//! (from the repository root; seeds in `fuzz/seeds/`).
+//! Fuzzes the `no_std` policy decoder: `scripts/fuzz.sh [SECONDS]` (coverage-guided, no
+//! cargo-fuzz needed) or `RUSTC_BOOTSTRAP=1 cargo fuzz run decode_policy` (from the repository
+//! root; seeds in `fuzz/seeds/`).
 //!
 //! An input starting with the magic is decoded as a whole file. Any other input is taken as a
 //! format version (its first byte: odd 1, even 2) and a payload, framed with a valid header
