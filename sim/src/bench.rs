@@ -54,6 +54,13 @@ impl SimBench {
         self.control_steps_per_s_vec / self.control_steps_per_s_single
     }
 
+    /// Simulated seconds per wall-clock second, one world on one thread (control steps over
+    /// the control rate): the figure to compare with another simulator at another rate.
+    #[must_use]
+    pub fn sim_seconds_per_s(&self) -> f64 {
+        self.control_steps_per_s_single / f64::from(self.settings.env.control_hz)
+    }
+
     /// One JSON line with the figures and the settings.
     #[must_use]
     pub fn to_json_line(&self) -> String {
@@ -63,6 +70,8 @@ impl SimBench {
             "control_steps_per_s_single": self.control_steps_per_s_single,
             "control_steps_per_s_vec": self.control_steps_per_s_vec,
             "speedup": self.speedup(),
+            "sim_seconds_per_s": self.sim_seconds_per_s(),
+            "sim_seconds_per_s_vec": self.control_steps_per_s_vec / f64::from(e.control_hz),
             "physics_steps_per_s_single": self.physics_steps_per_s_single,
             "resets_single": self.resets_single,
             "num_worlds": self.settings.num_worlds,
@@ -147,4 +156,24 @@ pub fn run(settings: &BenchSettings) -> Result<SimBench, SimError> {
             * settings.env.physics_steps_per_control() as f64,
         resets_single,
     })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_short_run_reports_simulated_seconds_per_second_at_its_control_rate() {
+        // Not the default 20 Hz; a divisor of the 120 Hz physics rate.
+        let env = EnvConfig { control_hz: 30.0, ..EnvConfig::default() };
+        let settings = BenchSettings { env, steps_per_world: 20, num_worlds: 2, threads: 1 };
+        let r = run(&settings).unwrap();
+        assert!(r.control_steps_per_s_single > 0.0);
+        assert!((r.sim_seconds_per_s() * 30.0 - r.control_steps_per_s_single).abs() < 1e-9);
+        let json: serde_json::Value = serde_json::from_str(&r.to_json_line()).unwrap();
+        assert_eq!(json["sim_seconds_per_s"].as_f64(), Some(r.sim_seconds_per_s()));
+        assert_eq!(json["control_hz"].as_f64(), Some(30.0));
+        assert!(json["sim_seconds_per_s_vec"].as_f64().unwrap() > 0.0);
+    }
 }

@@ -767,7 +767,11 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
             if json {
                 println!("{}", r.to_json_line());
             } else {
-                println!("control steps/s, one world, one thread: {:>8.0}", r.control_steps_per_s_single);
+                println!(
+                    "control steps/s, one world, one thread: {:>8.0}  ({:.0} simulated s per s)",
+                    r.control_steps_per_s_single,
+                    r.sim_seconds_per_s()
+                );
                 println!(
                     "control steps/s, {worlds} worlds, {} threads: {:>8.0}  ({:.2}x)",
                     r.threads_used,
