@@ -322,7 +322,7 @@ mod dsp {
     /// zipped iterator, so the loop has one end test (per-row iterators made LLVM spill the
     /// accumulators). Measured on the seed-0 policy: 210k instructions per forward with four
     /// rows (32 per 16 multiply-accumulates, three accumulators spilled), 242k with three
-    /// (LLVM then shuffles the row pointers), 275k with per-row iterators. Other row counts go one row at a time. The interleaved input groups are
+    /// (LLVM then shuffles the row pointers), 227k with two, 275k with per-row iterators. Other row counts go one row at a time. The interleaved input groups are
     /// read as word pairs: `q_x` lies in the caller's `u32` buffer, so the cast cannot fail
     /// (if it did, the same sums would come from one row at a time, slower).
     #[inline(always)]
