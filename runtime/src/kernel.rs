@@ -42,50 +42,11 @@ pub(crate) fn affine(
     q_buf: &mut [u32],
     y: &mut [f32],
 ) -> Result<(), RuntimeError> {
-    check_dims(layer, index, x, y)?;
+    layer.check_io(index, x, y)?;
     match layer.weights {
         Weights::F32(w) => dense_f32(w, layer.bias, x, y),
         Weights::F16(w) => dense_f::<ROWS, u16>(w, layer.bias, x, y, weights::f16_to_f32),
-        Weights::I8 { q, row_scale } => {
-            // `q_buf` holds two `i16` codes per word.
-            let max = q_buf.len().saturating_mul(2);
-            if x.len() > max {
-                return Err(RuntimeError::WidthExceedsCapacity { layer: index, dim: x.len(), max });
-            }
-            dense_i8(q, row_scale, layer.bias, x, q_buf, y);
-        }
-    }
-    Ok(())
-}
-
-/// Re-checks every length the kernels rely on, so that a mismatch is an error, not a panic
-/// or a silently short product.
-fn check_dims(layer: &Layer<'_>, index: usize, x: &[f32], y: &[f32]) -> Result<(), RuntimeError> {
-    let (n_in, n_out) = (layer.in_dim, layer.out_dim);
-    if x.len() != n_in {
-        return Err(RuntimeError::DimMismatch { layer: index, expected_in: x.len(), got_in: n_in });
-    }
-    if y.len() != n_out {
-        return Err(RuntimeError::ActionLen { expected: n_out, got: y.len() });
-    }
-    let n_w = n_in.checked_mul(n_out).ok_or(RuntimeError::SizeOverflow { layer: index })?;
-    if layer.weights.len() != n_w {
-        return Err(RuntimeError::WeightLen { layer: index, expected: n_w, got: layer.weights.len() });
-    }
-    if layer.bias.len() != n_out {
-        return Err(RuntimeError::BiasLen { layer: index, expected: n_out, got: layer.bias.len() });
-    }
-    if let Weights::I8 { row_scale, .. } = layer.weights {
-        if row_scale.len() != n_out {
-            return Err(RuntimeError::ScaleLen { layer: index, expected: n_out, got: row_scale.len() });
-        }
-        if n_in > weights::I8_MAX_IN_DIM {
-            return Err(RuntimeError::TooWideForI8 {
-                layer: index,
-                in_dim: n_in,
-                max: weights::I8_MAX_IN_DIM,
-            });
-        }
+        Weights::I8 { q, row_scale } => dense_i8(q, row_scale, layer.bias, index, x, q_buf, y)?,
     }
     Ok(())
 }
@@ -205,16 +166,26 @@ fn reduce(acc: &[f32; LANES]) -> f32 {
 /// in `i32` (at most 127 · 32767 · in_dim, and `in_dim <= I8_MAX_IN_DIM` is checked at load),
 /// then `y[r] = b[r] + (row_scale[r] · x_scale) · sum_r`. Integer sums are exact in any order,
 /// so the Cortex-M DSP build ([`dsp`]) gives the same results as the portable one.
+/// `index` labels the error when `q_buf` (two `i16` codes per word) cannot hold `x`.
 #[inline(always)]
-fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_buf: &mut [u32], y: &mut [f32]) {
+fn dense_i8(
+    q: &[i8],
+    row_scale: &[f32],
+    bias: &[f32],
+    index: usize,
+    x: &[f32],
+    q_buf: &mut [u32],
+    y: &mut [f32],
+) -> Result<(), RuntimeError> {
     let n_in = x.len();
+    let max = q_buf.len().saturating_mul(2);
+    let too_wide = RuntimeError::WidthExceedsCapacity { layer: index, dim: n_in, max };
     let q16: &mut [i16] = bytemuck::cast_slice_mut(q_buf);
-    let Some(q_x) = q16.get_mut(..n_in) else { return };
+    let q_x = q16.get_mut(..n_in).ok_or(too_wide)?;
     let x_scale = weights::quantise_input(x, q_x);
     #[cfg(all(feature = "armv7em-dsp", target_arch = "arm"))]
     dsp::interleave(q_x);
-    let q_x: &[i16] = bytemuck::cast_slice(q_buf);
-    let q_x = q_x.get(..n_in).unwrap_or(&[]);
+    let q_x: &[i16] = q_x;
     let mut w_blocks = q.chunks_exact(n_in.saturating_mul(ROWS_I8).max(1));
     let mut y_blocks = y.chunks_exact_mut(ROWS_I8);
     let mut s_blocks = row_scale.chunks_exact(ROWS_I8);
@@ -232,6 +203,7 @@ fn dense_i8(q: &[i8], row_scale: &[f32], bias: &[f32], x: &[f32], q_buf: &mut [u
         let (s, b, yo) = (core::slice::from_ref(s), core::slice::from_ref(b), core::slice::from_mut(yo));
         rows_i8::<1>(w, s, b, q_x, x_scale, yo);
     }
+    Ok(())
 }
 
 /// The `R` rows' `y = b + (s · x_scale) · (q_w · q_x)`, portable.
@@ -275,25 +247,22 @@ mod dsp {
         }
     }
 
+    /// SXTB16 of `x` rotated right by `ROR` bits (0 or 8): bytes `ROR / 8` and `ROR / 8 + 2`
+    /// sign-extended into the two halves.
     #[inline(always)]
-    fn sxtb16(x: u32) -> u32 {
+    fn sxtb16<const ROR: u32>(x: u32) -> u32 {
         let r: u32;
         // SAFETY: one register-to-register instruction of ARMv7E-M (the feature's contract):
         // no memory, no stack, no flags.
         #[allow(unsafe_code)]
         unsafe {
-            asm!("sxtb16 {r}, {x}", r = lateout(reg) r, x = in(reg) x, options(pure, nomem, nostack, preserves_flags))
-        };
-        r
-    }
-
-    #[inline(always)]
-    fn sxtb16_ror8(x: u32) -> u32 {
-        let r: u32;
-        // SAFETY: as `sxtb16`.
-        #[allow(unsafe_code)]
-        unsafe {
-            asm!("sxtb16 {r}, {x}, ror #8", r = lateout(reg) r, x = in(reg) x, options(pure, nomem, nostack, preserves_flags))
+            asm!(
+                "sxtb16 {r}, {x}, ror #{ror}",
+                r = lateout(reg) r,
+                x = in(reg) x,
+                ror = const ROR,
+                options(pure, nomem, nostack, preserves_flags)
+            )
         };
         r
     }
@@ -315,16 +284,19 @@ mod dsp {
     #[inline(always)]
     fn group(acc: i32, w: &[i8; 4], x02: u32, x13: u32) -> i32 {
         let packed = u32::from_le_bytes(w.map(|v| v as u8));
-        smlad(sxtb16_ror8(packed), x13, smlad(sxtb16(packed), x02, acc))
+        smlad(sxtb16::<8>(packed), x13, smlad(sxtb16::<0>(packed), x02, acc))
     }
 
     /// Rows four at a time share each input load; each row's slices are walked by one
     /// zipped iterator, so the loop has one end test (per-row iterators made LLVM spill the
-    /// accumulators). Measured on the seed-0 policy: 210k instructions per forward with four
-    /// rows (32 per 16 multiply-accumulates, three accumulators spilled), 242k with three
-    /// (LLVM then shuffles the row pointers), 227k with two, 275k with per-row iterators. Other row counts go one row at a time. The interleaved input groups are
-    /// read as word pairs: `q_x` lies in the caller's `u32` buffer, so the cast cannot fail
-    /// (if it did, the same sums would come from one row at a time, slower).
+    /// accumulators). Measured on the seed-0 policy when this was chosen: 210k instructions
+    /// per forward with four rows (32 per 16 multiply-accumulates, three accumulators
+    /// spilled), 242k with three (LLVM then shuffles the row pointers), 227k with two, 275k
+    /// with per-row iterators. The surrounding code moves this by a few percent (218k since
+    /// the length checks became `Layer::check_io`).
+    /// Other row counts go one row at a time. The interleaved input groups are read as word
+    /// pairs: `q_x` lies in the caller's `u32` buffer, so the cast cannot fail (if it did, the
+    /// same sums would come from one row at a time, slower).
     #[inline(always)]
     pub(super) fn rows_i8<const R: usize>(
         w: &[i8],

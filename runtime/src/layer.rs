@@ -48,9 +48,9 @@ pub struct Layer<'a> {
 }
 
 impl<'a> Layer<'a> {
-    /// Checks slice lengths against the dimensions, and that all parameters are finite.
-    /// `index` is only used to label errors.
-    pub fn validate(&self, index: usize) -> Result<(), RuntimeError> {
+    /// Dimensions and slice lengths, not values: what [`Layer::validate`] checks at build and
+    /// the kernels re-check at every forward ([`Layer::check_io`]).
+    pub(crate) fn check_lengths(&self, index: usize) -> Result<(), RuntimeError> {
         if self.in_dim == 0 || self.out_dim == 0 {
             return Err(RuntimeError::ZeroDim { layer: index });
         }
@@ -62,15 +62,39 @@ impl<'a> Layer<'a> {
         if self.bias.len() != self.out_dim {
             return Err(RuntimeError::BiasLen { layer: index, expected: self.out_dim, got: self.bias.len() });
         }
-        if let Weights::I8 { row_scale, .. } = self.weights
-            && row_scale.len() != self.out_dim
-        {
-            return Err(RuntimeError::ScaleLen {
+        if let Weights::I8 { row_scale, .. } = self.weights {
+            if row_scale.len() != self.out_dim {
+                let (expected, got) = (self.out_dim, row_scale.len());
+                return Err(RuntimeError::ScaleLen { layer: index, expected, got });
+            }
+            if self.in_dim > crate::weights::I8_MAX_IN_DIM {
+                let (in_dim, max) = (self.in_dim, crate::weights::I8_MAX_IN_DIM);
+                return Err(RuntimeError::TooWideForI8 { layer: index, in_dim, max });
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Layer::check_lengths`] and the input and output slices of one forward, so that a
+    /// mismatch is an error, not a panic or a silently short product.
+    pub(crate) fn check_io(&self, index: usize, x: &[f32], y: &[f32]) -> Result<(), RuntimeError> {
+        if x.len() != self.in_dim {
+            return Err(RuntimeError::DimMismatch {
                 layer: index,
-                expected: self.out_dim,
-                got: row_scale.len(),
+                expected_in: x.len(),
+                got_in: self.in_dim,
             });
         }
+        if y.len() != self.out_dim {
+            return Err(RuntimeError::ActionLen { expected: self.out_dim, got: y.len() });
+        }
+        self.check_lengths(index)
+    }
+
+    /// Checks slice lengths against the dimensions, and that all parameters are finite.
+    /// `index` is only used to label errors.
+    pub fn validate(&self, index: usize) -> Result<(), RuntimeError> {
+        self.check_lengths(index)?;
         if let Some(i) = self.weights.first_invalid() {
             return Err(match self.weights {
                 Weights::I8 { .. } => RuntimeError::BadScale { layer: index, index: i },
@@ -98,21 +122,8 @@ impl<'a> Layer<'a> {
         let Weights::F32(weights) = self.weights else {
             return Err(RuntimeError::WeightLen { layer: index, expected: 0, got: self.weights.len() });
         };
+        self.check_io(index, x, y)?;
         let (n_in, n_out) = (self.in_dim, self.out_dim);
-        if x.len() != n_in {
-            return Err(RuntimeError::DimMismatch { layer: index, expected_in: x.len(), got_in: n_in });
-        }
-        if y.len() != n_out {
-            return Err(RuntimeError::ActionLen { expected: n_out, got: y.len() });
-        }
-        let layer = index;
-        let n_w = n_in.checked_mul(n_out).ok_or(RuntimeError::SizeOverflow { layer })?;
-        if weights.len() != n_w {
-            return Err(RuntimeError::WeightLen { layer, expected: n_w, got: weights.len() });
-        }
-        if self.bias.len() != n_out {
-            return Err(RuntimeError::BiasLen { layer, expected: n_out, got: self.bias.len() });
-        }
 
         // Row-major out×in is column-major in×out: view it as Wᵀ and use the transposed product.
         let w_t = MatrixView::<f32, Dyn, Dyn>::from_slice_generic(weights, Dyn(n_in), Dyn(n_out));

@@ -383,3 +383,23 @@ fn i8_kernel_matches_the_dequantised_network_within_its_input_rounding() {
         assert!(max_diff > 0.0, "the input quantisation must show");
     }
 }
+
+#[test]
+fn an_i8_layer_too_wide_for_exact_i32_sums_is_refused_when_built() {
+    let n_in = vge_runtime::I8_MAX_IN_DIM + 1;
+    let q = vec![1i8; n_in];
+    let (s, b) = ([1.0f32], [0.0f32]);
+    let wide = Layer {
+        in_dim: n_in,
+        out_dim: 1,
+        weights: Weights::I8 { q: &q, row_scale: &s },
+        bias: &b,
+        activation: Activation::Identity,
+    };
+    assert_eq!(
+        Mlp::<'_, 1, 1024>::new(&[wide]).unwrap_err(),
+        RuntimeError::TooWideForI8 { layer: 0, in_dim: 517, max: 516 }
+    );
+    let fits = Layer { in_dim: 516, weights: Weights::I8 { q: &q[..516], row_scale: &s }, ..wide };
+    assert!(Mlp::<'_, 1, 1024>::new(&[fits]).is_ok());
+}
