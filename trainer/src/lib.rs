@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod eval;
 pub mod gait_diagram;
+pub mod heap;
 pub mod nets;
 pub mod optim;
 pub mod plot;

@@ -407,6 +407,10 @@ enum Bench {
 }
 
 fn main() -> ExitCode {
+    // Before libtorch allocates anything; a refusal only costs speed (heap.rs).
+    if !vge_trainer::heap::keep_freed_memory() {
+        eprintln!("vge: note: glibc heap settings not applied; updates may run slower");
+    }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
