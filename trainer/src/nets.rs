@@ -261,6 +261,25 @@ impl TwinCritic {
         h
     }
 
+    /// Q-values of the first twin alone, shape `[batch, 1]` (TD3's actor loss reads only
+    /// Q₁: evaluating one twin halves that forward and its backward). Twin 0's slice of
+    /// each stacked weight, in the same layer order as [`Self::q_values`].
+    pub fn q1(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+        let mut h = Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1);
+        let last = self.weights.len() - 1;
+        for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
+            h = b.get(0).addmm(&h, &w.get(0));
+            if i < last {
+                if self.layer_norm {
+                    let width = h.size()[1];
+                    h = h.layer_norm([width], None::<Tensor>, None::<Tensor>, 1e-5, false);
+                }
+                h = h.relu();
+            }
+        }
+        h
+    }
+
     /// Weight and bias tensors, layer by layer (shallow handles sharing storage).
     pub fn parameters(&self) -> impl Iterator<Item = Tensor> + '_ {
         self.weights.iter().zip(&self.biases).flat_map(|(w, b)| [w.shallow_clone(), b.shallow_clone()])

@@ -87,6 +87,24 @@ fn twin_critic_batched_pass_equals_two_separate_mlps() {
     assert!(max_abs(&(min_q - q.amin(0, false))) == 0.0);
 }
 
+#[test]
+fn first_twin_alone_equals_the_batched_pass_with_and_without_layer_norm() {
+    for layer_norm in [false, true] {
+        let vs = nn::VarStore::new(Device::Cpu);
+        let spec = NetSpec { obs_dim: 65, act_dim: 15, hidden: vec![256, 256] };
+        let critic = TwinCritic::new(&vs.root(), &spec, &[0.05; 15], layer_norm);
+        let obs = Tensor::randn([256, 65], (Kind::Float, Device::Cpu));
+        let act = Tensor::randn([256, 15], (Kind::Float, Device::Cpu)) * 0.05;
+        let (q, q1) = tch::no_grad(|| (critic.q_values(&obs, &act), critic.q1(&obs, &act)));
+        assert_eq!(q1.size(), vec![256, 1]);
+        // Same arithmetic up to the matmul kernel's summation order.
+        let scale = max_abs(&q.get(0)).max(1e-3);
+        assert!(max_abs(&(q1 - q.get(0))) < 1e-5 * scale, "layer norm {layer_norm}");
+        // And not the second twin's values (the twins are initialised independently).
+        assert!(max_abs(&(critic.q1(&obs, &act) - q.get(1))) > 1e-3);
+    }
+}
+
 fn fixed_batch(spec: &NetSpec) -> Batch {
     let opts = (Kind::Float, Device::Cpu);
     Batch {

@@ -82,7 +82,7 @@ impl Sac {
         if self.updates.is_multiple_of(policy_delay.max(1)) {
             self.critic_vs.freeze();
             let mu = self.actor.deterministic(&batch.obs);
-            let rl_loss = -self.critic.q_values(&batch.obs, &mu).get(0).mean(Kind::Float);
+            let rl_loss = -self.critic.q1(&batch.obs, &mu).mean(Kind::Float);
             let actor_loss = match (&batch.bc, &bc_weight) {
                 (Some(bc), Some(weight)) => {
                     let sq = ((bc_target(bc, &scale) - &mu) / &scale).square().sum_dim_intlist(
