@@ -25,7 +25,7 @@ use super::{Controller, ControllerInput, CsConfig, CsController, FgController, I
 
 /// Which controller to roll out (or to guide training with). Serialised as [`Self::name`]
 /// gives it (`"fg"`, as configs spell it; serde, unlike [`FromStr`], is case-sensitive).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControllerKind {
     /// In-grasp manipulation.
@@ -139,6 +139,9 @@ pub struct EpisodeStats {
     pub no_action_steps: usize,
     /// Fingertips that broke and remade contact ([`vge_sim::gait::ContactSwitches`]).
     pub contact_switches: u32,
+    /// The success test's verdict ([`vge_sim::EpisodeOutcome::success`]): >= 2π about z
+    /// without a drop.
+    pub success: bool,
     /// Controller call times (s), one per step.
     pub controller_s: Vec<f64>,
 }
@@ -194,6 +197,7 @@ pub fn run_episode(
         dropped: outcome.terminated,
         no_action_steps,
         contact_switches: outcome.contact_switches,
+        success: outcome.success(),
         controller_s,
     })
 }
@@ -220,6 +224,9 @@ pub struct RolloutSummary {
     pub mean_contacts: f32,
     /// Episodes the env terminated (object fell, or fewer than 3 fingertips held it).
     pub drops: usize,
+    /// Share of episodes that passed the success test (>= 2π about z without a drop), the
+    /// figure `vge eval` reports for a policy.
+    pub success_rate: f32,
     /// Mean contact switches per episode (a fingertip that broke and remade contact).
     pub mean_contact_switches: f32,
     /// Mean episode length (control steps).
@@ -246,7 +253,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 impl RolloutSummary {
     /// One JSON object on one line (no trailing newline), keys: `kind`, `object`,
     /// `episodes`, `seed`, `mean_return`, `mean_rotation_rad`, `max_abs_rotation_rad`,
-    /// `mean_contacts`, `drops`, `mean_contact_switches`, `mean_steps`, `no_action_fraction`,
+    /// `mean_contacts`, `drops`, `success_rate`, `mean_contact_switches`, `mean_steps`, `no_action_fraction`,
     /// `controller_median_us`, `controller_p90_us`. Non-finite numbers are `null`.
     #[must_use]
     pub fn to_json_line(&self) -> String {
@@ -261,6 +268,7 @@ impl RolloutSummary {
             "max_abs_rotation_rad": self.max_abs_rotation_rad,
             "mean_contacts": self.mean_contacts,
             "drops": self.drops,
+            "success_rate": self.success_rate,
             "mean_contact_switches": self.mean_contact_switches,
             "mean_steps": self.mean_steps,
             "no_action_fraction": self.no_action_fraction,
@@ -291,6 +299,7 @@ impl fmt::Display for RolloutSummary {
         )?;
         writeln!(f, "  mean fingertip contacts {:.2}", self.mean_contacts)?;
         writeln!(f, "  drops                {} of {}", self.drops, self.episodes)?;
+        writeln!(f, "  success (2 pi, no drop) {:.0} %", 100.0 * self.success_rate)?;
         writeln!(f, "  contact switches     {:.1} per episode", self.mean_contact_switches)?;
         writeln!(
             f,
@@ -328,6 +337,7 @@ pub fn run_with(
     let (mut ret, mut rot, mut max_rot, mut contacts, mut steps, mut drops, mut no_action) =
         (0.0f64, 0.0f64, 0.0f32, 0.0f64, 0usize, 0usize, 0usize);
     let mut switches = 0u64;
+    let mut successes = 0usize;
     let mut costs = Vec::new();
     for i in 0..episodes {
         let stats = run_episode(&mut env, controller.as_mut(), seed.wrapping_add(i as u64), |_, _| {})?;
@@ -339,6 +349,7 @@ pub fn run_with(
         drops += usize::from(stats.dropped);
         no_action += stats.no_action_steps;
         switches += u64::from(stats.contact_switches);
+        successes += usize::from(stats.success);
         costs.extend_from_slice(&stats.controller_s);
         on_episode(i, &stats);
     }
@@ -354,6 +365,7 @@ pub fn run_with(
         max_abs_rotation_rad: max_rot,
         mean_contacts: (contacts / steps.max(1) as f64) as f32,
         drops,
+        success_rate: (successes as f64 / n) as f32,
         mean_contact_switches: (switches as f64 / n) as f32,
         mean_steps: (steps as f64 / n) as f32,
         no_action_fraction: (no_action as f64 / steps.max(1) as f64) as f32,

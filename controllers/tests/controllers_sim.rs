@@ -115,10 +115,18 @@ fn rollout_summaries_and_cost_per_call() {
         assert_eq!(s.episodes, 2);
         assert!(s.controller_median_us.is_finite() && s.controller_median_us > 0.0);
         let line = s.to_json_line();
-        for key in ["\"mean_return\":", "\"mean_rotation_rad\":", "\"mean_contacts\":", "\"drops\":"] {
+        for key in [
+            "\"mean_return\":",
+            "\"mean_rotation_rad\":",
+            "\"mean_contacts\":",
+            "\"drops\":",
+            "\"success_rate\":",
+        ] {
             assert!(line.contains(key), "{line}");
         }
         assert!(!line.contains('\n'));
+        // Two seconds cannot turn the cube a full 2π: no episode passes the success test.
+        assert_eq!(s.success_rate, 0.0, "{line}");
     }
     assert!(rollout::run(ControllerKind::Igm, ObjectShape::Cube, 0, 0, &options).is_err());
     assert_eq!("FG".parse::<ControllerKind>(), Ok(ControllerKind::Fg));
