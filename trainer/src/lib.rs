@@ -17,6 +17,7 @@ pub mod replay;
 pub mod robustness;
 pub mod sac;
 pub mod sweep;
+pub mod table1;
 pub mod tensorboard;
 pub mod toy;
 pub mod train;

@@ -89,20 +89,39 @@ enum Command {
     #[command(verbatim_doc_comment)]
     Sweep(SweepArgs),
     /// Plot training curves of run directories (mean and min-max over runs of the same
-    /// experiment) into a PNG, and print a markdown table of final success rates.
+    /// experiment) into a PNG, and print a markdown table of final success rates; or, with
+    /// --table1, the paper's Table I and Fig. 3 from all runs below the given folders.
     ///
     /// Panels: episode return, rotation, controller share, and the critic's mean Q beside the
     /// discounted Monte-Carlo returns of its data (a sound critic stays within them). A run
     /// learned when its final-eval.json success rate is >= 50% (`vge eval`'s success test).
+    ///
+    /// --table1 DIR places every run by its config's controller and method and writes
+    /// DIR/table1.csv (controller,method,seeds,learned,success_rate_mean,return_mean,
+    /// return_std,env_steps), DIR/table1.md (beside the paper's numbers) and
+    /// DIR/curves-fg.png, DIR/curves-cs.png (periodic success rate and return against env
+    /// steps, one band per method). Runs without final-eval.json are counted as running.
+    /// The controllers alone come from DIR/controllers/{fg,cs,igm}.json when present
+    /// (`vge controller --kind fg --episodes 20 --episode-s 30 --json`).
+    ///
+    /// Examples:
+    ///   vge plot runs/fg/seed-* --out fg.png --success-csv fg.csv
+    ///   vge plot --table1 docs/results/table1 docs/results/table1 docs/results/cube-fg-vge-seeds
+    #[command(verbatim_doc_comment)]
     Plot {
-        /// Run directories (each with config.toml and metrics.csv).
+        /// Run directories (each with config.toml and metrics.csv); with --table1, folders
+        /// searched for runs (three levels down).
         #[arg(required = true)]
         runs: Vec<PathBuf>,
-        #[arg(long)]
-        out: PathBuf,
+        /// The PNG of the curves.
+        #[arg(long, required_unless_present = "table1", conflicts_with = "table1")]
+        out: Option<PathBuf>,
         /// Also write one row per run (learned, success rate, env steps, wall time) here.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "table1")]
         success_csv: Option<PathBuf>,
+        /// Write Table I and its curves into this folder instead (see above).
+        #[arg(long, value_name = "DIR")]
+        table1: Option<PathBuf>,
     },
     /// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
     /// return, rotation, contact switches, drops and success rate.
@@ -436,7 +455,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             train(config, out, resume, seed, steps, &overrides, &*stop_on_signal()?).map(|_| ())
         }
         Command::Sweep(args) => sweep(args),
-        Command::Plot { runs, out, success_csv } => {
+        Command::Plot { runs, table1: Some(dir), .. } => {
+            let written = vge_trainer::table1::write(&runs, &dir)?;
+            print!("{}", vge_trainer::table1::to_markdown(&written.rows));
+            for f in &written.files {
+                eprintln!("wrote {}", f.display());
+            }
+            Ok(())
+        }
+        Command::Plot { runs, out, success_csv, table1: None } => {
+            let out = out.context("--out is required without --table1")?;
             let curves =
                 runs.iter().map(|d| vge_trainer::plot::read_run(d)).collect::<Result<Vec<_>, _>>()?;
             let table = vge_trainer::plot::plot(&curves, &out)?;

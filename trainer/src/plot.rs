@@ -13,7 +13,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use thiserror::Error;
 
-use crate::config::{AlgorithmName, ConfigError, parse_with_overrides};
+use crate::config::{AlgorithmName, Config, ConfigError, Method, parse_with_overrides};
+use crate::controllers::ControllerKind;
 
 #[derive(Debug, Error)]
 pub enum PlotError {
@@ -38,6 +39,9 @@ pub struct RunCurves {
     pub dir: PathBuf,
     /// The experiment, from the run's config (`name`): runs with one name are seeds of it.
     pub experiment: String,
+    /// The run config's method and controller (the cell of Table I it belongs to).
+    pub method: Method,
+    pub controller: Option<ControllerKind>,
     pub step: Vec<f64>,
     pub mean_return: Vec<f64>,
     pub rotation_rad: Vec<f64>,
@@ -46,9 +50,16 @@ pub struct RunCurves {
     pub mean_q: Vec<f64>,
     /// Mean discounted Monte-Carlo return of the visited states (empty when not logged).
     pub mc_return: Vec<f64>,
+    /// The periodic evaluations (`eval.csv`: the success test on the exported policy):
+    /// their env steps, mean returns and success rates (empty without evaluations).
+    pub eval_step: Vec<f64>,
+    pub eval_return: Vec<f64>,
+    pub eval_success: Vec<f64>,
     /// Success rate of the final evaluation (`final-eval.json`), else of the last periodic
     /// one, if any.
     pub final_success: Option<f64>,
+    /// Mean return of the final evaluation (`final-eval.json`).
+    pub final_return: Option<f64>,
     /// Env steps and wall time of the finished run (from `final-eval.json`).
     pub env_steps: Option<u64>,
     pub wall_s: Option<f64>,
@@ -82,6 +93,7 @@ impl RunCurves {
 #[derive(Debug, serde::Deserialize)]
 struct FinalEvalFields {
     success_rate: f64,
+    mean_return: f64,
     env_steps: u64,
     wall_s: f64,
 }
@@ -125,7 +137,8 @@ pub(crate) fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, 
 
 /// Reads one run directory.
 pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
-    let experiment = experiment(dir)?;
+    let config = run_config(dir)?;
+    let experiment = experiment(&config);
     let metrics = dir.join("metrics.csv");
     let cols = csv_columns(&metrics, &["step", "return", "rotation", "controller_share"])?;
     let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] =
@@ -135,40 +148,56 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         (optional("mean_q").unwrap_or_default(), optional("mc_return").unwrap_or_default());
     let final_eval = read_final_eval(dir)?;
     let eval = dir.join("eval.csv");
+    let [eval_step, eval_return, eval_success]: [Vec<f64>; 3] = if eval.exists() {
+        csv_columns(&eval, &["step", "return", "success"])?
+            .try_into()
+            .map_err(|_| PlotError::Csv { path: eval.clone(), message: "columns".into() })?
+    } else {
+        Default::default()
+    };
     let final_success = match &final_eval {
         Some(f) => Some(f.success_rate),
-        None if eval.exists() => csv_columns(&eval, &["success"])?.first().and_then(|c| c.last().copied()),
-        None => None,
+        None => eval_success.last().copied(),
     };
     Ok(RunCurves {
         dir: dir.to_owned(),
         experiment,
+        method: config.method,
+        controller: config.controller,
         step,
         mean_return,
         rotation_rad,
         controller_share,
         mean_q,
         mc_return,
+        eval_step,
+        eval_return,
+        eval_success,
         final_success,
+        final_return: final_eval.as_ref().map(|f| f.mean_return),
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
         selected: read_json(&dir.join("best-eval.json"))?,
     })
 }
 
-/// The experiment of the run in `dir`: the `name` of its `config.toml`, read with the
-/// config parser (so a file it cannot read is an error naming the file; keys left out take
-/// the config's defaults). A run of a SAC config switched to TD3 (`--set algorithm="td3"`)
-/// is another experiment: the learner is appended unless the name already says it.
-fn experiment(dir: &Path) -> Result<String, PlotError> {
+/// The run's `config.toml`, read with the config parser (so a file it cannot read is an
+/// error naming the file; keys left out take the config's defaults).
+fn run_config(dir: &Path) -> Result<Config, PlotError> {
     let path = dir.join("config.toml");
-    let config = parse_with_overrides(&read(&path)?, &path.display().to_string(), &[])?;
+    Ok(parse_with_overrides(&read(&path)?, &path.display().to_string(), &[])?)
+}
+
+/// The experiment of a run: its config's `name`. A run of a SAC config switched to TD3
+/// (`--set algorithm="td3"`) is another experiment: the learner is appended unless the name
+/// already says it.
+fn experiment(config: &Config) -> String {
     let algorithm = config.algorithm.name();
-    Ok(if config.algorithm != AlgorithmName::Sac && !config.name.contains(algorithm) {
+    if config.algorithm != AlgorithmName::Sac && !config.name.contains(algorithm) {
         format!("{} ({algorithm})", config.name)
     } else {
-        config.name
-    })
+        config.name.clone()
+    }
 }
 
 /// The run's `final-eval.json`, if it finished.
@@ -209,20 +238,20 @@ fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
     }
 }
 
-/// Mean, min and max over runs of `series` at the logged steps of the run that ended
-/// earliest (runs may log at different intervals: the others are interpolated).
-fn spread(runs: &[&RunCurves], series: impl Fn(&RunCurves) -> &[f64]) -> Vec<SpreadPoint> {
-    let usable: Vec<&&RunCurves> =
-        runs.iter().filter(|r| !r.step.is_empty() && !series(r).is_empty()).collect();
+/// Mean, min and max over runs of `series` (steps and values) at the logged steps of the
+/// run that ended earliest (runs may log at different intervals: the others are
+/// interpolated).
+fn spread(runs: &[&RunCurves], series: Series) -> Vec<SpreadPoint> {
+    let usable: Vec<(&[f64], &[f64])> =
+        runs.iter().map(|r| series(r)).filter(|(xs, ys)| !xs.is_empty() && !ys.is_empty()).collect();
     let Some(grid) =
-        usable.iter().min_by(|a, b| a.step[a.step.len() - 1].total_cmp(&b.step[b.step.len() - 1]))
+        usable.iter().map(|(xs, _)| *xs).min_by(|a, b| a[a.len() - 1].total_cmp(&b[b.len() - 1]))
     else {
         return Vec::new();
     };
-    grid.step
-        .iter()
+    grid.iter()
         .map(|&x| {
-            let values: Vec<f64> = usable.iter().map(|r| interpolate(&r.step, series(r), x)).collect();
+            let values: Vec<f64> = usable.iter().map(|(xs, ys)| interpolate(xs, ys, x)).collect();
             let mean = values.iter().sum::<f64>() / values.len() as f64;
             let min = values.iter().copied().fold(f64::INFINITY, f64::min);
             let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -247,11 +276,14 @@ pub(crate) fn load_font() -> Result<(), PlotError> {
         .map_err(|_| PlotError::Font("DejaVuSans.ttf is not a usable font".into()))
 }
 
-/// Runs grouped by experiment, in name order.
-type Groups<'a> = BTreeMap<&'a str, Vec<&'a RunCurves>>;
+/// Runs grouped by a label (the experiment, or the method in Table I), in label order.
+pub(crate) type Groups<'a> = BTreeMap<&'a str, Vec<&'a RunCurves>>;
 
-/// One series of a run (e.g. its mean returns).
-type Series = fn(&RunCurves) -> &[f64];
+/// One series of a run: its env steps and values (e.g. its mean returns).
+pub(crate) type Series = fn(&RunCurves) -> (&[f64], &[f64]);
+
+/// A panel of a figure: its title, its series and an optional second series drawn dashed.
+pub(crate) type PanelSpec = (&'static str, Series, Option<Series>);
 
 /// A group's curve in one panel: the experiment, its points, and whether it is the panel's
 /// second (dashed) series.
@@ -269,32 +301,52 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
     if runs.is_empty() {
         return Err(PlotError::NoRuns);
     }
-    load_font()?;
     let mut groups: Groups = BTreeMap::new();
     for r in runs {
         groups.entry(r.experiment.as_str()).or_default().push(r);
     }
-    let root = BitMapBackend::new(out, (2000, 450)).into_drawing_area();
-    root.fill(&WHITE).map_err(draw_err)?;
-    let panels = root.split_evenly((1, 4));
     // Each panel: a title and its series (a second one, e.g. Monte-Carlo returns beside
     // mean Q, is drawn dashed in the same colour).
-    let specs: [(&str, Series, Option<Series>); 4] = [
-        ("episode return", |r| &r.mean_return, None),
-        ("rotation about z per episode (rad)", |r| &r.rotation_rad, None),
-        ("controller share", |r| &r.controller_share, None),
-        ("mean Q (solid) vs Monte-Carlo return (dashed)", |r| &r.mean_q, Some(|r| &r.mc_return)),
+    let specs: [PanelSpec; 4] = [
+        ("episode return", |r| (&r.step, &r.mean_return), None),
+        ("rotation about z per episode (rad)", |r| (&r.step, &r.rotation_rad), None),
+        ("controller share", |r| (&r.step, &r.controller_share), None),
+        (
+            "mean Q (solid) vs Monte-Carlo return (dashed)",
+            |r| (&r.step, &r.mean_q),
+            Some(|r| (&r.step, &r.mc_return)),
+        ),
     ];
-    for (panel, (title, series, second)) in panels.iter().zip(specs) {
+    draw_figure(&groups, &specs, "", out)?;
+    Ok(success_table(&groups))
+}
+
+/// One row of panels, one per spec, each with every group's mean over its min-max band,
+/// into a PNG at `out`, under `caption` (none if empty).
+pub(crate) fn draw_figure(
+    groups: &Groups,
+    specs: &[PanelSpec],
+    caption: &str,
+    out: &Path,
+) -> Result<(), PlotError> {
+    load_font()?;
+    let width = 500 * specs.len().max(1) as u32;
+    let height = if caption.is_empty() { 450 } else { 490 };
+    let mut root = BitMapBackend::new(out, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+    if !caption.is_empty() {
+        root = root.titled(caption, ("sans-serif", 20)).map_err(draw_err)?;
+    }
+    let panels = root.split_evenly((1, specs.len().max(1)));
+    for (panel, &(title, series, second)) in panels.iter().zip(specs) {
         let mut curves: Vec<Curve> =
             groups.iter().map(|(name, rs)| (*name, spread(rs, series), false)).collect();
         if let Some(second) = second {
             curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
         }
-        draw_panel(panel, title, &curves, &groups)?;
+        draw_panel(panel, title, &curves, groups)?;
     }
-    root.present().map_err(draw_err)?;
-    Ok(success_table(&groups))
+    root.present().map_err(draw_err)
 }
 
 /// One panel: axes fitted to `curves`, each group's mean line over its min-max band (or a

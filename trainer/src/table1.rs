@@ -1,0 +1,319 @@
+//! The paper's Table I and Fig. 3 from run folders (`vge plot --table1 DIR`): for every
+//! (controller, method) the seeds that finished, how many learned (the success test of
+//! [`crate::eval`]), their mean final success rate and return, and learning curves of the
+//! periodic evaluations, one figure per controller with one band per method.
+//!
+//! Runs are found under the given folders (a run folder holds `config.toml` and
+//! `metrics.csv`) and placed in the table by their config's `controller` and `method`,
+//! never by folder names. A run counts once it has its `final-eval.json`; unfinished runs
+//! are counted apart. The controllers alone (`vge controller --json`, the same success
+//! test's episodes) are read from `DIR/controllers/{igm,cs,fg}.json` when present.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::config::Method;
+use crate::controllers::ControllerKind;
+use crate::plot::{Groups, PanelSpec, PlotError, RunCurves, draw_figure, read_run};
+
+/// Controllers in the table's order (the paper's: FG, then CS; IGM last).
+pub const CONTROLLERS: [ControllerKind; 3] = [ControllerKind::Fg, ControllerKind::Cs, ControllerKind::Igm];
+
+/// The method label of the controllers-alone rows.
+pub const CONTROLLER_ALONE: &str = "controller-alone";
+
+/// The figures (one per controller) that [`write`] draws.
+pub const CURVE_FIGURES: [ControllerKind; 2] = [ControllerKind::Fg, ControllerKind::Cs];
+
+/// The paper's Table I (share of about 10 seeds that learned), and its text for the
+/// baselines ("RL + BC loss and RL" never learn).
+#[must_use]
+pub fn paper_learned_share(controller: ControllerKind, method: &str) -> Option<f64> {
+    match (controller, method) {
+        (ControllerKind::Fg, "vge" | "vge-bc") => Some(1.0),
+        (ControllerKind::Fg, "fge") => Some(0.73),
+        (ControllerKind::Cs, "vge") => Some(0.27),
+        (ControllerKind::Cs, "vge-bc") => Some(0.36),
+        (ControllerKind::Cs, "fge") => Some(0.67),
+        (ControllerKind::Fg | ControllerKind::Cs, "rl" | "rl-bc") => Some(0.0),
+        _ => None,
+    }
+}
+
+/// One row of `table1.csv`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    pub controller: ControllerKind,
+    /// [`Method::name`], or [`CONTROLLER_ALONE`].
+    pub method: String,
+    /// Finished runs (with `final-eval.json`); 0 for the controller alone.
+    pub seeds: usize,
+    /// Of those, the runs whose final policy learned (success rate >= 50%).
+    pub learned: usize,
+    /// Mean over seeds of the final success rate (the controller alone: over its episodes).
+    pub success_rate_mean: f64,
+    /// Mean and standard deviation over seeds of the final evaluation's mean return (the
+    /// controller alone: its mean return, no deviation).
+    pub return_mean: f64,
+    pub return_std: Option<f64>,
+    /// Mean env steps of the finished runs (0 for the controller alone).
+    pub env_steps: u64,
+    /// Runs found for this cell that have not finished.
+    pub unfinished: usize,
+}
+
+/// The `vge controller --json` fields the table reads.
+#[derive(Debug, serde::Deserialize)]
+struct ControllerAlone {
+    success_rate: f64,
+    mean_return: f64,
+}
+
+/// Every run folder at or below `roots` (a folder with `config.toml` and `metrics.csv`;
+/// subfolders are searched in name order, three levels down at most).
+pub fn find_runs(roots: &[PathBuf]) -> Result<Vec<PathBuf>, PlotError> {
+    fn walk(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), PlotError> {
+        if dir.join("config.toml").is_file() && dir.join("metrics.csv").is_file() {
+            found.push(dir.to_owned());
+            return Ok(());
+        }
+        if depth == 0 {
+            return Ok(());
+        }
+        let io = |source| PlotError::Io { path: dir.to_owned(), source };
+        let mut subdirs: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(io)?
+            .map(|e| e.map(|e| e.path()))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(io)?
+            .into_iter()
+            .filter(|p| p.is_dir())
+            .collect();
+        subdirs.sort();
+        subdirs.iter().try_for_each(|d| walk(d, depth - 1, found))
+    }
+    let mut found = Vec::new();
+    for root in roots {
+        if !root.is_dir() {
+            return Err(PlotError::Io {
+                path: root.clone(),
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a folder"),
+            });
+        }
+        walk(root, 3, &mut found)?;
+    }
+    found.dedup();
+    Ok(found)
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len().max(1) as f64
+}
+
+/// Sample standard deviation (n - 1); None below two values.
+fn std_dev(values: &[f64]) -> Option<f64> {
+    (values.len() >= 2).then(|| {
+        let m = mean(values);
+        (values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (values.len() - 1) as f64).sqrt()
+    })
+}
+
+/// The table's rows: one per (controller, method) with runs, in [`CONTROLLERS`] and
+/// [`Method::ALL`] order, each controller followed by its controller-alone row if given.
+#[must_use]
+pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) -> Vec<Row> {
+    let mut rows = Vec::new();
+    for controller in CONTROLLERS {
+        for method in Method::ALL {
+            let cell: Vec<&RunCurves> =
+                runs.iter().filter(|r| r.controller == Some(controller) && r.method == method).collect();
+            if cell.is_empty() {
+                continue;
+            }
+            let finished: Vec<&RunCurves> =
+                cell.iter().copied().filter(|r| r.final_return.is_some()).collect();
+            let success: Vec<f64> = finished.iter().filter_map(|r| r.final_success).collect();
+            let returns: Vec<f64> = finished.iter().filter_map(|r| r.final_return).collect();
+            let steps: Vec<f64> = finished.iter().filter_map(|r| r.env_steps).map(|s| s as f64).collect();
+            rows.push(Row {
+                controller,
+                method: method.name().to_owned(),
+                seeds: finished.len(),
+                learned: finished.iter().filter(|r| r.learned() == Some(true)).count(),
+                success_rate_mean: mean(&success),
+                return_mean: mean(&returns),
+                return_std: std_dev(&returns),
+                env_steps: mean(&steps).round() as u64,
+                unfinished: cell.len() - finished.len(),
+            });
+        }
+        if let Some(&(success_rate, mean_return)) = alone.get(&controller) {
+            rows.push(Row {
+                controller,
+                method: CONTROLLER_ALONE.to_owned(),
+                seeds: 0,
+                learned: 0,
+                success_rate_mean: success_rate,
+                return_mean: mean_return,
+                return_std: None,
+                env_steps: 0,
+                unfinished: 0,
+            });
+        }
+    }
+    rows
+}
+
+/// `table1.csv`: `controller,method,seeds,learned,success_rate_mean,return_mean,return_std,
+/// env_steps` (return_std empty below two seeds; `seeds` and `learned` empty for the
+/// controller alone).
+#[must_use]
+pub fn to_csv(rows: &[Row]) -> String {
+    let mut text =
+        String::from("controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps\n");
+    for r in rows {
+        let alone = r.method == CONTROLLER_ALONE;
+        let count = |n: usize| if alone { String::new() } else { n.to_string() };
+        text.push_str(&format!(
+            "{},{},{},{},{:.4},{:.2},{},{}\n",
+            r.controller.name(),
+            r.method,
+            count(r.seeds),
+            count(r.learned),
+            r.success_rate_mean,
+            r.return_mean,
+            r.return_std.map_or_else(String::new, |s| format!("{s:.2}")),
+            if alone { String::new() } else { r.env_steps.to_string() },
+        ));
+    }
+    text
+}
+
+/// `table1.md`: ours beside the paper's share of seeds that learned.
+#[must_use]
+pub fn to_markdown(rows: &[Row]) -> String {
+    let mut text = String::from(
+        "| controller | method | seeds learned (ours) | paper (about 10 seeds) | final success rate, mean | final return, mean ± std | env steps |\n|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let paper = paper_learned_share(r.controller, &r.method)
+            .map_or_else(|| "not reported".to_owned(), |p| format!("{:.0}%", 100.0 * p));
+        let learned = if r.method == CONTROLLER_ALONE {
+            "(no learning)".to_owned()
+        } else {
+            let share = if r.seeds > 0 { 100.0 * r.learned as f64 / r.seeds as f64 } else { 0.0 };
+            let mut cell = format!("{}/{} ({share:.0}%)", r.learned, r.seeds);
+            if r.unfinished > 0 {
+                cell.push_str(&format!(", {} running", r.unfinished));
+            }
+            cell
+        };
+        let ret = match r.return_std {
+            Some(s) => format!("{:.1} ± {s:.1}", r.return_mean),
+            None => format!("{:.1}", r.return_mean),
+        };
+        let paper = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { paper };
+        let steps = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { r.env_steps.to_string() };
+        text.push_str(&format!(
+            "| {} | {} | {learned} | {paper} | {:.2} | {ret} | {steps} |\n",
+            r.controller.name().to_uppercase(),
+            r.method,
+            r.success_rate_mean,
+        ));
+    }
+    text
+}
+
+/// The controllers-alone figures under `dir/controllers/` (`{kind}.json`, written by `vge
+/// controller --json`): success rate and mean return per controller found.
+pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, (f64, f64)>, PlotError> {
+    let mut alone = BTreeMap::new();
+    for kind in CONTROLLERS {
+        let path = dir.join("controllers").join(format!("{}.json", kind.name()));
+        if !path.exists() {
+            continue;
+        }
+        let text =
+            std::fs::read_to_string(&path).map_err(|source| PlotError::Io { path: path.clone(), source })?;
+        let c: ControllerAlone = serde_json::from_str(text.trim())
+            .map_err(|e| PlotError::Csv { path: path.clone(), message: e.to_string() })?;
+        alone.insert(kind, (c.success_rate, c.mean_return));
+    }
+    Ok(alone)
+}
+
+/// What [`write`] produced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Written {
+    pub rows: Vec<Row>,
+    pub files: Vec<PathBuf>,
+}
+
+/// Reads the runs below `roots` and the controllers alone under `out`, and writes
+/// `out/table1.csv`, `out/table1.md` and `out/curves-{fg,cs}.png` (a figure only for a
+/// controller with runs).
+pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
+    let dirs = find_runs(roots)?;
+    if dirs.is_empty() {
+        return Err(PlotError::NoRuns);
+    }
+    let runs = dirs.iter().map(|d| read_run(d)).collect::<Result<Vec<_>, _>>()?;
+    let alone = read_controllers_alone(out)?;
+    let rows = rows(&runs, &alone);
+    std::fs::create_dir_all(out).map_err(|source| PlotError::Io { path: out.to_owned(), source })?;
+    let mut files = Vec::new();
+    for (name, text) in [("table1.csv", to_csv(&rows)), ("table1.md", to_markdown(&rows))] {
+        let path = out.join(name);
+        std::fs::write(&path, text).map_err(|source| PlotError::Io { path: path.clone(), source })?;
+        files.push(path);
+    }
+    // The learner's own performance: the periodic success test of the exported policy.
+    let specs: [PanelSpec; 2] = [
+        ("success rate (success test)", |r| (&r.eval_step, &r.eval_success), None),
+        ("evaluation return", |r| (&r.eval_step, &r.eval_return), None),
+    ];
+    for controller in CURVE_FIGURES {
+        let mut groups: Groups = BTreeMap::new();
+        for r in runs.iter().filter(|r| r.controller == Some(controller)) {
+            groups.entry(r.method.name()).or_default().push(r);
+        }
+        if groups.is_empty() {
+            continue;
+        }
+        let path = out.join(format!("curves-{}.png", controller.name()));
+        let caption = format!(
+            "{} controller, cube: success test every {} env steps, mean and min-max over seeds",
+            controller.name().to_uppercase(),
+            eval_interval(&groups)
+        );
+        draw_figure(&groups, &specs, &caption, &path)?;
+        files.push(path);
+    }
+    Ok(Written { rows, files })
+}
+
+/// The step between periodic evaluations of the first run with two (for the caption).
+fn eval_interval(groups: &Groups) -> String {
+    groups
+        .values()
+        .flatten()
+        .find(|r| r.eval_step.len() >= 2)
+        .map_or_else(|| "?".to_owned(), |r| format!("{:.0}k", (r.eval_step[1] - r.eval_step[0]) / 1e3))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_standard_deviation() {
+        assert_eq!(std_dev(&[1.0]), None);
+        assert_eq!(std_dev(&[1.0, 3.0]), Some(std::f64::consts::SQRT_2));
+    }
+
+    #[test]
+    fn paper_cells() {
+        assert_eq!(paper_learned_share(ControllerKind::Cs, "fge"), Some(0.67));
+        assert_eq!(paper_learned_share(ControllerKind::Igm, "vge"), None);
+    }
+}

@@ -1,0 +1,107 @@
+//! Table I from run folders (`vge plot --table1`): the arithmetic on known runs, and the
+//! committed docs/results/table1 artefacts against the run folders they come from.
+
+use std::path::{Path, PathBuf};
+
+use vge_trainer::controllers::ControllerKind;
+use vge_trainer::table1;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_owned()
+}
+
+fn tempdir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vge-table1-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// A run folder of `config` (a file under configs/) with two metrics rows, two periodic
+/// evaluations and, when `final_eval` is given as (success rate, mean return), a final one.
+fn fake_run(dir: &Path, config: &str, final_eval: Option<(f64, f64)>) {
+    std::fs::create_dir_all(dir).expect("run dir");
+    std::fs::copy(repo().join("configs").join(config), dir.join("config.toml")).expect("config");
+    std::fs::write(
+        dir.join("metrics.csv"),
+        "step,episodes,return,rotation,controller_share\n10000,5,1.0,0.1,0.5\n20000,9,2.0,0.2,0.4\n",
+    )
+    .expect("metrics");
+    let (success, ret) = final_eval.unwrap_or((0.25, 10.0));
+    std::fs::write(
+        dir.join("eval.csv"),
+        format!(
+            "step,episodes,return,rotation,success\n10000,20,5.0,0.3,0.0\n20000,20,{ret},1.0,{success}\n"
+        ),
+    )
+    .expect("eval");
+    if let Some((success, ret)) = final_eval {
+        let json = serde_json::json!({
+            "success_rate": success, "mean_return": ret, "env_steps": 20000, "wall_s": 60.0,
+            "episodes": 20, "learned": success >= 0.5,
+        });
+        std::fs::write(dir.join("final-eval.json"), json.to_string()).expect("final eval");
+    }
+}
+
+#[test]
+fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
+    let root = tempdir("known");
+    // Folder names say nothing: the config decides the cell.
+    fake_run(&root.join("a/seed-0"), "cube-fg-fge.toml", Some((0.6, 100.0)));
+    fake_run(&root.join("a/seed-1"), "cube-fg-fge.toml", Some((0.4, 200.0)));
+    fake_run(&root.join("b/x"), "cube-fg-fge.toml", Some((0.5, 300.0)));
+    fake_run(&root.join("b/y"), "cube-fg-fge.toml", None);
+    fake_run(&root.join("c"), "cube-cs-vge.toml", Some((0.0, 12.5)));
+    let out = tempdir("known-out");
+    std::fs::create_dir_all(out.join("controllers")).expect("controllers dir");
+    std::fs::write(
+        out.join("controllers/fg.json"),
+        r#"{"kind":"fg","success_rate":0.05,"mean_return":11.5}"#,
+    )
+    .expect("fg alone");
+
+    let written = table1::write(std::slice::from_ref(&root), &out).expect("table");
+    let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
+    assert_eq!(
+        csv,
+        "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps\n\
+         fg,fge,3,2,0.5000,200.00,100.00,20000\n\
+         fg,controller-alone,,,0.0500,11.50,,\n\
+         cs,vge,1,0,0.0000,12.50,,20000\n"
+    );
+    let fge = &written.rows[0];
+    assert_eq!((fge.controller, fge.seeds, fge.learned, fge.unfinished), (ControllerKind::Fg, 3, 2, 1));
+    let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
+    assert!(md.contains("| FG | fge | 2/3 (67%), 1 running | 73% |"), "{md}");
+    assert!(md.contains("| CS | vge | 0/1 (0%) | 27% |"), "{md}");
+    for png in ["curves-fg.png", "curves-cs.png"] {
+        let bytes = std::fs::read(out.join(png)).expect(png);
+        assert!(bytes.starts_with(b"\x89PNG"), "{png}");
+    }
+    assert!(!out.join("curves-igm.png").exists());
+
+    // A folder without runs is an error, not an empty table.
+    let empty = tempdir("empty");
+    assert!(table1::write(&[empty], &out).is_err());
+}
+
+#[test]
+fn committed_table1_is_what_its_run_folders_give() {
+    let results = repo().join("docs/results");
+    let committed = results.join("table1");
+    let out = tempdir("committed");
+    std::fs::create_dir_all(out.join("controllers")).expect("controllers dir");
+    for entry in std::fs::read_dir(committed.join("controllers")).expect("docs/results/table1/controllers") {
+        let path = entry.expect("entry").path();
+        std::fs::copy(&path, out.join("controllers").join(path.file_name().expect("name"))).expect("copy");
+    }
+    // The roots that README and table1.md name: the table's own folder and VGE + FG's seeds.
+    let roots = [committed.clone(), results.join("cube-fg-vge-seeds")];
+    table1::write(&roots, &out).expect("recompute");
+    for file in ["table1.csv", "table1.md"] {
+        let want = std::fs::read_to_string(committed.join(file)).expect(file);
+        let got = std::fs::read_to_string(out.join(file)).expect(file);
+        assert_eq!(got, want, "{file} differs from what the run folders give");
+    }
+}
