@@ -63,7 +63,10 @@ impl Sac {
             None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
         };
         self.updates += 1;
-        let bc_weight = self.bc_weight(batch);
+        let actor_step = self.updates.is_multiple_of(policy_delay.max(1));
+        // The BC weights come from the critics before this update's critic step, and only
+        // an update with an actor step reads them.
+        let bc_weight = if actor_step { self.bc_weight(batch) } else { None };
         let scale = self.actor.action_scale().shallow_clone();
         let target_actor = match &self.target_actor {
             Some(target) => &target.actor,
@@ -79,7 +82,7 @@ impl Sac {
         let (critic_loss, q) = self.critic_step(batch, &q_next);
 
         let mut bc_value = 0.0;
-        if self.updates.is_multiple_of(policy_delay.max(1)) {
+        if actor_step {
             self.critic_vs.freeze();
             let mu = self.actor.deterministic(&batch.obs);
             let rl_loss = -self.critic.q1(&batch.obs, &mu).mean(Kind::Float);
