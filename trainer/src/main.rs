@@ -458,6 +458,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plot { runs, table1: Some(dir), .. } => {
             let written = vge_trainer::table1::write(&runs, &dir)?;
             print!("{}", vge_trainer::table1::to_markdown(&written.rows));
+            for d in &written.skipped {
+                eprintln!("not in Table I (not the cube alone, or no controller): {}", d.display());
+            }
             for f in &written.files {
                 eprintln!("wrote {}", f.display());
             }

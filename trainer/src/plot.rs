@@ -42,6 +42,8 @@ pub struct RunCurves {
     /// The run config's method and controller (the cell of Table I it belongs to).
     pub method: Method,
     pub controller: Option<ControllerKind>,
+    /// The objects its envs train on (`env.objects`).
+    pub objects: Vec<vge_sim::ObjectShape>,
     pub step: Vec<f64>,
     pub mean_return: Vec<f64>,
     pub rotation_rad: Vec<f64>,
@@ -164,6 +166,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         experiment,
         method: config.method,
         controller: config.controller,
+        objects: config.env.objects.clone(),
         step,
         mean_return,
         rotation_rad,

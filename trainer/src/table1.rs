@@ -70,7 +70,8 @@ struct ControllerAlone {
 }
 
 /// Every run folder at or below `roots` (a folder with `config.toml` and `metrics.csv`;
-/// subfolders are searched in name order, three levels down at most).
+/// subfolders are searched in name order, three levels down at most), each once however
+/// the roots overlap.
 pub fn find_runs(roots: &[PathBuf]) -> Result<Vec<PathBuf>, PlotError> {
     fn walk(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), PlotError> {
         if dir.join("config.toml").is_file() && dir.join("metrics.csv").is_file() {
@@ -102,7 +103,8 @@ pub fn find_runs(roots: &[PathBuf]) -> Result<Vec<PathBuf>, PlotError> {
         }
         walk(root, 3, &mut found)?;
     }
-    found.dedup();
+    let mut seen = std::collections::HashSet::new();
+    found.retain(|d| seen.insert(std::fs::canonicalize(d).unwrap_or_else(|_| d.clone())));
     Ok(found)
 }
 
@@ -247,6 +249,13 @@ pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, (f6
 pub struct Written {
     pub rows: Vec<Row>,
     pub files: Vec<PathBuf>,
+    /// Runs found that are not a cell of the table (no controller, or not the cube alone).
+    pub skipped: Vec<PathBuf>,
+}
+
+/// Whether a run belongs in the table: the cube alone, with a controller named.
+fn in_table(run: &RunCurves) -> bool {
+    run.controller.is_some() && run.objects == [vge_sim::ObjectShape::Cube]
 }
 
 /// Reads the runs below `roots` and the controllers alone under `out`, and writes
@@ -257,7 +266,9 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
     if dirs.is_empty() {
         return Err(PlotError::NoRuns);
     }
-    let runs = dirs.iter().map(|d| read_run(d)).collect::<Result<Vec<_>, _>>()?;
+    let (runs, others): (Vec<RunCurves>, Vec<RunCurves>) =
+        dirs.iter().map(|d| read_run(d)).collect::<Result<Vec<_>, _>>()?.into_iter().partition(in_table);
+    let skipped = others.into_iter().map(|r| r.dir).collect();
     let alone = read_controllers_alone(out)?;
     let rows = rows(&runs, &alone);
     std::fs::create_dir_all(out).map_err(|source| PlotError::Io { path: out.to_owned(), source })?;
@@ -289,7 +300,7 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
         draw_figure(&groups, &specs, &caption, &path)?;
         files.push(path);
     }
-    Ok(Written { rows, files })
+    Ok(Written { rows, files, skipped })
 }
 
 /// The step between periodic evaluations of the first run with two (for the caption).

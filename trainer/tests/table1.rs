@@ -53,6 +53,8 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     fake_run(&root.join("b/x"), "cube-fg-fge.toml", Some((0.5, 300.0)));
     fake_run(&root.join("b/y"), "cube-fg-fge.toml", None);
     fake_run(&root.join("c"), "cube-cs-vge.toml", Some((0.0, 12.5)));
+    // Not a cell: several objects.
+    fake_run(&root.join("d"), "multi-object-fg-vge.toml", Some((1.0, 50.0)));
     let out = tempdir("known-out");
     std::fs::create_dir_all(out.join("controllers")).expect("controllers dir");
     std::fs::write(
@@ -61,7 +63,9 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     )
     .expect("fg alone");
 
-    let written = table1::write(std::slice::from_ref(&root), &out).expect("table");
+    // Overlapping roots list a run once.
+    let written = table1::write(&[root.clone(), root.join("a")], &out).expect("table");
+    assert_eq!(written.skipped, vec![root.join("d")]);
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
     assert_eq!(
         csv,
