@@ -95,7 +95,9 @@ impl RunCurves {
 #[derive(Debug, serde::Deserialize)]
 struct FinalEvalFields {
     success_rate: f64,
-    mean_return: f64,
+    /// Absent in files of older vge versions.
+    #[serde(default)]
+    mean_return: Option<f64>,
     env_steps: u64,
     wall_s: f64,
 }
@@ -177,7 +179,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         eval_return,
         eval_success,
         final_success,
-        final_return: final_eval.as_ref().map(|f| f.mean_return),
+        final_return: final_eval.as_ref().and_then(|f| f.mean_return),
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
         selected: read_json(&dir.join("best-eval.json"))?,

@@ -132,8 +132,8 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) ->
             if cell.is_empty() {
                 continue;
             }
-            let finished: Vec<&RunCurves> =
-                cell.iter().copied().filter(|r| r.final_return.is_some()).collect();
+            // Finished: it has a final-eval.json (which gives the env steps).
+            let finished: Vec<&RunCurves> = cell.iter().copied().filter(|r| r.env_steps.is_some()).collect();
             let success: Vec<f64> = finished.iter().filter_map(|r| r.final_success).collect();
             let returns: Vec<f64> = finished.iter().filter_map(|r| r.final_return).collect();
             let steps: Vec<f64> = finished.iter().filter_map(|r| r.env_steps).map(|s| s as f64).collect();
