@@ -322,16 +322,19 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
             Some(|r| (&r.step, &r.mc_return)),
         ),
     ];
-    draw_figure(&groups, &specs, "", out)?;
+    draw_figure(&groups, &specs, "", &[], out)?;
     Ok(success_table(&groups))
 }
 
 /// One row of panels, one per spec, each with every group's mean over its min-max band,
-/// into a PNG at `out`, under `caption` (none if empty).
+/// into a PNG at `out`, under `caption` (none if empty). A group named in `palette` takes
+/// the colour of its place there, so that it keeps its colour whichever other groups are
+/// present; others take their place among the groups.
 pub(crate) fn draw_figure(
     groups: &Groups,
     specs: &[PanelSpec],
     caption: &str,
+    palette: &[&str],
     out: &Path,
 ) -> Result<(), PlotError> {
     load_font()?;
@@ -349,7 +352,7 @@ pub(crate) fn draw_figure(
         if let Some(second) = second {
             curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
         }
-        draw_panel(panel, title, &curves, groups)?;
+        draw_panel(panel, title, &curves, groups, palette)?;
     }
     root.present().map_err(draw_err)
 }
@@ -361,6 +364,7 @@ fn draw_panel(
     title: &str,
     curves: &[Curve],
     groups: &Groups,
+    palette: &[&str],
 ) -> Result<(), PlotError> {
     let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
     let (y_min, y_max) = curves
@@ -385,8 +389,10 @@ fn draw_panel(
         .x_label_formatter(&steps_label)
         .draw()
         .map_err(draw_err)?;
-    for (i, (name, c, dashed)) in curves.iter().enumerate() {
-        let color = Palette99::pick(i % groups.len()).to_rgba();
+    for (name, c, dashed) in curves {
+        let place = palette.iter().position(|p| p == name);
+        let place = place.or_else(|| groups.keys().position(|k| k == name)).unwrap_or(0);
+        let color = Palette99::pick(place).to_rgba();
         if *dashed {
             chart
                 .draw_series(DashedLineSeries::new(
@@ -397,7 +403,7 @@ fn draw_panel(
                 ))
                 .map_err(draw_err)?;
         } else {
-            draw_band_and_mean(&mut chart, c, color, format!("{name} ({} runs)", groups[name].len()))?;
+            draw_band_and_mean(&mut chart, c, color, runs_label(name, groups[name].len()))?;
         }
     }
     chart
@@ -406,6 +412,11 @@ fn draw_panel(
         .border_style(BLACK)
         .draw()
         .map_err(draw_err)
+}
+
+/// A legend entry: the group and how many runs it averages.
+fn runs_label(name: &str, runs: usize) -> String {
+    format!("{name} ({runs} run{})", if runs == 1 { "" } else { "s" })
 }
 
 /// A group's min-max band (light) and its mean line, labelled in the legend.

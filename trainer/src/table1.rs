@@ -297,7 +297,7 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
             controller.name().to_uppercase(),
             eval_interval(&groups)
         );
-        draw_figure(&groups, &specs, &caption, &path)?;
+        draw_figure(&groups, &specs, &caption, &Method::ALL.map(Method::name), &path)?;
         files.push(path);
     }
     Ok(Written { rows, files, skipped })
