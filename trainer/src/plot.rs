@@ -60,8 +60,10 @@ pub struct RunCurves {
     /// Success rate of the final evaluation (`final-eval.json`), else of the last periodic
     /// one, if any.
     pub final_success: Option<f64>,
-    /// Mean return of the final evaluation (`final-eval.json`).
+    /// Mean return and contact switches per episode of the final evaluation
+    /// (`final-eval.json`).
     pub final_return: Option<f64>,
+    pub final_contact_switches: Option<f64>,
     /// Env steps and wall time of the finished run (from `final-eval.json`).
     pub env_steps: Option<u64>,
     pub wall_s: Option<f64>,
@@ -98,6 +100,8 @@ struct FinalEvalFields {
     /// Absent in files of older vge versions.
     #[serde(default)]
     mean_return: Option<f64>,
+    #[serde(default)]
+    mean_contact_switches: Option<f64>,
     env_steps: u64,
     wall_s: f64,
 }
@@ -180,6 +184,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         eval_success,
         final_success,
         final_return: final_eval.as_ref().and_then(|f| f.mean_return),
+        final_contact_switches: final_eval.as_ref().and_then(|f| f.mean_contact_switches),
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
         selected: read_json(&dir.join("best-eval.json"))?,

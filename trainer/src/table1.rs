@@ -58,6 +58,9 @@ pub struct Row {
     pub return_std: Option<f64>,
     /// Mean env steps of the finished runs (0 for the controller alone).
     pub env_steps: u64,
+    /// Mean over seeds of the final evaluation's contact switches per episode, the evidence
+    /// that a success is finger gaiting (table1.md only; None where no run reports it).
+    pub contact_switches_mean: Option<f64>,
     /// Runs found for this cell that have not finished.
     pub unfinished: usize,
 }
@@ -67,7 +70,11 @@ pub struct Row {
 struct ControllerAlone {
     success_rate: f64,
     mean_return: f64,
+    mean_contact_switches: f64,
 }
+
+/// A controller alone's figures: success rate, mean return, contact switches per episode.
+pub type AloneFigures = (f64, f64, f64);
 
 /// Every run folder at or below `roots` (a folder with `config.toml` and `metrics.csv`;
 /// subfolders are searched in name order, three levels down at most), each once however
@@ -123,7 +130,7 @@ fn std_dev(values: &[f64]) -> Option<f64> {
 /// The table's rows: one per (controller, method) with runs, in [`CONTROLLERS`] and
 /// [`Method::ALL`] order, each controller followed by its controller-alone row if given.
 #[must_use]
-pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) -> Vec<Row> {
+pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) -> Vec<Row> {
     let mut rows = Vec::new();
     for controller in CONTROLLERS {
         for method in Method::ALL {
@@ -137,6 +144,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) ->
             let success: Vec<f64> = finished.iter().filter_map(|r| r.final_success).collect();
             let returns: Vec<f64> = finished.iter().filter_map(|r| r.final_return).collect();
             let steps: Vec<f64> = finished.iter().filter_map(|r| r.env_steps).map(|s| s as f64).collect();
+            let switches: Vec<f64> = finished.iter().filter_map(|r| r.final_contact_switches).collect();
             rows.push(Row {
                 controller,
                 method: method.name().to_owned(),
@@ -146,10 +154,11 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) ->
                 return_mean: mean(&returns),
                 return_std: std_dev(&returns),
                 env_steps: mean(&steps).round() as u64,
+                contact_switches_mean: (!switches.is_empty()).then(|| mean(&switches)),
                 unfinished: cell.len() - finished.len(),
             });
         }
-        if let Some(&(success_rate, mean_return)) = alone.get(&controller) {
+        if let Some(&(success_rate, mean_return, switches)) = alone.get(&controller) {
             rows.push(Row {
                 controller,
                 method: CONTROLLER_ALONE.to_owned(),
@@ -159,6 +168,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, (f64, f64)>) ->
                 return_mean: mean_return,
                 return_std: None,
                 env_steps: 0,
+                contact_switches_mean: Some(switches),
                 unfinished: 0,
             });
         }
@@ -195,7 +205,7 @@ pub fn to_csv(rows: &[Row]) -> String {
 #[must_use]
 pub fn to_markdown(rows: &[Row]) -> String {
     let mut text = String::from(
-        "| controller | method | seeds learned (ours) | paper (about 10 seeds) | final success rate, mean | final return, mean ± std | env steps |\n|---|---|---|---|---|---|---|\n",
+        "| controller | method | seeds learned (ours) | paper (about 10 seeds) | final success rate, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let paper = paper_learned_share(r.controller, &r.method)
@@ -216,8 +226,9 @@ pub fn to_markdown(rows: &[Row]) -> String {
         };
         let paper = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { paper };
         let steps = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { r.env_steps.to_string() };
+        let switches = r.contact_switches_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.1}"));
         text.push_str(&format!(
-            "| {} | {} | {learned} | {paper} | {:.2} | {ret} | {steps} |\n",
+            "| {} | {} | {learned} | {paper} | {:.2} | {ret} | {switches} | {steps} |\n",
             r.controller.name().to_uppercase(),
             r.method,
             r.success_rate_mean,
@@ -227,8 +238,8 @@ pub fn to_markdown(rows: &[Row]) -> String {
 }
 
 /// The controllers-alone figures under `dir/controllers/` (`{kind}.json`, written by `vge
-/// controller --json`): success rate and mean return per controller found.
-pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, (f64, f64)>, PlotError> {
+/// controller --json`): success rate, mean return and contact switches per controller found.
+pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, AloneFigures>, PlotError> {
     let mut alone = BTreeMap::new();
     for kind in CONTROLLERS {
         let path = dir.join("controllers").join(format!("{}.json", kind.name()));
@@ -239,7 +250,7 @@ pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, (f6
             std::fs::read_to_string(&path).map_err(|source| PlotError::Io { path: path.clone(), source })?;
         let c: ControllerAlone = serde_json::from_str(text.trim())
             .map_err(|e| PlotError::Csv { path: path.clone(), message: e.to_string() })?;
-        alone.insert(kind, (c.success_rate, c.mean_return));
+        alone.insert(kind, (c.success_rate, c.mean_return, c.mean_contact_switches));
     }
     Ok(alone)
 }

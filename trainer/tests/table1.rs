@@ -38,6 +38,7 @@ fn fake_run(dir: &Path, config: &str, final_eval: Option<(f64, f64)>) {
     if let Some((success, ret)) = final_eval {
         let json = serde_json::json!({
             "success_rate": success, "mean_return": ret, "env_steps": 20000, "wall_s": 60.0,
+            "mean_contact_switches": 10.0 * success,
             "episodes": 20, "learned": success >= 0.5,
         });
         std::fs::write(dir.join("final-eval.json"), json.to_string()).expect("final eval");
@@ -59,7 +60,7 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     std::fs::create_dir_all(out.join("controllers")).expect("controllers dir");
     std::fs::write(
         out.join("controllers/fg.json"),
-        r#"{"kind":"fg","success_rate":0.05,"mean_return":11.5}"#,
+        r#"{"kind":"fg","success_rate":0.05,"mean_return":11.5,"mean_contact_switches":7.3}"#,
     )
     .expect("fg alone");
 
@@ -77,7 +78,12 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     let fge = &written.rows[0];
     assert_eq!((fge.controller, fge.seeds, fge.learned, fge.unfinished), (ControllerKind::Fg, 3, 2, 1));
     let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
-    assert!(md.contains("| FG | fge | 2/3 (67%), 1 running | 73% |"), "{md}");
+    // Contact switches: the mean of 6, 4 and 5.
+    assert!(
+        md.contains("| FG | fge | 2/3 (67%), 1 running | 73% | 0.50 | 200.0 ± 100.0 | 5.0 | 20000 |"),
+        "{md}"
+    );
+    assert!(md.contains("| FG | controller-alone | (no learning) | - | 0.05 | 11.5 | 7.3 | - |"), "{md}");
     assert!(md.contains("| CS | vge | 0/1 (0%) | 27% |"), "{md}");
     for png in ["curves-fg.png", "curves-cs.png"] {
         let bytes = std::fs::read(out.join(png)).expect(png);
