@@ -178,7 +178,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
 
 /// `table1.csv`: `controller,method,seeds,learned,success_rate_mean,return_mean,return_std,
 /// env_steps` (return_std empty below two seeds; `seeds` and `learned` empty for the
-/// controller alone).
+/// controller alone; the figures empty for a cell with no finished run).
 #[must_use]
 pub fn to_csv(rows: &[Row]) -> String {
     let mut text =
@@ -186,16 +186,18 @@ pub fn to_csv(rows: &[Row]) -> String {
     for r in rows {
         let alone = r.method == CONTROLLER_ALONE;
         let count = |n: usize| if alone { String::new() } else { n.to_string() };
+        // A cell whose runs are all still running has no figures yet (not zeros).
+        let figure = |text: String| if !alone && r.seeds == 0 { String::new() } else { text };
         text.push_str(&format!(
-            "{},{},{},{},{:.4},{:.2},{},{}\n",
+            "{},{},{},{},{},{},{},{}\n",
             r.controller.name(),
             r.method,
             count(r.seeds),
             count(r.learned),
-            r.success_rate_mean,
-            r.return_mean,
+            figure(format!("{:.4}", r.success_rate_mean)),
+            figure(format!("{:.2}", r.return_mean)),
             r.return_std.map_or_else(String::new, |s| format!("{s:.2}")),
-            if alone { String::new() } else { r.env_steps.to_string() },
+            if alone { String::new() } else { figure(r.env_steps.to_string()) },
         ));
     }
     text
@@ -225,6 +227,15 @@ pub fn to_markdown(rows: &[Row]) -> String {
             None => format!("{:.1}", r.return_mean),
         };
         let paper = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { paper };
+        if r.method != CONTROLLER_ALONE && r.seeds == 0 {
+            // All of the cell's runs are still running: no figures yet.
+            text.push_str(&format!(
+                "| {} | {} | {learned} | {paper} | - | - | - | - |\n",
+                r.controller.name().to_uppercase(),
+                r.method
+            ));
+            continue;
+        }
         let steps = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { r.env_steps.to_string() };
         let switches = r.contact_switches_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.1}"));
         text.push_str(&format!(

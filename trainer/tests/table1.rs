@@ -54,6 +54,8 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     fake_run(&root.join("b/x"), "cube-fg-fge.toml", Some((0.5, 300.0)));
     fake_run(&root.join("b/y"), "cube-fg-fge.toml", None);
     fake_run(&root.join("c"), "cube-cs-vge.toml", Some((0.0, 12.5)));
+    // A cell whose only run is still running.
+    fake_run(&root.join("e"), "cube-cs-fge.toml", None);
     // Not a cell: several objects.
     fake_run(&root.join("d"), "multi-object-fg-vge.toml", Some((1.0, 50.0)));
     let out = tempdir("known-out");
@@ -73,6 +75,7 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
         "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps\n\
          fg,fge,3,2,0.5000,200.00,100.00,20000\n\
          fg,controller-alone,,,0.0500,11.50,,\n\
+         cs,fge,0,0,,,,\n\
          cs,vge,1,0,0.0000,12.50,,20000\n"
     );
     let fge = &written.rows[0];
@@ -85,6 +88,7 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     );
     assert!(md.contains("| FG | controller-alone | (no learning) | - | 0.05 | 11.5 | 7.3 | - |"), "{md}");
     assert!(md.contains("| CS | vge | 0/1 (0%) | 27% |"), "{md}");
+    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | 67% | - | - | - | - |"), "{md}");
     for png in ["curves-fg.png", "curves-cs.png"] {
         let bytes = std::fs::read(out.join(png)).expect(png);
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");
