@@ -244,34 +244,35 @@ impl TwinCritic {
 
     /// Q-values of both twins, shape `[2, batch, 1]`.
     pub fn q_values(&self, obs: &Tensor, action: &Tensor) -> Tensor {
-        let x = Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1);
+        let x = self.input(obs, action);
         let batch = x.size()[0];
-        let mut h = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
-        let last = self.weights.len() - 1;
-        for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
-            h = b.baddbmm(&h, w, 1.0, 1.0);
-            if i < last {
-                if self.layer_norm {
-                    let width = h.size()[2];
-                    h = h.layer_norm([width], None::<Tensor>, None::<Tensor>, 1e-5, false);
-                }
-                h = h.relu();
-            }
-        }
-        h
+        let x = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
+        self.forward(x, |h, w, b| b.baddbmm(h, w, 1.0, 1.0))
     }
 
     /// Q-values of the first twin alone, shape `[batch, 1]` (TD3's actor loss reads only
     /// Q₁: evaluating one twin halves that forward and its backward). Twin 0's slice of
     /// each stacked weight, in the same layer order as [`Self::q_values`].
     pub fn q1(&self, obs: &Tensor, action: &Tensor) -> Tensor {
-        let mut h = Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1);
+        self.forward(self.input(obs, action), |h, w, b| b.get(0).addmm(h, &w.get(0)))
+    }
+
+    /// The critics' input: normalised observations beside actions in units of their range.
+    fn input(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+        Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1)
+    }
+
+    /// The layer stack from input `x`, with `affine(h, weight, bias)` applying one layer's
+    /// stacked weights (both twins, or a slice); layer norm (over the last dimension) and
+    /// ReLU after each hidden layer.
+    fn forward(&self, x: Tensor, affine: impl Fn(&Tensor, &Tensor, &Tensor) -> Tensor) -> Tensor {
+        let mut h = x;
         let last = self.weights.len() - 1;
         for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
-            h = b.get(0).addmm(&h, &w.get(0));
+            h = affine(&h, w, b);
             if i < last {
                 if self.layer_norm {
-                    let width = h.size()[1];
+                    let width = h.size()[h.dim() - 1];
                     h = h.layer_norm([width], None::<Tensor>, None::<Tensor>, 1e-5, false);
                 }
                 h = h.relu();
