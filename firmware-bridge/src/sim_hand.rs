@@ -164,7 +164,7 @@ impl SimHand {
         self.pending = [None; FINGERS];
         let result = self.env.step(&action)?;
         self.obs = result.obs;
-        self.tracker.record(result.reward, result.info.object_yaw_rad, result.info.tip_contacts);
+        self.tracker.record(result.reward, result.info.object_rotation_z_rad, result.info.tip_contacts);
         self.terminated |= result.terminated;
         let all: Vec<FingerId> = FingerId::all().collect();
         self.state_frames(&all, cmd.seq)

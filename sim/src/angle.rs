@@ -1,8 +1,24 @@
-//! Angles: the one yaw-difference helper. Physics-free (it stays in the crate without the
-//! `physics` feature), since episode accounting and the bridge use it as well as the env.
+//! Angles: how far an object turned about world z between two orientations, and angle
+//! wrapping. Physics-free (it stays in the crate without the `physics` feature), since
+//! episode accounting and the bridge use it as well as the env.
 
-/// Angle wrapped to (-pi, pi]: the one helper every yaw difference in vge goes through
-/// (env, eval, rollouts, the bridge's sim summary).
+use nalgebra::UnitQuaternion;
+
+/// Rotation about world z (rad) from orientation `before` to `after`: the z component of the
+/// world-frame rotation vector of `after * before⁻¹`, i.e. the angular velocity about z
+/// integrated over the interval (exact for a rotation about z, and for a short interval in
+/// general). The reward and the success test's rotation are sums of this.
+///
+/// Not a difference of Euler yaw angles: at a tilt near 90° (pitch ±π/2, gimbal lock) the
+/// Euler yaw swings by radians while the object barely moves, and a plain RL policy learned
+/// to tip the cube onto its side and wiggle it there, "turning" it 166 rad in 30 s with
+/// three fingertips resting on it (docs/results/yaw-exploit/).
+#[must_use]
+pub fn rotation_about_z_rad(before: &UnitQuaternion<f32>, after: &UnitQuaternion<f32>) -> f32 {
+    (after * before.inverse()).scaled_axis().z
+}
+
+/// Angle wrapped to (-pi, pi].
 #[must_use]
 pub fn wrap_angle_rad(a: f32) -> f32 {
     use std::f32::consts::PI;
@@ -18,8 +34,26 @@ pub fn wrap_angle_rad(a: f32) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::wrap_angle_rad;
+    use super::{rotation_about_z_rad, wrap_angle_rad};
+    use nalgebra::{UnitQuaternion, Vector3};
     use std::f32::consts::PI;
+
+    #[test]
+    fn rotation_about_z_is_the_turn_about_world_z_at_any_tilt() {
+        let z = |a: f32| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a);
+        // Upright: the turn itself, also across ±π.
+        assert!((rotation_about_z_rad(&z(3.0), &z(3.2)) - 0.2).abs() < 1e-5);
+        assert!((rotation_about_z_rad(&z(0.5), &z(0.3)) + 0.2).abs() < 1e-5);
+        // Tipped onto its side (pitch 89.5°), then a turn of 0.2 rad about world z: still 0.2.
+        let tipped = UnitQuaternion::from_euler_angles(0.3, 1.562, -1.0);
+        assert!((rotation_about_z_rad(&tipped, &(z(0.2) * tipped)) - 0.2).abs() < 1e-5);
+        // At that tilt a 0.05 rad wiggle about world x swings the Euler yaw by far more, yet
+        // turns nothing about z.
+        let wiggled = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.05) * tipped;
+        let euler_yaw_change = wrap_angle_rad(wiggled.euler_angles().2 - tipped.euler_angles().2);
+        assert!(euler_yaw_change.abs() > 0.5, "Euler yaw moved only {euler_yaw_change}");
+        assert!(rotation_about_z_rad(&tipped, &wiggled).abs() < 1e-5);
+    }
 
     #[test]
     fn wraps_angles_into_minus_pi_exclusive_to_pi_inclusive() {

@@ -24,7 +24,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::action::DEFAULT_MAX_ACTION_RAD;
-use crate::angle::wrap_angle_rad;
+use crate::angle::rotation_about_z_rad;
 use crate::episode::{EpisodeOutcome, EpisodeTracker};
 use crate::error::SimError;
 use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
@@ -270,8 +270,8 @@ pub struct StepInfo {
     pub tip_contacts: [bool; NUM_FINGERS],
     /// Object angular velocity about world z (rad/s) at the end of the step, unclipped.
     pub object_angvel_z_rad_per_s: f32,
-    /// Object yaw (rad).
-    pub object_yaw_rad: f32,
+    /// Object rotation about world z during this step (rad; [`crate::rotation_about_z_rad`]).
+    pub object_rotation_z_rad: f32,
     /// Object height (m).
     pub object_height_m: f32,
     /// Whether the object dropped below the termination height.
@@ -533,15 +533,15 @@ impl Env {
             world.set_object_external_force(&self.external_force_n);
         }
         // The reward is the object's angular velocity about z averaged over the control
-        // period, i.e. its yaw change over the period: the end-of-period velocity alone
+        // period, i.e. its rotation about z over the period: the end-of-period velocity alone
         // under-reported IGM's rotation ~4x, and summed solver velocities miss the solver's
         // position corrections (~15% on an in-grasp roll).
-        let yaw_before = world.object_state().yaw_rad();
+        let orientation_before = world.object_state().pose.rotation;
         for _ in 0..n_physics {
             world.step();
         }
-        let yaw_change = wrap_angle_rad(world.object_state().yaw_rad() - yaw_before);
-        let mean_angvel_z = yaw_change / cfg.control_dt_s();
+        let rotation_z_rad = rotation_about_z_rad(&orientation_before, &world.object_state().pose.rotation);
+        let mean_angvel_z = rotation_z_rad / cfg.control_dt_s();
         if !world.is_finite() {
             return Err(SimError::NonFiniteState(format!("at control step {}", self.steps)));
         }
@@ -563,7 +563,7 @@ impl Env {
             num_tip_contacts: n_contacts,
             tip_contacts: state.contacts.map(|c| c.is_some()),
             object_angvel_z_rad_per_s: wz,
-            object_yaw_rad: state.object.yaw_rad(),
+            object_rotation_z_rad: rotation_z_rad,
             object_height_m: height,
             dropped,
             step: self.steps,
@@ -581,7 +581,7 @@ impl Env {
     /// A tracker for the episode the last reset began.
     pub fn episode_tracker(&self) -> Result<EpisodeTracker, SimError> {
         let s = self.privileged().ok_or(SimError::NotReset)?;
-        Ok(EpisodeTracker::start(s.object.yaw_rad(), s.contacts.map(|c| c.is_some())))
+        Ok(EpisodeTracker::start(s.contacts.map(|c| c.is_some())))
     }
 
     /// Resets with `seed`, then steps with `act(env, obs)` until the env ends the episode (a
@@ -598,7 +598,7 @@ impl Env {
         loop {
             let action = act(self, &obs)?;
             let r = self.step(&action)?;
-            tracker.record(r.reward, r.info.object_yaw_rad, r.info.tip_contacts);
+            tracker.record(r.reward, r.info.object_rotation_z_rad, r.info.tip_contacts);
             on_step(self, &r, &tracker);
             if r.terminated || r.truncated {
                 return Ok(tracker.outcome(r.terminated));

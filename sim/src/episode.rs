@@ -2,9 +2,9 @@
 //! `vge eval`, the controller rollouts, the bridge's sim summary) so that they all measure
 //! return, rotation, contacts and contact switches the same way.
 //!
-//! Rotation is the object's yaw unwrapped step by step ([`crate::wrap_angle_rad`] of each
-//! step's difference), so several turns add up; sums are kept in f64 so that a 30 s episode
-//! loses nothing to rounding.
+//! Rotation is the sum of each step's rotation about world z ([`crate::rotation_about_z_rad`],
+//! never Euler yaw differences, which a tipped object games), so several turns add up; sums
+//! are kept in f64 so that a 30 s episode loses nothing to rounding.
 
 use serde::Serialize;
 
@@ -44,23 +44,21 @@ pub struct EpisodeTracker {
     rotation_rad: f64,
     contact_sum: u64,
     length: usize,
-    yaw_rad: f32,
     switches: ContactSwitches,
 }
 
 impl EpisodeTracker {
-    /// An episode that starts with the object at `yaw_rad` and fingertips `touching`.
+    /// An episode that starts with fingertips `touching`.
     #[must_use]
-    pub fn start(yaw_rad: f32, touching: [bool; NUM_FINGERS]) -> Self {
-        Self { yaw_rad, switches: ContactSwitches::new(touching), ..Self::default() }
+    pub fn start(touching: [bool; NUM_FINGERS]) -> Self {
+        Self { switches: ContactSwitches::new(touching), ..Self::default() }
     }
 
-    /// Records one step: its reward, the object's yaw and the fingertips touching after it.
-    /// Returns the contact switches completed on this step.
-    pub fn record(&mut self, reward: f32, yaw_rad: f32, touching: [bool; NUM_FINGERS]) -> u32 {
+    /// Records one step: its reward, the object's rotation about world z during it and the
+    /// fingertips touching after it. Returns the contact switches completed on this step.
+    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: [bool; NUM_FINGERS]) -> u32 {
         self.episode_return += f64::from(reward);
-        self.rotation_rad += f64::from(crate::wrap_angle_rad(yaw_rad - self.yaw_rad));
-        self.yaw_rad = yaw_rad;
+        self.rotation_rad += f64::from(rotation_z_rad);
         self.contact_sum += touching.iter().filter(|&&t| t).count() as u64;
         self.length += 1;
         self.switches.update(touching)
@@ -97,13 +95,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn rotation_unwraps_across_pi_and_turns_add_up() {
-        let mut t = EpisodeTracker::start(3.0, [true; NUM_FINGERS]);
-        // 0.3 rad per step across the ±π seam, 25 steps: 7.5 rad, more than a turn.
-        let mut yaw = 3.0f32;
+    fn turns_add_up() {
+        let mut t = EpisodeTracker::start([true; NUM_FINGERS]);
+        // 0.3 rad per step, 25 steps: 7.5 rad, more than a turn.
         for _ in 0..25 {
-            yaw = crate::wrap_angle_rad(yaw + 0.3);
-            t.record(1.0, yaw, [true; NUM_FINGERS]);
+            t.record(1.0, 0.3, [true; NUM_FINGERS]);
         }
         let o = t.outcome(false);
         assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
@@ -115,7 +111,7 @@ mod tests {
     #[test]
     fn contacts_average_and_switches_count() {
         let touching = [true, true, true, true, false];
-        let mut t = EpisodeTracker::start(0.0, touching);
+        let mut t = EpisodeTracker::start(touching);
         let detached = [false, true, true, true, false];
         let mut completed = 0;
         for _ in 0..crate::gait::MIN_DETACH_STEPS {

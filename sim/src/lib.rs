@@ -10,7 +10,7 @@
 //!   [`objects`], [`env`], [`vec_env`], [`bench`]). Without it the crate is the hand
 //!   description alone, with no rapier3d or rayon: [`kinematics`] (geometry, joint limits),
 //!   the observation layout and its builder ([`observation`]), the action's default step
-//!   ([`action`]), contact switches ([`gait`]) and [`wrap_angle_rad`]; what the bridge needs
+//!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
 //!   to drive a real hand (`vge-bridge` without its `sim` feature).
 
 pub mod action;
@@ -31,7 +31,7 @@ pub mod vec_env;
 #[cfg(feature = "physics")]
 pub mod world;
 
-pub use angle::wrap_angle_rad;
+pub use angle::{rotation_about_z_rad, wrap_angle_rad};
 #[cfg(feature = "physics")]
 pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,

@@ -141,7 +141,8 @@ pub struct ObjectState {
 }
 
 impl ObjectState {
-    /// Rotation angle about world z (yaw, rad, in (-pi, pi]).
+    /// Euler yaw (rad, in (-pi, pi]): meaningful only while the object is near upright; to
+    /// measure turning, sum [`crate::rotation_about_z_rad`] instead (gimbal lock at 90° tilt).
     #[must_use]
     pub fn yaw_rad(&self) -> f32 {
         self.pose.rotation.euler_angles().2
