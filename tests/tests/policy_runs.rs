@@ -86,11 +86,14 @@ fn a_policy_that_overflows_inside_is_refused_by_eval_and_halts_the_bridge() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// The contrast: the stored seed-0 gait (docs/results/cube-fg-vge-seeds/seed-0) through the
+/// The contrast: the stored seed-0 gait (docs/results/euler-yaw-reward/cube-fg-vge-seeds/seed-0) through the
 /// bridge on the simulated hand turns the cube and switches contacts.
 #[test]
 fn the_stored_gait_turns_the_cube_and_switches_contacts_through_the_bridge() {
-    let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/results/cube-fg-vge-seeds/seed-0/policy.vgep");
+    let policy = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../docs/results/euler-yaw-reward/cube-fg-vge-seeds/seed-0/policy.vgep"
+    );
     let run = Command::new(workspace_bin("vge-bridge"))
         .args(["run", "--backend", "sim", "--duration", "6", "--json", "--policy", policy])
         .output()

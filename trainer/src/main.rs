@@ -171,8 +171,16 @@ enum Command {
 #[derive(Debug, Args)]
 struct EvalArgs {
     /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
-    #[arg(long)]
-    policy: PathBuf,
+    #[arg(long, required_unless_present = "run")]
+    policy: Option<PathBuf>,
+    /// Instead of --policy: score a finished training run's final policy again, with its
+    /// config and the very episodes of its `final-eval.json`, by this vge's success test, and
+    /// print the stored figures beside the new ones (for runs scored by an older vge).
+    #[arg(long, conflicts_with_all = ["policy", "plot", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n"])]
+    run: Option<PathBuf>,
+    /// With --run: replace the run's `final-eval.json` by the new score.
+    #[arg(long, requires = "run")]
+    write: bool,
     /// Episodes to run (the success test uses 20).
     #[arg(long, default_value_t = vge_trainer::eval::SUCCESS_TEST_EPISODES)]
     episodes: usize,
@@ -498,7 +506,13 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         perturb_force_n,
         plot,
         json,
+        run,
+        write,
     } = args;
+    if let Some(dir) = run {
+        return rescore_run(&dir, write, json);
+    }
+    let policy = policy.context("--policy or --run is required")?;
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
     anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
     for (name, v) in [
@@ -532,6 +546,38 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         println!("{}", report.to_json_line());
     } else {
         print_eval_report(&report, &policy, episode_s, object);
+    }
+    Ok(())
+}
+
+/// `vge eval --run DIR [--write]`.
+fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
+    let r = vge_trainer::train::rescore_final_eval(dir, write)
+        .with_context(|| format!("scoring the run in {}", dir.display()))?;
+    if json {
+        println!("{}", r.report.to_json_line());
+        return Ok(());
+    }
+    let stored = |v: Option<f64>, unit: &str| v.map_or("-".to_owned(), |v| format!("{v:.3}{unit}"));
+    println!("{}", dir.display());
+    println!(
+        "  success rate     {:.3} (stored: {})",
+        r.report.success_rate,
+        stored(r.stored_success_rate, "")
+    );
+    println!(
+        "  rotation         {:.2} rad per episode (stored: {})",
+        r.report.mean_rotation_rad,
+        stored(r.stored_rotation_rad, " rad")
+    );
+    println!(
+        "  drops {:.2}, contact switches {:.1} per episode, learned: {}",
+        r.report.drop_rate,
+        r.report.mean_contact_switches,
+        r.report.learned()
+    );
+    if write {
+        println!("  final-eval.json rewritten");
     }
     Ok(())
 }

@@ -178,8 +178,11 @@ impl Collector {
             let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
             replay.push(&self.obs[i], &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
             let episode = &mut self.episodes[i];
-            window.switches +=
-                u64::from(episode.tracker.record(r.reward, r.info.object_rotation_z_rad, r.info.tip_contacts));
+            window.switches += u64::from(episode.tracker.record(
+                r.reward,
+                r.info.object_rotation_z_rad,
+                r.info.tip_contacts,
+            ));
             episode.rewards.push(r.reward);
             self.obs[i] = r.obs;
             if r.terminated || r.truncated {

@@ -215,6 +215,48 @@ fn write_final_eval(
     std::fs::write(&path, text + "\n").map_err(io_err(&path))
 }
 
+/// A finished run's final policy scored again by the success test of this vge (the same
+/// config, episodes and grasps as its `final-eval.json`): for runs scored by an older test.
+#[derive(Debug, Clone)]
+pub struct Rescored {
+    /// This vge's success test of `DIR/policy.vgep`.
+    pub report: EvalReport,
+    /// The success rate `DIR/final-eval.json` held before, when it could be read.
+    pub stored_success_rate: Option<f64>,
+    /// The rotation (rad per episode) `DIR/final-eval.json` held before.
+    pub stored_rotation_rad: Option<f64>,
+}
+
+/// Re-runs the final success test of the finished run in `dir`; with `write`, replaces its
+/// `final-eval.json` (keeping `env_steps` and `wall_s`, which describe the training run).
+pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainError> {
+    let config = super::run_config(dir)?;
+    let policy = dir.join("policy.vgep");
+    let bytes = std::fs::read(&policy).map_err(io_err(&policy))?;
+    let report = evaluate_policy(&config, &bytes, EpisodeSet::Validation)?;
+    let stored_path = dir.join("final-eval.json");
+    let stored: Option<serde_json::Value> =
+        std::fs::read_to_string(&stored_path).ok().and_then(|t| serde_json::from_str(&t).ok());
+    let field = |name: &str| stored.as_ref().and_then(|v| v[name].as_f64());
+    let rescored = Rescored {
+        stored_success_rate: field("success_rate"),
+        stored_rotation_rad: field("mean_rotation_rad"),
+        report,
+    };
+    if write {
+        let (Some(env_steps), Some(wall_s)) =
+            (stored.as_ref().and_then(|v| v["env_steps"].as_u64()), field("wall_s"))
+        else {
+            return Err(TrainError::NotFinished {
+                path: stored_path.display().to_string(),
+                what: "no env_steps and wall_s to keep".to_owned(),
+            });
+        };
+        write_final_eval(dir, &config, &rescored.report, env_steps, wall_s)?;
+    }
+    Ok(rescored)
+}
+
 /// The periodic evaluation at `step`: the actor (policy-file `bytes`) on the validation
 /// episodes, a row of `eval.csv`, and the actor kept as a snapshot. Returns the report.
 pub(super) fn periodic(

@@ -63,7 +63,7 @@ use crate::eval::EvalError;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::Sac;
 use collector::Collector;
-pub use evaluation::export_actor;
+pub use evaluation::{Rescored, export_actor, rescore_final_eval};
 use run_folder::RunFolder;
 use state::{Counters, TrainState};
 
@@ -85,6 +85,8 @@ pub enum TrainError {
     Io { path: String, source: std::io::Error },
     #[error("resume: {0}")]
     Resume(String),
+    #[error("{path}: not a finished run's file: {what}")]
+    NotFinished { path: String, what: String },
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
     #[error("behaviour policy: {0}")]
