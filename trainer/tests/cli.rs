@@ -382,3 +382,46 @@ fn eval_plot_draws_the_gait_diagram_of_one_episode() {
     assert!(bytes.len() > 10_000 && bytes.starts_with(b"\x89PNG"), "{} bytes", bytes.len());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `vge eval --run DIR` scores a finished run's final policy again on its own episodes, shows
+/// the stored figures beside the new ones, and with `--write` replaces `final-eval.json`
+/// keeping what describes the training (env steps, wall time).
+#[test]
+fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
+    let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../docs/results/euler-yaw-reward/table1/cube-fg-fge/seed-0");
+    let dir = common::temp_dir("rescore");
+    for file in ["config.toml", "policy.vgep"] {
+        std::fs::copy(stored.join(file), dir.join(file)).expect("copy the run");
+    }
+    let mut doc: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(stored.join("final-eval.json")).expect("final-eval.json"),
+    )
+    .expect("json");
+    doc["success_rate"] = serde_json::json!(0.125);
+    std::fs::write(dir.join("final-eval.json"), doc.to_string()).expect("write");
+    let arg = dir.display().to_string();
+
+    let shown = vge(&["eval", "--run"], std::slice::from_ref(&arg));
+    assert!(shown.status.success(), "{}", text(&shown.stderr));
+    let out = text(&shown.stdout);
+    assert!(out.contains("success rate     0.850 (stored: 0.125)"), "{out}");
+    let written = vge(&["eval", "--write", "--run"], std::slice::from_ref(&arg));
+    assert!(written.status.success(), "{}", text(&written.stderr));
+    let now: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("final-eval.json")).expect("rewritten"))
+            .expect("json");
+    assert_eq!(now["success_rate"], 0.85);
+    assert_eq!(now["env_steps"], doc["env_steps"]);
+    assert_eq!(now["wall_s"], doc["wall_s"]);
+    assert_eq!(now["per_episode"].as_array().map(Vec::len), Some(20));
+
+    // An unfinished run (no final-eval.json) cannot be rewritten; neither flag: an error.
+    std::fs::remove_file(dir.join("final-eval.json")).expect("remove");
+    let refused = vge(&["eval", "--write", "--run"], &[arg]);
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("not a finished run"), "{}", text(&refused.stderr));
+    let neither = vge(&["eval"], &[]);
+    assert!(!neither.status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+}
