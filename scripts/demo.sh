@@ -1,14 +1,19 @@
 #!/usr/bin/env bash
-# vge's main job, end to end, on a fresh machine: set up libtorch, build, train a VGE + FG
-# policy on the cube briefly, export it, evaluate it on the no_std runtime, and run it
-# through vge-bridge against the simulated hand at its fixed control rate, printing rate,
-# jitter and the object's rotation.
+# vge's main job, end to end, on a fresh machine:
+#  1. the gait that ships with vge (policies/cube.vgep) runs on the no_std runtime through
+#     vge-bridge against the hand's five joint-controller nodes on a real CAN bus (vcan0;
+#     the nodes emulated by the simulated hand holding the cube), at its 20 Hz control rate,
+#     printing rate, jitter, frames, and how far the cube turned with how many contact
+#     switches;
+#  2. a brief VGE + FG training run on the cube from scratch, exported, evaluated on the
+#     runtime and run through vge-bridge against the simulated hand.
 #
 #   scripts/demo.sh                  # ~2 min of training after the build
 #   VGE_DEMO_STEPS=200000 scripts/demo.sh
 #
-# A brief run does not learn to gait (that takes millions of steps: see docs/results/);
-# it shows the whole path from training to deployment on real components.
+# The brief run does not learn to gait (that takes about a million steps: docs/results/);
+# it shows the whole path from training to deployment on real components. The build is the
+# test command's (scripts/test.sh): after the tests, the demo starts at once.
 set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
@@ -17,12 +22,19 @@ unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION
 steps=${VGE_DEMO_STEPS:-30000}
 out=${VGE_DEMO_OUT:-runs/demo-$(date +%Y%m%d-%H%M%S)}
 
+echo "==> system packages (user-mode-linux: a CAN-capable guest where this kernel has no vcan)"
+scripts/ensure-packages.sh user-mode-linux kmod iproute2
 echo "==> libtorch"
 scripts/setup-libtorch.sh
-echo "==> build (release)"
-cargo build --release -p vge-trainer -p vge-bridge --bins
+echo "==> build (release, as scripts/test.sh builds it, so one build serves both)"
+cargo test --release --workspace --no-run
 vge=target/release/vge
 bridge=target/release/vge-bridge
+
+echo "==> the gait that ships with vge: policies/cube.vgep (policies/README.md)"
+"$vge" inspect policies/cube.vgep | head -5
+echo "==> policies/cube.vgep through vge-bridge over CAN: the hand's nodes emulated on vcan0, 30 s at 20 Hz"
+scripts/canvm/run.sh scripts/canvm/bridge-demo.sh "$bridge" policies/cube.vgep 30 "${VGE_DEMO_SEED:-0}"
 
 echo "==> train: VGE + FG on the cube, $steps env steps, into $out"
 "$vge" train --config configs/cube-fg-vge.toml --out "$out" --steps "$steps" \

@@ -21,17 +21,7 @@ step "system packages"
 # user-mode-linux: a CAN-capable guest for HIL tests where this kernel has no vcan.
 # kmod/iproute2: insmod and ip inside that guest.
 # qemu-system-arm: runs the Cortex-M4F firmware (mps2-an386) in the export tests.
-packages=(user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm)
-missing=()
-for p in "${packages[@]}"; do dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p"); done
-if ((${#missing[@]})); then
-  sudo=(); [[ $(id -u) == 0 ]] || sudo=(sudo)
-  echo "installing: ${missing[*]}"
-  "${sudo[@]}" apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
-else
-  echo "present: ${packages[*]}"
-fi
+scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm
 
 step "python tools (cantools, tensorboard, in .deps/py)"
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's

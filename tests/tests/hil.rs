@@ -371,6 +371,26 @@ impl Capture {
     }
 }
 
+/// The gait that ships with vge (policies/cube.vgep, what scripts/demo.sh runs) turns the
+/// cube more than a full turn over CAN, switching contacts, without a drop: the emulated
+/// hand's nodes on vcan0, the bridge driving them at 20 Hz for 15 s.
+#[test]
+#[ignore = "needs vcan0: run scripts/hil.sh"]
+fn the_shipped_gait_turns_the_cube_a_full_turn_over_vcan() {
+    let iface = hil_iface();
+    let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
+    let emulator = spawn_emulator(&iface, 0, 2.0);
+    thread::sleep(Duration::from_millis(500)); // the emulator grasps the cube first
+    let over_can =
+        bridge_run(&["--policy", policy, "--backend", "can", "--iface", &iface, "--duration", "15"]);
+    let emulated = wait_for_output(emulator);
+    eprintln!("{over_can}\n{emulated}");
+    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("duration"), "{over_can}");
+    assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "dropped: {emulated}");
+    assert!(json_f64(&emulated, "rotation_rad") >= std::f64::consts::TAU, "{emulated}");
+    assert!(json_f64(&emulated, "contact_switches") >= 10.0, "{emulated}");
+}
+
 /// Emulator and bridge as processes on vcan0 (classic frames, or the FD option), against the
 /// same policy and seed run in-process; returns how many FD frames a third socket saw.
 fn closed_loop_matches_in_process(fd: bool) -> usize {

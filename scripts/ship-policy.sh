@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Ships a finished training run's final policy as the gait that comes with vge, measured:
+#
+#   scripts/ship-policy.sh RUN_DIR [NAME]     # NAME: cube (default)
+#
+# Copies RUN_DIR/policy.vgep and RUN_DIR/config.toml to policies/NAME.vgep and NAME.toml,
+# then measures the copy with the success test (`vge eval`: 20 randomised 30 s episodes) and
+# the robustness test (`vge robustness`: 10 episodes per level, 5 levels per axis up to the
+# paper's), and writes both, the run it came from and the issue's goals with whether each
+# holds, to policies/NAME.json (the robustness figure to policies/NAME-robustness.png).
+# VGE_BIN chooses the vge binary (default target/release/vge). About 5 min on 2 cores.
+set -euo pipefail
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+[[ $# -ge 1 ]] || { echo "usage: $0 RUN_DIR [NAME]" >&2; exit 2; }
+run=$(cd "$1" && pwd)
+name=${2:-cube}
+vge=${VGE_BIN:-$repo/target/release/vge}
+for f in policy.vgep config.toml final-eval.json; do
+  [[ -f $run/$f ]] || { echo "$run/$f is missing: not a finished training run" >&2; exit 1; }
+done
+cd "$repo"
+mkdir -p policies
+cp "$run/policy.vgep" "policies/$name.vgep"
+cp "$run/config.toml" "policies/$name.toml"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+echo "==> the success test of policies/$name.vgep"
+"$vge" eval --policy "policies/$name.vgep" --json >"$tmp/eval.json"
+echo "==> the robustness test"
+"$vge" robustness --policy "policies/$name.vgep" --out "$tmp/robustness"
+cp "$tmp/robustness/robustness.png" "policies/$name-robustness.png"
+provenance=$("$vge" inspect "policies/$name.vgep" | sed -n 's/^provenance: *//p')
+python3 - "$run" "$provenance" "$tmp/eval.json" "$tmp/robustness/robustness.json" "policies/$name.json" <<'PY'
+import json, os, sys
+run, provenance, eval_path, robustness_path, out = sys.argv[1:]
+success = json.load(open(eval_path))
+robustness = json.load(open(robustness_path))
+# Issue 12's goals: success >= 80% of 20 randomised 30 s episodes, and >= 75% of the clean
+# return at each axis's paper level (the last level of each axis).
+at_paper_level = {}
+for row in robustness["rows"]:
+    if row["fraction_of_max"] == 1.0:
+        at_paper_level[row["axis"]] = row["return_fraction"]
+goals = {"success_rate >= 0.8": success["success_rate"] >= 0.8}
+for axis, fraction in at_paper_level.items():
+    goals[f"{axis}: return at the paper's level >= 0.75 of clean"] = fraction >= 0.75
+doc = {
+    "source_run": os.path.relpath(run),
+    "provenance": provenance,
+    "success_test": success,
+    "robustness": robustness,
+    "return_fraction_at_paper_level": at_paper_level,
+    "goals": goals,
+}
+json.dump(doc, open(out, "w"), indent=2)
+open(out, "a").write("\n")
+for goal, held in goals.items():
+    print(f"  {'holds' if held else 'FAILS'}  {goal}")
+PY
+echo "wrote policies/$name.vgep, $name.toml, $name.json, $name-robustness.png"
