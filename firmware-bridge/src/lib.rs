@@ -8,7 +8,7 @@
 //! - `sim`: the simulated hand as well ([`sim_hand`]: `run --backend sim`, `emulate --model
 //!   sim`), with vge-sim's rapier3d physics.
 //! - `rerun` (implies `sim`): `run --record F.rrd`, the simulated episode written for the
-//!   Rerun viewer ([`sim_hand::SimHand::record_to`], vge-sim's `recording`).
+//!   Rerun viewer (`SimHand::record_to`, vge-sim's `recording`).
 //!
 //! Without `std` this crate is only [`protocol`], `no_std`, so joint controller firmware can
 //! share the frame definitions. The bridge never links libtorch: it reads policy files with

@@ -12,7 +12,7 @@
 //!   the observation layout and its builder ([`observation`]), the action's default step
 //!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
 //!   to drive a real hand (`vge-bridge` without its `sim` feature).
-//! - `rerun` (implies `physics`): [`recording`], episodes written as Rerun `.rrd` files for
+//! - `rerun` (implies `physics`): `recording`, episodes written as Rerun `.rrd` files for
 //!   `vge eval --record` and `vge-bridge run --record` (off by default: the Rerun SDK is a
 //!   large build).
 
