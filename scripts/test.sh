@@ -23,14 +23,15 @@ step "system packages"
 # qemu-system-arm: runs the Cortex-M4F firmware (mps2-an386) in the export tests.
 scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm
 
-step "python tools (cantools, tensorboard, in .deps/py)"
+step "python tools (cantools, tensorboard, rerun-sdk, in .deps/py)"
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
-# event files are read back with TensorBoard's own reader.
-if ! .deps/py/bin/python -c 'import cantools, tensorboard' 2>/dev/null; then
+# event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
+# the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py).
+if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun; assert rerun.__version__ == "0.36.3"' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3
 fi
-.deps/py/bin/python -c 'import cantools, tensorboard; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__)'
+.deps/py/bin/python -c 'import cantools, tensorboard, rerun; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__)'
 
 step "rust components and targets"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done
@@ -57,13 +58,13 @@ for crate in vge-controllers vge-bridge; do
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
 
-step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
+step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon, no rerun)"
 # Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
 # description alone, not its physics (firmware-bridge/Cargo.toml). This overwrites
 # target/release/vge-bridge with the CAN-only binary; the test builds below put the full one back.
 can_only=(-p vge-bridge --no-default-features --features std)
 tree=$(cargo tree "${can_only[@]}" -e normal --prefix none)
-for dep in rapier3d rayon; do
+for dep in rapier3d rayon rerun; do
   if grep -q "^$dep " <<<"$tree"; then
     echo "vge-bridge without its sim feature depends on $dep:"; cargo tree "${can_only[@]}" -e normal -i "$dep"; exit 1
   fi

@@ -1,12 +1,14 @@
 //! vge-bridge: runs an exported vge policy at a fixed control rate against the simulator or
 //! against a hand's joint controllers over SocketCAN.
 //!
-//! Features (both default):
+//! Features (`std` and `sim` by default):
 //! - `std`: the bridge for real hands over SocketCAN. It needs vge-sim's hand description
 //!   only (joint limits, observation layout), without the physics: no rapier3d. A real
 //!   hand's joint limits come from a hand file ([`hand_file`], `--hand FILE`).
 //! - `sim`: the simulated hand as well ([`sim_hand`]: `run --backend sim`, `emulate --model
 //!   sim`), with vge-sim's rapier3d physics.
+//! - `rerun` (implies `sim`): `run --record F.rrd`, the simulated episode written for the
+//!   Rerun viewer (`SimHand::record_to`, vge-sim's `recording`).
 //!
 //! Without `std` this crate is only [`protocol`], `no_std`, so joint controller firmware can
 //! share the frame definitions. The bridge never links libtorch: it reads policy files with

@@ -159,6 +159,15 @@ enum Command {
         /// Seed of the simulated episode (backend sim).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Record the simulated episode (backend sim) into this Rerun file: each finger link's
+        /// pose and the object's, the fingertip and link contact points with their normal
+        /// forces (arrows, 1 cm per N), the joint-target changes sent and the reward, one row
+        /// per control step on the `step` and `sim_time` timelines. Open it with the Rerun
+        /// viewer: `rerun F.rrd` (from `pip install rerun-sdk==0.36.3`). Needs a vge-bridge
+        /// built with `--features rerun`. Refused with --backend can: a real hand does not
+        /// report where the object is.
+        #[arg(long, value_name = "F.rrd")]
+        record: Option<PathBuf>,
         #[command(flatten)]
         loop_args: LoopArgs,
     },
@@ -358,9 +367,19 @@ fn print_report(
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Run { policy, backend, hand, iface, fd, object, seed, loop_args } => {
+        Command::Run { policy, backend, hand, iface, fd, object, seed, record, loop_args } => {
             if backend == Backend::Sim && !cfg!(feature = "sim") {
                 return Err(no_sim("--backend sim (the default)"));
+            }
+            if record.is_some() {
+                anyhow::ensure!(
+                    backend == Backend::Sim,
+                    "--record needs --backend sim: over CAN the hand reports its joints and fingertip \
+                     sensors but not the object, whose pose the recording is about"
+                );
+                if !cfg!(feature = "rerun") {
+                    return Err(rerun_missing());
+                }
             }
             let limits = match &hand {
                 Some(path) => hand_file::load_joint_limits(path)
@@ -390,7 +409,8 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None);
                 }
                 Backend::Sim => {
-                    let (report, summary) = run_against_sim(&mut runner, &cfg, &object, seed, &stop)?;
+                    let (report, summary) =
+                        run_against_sim(&mut runner, &cfg, &object, seed, record.as_deref(), &stop)?;
                     let extra = [("backend", json!("sim")), ("object", json!(object.to_string()))];
                     print_report(loop_args.json, &extra, &cfg, &report, Some(&summary));
                 }
@@ -517,6 +537,14 @@ fn no_sim(what: &str) -> anyhow::Error {
     )
 }
 
+/// Why `run --record` cannot run in this build.
+fn rerun_missing() -> anyhow::Error {
+    anyhow::anyhow!(
+        "--record writes a Rerun recording, and this vge-bridge was built without the Rerun SDK: rebuild \
+         it with `--features rerun` (cargo build --release -p vge-bridge --features rerun)"
+    )
+}
+
 /// Emulates the hand's nodes on `iface` with the simulated hand holding `object`; the summary.
 #[cfg(feature = "sim")]
 fn emulate_sim(
@@ -581,6 +609,7 @@ fn run_against_sim<P: PolicyRunner>(
     _: &LoopConfig,
     _: &ObjectArg,
     _: u64,
+    _: Option<&Path>,
     _: &Arc<AtomicBool>,
 ) -> anyhow::Result<(LoopReport, SimHandSummary)> {
     Err(no_sim("--backend sim (the default)"))
@@ -593,6 +622,7 @@ fn run_against_sim<P: PolicyRunner>(
     cfg: &LoopConfig,
     object: &ObjectShape,
     seed: u64,
+    record: Option<&Path>,
     stop: &Arc<AtomicBool>,
 ) -> anyhow::Result<(LoopReport, SimHandSummary)> {
     let mut env = EnvConfig::default();
@@ -601,14 +631,50 @@ fn run_against_sim<P: PolicyRunner>(
     let nodes_stop = Arc::new(AtomicBool::new(false));
     let nodes_flag = nodes_stop.clone();
     // In-process the link cannot lose commands; the timeout only guards a stalled loop.
-    let hand = SimHand::new(env, seed, Duration::from_secs(1)).context("building the simulated hand")?;
+    let mut hand = SimHand::new(env, seed, Duration::from_secs(1)).context("building the simulated hand")?;
+    if let Some(rrd) = record {
+        start_recording(&mut hand, rrd)?;
+    }
     let nodes = thread::spawn(move || {
         let mut hand = hand;
-        sim_hand::serve(&mut nodes_end, &mut hand, Duration::from_secs(5), &nodes_flag)
-            .map(|_| hand.summary())
+        sim_hand::serve(&mut nodes_end, &mut hand, Duration::from_secs(5), &nodes_flag)?;
+        let recorded = finish_recording(&mut hand)?;
+        Ok::<_, sim_hand::SimHandError>((hand.summary(), recorded))
     });
     let report = control_loop::run(&mut bridge_end, runner, cfg, stop);
     nodes_stop.store(true, Ordering::Relaxed);
-    let summary = nodes.join().map_err(|_| anyhow::anyhow!("the simulated hand's thread panicked"))??;
+    let (summary, recorded) =
+        nodes.join().map_err(|_| anyhow::anyhow!("the simulated hand's thread panicked"))??;
+    if let (Some(rrd), Some(steps)) = (record, recorded) {
+        eprintln!(
+            "vge-bridge: {steps} sim steps recorded in {}; open it with `rerun {}`",
+            rrd.display(),
+            rrd.display()
+        );
+    }
     Ok((report?, summary))
+}
+
+/// `run --record`: the simulated hand records each step into `rrd`.
+#[cfg(feature = "rerun")]
+fn start_recording(hand: &mut SimHand, rrd: &Path) -> anyhow::Result<()> {
+    hand.record_to(rrd).with_context(|| format!("recording into {}", rrd.display()))
+}
+
+/// Stand-in without the Rerun SDK: refuses.
+#[cfg(all(feature = "sim", not(feature = "rerun")))]
+fn start_recording(_: &mut SimHand, _: &Path) -> anyhow::Result<()> {
+    Err(rerun_missing())
+}
+
+/// Completes the recording, if any: the steps it holds.
+#[cfg(feature = "rerun")]
+fn finish_recording(hand: &mut SimHand) -> Result<Option<u64>, sim_hand::SimHandError> {
+    hand.finish_recording()
+}
+
+/// Without the Rerun SDK nothing was recorded.
+#[cfg(all(feature = "sim", not(feature = "rerun")))]
+fn finish_recording(_: &mut SimHand) -> Result<Option<u64>, sim_hand::SimHandError> {
+    Ok(None)
 }

@@ -12,6 +12,9 @@
 //!   the observation layout and its builder ([`observation`]), the action's default step
 //!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
 //!   to drive a real hand (`vge-bridge` without its `sim` feature).
+//! - `rerun` (implies `physics`): `recording`, episodes written as Rerun `.rrd` files for
+//!   `vge eval --record` and `vge-bridge run --record` (off by default: the Rerun SDK is a
+//!   large build).
 
 pub mod action;
 pub mod angle;
@@ -26,6 +29,8 @@ pub mod kinematics;
 #[cfg(feature = "physics")]
 pub mod objects;
 pub mod observation;
+#[cfg(feature = "rerun")]
+pub mod recording;
 #[cfg(feature = "physics")]
 pub mod vec_env;
 #[cfg(feature = "physics")]
@@ -46,6 +51,8 @@ pub use kinematics::{
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{FingertipReading, OBS_DIM, build_observation};
+#[cfg(feature = "rerun")]
+pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
 pub use vec_env::VecEnv;
 #[cfg(feature = "physics")]

@@ -11,13 +11,14 @@
 //! seed *learns* when its final policy succeeds in at least [`LEARNED_SUCCESS_RATE`] of the
 //! episodes.
 
+use std::cell::Cell;
 use std::path::Path;
 
 use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
 use vge_runtime::Policy;
-use vge_sim::{Env, EnvConfig, NUM_JOINTS, OBS_DIM, SimError};
+use vge_sim::{Env, EnvConfig, EpisodeTracker, NUM_JOINTS, OBS_DIM, SimError, StepResult};
 
 /// Episodes of the success test.
 pub const SUCCESS_TEST_EPISODES: usize = 20;
@@ -44,6 +45,9 @@ pub enum EvalError {
     NoEpisodes,
     #[error("{0}")]
     InvalidOption(String),
+    #[cfg(feature = "rerun")]
+    #[error("recording: {0}")]
+    Recording(#[from] vge_sim::RecordingError),
 }
 
 /// Figures over the evaluated episodes.
@@ -128,13 +132,29 @@ pub fn run_episode_traced(
     policy: &PolicyFn<'_>,
     mut on_step: impl FnMut([bool; vge_sim::NUM_FINGERS], f64),
 ) -> Result<EpisodeOutcome, EvalError> {
+    run_episode_observed(env_config, seed, policy, |_, _, r, tracker| {
+        on_step(r.info.tip_contacts, tracker.rotation_rad())
+    })
+}
+
+/// [`run_episode`], with `on_step(env, action, result, tracker)` after every step: the env
+/// after the step and the action the policy chose for it.
+pub fn run_episode_observed(
+    env_config: &EnvConfig,
+    seed: u64,
+    policy: &PolicyFn<'_>,
+    mut on_step: impl FnMut(&Env, &[f32; NUM_JOINTS], &StepResult, &EpisodeTracker),
+) -> Result<EpisodeOutcome, EvalError> {
     let mut env = Env::new(env_config.clone())?;
+    // `act` chooses the action and `on_step` sees its outcome: both closures read this.
+    let last_action = Cell::new([0.0f32; NUM_JOINTS]);
     let act = |_: &Env, obs: &[f32; OBS_DIM]| {
         let mut action = [0.0f32; NUM_JOINTS];
         policy(obs, &mut action).map_err(EvalError::Policy)?;
+        last_action.set(action);
         Ok::<_, EvalError>(action)
     };
-    env.run_episode(seed, act, |_, r, tracker| on_step(r.info.tip_contacts, tracker.rotation_rad()))
+    env.run_episode(seed, act, |env, r, tracker| on_step(env, &last_action.get(), r, tracker))
 }
 
 /// Means over episode outcomes.
@@ -176,6 +196,32 @@ pub fn trace_policy_bytes(bytes: &[u8], env: &EnvConfig, seed: u64) -> Result<Ga
         })?;
         trace.outcome = outcome;
         Ok(trace)
+    })
+}
+
+/// One episode of an encoded policy file on the runtime, written to the Rerun recording `rrd`
+/// step by step (`vge eval --record`; what it holds: [`vge_sim::recording`]).
+#[cfg(feature = "rerun")]
+pub fn record_policy_bytes(
+    bytes: &[u8],
+    env: &EnvConfig,
+    seed: u64,
+    rrd: &Path,
+) -> Result<EpisodeOutcome, EvalError> {
+    with_runtime_policy(bytes, env, |env, policy| {
+        let mut recorder = vge_sim::EpisodeRecorder::create(rrd, env)?;
+        // The episode loop's callback cannot fail: keep the first error and report it after.
+        let mut failure = None;
+        let outcome = run_episode_observed(env, seed, policy, |env, action, r, _| {
+            if failure.is_none() {
+                failure = recorder.record_step(env, action, r).err();
+            }
+        })?;
+        if let Some(e) = failure {
+            return Err(e.into());
+        }
+        recorder.finish()?;
+        Ok(outcome)
     })
 }
 

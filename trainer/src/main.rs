@@ -176,7 +176,7 @@ struct EvalArgs {
     /// Instead of --policy: score a finished training run's final policy again, with its
     /// config and the very episodes of its `final-eval.json`, by this vge's success test, and
     /// print the stored figures beside the new ones (for runs scored by an older vge).
-    #[arg(long, conflicts_with_all = ["policy", "plot", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n"])]
+    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n"])]
     run: Option<PathBuf>,
     /// With --run: replace the run's `final-eval.json` by the new score.
     #[arg(long, requires = "run")]
@@ -202,6 +202,13 @@ struct EvalArgs {
     /// finger's contact over time above the object's rotation.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Also record the first episode (seed --seed) into this Rerun file: each finger link's
+    /// pose and the object's, the fingertip and link contact points with their normal forces
+    /// (arrows, 1 cm per N), the 15 actions and the reward, one row per control step on the
+    /// `step` and `sim_time` timelines. Open it with the Rerun viewer: `rerun F.rrd` (from
+    /// `pip install rerun-sdk==0.36.3`). Needs a vge built with `--features rerun`.
+    #[arg(long, value_name = "F.rrd")]
+    record: Option<PathBuf>,
     #[arg(long)]
     json: bool,
 }
@@ -505,12 +512,16 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         noise_position_m,
         perturb_force_n,
         plot,
+        record,
         json,
         run,
         write,
     } = args;
     if let Some(dir) = run {
         return rescore_run(&dir, write, json);
+    }
+    if record.is_some() && !cfg!(feature = "rerun") {
+        return Err(rerun_missing());
     }
     let policy = policy.context("--policy or --run is required")?;
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
@@ -536,6 +547,10 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         (Axis::Perturbation, perturb_force_n),
     ] {
         axis.apply(&mut env, level);
+    }
+    // Before the evaluation, so that a path that cannot be written fails at once.
+    if let Some(rrd) = &record {
+        record_episode(&policy, &env, seed, rrd)?;
     }
     let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
@@ -600,6 +615,35 @@ fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> a
         .with_context(|| format!("drawing {}", png.display()))?;
     eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
     Ok(())
+}
+
+/// `vge eval --record`: the episode with seed `seed` written to the Rerun file `rrd`.
+#[cfg(feature = "rerun")]
+fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, rrd: &Path) -> anyhow::Result<()> {
+    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let outcome = vge_trainer::eval::record_policy_bytes(&bytes, env, seed, rrd)
+        .with_context(|| format!("recording {} into {}", policy.display(), rrd.display()))?;
+    eprintln!(
+        "vge eval: episode seed {seed} ({} steps) recorded in {}; open it with `rerun {}`",
+        outcome.length,
+        rrd.display(),
+        rrd.display()
+    );
+    Ok(())
+}
+
+/// Stand-in without the Rerun SDK: refuses.
+#[cfg(not(feature = "rerun"))]
+fn record_episode(_: &Path, _: &EnvConfig, _: u64, _: &Path) -> anyhow::Result<()> {
+    Err(rerun_missing())
+}
+
+/// Why `--record` cannot run in this build.
+fn rerun_missing() -> anyhow::Error {
+    anyhow::anyhow!(
+        "--record writes a Rerun recording, and this vge was built without the Rerun SDK: rebuild it with \
+         `--features rerun` (cargo build --release -p vge-trainer --features rerun)"
+    )
 }
 
 fn print_eval_report(
