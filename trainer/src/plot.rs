@@ -93,17 +93,19 @@ impl RunCurves {
     }
 }
 
-/// The fields of `final-eval.json` that the plot reads.
+/// The fields of `final-eval.json` that the plot and `vge eval --run` read.
 #[derive(Debug, serde::Deserialize)]
-struct FinalEvalFields {
-    success_rate: f64,
+pub(crate) struct FinalEvalFields {
+    pub(crate) success_rate: f64,
     /// Absent in files of older vge versions.
     #[serde(default)]
-    mean_return: Option<f64>,
+    pub(crate) mean_return: Option<f64>,
     #[serde(default)]
-    mean_contact_switches: Option<f64>,
-    env_steps: u64,
-    wall_s: f64,
+    pub(crate) mean_rotation_rad: Option<f64>,
+    #[serde(default)]
+    pub(crate) mean_contact_switches: Option<f64>,
+    pub(crate) env_steps: u64,
+    pub(crate) wall_s: f64,
 }
 
 fn read(path: &Path) -> Result<String, PlotError> {
@@ -211,7 +213,8 @@ fn experiment(config: &Config) -> String {
 }
 
 /// The run's `final-eval.json`, if it finished.
-fn read_final_eval(dir: &Path) -> Result<Option<FinalEvalFields>, PlotError> {
+/// `dir/final-eval.json`; `None` when the run has none (unfinished).
+pub(crate) fn read_final_eval(dir: &Path) -> Result<Option<FinalEvalFields>, PlotError> {
     read_json(&dir.join("final-eval.json"))
 }
 

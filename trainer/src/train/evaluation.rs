@@ -231,30 +231,36 @@ pub struct Rescored {
 /// `final-eval.json` (keeping `env_steps` and `wall_s`, which describe the training run).
 pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainError> {
     let config = super::run_config(dir)?;
+    let stored = crate::plot::read_final_eval(dir);
+    // What --write keeps must be there before the episodes run.
+    let kept = match (&stored, write) {
+        (Ok(Some(s)), true) => Some((s.env_steps, s.wall_s)),
+        (_, false) => None,
+        (Ok(None), true) => {
+            return Err(TrainError::NotFinished {
+                path: dir.join("final-eval.json").display().to_string(),
+                what: "no env_steps and wall_s to keep".to_owned(),
+            });
+        }
+        (Err(e), true) => {
+            return Err(TrainError::NotFinished {
+                path: dir.join("final-eval.json").display().to_string(),
+                what: e.to_string(),
+            });
+        }
+    };
     let policy = dir.join("policy.vgep");
     let bytes = std::fs::read(&policy).map_err(io_err(&policy))?;
     let report = evaluate_policy(&config, &bytes, EpisodeSet::Validation)?;
-    let stored_path = dir.join("final-eval.json");
-    let stored: Option<serde_json::Value> =
-        std::fs::read_to_string(&stored_path).ok().and_then(|t| serde_json::from_str(&t).ok());
-    let field = |name: &str| stored.as_ref().and_then(|v| v[name].as_f64());
-    let rescored = Rescored {
-        stored_success_rate: field("success_rate"),
-        stored_rotation_rad: field("mean_rotation_rad"),
-        report,
-    };
-    if write {
-        let (Some(env_steps), Some(wall_s)) =
-            (stored.as_ref().and_then(|v| v["env_steps"].as_u64()), field("wall_s"))
-        else {
-            return Err(TrainError::NotFinished {
-                path: stored_path.display().to_string(),
-                what: "no env_steps and wall_s to keep".to_owned(),
-            });
-        };
-        write_final_eval(dir, &config, &rescored.report, env_steps, wall_s)?;
+    if let Some((env_steps, wall_s)) = kept {
+        write_final_eval(dir, &config, &report, env_steps, wall_s)?;
     }
-    Ok(rescored)
+    let stored = stored.ok().flatten();
+    Ok(Rescored {
+        stored_success_rate: stored.as_ref().map(|s| s.success_rate),
+        stored_rotation_rad: stored.as_ref().and_then(|s| s.mean_rotation_rad),
+        report,
+    })
 }
 
 /// The periodic evaluation at `step`: the actor (policy-file `bytes`) on the validation
