@@ -90,6 +90,10 @@ pub struct EnvSection {
     /// The paper ends episodes only on a drop or at the time limit, which is the default;
     /// the reward is paid only while >= 3 fingertips touch the object either way.
     pub terminate_below_contacts: usize,
+    /// Charge a backward turn about z even while fewer than 3 fingertips touch (default),
+    /// so a back-and-forth earns nothing; `false` is the paper's reward, which one VGE seed
+    /// gamed that way (see `vge_sim::EnvConfig::charge_reverse_rotation`).
+    pub charge_reverse_rotation: bool,
     /// Randomise the initial grasp (one non-thumb finger open with probability 0.5).
     pub randomize_fingers: bool,
     /// Uniform noise on the initial grasp pose (rad).
@@ -117,6 +121,7 @@ impl Default for EnvSection {
             episode_length: env.episode_length_steps,
             max_action_rad: env.max_action_rad,
             terminate_below_contacts: env.min_contacts,
+            charge_reverse_rotation: env.charge_reverse_rotation,
             randomize_fingers: env.grasp.randomize_fingers,
             grasp_pose_noise_rad: env.grasp.pose_noise_rad,
             noise_q_std_rad: 0.0,
@@ -142,6 +147,7 @@ impl EnvSection {
         env.episode_length_steps = self.episode_length;
         env.max_action_rad = self.max_action_rad;
         env.min_contacts = self.terminate_below_contacts;
+        env.charge_reverse_rotation = self.charge_reverse_rotation;
         env.grasp.randomize_fingers = self.randomize_fingers;
         env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
         env.noise = NoiseConfig {
