@@ -104,10 +104,11 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
 fn committed_table1_is_what_its_run_folders_give() {
     let results = repo().join("docs/results");
     // Each committed table and the roots its README names: the table's own folder and
-    // VGE + FG's seeds. The Euler-yaw-reward archive always; the current table once its
-    // first runs are in.
-    let archive = results.join("euler-yaw-reward");
-    let mut tables = vec![(archive.join("table1"), archive.join("cube-fg-vge-seeds"))];
+    // VGE + FG's seeds. The two archives (the Euler-yaw reward, then the paper's reward)
+    // always; the current table once its first runs are in.
+    let mut tables: Vec<_> = ["euler-yaw-reward", "paper-reward"]
+        .map(|archive| (results.join(archive).join("table1"), results.join(archive).join("cube-fg-vge-seeds")))
+        .into();
     if results.join("table1/table1.csv").exists() {
         tables.push((results.join("table1"), results.join("cube-fg-vge-seeds")));
     }
