@@ -1,5 +1,4 @@
-//! Angles: how far an object turned about world z between two orientations, and angle
-//! wrapping. Physics-free (it stays in the crate without the `physics` feature), since
+//! How far an object turned about world z between two orientations. Physics-free (it stays in the crate without the `physics` feature), since
 //! episode accounting and the bridge use it as well as the env.
 
 use nalgebra::UnitQuaternion;
@@ -12,31 +11,30 @@ use nalgebra::UnitQuaternion;
 /// Not a difference of Euler yaw angles: at a tilt near 90° (pitch ±π/2, gimbal lock) the
 /// Euler yaw swings by radians while the object barely moves, and a plain RL policy learned
 /// to tip the cube onto its side and wiggle it there, "turning" it 166 rad in 30 s with
-/// three fingertips resting on it (docs/results/yaw-exploit/).
+/// three fingertips resting on it (docs/results/euler-yaw-reward/rl-exploit/).
 #[must_use]
 pub fn rotation_about_z_rad(before: &UnitQuaternion<f32>, after: &UnitQuaternion<f32>) -> f32 {
     (after * before.inverse()).scaled_axis().z
 }
 
-/// Angle wrapped to (-pi, pi].
-#[must_use]
-pub fn wrap_angle_rad(a: f32) -> f32 {
-    use std::f32::consts::PI;
-    let a = a % (2.0 * PI);
-    if a > PI {
-        a - 2.0 * PI
-    } else if a <= -PI {
-        a + 2.0 * PI
-    } else {
-        a
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::{rotation_about_z_rad, wrap_angle_rad};
     use nalgebra::{UnitQuaternion, Vector3};
     use std::f32::consts::PI;
+
+    use super::rotation_about_z_rad;
+
+    /// Angle wrapped to (-pi, pi]: how an Euler-yaw difference was measured before.
+    fn wrap_angle_rad(a: f32) -> f32 {
+        let a = a % (2.0 * PI);
+        if a > PI {
+            a - 2.0 * PI
+        } else if a <= -PI {
+            a + 2.0 * PI
+        } else {
+            a
+        }
+    }
 
     #[test]
     fn rotation_about_z_is_the_turn_about_world_z_at_any_tilt() {

@@ -36,7 +36,7 @@ pub mod vec_env;
 #[cfg(feature = "physics")]
 pub mod world;
 
-pub use angle::{rotation_about_z_rad, wrap_angle_rad};
+pub use angle::rotation_about_z_rad;
 #[cfg(feature = "physics")]
 pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,

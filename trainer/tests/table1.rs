@@ -107,7 +107,9 @@ fn committed_table1_is_what_its_run_folders_give() {
     // VGE + FG's seeds. The two archives (the Euler-yaw reward, then the paper's reward)
     // always; the current table once its first runs are in.
     let mut tables: Vec<_> = ["euler-yaw-reward", "paper-reward"]
-        .map(|archive| (results.join(archive).join("table1"), results.join(archive).join("cube-fg-vge-seeds")))
+        .map(|archive| {
+            (results.join(archive).join("table1"), results.join(archive).join("cube-fg-vge-seeds"))
+        })
         .into();
     if results.join("table1/table1.csv").exists() {
         tables.push((results.join("table1"), results.join("cube-fg-vge-seeds")));
