@@ -9,6 +9,7 @@ pub mod config;
 pub mod eval;
 pub mod gait_diagram;
 pub mod heap;
+pub mod mkl;
 pub mod nets;
 pub mod optim;
 pub mod plot;

@@ -440,6 +440,15 @@ enum Bench {
     },
 }
 
+/// MKL's vendor check, answered by `vge` so that MKL runs its AVX-512 kernels on AMD CPUs
+/// that have them (`vge_trainer::mkl` says why and what it measured). build.rs exports it
+/// from the executable, where it takes precedence over libtorch's own copy.
+#[unsafe(no_mangle)]
+#[allow(unsafe_code)]
+pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
+    vge_trainer::mkl::intel_cpu_answer()
+}
+
 fn main() -> ExitCode {
     // Before libtorch allocates anything; a refusal only costs speed (heap.rs).
     if !vge_trainer::heap::keep_freed_memory() {
@@ -862,6 +871,7 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                     "batch": r.batch,
                     "updates": r.updates,
                     "threads": r.threads,
+                    "mkl_code_branch": vge_trainer::mkl::code_branch(),
                 });
                 println!("{line}");
             } else {
@@ -875,6 +885,10 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                 println!("  updates/s        {:>8.1}", r.updates_per_s);
                 println!("  achieved GFLOP/s {:>8.2}", r.gflops);
                 println!("  matmul GFLOP/s   {:>8.2}  (1024^3 f32 matmul, same run)", r.matmul_gflops);
+                println!(
+                    "  MKL code branch  {:>8}  (see VGE_MKL_VENDOR_CHECK in vge_trainer::mkl)",
+                    vge_trainer::mkl::code_branch().unwrap_or("no MKL")
+                );
             }
         }
         Bench::Sim { json, steps, worlds, threads } => {
