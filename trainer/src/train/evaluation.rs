@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use vge_export::Provenance;
+use vge_sim::EnvConfig;
 
 use super::{TrainError, io_err};
 use crate::config::Config;
@@ -28,17 +29,24 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
     Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
 }
 
-/// The success test ([`crate::eval`]) of an exported actor (policy-file bytes) on the
-/// runtime: `run.eval_episodes` episodes of `run.eval_episode_s` from grasps randomised by
-/// `run.eval_grasp_noise_rad`, seeded from the config's seed only (training is not
-/// perturbed).
-fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<EvalReport, TrainError> {
+/// The success test's env for a run: its first env without the disturbances it may train
+/// with (a config with domain randomisation is judged by the same test as any other),
+/// `run.eval_episode_s` long, grasps randomised by `run.eval_grasp_noise_rad`.
+fn success_test_env_of(config: &Config) -> EnvConfig {
     let run = &config.run;
-    let env = crate::eval::success_test_env(
-        &config.env.env_config(0),
+    crate::eval::success_test_env(
+        &crate::eval::without_training_disturbances(&config.env.env_config(0)),
         run.eval_episode_s,
         run.eval_grasp_noise_rad,
-    );
+    )
+}
+
+/// The success test ([`crate::eval`]) of an exported actor (policy-file bytes) on the
+/// runtime: `run.eval_episodes` episodes of [`success_test_env_of`], seeded from the
+/// config's seed only (training is not perturbed).
+fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<EvalReport, TrainError> {
+    let run = &config.run;
+    let env = success_test_env_of(config);
     let eval_seed = match set {
         EpisodeSet::Validation => config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1),
         EpisodeSet::Test => config.seed.wrapping_mul(1_000_033).wrapping_add(0x7e57),
@@ -306,6 +314,29 @@ pub(super) fn finish(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_with_domain_randomisation_is_judged_by_the_clean_success_test() {
+        let mut config = Config::default();
+        config.env.control_hz = 30.0;
+        config.env.max_action_rad = 0.04;
+        config.env.terminate_below_contacts = 3;
+        config.env.noise_normal_std_frac = 0.25;
+        config.env.perturb_force_std_n = 0.75;
+        config.env.perturb_change_probability = 0.1;
+        config.env.mass_scale = [0.8, 1.2];
+        config.env.action_latency_steps = 1;
+        let env = success_test_env_of(&config);
+        let nominal = EnvConfig::default();
+        assert_eq!(env.noise, nominal.noise);
+        assert_eq!(env.perturbation, nominal.perturbation);
+        assert_eq!(env.randomization, nominal.randomization);
+        assert_eq!(env.min_contacts, 0, "the paper's ends: a drop or the time limit");
+        // What defines the task stays the run's.
+        assert_eq!((env.control_hz, env.max_action_rad), (30.0, 0.04));
+        assert_eq!(env.episode_length_steps, (config.run.eval_episode_s * 30.0).round() as usize);
+        assert_eq!(env.grasp.pose_noise_rad, config.run.eval_grasp_noise_rad);
+    }
 
     #[test]
     fn model_selection_takes_success_then_return_then_the_earlier_step() {
