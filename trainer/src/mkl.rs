@@ -3,13 +3,14 @@
 //! The PyPI libtorch links oneMKL statically. MKL asks `mkl_serv_intel_cpu_true()` whether
 //! the CPU is an Intel one, and on any other vendor it runs its generic AVX2 ("zen") SGEMM
 //! kernels even where the CPU has AVX-512: on the AMD EPYC machines here its code-branch
-//! query reads `auto` (no branch of its own) instead of `avx512_e1` (AVX-512 with VNNI). `vge`'s `main.rs` defines that
-//! function (exported from the executable, so it takes precedence over libtorch's copy)
-//! and answers yes, after which MKL picks its kernels by the CPU's features alone, as it
-//! does on Intel. Measured in one run of alternating pairs with training paused: TD3 one
-//! thread 129-137 -> 145-152 updates/s, SAC two threads 110-111 -> 126-141. The sums are
-//! those MKL computes on an Intel CPU with AVX-512, so results differ from the AVX2 path
-//! only by float rounding, as they already did between the Intel and AMD machines.
+//! query reads `auto` (no branch of its own) instead of `avx512_e1` (AVX-512 with VNNI).
+//! `vge`'s `main.rs` defines that function (exported from the executable, so it takes
+//! precedence over libtorch's copy) and answers yes, after which MKL picks its kernels by
+//! the CPU's features alone, as it does on Intel. Measured in one run of five alternating
+//! pairs with training paused: TD3 one thread +11 to +16% updates/s in every pair (e.g.
+//! 132.9 -> 149.4), SAC two threads +9 to +15% in four of five. The sums are those MKL
+//! computes on an Intel CPU with AVX-512, so results differ from the AVX2 path only by
+//! float rounding, as they already did between the Intel and AMD machines.
 //!
 //! `VGE_MKL_VENDOR_CHECK=1` leaves MKL's own answer in place (for comparisons); only the
 //! `vge` binary carries the override, so tests and examples that call tch in-process keep
