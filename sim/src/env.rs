@@ -370,6 +370,20 @@ impl Env {
         &self.config
     }
 
+    /// Replaces the observation noise and the forces on the object (a curriculum raises
+    /// them over training). They apply from the next step; set them before a reset for a
+    /// whole episode. Refused (and nothing changed) if the result is not a valid config.
+    pub fn set_disturbances(
+        &mut self,
+        noise: NoiseConfig,
+        perturbation: PerturbationConfig,
+    ) -> Result<(), SimError> {
+        EnvConfig { noise, perturbation, ..self.config.clone() }.validate()?;
+        self.config.noise = noise;
+        self.config.perturbation = perturbation;
+        Ok(())
+    }
+
     /// The physics world (after a reset).
     #[must_use]
     pub fn world(&self) -> Option<&HandWorld> {

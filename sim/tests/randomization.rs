@@ -1,7 +1,7 @@
 //! Domain randomisation on the real rapier world: the object's mass drawn per episode from
-//! its range (seeded), and the action latency.
+//! its range (seeded), the action latency, and disturbances changed between episodes.
 
-use vge_sim::{DomainRandomization, Env, EnvConfig, NUM_JOINTS};
+use vge_sim::{DomainRandomization, Env, EnvConfig, NUM_JOINTS, NoiseConfig, PerturbationConfig};
 
 fn env_with(randomization: DomainRandomization) -> Env {
     Env::new(EnvConfig { randomization, ..EnvConfig::default() }).expect("valid config")
@@ -45,4 +45,25 @@ fn an_action_takes_effect_after_the_latency() {
         ..EnvConfig::default()
     };
     assert!(Env::new(bad).is_err(), "an empty range is refused");
+}
+
+/// A curriculum changes the noise and the forces between episodes; a level that is not a
+/// valid config is refused and leaves the env as it was, and a valid one shows in the
+/// episode that follows (the object is pushed).
+#[test]
+fn disturbances_can_be_changed_between_episodes_and_invalid_ones_are_refused() {
+    let mut env = env_with(DomainRandomization::default());
+    let push = PerturbationConfig { force_std_n: 1.0, change_probability: 1.0 };
+    let bad = PerturbationConfig { force_std_n: -1.0, change_probability: 1.0 };
+    assert!(env.set_disturbances(NoiseConfig::default(), bad).is_err());
+    let nan = NoiseConfig { q_std_rad: f32::NAN, ..NoiseConfig::default() };
+    assert!(env.set_disturbances(nan, push).is_err());
+    assert_eq!(env.config().perturbation, PerturbationConfig::default(), "unchanged after a refusal");
+    env.reset(0).expect("reset");
+    env.step(&[0.0; NUM_JOINTS]).expect("step");
+    assert_eq!(env.external_force_n().norm(), 0.0, "no force before the curriculum raises it");
+    env.set_disturbances(NoiseConfig::default(), push).expect("valid levels");
+    env.reset(0).expect("reset");
+    env.step(&[0.0; NUM_JOINTS]).expect("step");
+    assert!(env.external_force_n().norm() > 0.0, "the new level pushes the object");
 }

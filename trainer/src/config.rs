@@ -110,6 +110,11 @@ pub struct EnvSection {
     pub friction_scale: [f32; 2],
     /// Control steps between an action and its effect (a real hand's bus and motor delay).
     pub action_latency_steps: usize,
+    /// Curriculum: the observation noise and the forces on the object (the `noise_*` and
+    /// `perturb_force_std_n` levels above) grow linearly from 0 to those levels over the
+    /// first this-many env steps, set at each episode's start (0: full levels from the
+    /// start). Mass, friction and latency are not ramped.
+    pub disturbance_ramp_steps: u64,
 }
 
 impl Default for EnvSection {
@@ -132,6 +137,7 @@ impl Default for EnvSection {
             mass_scale: env.randomization.mass_scale,
             friction_scale: env.randomization.friction_scale,
             action_latency_steps: env.randomization.action_latency_steps,
+            disturbance_ramp_steps: 0,
         }
     }
 }

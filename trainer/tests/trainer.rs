@@ -407,7 +407,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"multi-object-fg-vge".to_owned()));
     assert!(names.contains(&"cube-fg-vge-td3".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust".to_owned()));
-    assert_eq!(names.len(), 18);
+    assert!(names.contains(&"cube-fg-fge-robust-ramp".to_owned()));
+    assert_eq!(names.len(), 19);
 }
 
 #[test]

@@ -6,7 +6,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tch::Tensor;
-use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, OBS_DIM, SimError};
+use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
 
 use super::TrainError;
 use super::metrics::Window;
@@ -37,6 +37,34 @@ pub(super) struct Collector {
     ctl_rngs: Vec<ChaCha8Rng>,
     max_action_rad: f32,
     seed: u64,
+    /// The disturbance curriculum (`env.disturbance_ramp_steps`), when on.
+    curriculum: Option<DisturbanceRamp>,
+}
+
+/// Raises each env's observation noise and object forces linearly from 0 to its config's
+/// levels over `ramp_steps` env steps; an env gets the level of the step its episode starts.
+#[derive(Debug, Clone)]
+struct DisturbanceRamp {
+    ramp_steps: u64,
+    /// Each env's full levels.
+    full: Vec<(NoiseConfig, PerturbationConfig)>,
+    /// The fraction of the full levels for episodes starting now.
+    fraction: f32,
+}
+
+impl DisturbanceRamp {
+    fn scaled(&self, env: usize) -> (NoiseConfig, PerturbationConfig) {
+        let (noise, perturbation) = self.full[env];
+        let f = self.fraction;
+        (
+            NoiseConfig {
+                q_std_rad: noise.q_std_rad * f,
+                normal_std_frac: noise.normal_std_frac * f,
+                position_std_m: noise.position_std_m * f,
+            },
+            PerturbationConfig { force_std_n: perturbation.force_std_n * f, ..perturbation },
+        )
+    }
 }
 
 impl Collector {
@@ -50,7 +78,13 @@ impl Collector {
             }
             None => Vec::new(),
         };
+        let curriculum = (config.env.disturbance_ramp_steps > 0).then(|| DisturbanceRamp {
+            ramp_steps: config.env.disturbance_ramp_steps,
+            full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+            fraction: 0.0,
+        });
         Ok(Self {
+            curriculum,
             envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
             obs: vec![[0.0; OBS_DIM]; n],
             episodes: vec![EnvEpisode::default(); n],
@@ -63,6 +97,14 @@ impl Collector {
 
     pub fn len(&self) -> usize {
         self.envs.len()
+    }
+
+    /// Tells the disturbance curriculum how many env steps training has taken: episodes
+    /// that start from now on get that step's fraction of the full levels.
+    pub fn set_progress(&mut self, step: u64) {
+        if let Some(c) = &mut self.curriculum {
+            c.fraction = (step as f64 / c.ramp_steps as f64).min(1.0) as f32;
+        }
     }
 
     pub fn reset_all(&mut self, behaviour: &mut Behaviour, rng: &mut ChaCha8Rng) -> Result<(), TrainError> {
@@ -83,6 +125,10 @@ impl Collector {
             seeds[i] = Some(rng.next_u64());
             self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
             behaviour.episode_reset(i);
+            if let Some(c) = &self.curriculum {
+                let (noise, perturbation) = c.scaled(i);
+                self.envs[i].set_disturbances(noise, perturbation)?;
+            }
         }
         let resets: Vec<Option<[f32; OBS_DIM]>> = self
             .envs
@@ -236,5 +282,59 @@ mod tests {
         }
         let message = TrainError::NonFiniteAction { step, env: 0, value: f32::NAN }.to_string();
         assert!(message.contains("12345") && message.contains("not finite"), "{message}");
+    }
+
+    /// With `env.disturbance_ramp_steps`, an episode starting at step t gets t / ramp of
+    /// the configured noise and force levels (all of them from the ramp's end on); without
+    /// it, the env keeps its config's levels from the first episode.
+    #[test]
+    fn the_disturbance_curriculum_ramps_noise_and_forces_by_the_step_an_episode_starts() {
+        let levels = |c: &Collector, i: usize| {
+            let e = c.envs[i].config();
+            (e.noise.q_std_rad, e.noise.normal_std_frac, e.noise.position_std_m, e.perturbation.force_std_n)
+        };
+        let mut config = Config::default();
+        for o in [
+            "num_envs=2",
+            "method=rl",
+            "env.noise_q_std_rad=0.08",
+            "env.noise_normal_std_frac=0.4",
+            "env.noise_position_std_m=0.002",
+            "env.perturb_force_std_n=1.2",
+            "env.perturb_change_probability=0.1",
+        ] {
+            apply_override(&mut config, o).expect(o);
+        }
+        let full = (0.08, 0.4, 0.002, 1.2);
+        let mut behaviour = Behaviour::from_config(&config);
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let mut plain = Collector::new(&config).expect("envs");
+        plain.set_progress(0);
+        plain.reset_all(&mut behaviour, &mut rng).expect("reset");
+        assert_eq!(levels(&plain, 1), full, "no ramp: the config's levels from the start");
+
+        apply_override(&mut config, "env.disturbance_ramp_steps=1000").expect("ramp");
+        let mut ramped = Collector::new(&config).expect("envs");
+        ramped.set_progress(0);
+        ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
+        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        ramped.set_progress(250);
+        // Only an episode that starts now gets the new level.
+        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        ramped.reset(&[1], &mut behaviour, &mut rng).expect("reset env 1");
+        let quarter = levels(&ramped, 1);
+        let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b.max(1.0);
+        assert!(
+            close(quarter.0, 0.02)
+                && close(quarter.1, 0.1)
+                && close(quarter.2, 0.0005)
+                && close(quarter.3, 0.3),
+            "{quarter:?}"
+        );
+        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        ramped.set_progress(5000);
+        ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
+        assert_eq!(levels(&ramped, 0), full, "past the ramp: the full levels");
+        assert_eq!(ramped.envs[0].config().perturbation.change_probability, 0.1);
     }
 }

@@ -200,6 +200,7 @@ pub fn train(
             stopped = true;
             break;
         }
+        t.collector.set_progress(t.c.step);
         let learner = t.collector.learner_actions(&t.sac, t.c.step, config.sac.warmup, &mut t.rng)?;
         t.lap(Phase::Learner);
         let stats_before = t.behaviour.stats;
@@ -278,6 +279,7 @@ impl<'a> Trainer<'a> {
             previous_wall_s = state.wall_s;
         }
         let folder = RunFolder::open(out_dir, config, c.step, resume)?;
+        collector.set_progress(c.step);
         collector.reset_all(&mut behaviour, &mut rng)?;
         let now = Instant::now();
         Ok(Self {
@@ -382,6 +384,7 @@ impl<'a> Trainer<'a> {
             self.checkpoint()?;
             self.lap(Phase::Checkpoint);
             // A checkpoint ends every episode (module docs).
+            self.collector.set_progress(step);
             self.collector.reset_all(&mut self.behaviour, &mut self.rng)?;
         }
         self.lap(Phase::Sim);
