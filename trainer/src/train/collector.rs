@@ -37,33 +37,25 @@ pub(super) struct Collector {
     ctl_rngs: Vec<ChaCha8Rng>,
     max_action_rad: f32,
     seed: u64,
-    /// The disturbance curriculum (`env.disturbance_ramp_steps`), when on.
-    curriculum: Option<DisturbanceRamp>,
+    /// The push curriculum (`env.perturb_ramp_steps`), when on.
+    push_ramp: Option<PushRamp>,
 }
 
-/// Raises each env's observation noise and object forces linearly from 0 to its config's
-/// levels over `ramp_steps` env steps; an env gets the level of the step its episode starts.
+/// Raises each env's random force on the object linearly from 0 to its config's level over
+/// `ramp_steps` env steps; an env gets the level of the step its episode starts at.
 #[derive(Debug, Clone)]
-struct DisturbanceRamp {
+struct PushRamp {
     ramp_steps: u64,
-    /// Each env's full levels.
-    full: Vec<(NoiseConfig, PerturbationConfig)>,
-    /// The fraction of the full levels for episodes starting now.
+    /// Each env's full level.
+    full: Vec<PerturbationConfig>,
+    /// The fraction of the full level for episodes starting now.
     fraction: f32,
 }
 
-impl DisturbanceRamp {
-    fn scaled(&self, env: usize) -> (NoiseConfig, PerturbationConfig) {
-        let (noise, perturbation) = self.full[env];
-        let f = self.fraction;
-        (
-            NoiseConfig {
-                q_std_rad: noise.q_std_rad * f,
-                normal_std_frac: noise.normal_std_frac * f,
-                position_std_m: noise.position_std_m * f,
-            },
-            PerturbationConfig { force_std_n: perturbation.force_std_n * f, ..perturbation },
-        )
+impl PushRamp {
+    fn scaled(&self, env: usize) -> PerturbationConfig {
+        let full = self.full[env];
+        PerturbationConfig { force_std_n: full.force_std_n * self.fraction, ..full }
     }
 }
 
@@ -78,13 +70,13 @@ impl Collector {
             }
             None => Vec::new(),
         };
-        let curriculum = (config.env.disturbance_ramp_steps > 0).then(|| DisturbanceRamp {
-            ramp_steps: config.env.disturbance_ramp_steps,
-            full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+        let push_ramp = (config.env.perturb_ramp_steps > 0).then(|| PushRamp {
+            ramp_steps: config.env.perturb_ramp_steps,
+            full: env_configs.iter().map(|e| e.perturbation).collect(),
             fraction: 0.0,
         });
         Ok(Self {
-            curriculum,
+            push_ramp,
             envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
             obs: vec![[0.0; OBS_DIM]; n],
             episodes: vec![EnvEpisode::default(); n],
@@ -99,10 +91,10 @@ impl Collector {
         self.envs.len()
     }
 
-    /// Tells the disturbance curriculum how many env steps training has taken: episodes
-    /// that start from now on get that step's fraction of the full levels.
+    /// Tells the push curriculum how many env steps training has taken: episodes that
+    /// start from now on get that step's fraction of the full force.
     pub fn set_progress(&mut self, step: u64) {
-        if let Some(c) = &mut self.curriculum {
+        if let Some(c) = &mut self.push_ramp {
             c.fraction = (step as f64 / c.ramp_steps as f64).min(1.0) as f32;
         }
     }
@@ -125,9 +117,9 @@ impl Collector {
             seeds[i] = Some(rng.next_u64());
             self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
             behaviour.episode_reset(i);
-            if let Some(c) = &self.curriculum {
-                let (noise, perturbation) = c.scaled(i);
-                self.envs[i].set_disturbances(noise, perturbation)?;
+            if let Some(c) = &self.push_ramp {
+                let noise = self.envs[i].config().noise;
+                self.envs[i].set_disturbances(noise, c.scaled(i))?;
             }
         }
         let resets: Vec<Option<[f32; OBS_DIM]>> = self
@@ -284,11 +276,11 @@ mod tests {
         assert!(message.contains("12345") && message.contains("not finite"), "{message}");
     }
 
-    /// With `env.disturbance_ramp_steps`, an episode starting at step t gets t / ramp of
-    /// the configured noise and force levels (all of them from the ramp's end on); without
-    /// it, the env keeps its config's levels from the first episode.
+    /// With `env.perturb_ramp_steps`, an episode starting at step t gets t / ramp of the
+    /// configured force on the object (all of it from the ramp's end on) while the sensor
+    /// noise stays at its level throughout; without it, the env keeps its config's force.
     #[test]
-    fn the_disturbance_curriculum_ramps_noise_and_forces_by_the_step_an_episode_starts() {
+    fn the_push_curriculum_ramps_the_force_by_the_step_an_episode_starts() {
         let levels = |c: &Collector, i: usize| {
             let e = c.envs[i].config();
             (e.noise.q_std_rad, e.noise.normal_std_frac, e.noise.position_std_m, e.perturbation.force_std_n)
@@ -306,6 +298,7 @@ mod tests {
             apply_override(&mut config, o).expect(o);
         }
         let full = (0.08, 0.4, 0.002, 1.2);
+        let no_push = (0.08, 0.4, 0.002, 0.0);
         let mut behaviour = Behaviour::from_config(&config);
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let mut plain = Collector::new(&config).expect("envs");
@@ -313,28 +306,22 @@ mod tests {
         plain.reset_all(&mut behaviour, &mut rng).expect("reset");
         assert_eq!(levels(&plain, 1), full, "no ramp: the config's levels from the start");
 
-        apply_override(&mut config, "env.disturbance_ramp_steps=1000").expect("ramp");
+        apply_override(&mut config, "env.perturb_ramp_steps=1000").expect("ramp");
         let mut ramped = Collector::new(&config).expect("envs");
         ramped.set_progress(0);
         ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
-        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        assert_eq!(levels(&ramped, 0), no_push);
         ramped.set_progress(250);
         // Only an episode that starts now gets the new level.
-        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        assert_eq!(levels(&ramped, 0), no_push);
         ramped.reset(&[1], &mut behaviour, &mut rng).expect("reset env 1");
         let quarter = levels(&ramped, 1);
-        let close = |a: f32, b: f32| (a - b).abs() <= 1e-6 * b.max(1.0);
-        assert!(
-            close(quarter.0, 0.02)
-                && close(quarter.1, 0.1)
-                && close(quarter.2, 0.0005)
-                && close(quarter.3, 0.3),
-            "{quarter:?}"
-        );
-        assert_eq!(levels(&ramped, 0), (0.0, 0.0, 0.0, 0.0));
+        assert_eq!((quarter.0, quarter.1, quarter.2), (0.08, 0.4, 0.002), "noise is not ramped");
+        assert!((quarter.3 - 0.3).abs() < 1e-6, "{quarter:?}");
+        assert_eq!(levels(&ramped, 0), no_push);
         ramped.set_progress(5000);
         ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
-        assert_eq!(levels(&ramped, 0), full, "past the ramp: the full levels");
+        assert_eq!(levels(&ramped, 0), full, "past the ramp: the full force");
         assert_eq!(ramped.envs[0].config().perturbation.change_probability, 0.1);
     }
 }
