@@ -6,7 +6,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tch::Tensor;
-use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
+use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, OBS_DIM, PerturbationConfig, SimError};
 
 use super::TrainError;
 use super::metrics::Window;
