@@ -416,6 +416,18 @@ impl Verified {
         }
         Ok(())
     }
+
+    /// Restores only the networks into `sac` ([`Sac::load_networks`]): the start of a run
+    /// that continues from another run's networks with fresh optimiser state and data.
+    pub fn load_networks(&self, sac: &mut Sac) -> Result<(), CheckpointError> {
+        for name in sac.checkpoint_files().into_iter().filter(|n| *n != crate::sac::OPTIM_FILE) {
+            self.require(name)?;
+        }
+        sac.load_networks(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
+            dir: self.dir.clone(),
+            message: without_backtrace(&e.to_string()).to_owned(),
+        })
+    }
 }
 
 /// A libtorch error message up to the C++ backtrace that follows it.

@@ -5,7 +5,7 @@
 //! Every section has defaults, so a file names only what differs; unknown keys are errors
 //! (a typo must not silently train the default).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -117,6 +117,18 @@ pub struct EnvSection {
     /// 50% normal error a policy trained without it kept 8% of its return, one trained
     /// with 25% from the start 85%).
     pub perturb_ramp_steps: u64,
+    /// Curriculum for a run that starts from trained networks ([`Config::init_from`]): the
+    /// sensor noise (`noise_*`) grows linearly from 0 to its level over the first this-many
+    /// env steps, set at each episode's start (0: full from the start). Refused for a run
+    /// that fits its observation normaliser, whose warm-up data would then hold no noise.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub noise_ramp_steps: u64,
+}
+
+/// Keeps a key that is off out of the serialised config, so that configs from before it
+/// existed keep their hash.
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 impl Default for EnvSection {
@@ -140,6 +152,7 @@ impl Default for EnvSection {
             friction_scale: env.randomization.friction_scale,
             action_latency_steps: env.randomization.action_latency_steps,
             perturb_ramp_steps: 0,
+            noise_ramp_steps: 0,
         }
     }
 }
@@ -388,6 +401,14 @@ pub struct Config {
     /// Required for fge, vge, vge-bc; spelt as [`ControllerKind::name`] gives it (`"fg"`).
     pub controller: Option<ControllerKind>,
     pub algorithm: AlgorithmName,
+    /// A run folder whose checkpoint's networks start this run: the actor, the critics,
+    /// their targets and the observation normaliser they carry (a second curriculum stage,
+    /// e.g. fine-tuning a gait under domain randomisation). The optimiser, the replay buffer
+    /// and the counters start fresh; the warm-up acts with the loaded actor instead of
+    /// uniform random actions, and the normaliser is kept rather than refitted. The
+    /// algorithm and network sizes must match the folder's. A relative path is taken from
+    /// the working directory. Only read when a run starts, not on `--resume`.
+    pub init_from: Option<PathBuf>,
     pub env: EnvSection,
     pub sac: SacSection,
     pub td3: Td3Section,
@@ -407,6 +428,7 @@ impl Default for Config {
             method: Method::Vge,
             controller: Some(ControllerKind::Fg),
             algorithm: AlgorithmName::Sac,
+            init_from: None,
             env: EnvSection::default(),
             sac: SacSection::default(),
             td3: Td3Section::default(),
@@ -497,6 +519,14 @@ impl Config {
                     "sac.alpha is SAC's entropy coefficient: leave it at 0 with algorithm = \"td3\"",
                 ));
             }
+        }
+        if self.env.noise_ramp_steps > 0 && self.init_from.is_none() && self.sac.normalize_obs {
+            return Err(invalid(
+                "env.noise_ramp_steps ramps the sensor noise up from 0, but this run fits its observation \
+                 normaliser to the warm-up's data, which would hold no noise (a policy normalised \
+                 without normal noise kept 8% of its return at 50% error): use it with init_from, \
+                 whose normaliser is kept, or ramp only the force (env.perturb_ramp_steps)",
+            ));
         }
         self.vge.validate()?;
         self.fge.validate()?;

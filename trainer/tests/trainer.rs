@@ -408,7 +408,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-vge-td3".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust-ramp".to_owned()));
-    assert_eq!(names.len(), 19);
+    assert!(names.contains(&"cube-fg-vge-robust-finetune".to_owned()));
+    assert_eq!(names.len(), 20);
 }
 
 #[test]
@@ -448,6 +449,11 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     refuse("num_envs=0", "num_envs");
     refuse("env.control_hz=7", "control");
     refuse("algorithm=\"ppo\"", "algorithm");
+    // A noise ramp would leave a freshly fitted normaliser without noise; from trained
+    // networks (whose normaliser is kept) it is allowed.
+    refuse("env.noise_ramp_steps=1000", "init_from");
+    let ramp_from = ["env.noise_ramp_steps=1000".to_owned(), "init_from=\"runs/stage-1\"".to_owned()];
+    load_config(&path, &ramp_from).expect("noise ramp from trained networks");
     let td3 = |o: &str| vec!["algorithm=\"td3\"".to_owned(), o.to_owned()];
     let e = load_config(&path, &td3("td3.policy_delay=0")).expect_err("delay 0");
     assert!(e.to_string().contains("td3.policy_delay"), "{e}");
@@ -656,5 +662,67 @@ fn a_network_the_deployed_runtime_cannot_hold_is_refused_before_training() {
     for too_big in ["[512, 512]", "[64, 64, 64, 64]"] {
         let err = with_hidden(too_big).expect_err(too_big).to_string();
         assert!(err.contains("vge-bridge") && err.contains("256"), "{err}");
+    }
+}
+
+#[test]
+fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
+    let never = AtomicBool::new(false);
+    let td3 = ["algorithm=\"td3\"", "method=rl"];
+    let source = tempdir("init-source");
+    train(&tiny_config_with(100, &td3), &source, false, &never, &mut |_| {}).expect("source run");
+    let policy = |dir: &std::path::Path| {
+        let bytes = std::fs::read(dir.join("policy.vgep")).expect("policy.vgep");
+        vge_export::PolicyFile::from_bytes(&bytes).expect("policy file")
+    };
+    let theirs = policy(&source);
+    // Stage 2 under pushes and noise, from the source's networks.
+    let init = format!("init_from=\"{}\"", source.display());
+    let stage2 = |total: u64, more: &[&str]| {
+        let mut extra: Vec<&str> = td3.to_vec();
+        extra.extend([init.as_str(), "env.perturb_force_std_n=0.5", "env.perturb_change_probability=0.1"]);
+        extra.extend(more);
+        tiny_config_with(total, &extra)
+    };
+    // Shorter than the 40-step warm-up: no update, so the exported actor is the loaded one.
+    let short = tempdir("init-short");
+    let s = train(&stage2(20, &[]), &short, false, &never, &mut |_| {}).expect("stage 2, no update");
+    assert_eq!(s.updates, 0);
+    let loaded = policy(&short);
+    assert!(loaded.layers == theirs.layers, "the loaded actor differs from the source's");
+    assert_eq!((&loaded.obs_mean, &loaded.obs_std), (&theirs.obs_mean, &theirs.obs_std));
+    let fresh = tempdir("init-fresh");
+    let mut no_init = stage2(20, &[]);
+    no_init.init_from = None;
+    train(&no_init, &fresh, false, &never, &mut |_| {}).expect("fresh run");
+    assert!(
+        policy(&fresh).layers != theirs.layers,
+        "a fresh actor equals the source's: the check proves nothing"
+    );
+    // Past the warm-up it learns, and keeps the source's observation normaliser.
+    let long = tempdir("init-long");
+    let l = train(&stage2(80, &[]), &long, false, &never, &mut |_| {}).expect("stage 2");
+    assert!(l.updates > 0);
+    let trained = policy(&long);
+    assert!(trained.layers != theirs.layers, "updates left the actor unchanged");
+    assert_eq!((&trained.obs_mean, &trained.obs_std), (&theirs.obs_mean, &theirs.obs_std));
+    // Networks of another shape or algorithm, or no run at all, are refused by name.
+    let refused = |config: Config| {
+        let dir = tempdir("init-refused");
+        let err = train(&config, &dir, false, &never, &mut |_| {}).expect_err("refused").to_string();
+        let _ = std::fs::remove_dir_all(dir);
+        err
+    };
+    let err = refused(stage2(20, &["sac.hidden=[16, 16]"]));
+    assert!(err.contains("sac.hidden") && err.contains(&source.display().to_string()), "{err}");
+    let mut sac = stage2(20, &[]);
+    sac.algorithm = vge_trainer::config::AlgorithmName::Sac;
+    sac.td3 = Default::default();
+    assert!(refused(sac).contains("algorithm"));
+    let mut nowhere = stage2(20, &[]);
+    nowhere.init_from = Some(source.join("no-such-run"));
+    assert!(refused(nowhere).contains("no-such-run"));
+    for d in [source, short, fresh, long] {
+        let _ = std::fs::remove_dir_all(d);
     }
 }

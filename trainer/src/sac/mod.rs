@@ -423,14 +423,22 @@ impl Sac {
         Tensor::save_multi(&named, dir.join(OPTIM_FILE))
     }
 
-    /// Restores what [`Self::save`] wrote (same configuration).
-    pub fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+    /// Restores the networks [`Self::save`] wrote (actor, critics, targets, with the
+    /// observation normalisers they hold), leaving the optimiser state and the update
+    /// counter as they are: a run that starts from another run's networks.
+    pub fn load_networks(&mut self, dir: &Path) -> Result<(), tch::TchError> {
         self.actor_vs.load(dir.join(ACTOR_FILE))?;
         self.critic_vs.load(dir.join(CRITIC_FILE))?;
         self.target_vs.load(dir.join(TARGET_FILE))?;
         if let Some(target) = &mut self.target_actor {
             target.vs.load(dir.join(TARGET_ACTOR_FILE))?;
         }
+        Ok(())
+    }
+
+    /// Restores what [`Self::save`] wrote (same configuration).
+    pub fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+        self.load_networks(dir)?;
         let named: std::collections::HashMap<String, Tensor> =
             Tensor::load_multi(dir.join(OPTIM_FILE))?.into_iter().collect();
         self.actor_opt.restore("actor_opt", &named)?;

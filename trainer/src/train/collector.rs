@@ -6,7 +6,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tch::Tensor;
-use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, OBS_DIM, PerturbationConfig, SimError};
+use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
 
 use super::TrainError;
 use super::metrics::Window;
@@ -37,25 +37,38 @@ pub(super) struct Collector {
     ctl_rngs: Vec<ChaCha8Rng>,
     max_action_rad: f32,
     seed: u64,
-    /// The push curriculum (`env.perturb_ramp_steps`), when on.
-    push_ramp: Option<PushRamp>,
+    /// The disturbance curricula (`env.perturb_ramp_steps`, `env.noise_ramp_steps`), when on.
+    ramp: Option<DisturbanceRamp>,
 }
 
-/// Raises each env's random force on the object linearly from 0 to its config's level over
-/// `ramp_steps` env steps; an env gets the level of the step its episode starts at.
+/// Raises each env's random force on the object (over `perturb_ramp_steps`) and its sensor
+/// noise (over `noise_ramp_steps`) linearly from 0 to its config's level; 0 steps: the
+/// full level from the start. An env gets the levels of the step its episode starts at.
 #[derive(Debug, Clone)]
-struct PushRamp {
-    ramp_steps: u64,
-    /// Each env's full level.
-    full: Vec<PerturbationConfig>,
-    /// The fraction of the full level for episodes starting now.
-    fraction: f32,
+struct DisturbanceRamp {
+    perturb_ramp_steps: u64,
+    noise_ramp_steps: u64,
+    /// Each env's full levels.
+    full: Vec<(NoiseConfig, PerturbationConfig)>,
+    /// Env steps taken so far.
+    step: u64,
 }
 
-impl PushRamp {
-    fn scaled(&self, env: usize) -> PerturbationConfig {
-        let full = self.full[env];
-        PerturbationConfig { force_std_n: full.force_std_n * self.fraction, ..full }
+impl DisturbanceRamp {
+    fn fraction(&self, ramp_steps: u64) -> f32 {
+        if ramp_steps == 0 { 1.0 } else { (self.step as f64 / ramp_steps as f64).min(1.0) as f32 }
+    }
+
+    /// The noise and force for an episode of env `env` starting now.
+    fn levels(&self, env: usize) -> (NoiseConfig, PerturbationConfig) {
+        let (noise, push) = self.full[env];
+        let (n, p) = (self.fraction(self.noise_ramp_steps), self.fraction(self.perturb_ramp_steps));
+        let noise = NoiseConfig {
+            q_std_rad: noise.q_std_rad * n,
+            normal_std_frac: noise.normal_std_frac * n,
+            position_std_m: noise.position_std_m * n,
+        };
+        (noise, PerturbationConfig { force_std_n: push.force_std_n * p, ..push })
     }
 }
 
@@ -70,13 +83,16 @@ impl Collector {
             }
             None => Vec::new(),
         };
-        let push_ramp = (config.env.perturb_ramp_steps > 0).then(|| PushRamp {
-            ramp_steps: config.env.perturb_ramp_steps,
-            full: env_configs.iter().map(|e| e.perturbation).collect(),
-            fraction: 0.0,
+        let (perturb_ramp_steps, noise_ramp_steps) =
+            (config.env.perturb_ramp_steps, config.env.noise_ramp_steps);
+        let ramp = (perturb_ramp_steps > 0 || noise_ramp_steps > 0).then(|| DisturbanceRamp {
+            perturb_ramp_steps,
+            noise_ramp_steps,
+            full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+            step: 0,
         });
         Ok(Self {
-            push_ramp,
+            ramp,
             envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
             obs: vec![[0.0; OBS_DIM]; n],
             episodes: vec![EnvEpisode::default(); n],
@@ -91,11 +107,11 @@ impl Collector {
         self.envs.len()
     }
 
-    /// Tells the push curriculum how many env steps training has taken: episodes that
-    /// start from now on get that step's fraction of the full force.
+    /// Tells the disturbance curricula how many env steps training has taken: episodes
+    /// that start from now on get that step's levels.
     pub fn set_progress(&mut self, step: u64) {
-        if let Some(c) = &mut self.push_ramp {
-            c.fraction = (step as f64 / c.ramp_steps as f64).min(1.0) as f32;
+        if let Some(ramp) = &mut self.ramp {
+            ramp.step = step;
         }
     }
 
@@ -117,9 +133,9 @@ impl Collector {
             seeds[i] = Some(rng.next_u64());
             self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
             behaviour.episode_reset(i);
-            if let Some(c) = &self.push_ramp {
-                let noise = self.envs[i].config().noise;
-                self.envs[i].set_disturbances(noise, c.scaled(i))?;
+            if let Some(ramp) = &self.ramp {
+                let (noise, push) = ramp.levels(i);
+                self.envs[i].set_disturbances(noise, push)?;
             }
         }
         let resets: Vec<Option<[f32; OBS_DIM]>> = self
@@ -278,7 +294,8 @@ mod tests {
 
     /// With `env.perturb_ramp_steps`, an episode starting at step t gets t / ramp of the
     /// configured force on the object (all of it from the ramp's end on) while the sensor
-    /// noise stays at its level throughout; without it, the env keeps its config's force.
+    /// noise stays at its level throughout, unless `env.noise_ramp_steps` ramps it too;
+    /// without either, the env keeps its config's levels.
     #[test]
     fn the_push_curriculum_ramps_the_force_by_the_step_an_episode_starts() {
         let levels = |c: &Collector, i: usize| {
@@ -323,5 +340,21 @@ mod tests {
         ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
         assert_eq!(levels(&ramped, 0), full, "past the ramp: the full force");
         assert_eq!(ramped.envs[0].config().perturbation.change_probability, 0.1);
+
+        // A run from trained networks may ramp the sensor noise too, on its own schedule.
+        config.init_from = Some("elsewhere".into());
+        apply_override(&mut config, "env.noise_ramp_steps=500").expect("noise ramp");
+        let mut both = Collector::new(&config).expect("envs");
+        both.set_progress(250);
+        both.reset_all(&mut behaviour, &mut rng).expect("reset");
+        let (q, n, p, f) = levels(&both, 0);
+        for (got, want) in [(q, 0.04), (n, 0.2), (p, 0.001), (f, 0.3)] {
+            assert!((got - want).abs() < 1e-6, "{:?}", (q, n, p, f));
+        }
+        both.set_progress(600);
+        both.reset_all(&mut behaviour, &mut rng).expect("reset");
+        let (q, n, p, f) = levels(&both, 1);
+        assert_eq!((q, n, p), (0.08, 0.4, 0.002), "noise ramp over");
+        assert!((f - 0.72).abs() < 1e-6, "force still ramping: {f}");
     }
 }

@@ -85,6 +85,8 @@ pub enum TrainError {
     Io { path: String, source: std::io::Error },
     #[error("resume: {0}")]
     Resume(String),
+    #[error("init_from {path}: {what}")]
+    InitFrom { path: String, what: String },
     #[error("{path}: not a finished run's file: {what}")]
     NotFinished { path: String, what: String },
     #[error(transparent)]
@@ -194,6 +196,8 @@ pub fn train(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<TrainSummary, TrainError> {
     let mut t = Trainer::new(config, out_dir, resume)?;
+    // Uniform random actions fill the warm-up, unless the run starts from trained networks.
+    let random_steps = if config.init_from.is_some() { 0 } else { config.sac.warmup };
     let mut stopped = false;
     while t.c.step < config.total_steps {
         if stop.load(Ordering::SeqCst) {
@@ -201,7 +205,7 @@ pub fn train(
             break;
         }
         t.collector.set_progress(t.c.step);
-        let learner = t.collector.learner_actions(&t.sac, t.c.step, config.sac.warmup, &mut t.rng)?;
+        let learner = t.collector.learner_actions(&t.sac, t.c.step, random_steps, &mut t.rng)?;
         t.lap(Phase::Learner);
         let stats_before = t.behaviour.stats;
         let decisions =
@@ -220,6 +224,42 @@ pub fn train(
         t.periodic(prev_step, progress)?;
     }
     t.finish(stopped)
+}
+
+/// Loads the networks of the run folder `source` into `sac` ([`Config::init_from`]), after
+/// checking that its algorithm and network sizes are this run's.
+fn init_networks(config: &Config, source: &Path, sac: &mut Sac) -> Result<(), TrainError> {
+    let theirs = run_config(source).map_err(|e| TrainError::InitFrom {
+        path: source.display().to_string(),
+        what: format!("its config.toml: {e}"),
+    })?;
+    let mismatch = |what: &str, ours: String, theirs: String| TrainError::InitFrom {
+        path: source.display().to_string(),
+        what: format!("{what} is {theirs} there and {ours} here"),
+    };
+    if theirs.algorithm != config.algorithm {
+        return Err(mismatch(
+            "algorithm",
+            format!("{:?}", config.algorithm),
+            format!("{:?}", theirs.algorithm),
+        ));
+    }
+    if theirs.sac.hidden != config.sac.hidden {
+        return Err(mismatch(
+            "sac.hidden",
+            format!("{:?}", config.sac.hidden),
+            format!("{:?}", theirs.sac.hidden),
+        ));
+    }
+    if theirs.sac.critic_layer_norm != config.sac.critic_layer_norm {
+        let (a, b) = (config.sac.critic_layer_norm, theirs.sac.critic_layer_norm);
+        return Err(mismatch("sac.critic_layer_norm", a.to_string(), b.to_string()));
+    }
+    if theirs.sac.normalize_obs != config.sac.normalize_obs {
+        let (a, b) = (config.sac.normalize_obs, theirs.sac.normalize_obs);
+        return Err(mismatch("sac.normalize_obs", a.to_string(), b.to_string()));
+    }
+    Ok(crate::checkpoint::open(source)?.load_networks(sac)?)
 }
 
 /// A phase of [`PhaseTimes`].
@@ -277,6 +317,8 @@ impl<'a> Trainer<'a> {
             c = state.counters();
             behaviour.stats = state.behaviour_stats();
             previous_wall_s = state.wall_s;
+        } else if let Some(source) = &config.init_from {
+            init_networks(config, source, &mut sac)?;
         }
         let folder = RunFolder::open(out_dir, config, c.step, resume)?;
         collector.set_progress(c.step);
@@ -326,7 +368,7 @@ impl<'a> Trainer<'a> {
         if self.c.step < config.sac.warmup || self.replay.len() < batch_size {
             return Ok(());
         }
-        if self.sac.updates() == 0 && config.sac.normalize_obs {
+        if self.sac.updates() == 0 && config.sac.normalize_obs && config.init_from.is_none() {
             // Once; afterwards the statistics live in the networks' var stores and come back
             // with a checkpoint.
             let (mean, std) = self.replay.obs_stats(OBS_MIN_STD);
