@@ -49,6 +49,11 @@ enum Command {
     /// --logdir DIR`), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
     /// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues, also
     /// after a kill (from the last periodic checkpoint).
+    ///
+    /// A run can start from another run's networks (actor, critics, observation
+    /// normaliser) with the config key `init_from = "DIR"` or `--set init_from=DIR`: a
+    /// second curriculum stage, e.g. configs/cube-fg-vge-robust-finetune.toml, which
+    /// fine-tunes a trained gait under sensor noise and pushes.
     Train {
         /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.
         #[arg(long, required_unless_present = "resume")]
@@ -1164,13 +1169,16 @@ fn train(
     let (config, out_dir, resuming) = train_target(resume, config, out, &overrides)?;
     let bar = progress_bar(config.total_steps);
     let resumed_from = if resuming { vge_trainer::sweep::checkpoint_step(&out_dir) } else { None };
+    // The controller only where the method queries it (rl runs ignore `controller`).
+    let controller = config.controller.filter(|_| config.method.queries_controller());
     eprintln!(
-        "training {} ({:?} + {:?}, {:?}, seed {}) into {}{}",
+        "training {} ({}{}, {}, seed {}){} into {}{}",
         config.name,
-        config.method,
-        config.controller,
-        config.algorithm,
+        config.method.name(),
+        controller.map_or(String::new(), |c| format!(" + {}", c.name())),
+        config.algorithm.name(),
         config.seed,
+        config.init_from.as_ref().map_or(String::new(), |d| format!(" from the networks of {}", d.display())),
         out_dir.display(),
         match (resuming, resumed_from) {
             (true, Some(step)) => format!(", resuming from step {step}"),
