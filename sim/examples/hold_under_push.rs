@@ -40,7 +40,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                             let proximal = 3 * finger + 1;
                             if steps < PHASE_STEPS && lifted.contains(&finger) {
                                 action[proximal] = -0.05;
-                            } else if (PHASE_STEPS..2 * PHASE_STEPS).contains(&steps) && !lifted.contains(&finger) {
+                            } else if (PHASE_STEPS..2 * PHASE_STEPS).contains(&steps)
+                                && !lifted.contains(&finger)
+                            {
                                 action[proximal] = squeeze_rad / PHASE_STEPS as f32;
                             }
                         }

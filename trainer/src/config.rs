@@ -706,6 +706,32 @@ pub fn load_config(path: &Path, overrides: &[String]) -> Result<Config, ConfigEr
     Ok(config)
 }
 
+/// Keys whose default changed while runs were stored without them: resuming such a run
+/// would switch it to the new default mid-run. (section, key, what to do).
+const CHANGED_DEFAULTS: [(&str, &str, &str); 1] = [(
+    "env",
+    "charge_reverse_rotation",
+    "backward turns cost reward by default since 8e9ed9f, and this run was trained on the \
+     paper's reward, which pays only while >= 3 fingertips touch: add \
+     `charge_reverse_rotation = false` under [env] to continue it as it was",
+)];
+
+/// Refuses a stored run's config (`text`, from `origin`) that lacks a key whose default
+/// has changed since ([`CHANGED_DEFAULTS`]): resumed, the run would silently train on.
+pub fn check_resumable(text: &str, origin: &str) -> Result<(), ConfigError> {
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
+        path: origin.to_owned(),
+        message: e.to_string(),
+    })?;
+    for (section, key, advice) in CHANGED_DEFAULTS {
+        let present = table.get(section).and_then(|s| s.as_table()).is_some_and(|s| s.contains_key(key));
+        if !present {
+            return Err(invalid(format!("{origin} predates {section}.{key}: {advice}")));
+        }
+    }
+    Ok(())
+}
+
 /// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
 pub fn parse_with_overrides(text: &str, origin: &str, overrides: &[String]) -> Result<Config, ConfigError> {
     let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {

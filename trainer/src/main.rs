@@ -1119,8 +1119,9 @@ fn train_target(
         (Some(dir), _, _) => {
             let text = std::fs::read_to_string(dir.join("config.toml"))
                 .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
-            let config =
-                cfg::parse_with_overrides(&text, &dir.join("config.toml").display().to_string(), overrides)?;
+            let origin = dir.join("config.toml").display().to_string();
+            cfg::check_resumable(&text, &origin)?;
+            let config = cfg::parse_with_overrides(&text, &origin, overrides)?;
             config.validate()?;
             (config, dir, true)
         }

@@ -425,3 +425,27 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     assert!(!neither.status.success());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
+    let root = std::env::temp_dir().join(format!("vge-cli-old-default-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).expect("temp dir");
+    // A run trained on the paper's reward, before env.charge_reverse_rotation existed.
+    let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../docs/results/paper-reward/cube-fg-vge-seeds/seed-0/config.toml");
+    let old = std::fs::read_to_string(stored).expect("stored config");
+    std::fs::write(root.join("config.toml"), &old).expect("write");
+    let out = vge(&["train", "--resume", root.to_str().expect("utf-8")], &[]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("predates env.charge_reverse_rotation") && err.contains("= false"), "{err}");
+    // With the key written in, the config passes and the missing checkpoint is what stops it.
+    let fixed = old.replacen("[env]\n", "[env]\ncharge_reverse_rotation = false\n", 1);
+    assert_ne!(fixed, old);
+    std::fs::write(root.join("config.toml"), fixed).expect("write");
+    let out = vge(&["train", "--resume", root.to_str().expect("utf-8")], &[]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success() && !err.contains("predates") && err.contains("checkpoint"), "{err}");
+    let _ = std::fs::remove_dir_all(&root);
+}
