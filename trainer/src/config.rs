@@ -219,6 +219,12 @@ pub struct SacSection {
     /// CleanRL's exp(-5) = 0.007). With alpha = 0 nothing else keeps σ up; see
     /// `GaussianActor::with_min_std`.
     pub min_policy_std: f64,
+    /// The first this-many updates train only the critics, the actor held (and SAC's α):
+    /// for a run from trained networks ([`Config::init_from`]) under new conditions, whose
+    /// critic must learn them before it steers the actor. Fine-tuned without a hold, a
+    /// gait lost all its clean success within 20k updates.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub actor_hold_updates: u64,
 }
 
 /// α: a fixed number or `"auto"`.
@@ -254,6 +260,7 @@ impl Default for SacSection {
             normalize_obs: true,
             critic_layer_norm: true,
             min_policy_std: 0.0,
+            actor_hold_updates: 0,
         }
     }
 }
@@ -503,6 +510,7 @@ impl Config {
             entropy,
             critic_layer_norm: self.sac.critic_layer_norm,
             min_policy_std: self.sac.min_policy_std,
+            actor_hold_updates: self.sac.actor_hold_updates,
         }
     }
 

@@ -52,7 +52,7 @@ enum Command {
     ///
     /// A run can start from another run's networks (actor, critics, observation
     /// normaliser) with the config key `init_from = "DIR"` or `--set init_from=DIR`: a
-    /// second curriculum stage, e.g. configs/cube-fg-vge-robust-finetune.toml, which
+    /// second curriculum stage, e.g. configs/cube-fg-fge-robust-finetune.toml, which
     /// fine-tunes a trained gait under sensor noise and pushes.
     Train {
         /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.

@@ -129,6 +129,7 @@ fn config(entropy: EntropyCoef) -> SacConfig {
         entropy,
         critic_layer_norm: false,
         min_policy_std: 0.0,
+        actor_hold_updates: 0,
     }
 }
 
@@ -182,4 +183,29 @@ fn adam_matches_libtorchs_adam_step_for_step() {
     assert!(moved > 0.1, "parameters barely moved ({moved})");
     let diff = max_abs(&(&ours_p - &theirs_p));
     assert!(diff < 1e-5, "ours and libtorch's Adam differ by {diff} after 50 steps");
+}
+
+/// `actor_hold_updates`: the first updates train only the critics (their targets keep
+/// following), then the actor learns as usual; for both learners.
+#[test]
+fn a_held_actor_stays_put_while_the_critics_learn() {
+    let td3 =
+        Algorithm::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 1 };
+    for algorithm in [Algorithm::Sac, td3] {
+        let held = SacConfig { algorithm, actor_hold_updates: 3, ..config(EntropyCoef::Fixed(0.0)) };
+        let mut sac = Sac::new_seeded(held, Device::Cpu, 1).expect("sac");
+        let batch = fixed_batch(&sac.config.net);
+        let probe = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
+        let zeros = Tensor::zeros([16, 3], (Kind::Float, Device::Cpu));
+        let action = |s: &Sac| s.behaviour_action(&probe, &zeros);
+        let q = |s: &Sac| s.q_of(&probe, &zeros);
+        let (action_0, q_0) = (action(&sac), q(&sac));
+        for _ in 0..3 {
+            sac.update(&batch);
+        }
+        assert_eq!(max_abs(&(action(&sac) - &action_0)), 0.0, "{algorithm:?}: the held actor moved");
+        assert!(max_abs(&(q(&sac) - &q_0)) > 0.0, "{algorithm:?}: the critics did not learn");
+        sac.update(&batch);
+        assert!(max_abs(&(action(&sac) - &action_0)) > 0.0, "{algorithm:?}: the actor never learned");
+    }
 }

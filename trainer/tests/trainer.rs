@@ -227,6 +227,7 @@ fn small_learner(algorithm: Algorithm) -> Sac {
         entropy: EntropyCoef::Fixed(0.0),
         critic_layer_norm: false,
         min_policy_std: 0.0,
+        actor_hold_updates: 0,
     };
     Sac::new(config, Device::Cpu).expect("sac")
 }
@@ -408,7 +409,7 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-vge-td3".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust-ramp".to_owned()));
-    assert!(names.contains(&"cube-fg-vge-robust-finetune".to_owned()));
+    assert!(names.contains(&"cube-fg-fge-robust-finetune".to_owned()));
     assert_eq!(names.len(), 20);
 }
 

@@ -72,6 +72,8 @@ pub struct SacConfig {
     /// SAC: floor of the policy's pre-tanh σ (unit action range); 0 keeps CleanRL's
     /// `exp(LOG_STD_MIN)`. See [`crate::nets::GaussianActor::with_min_std`].
     pub min_policy_std: f64,
+    /// Updates that step only the critics (and their targets) before the actor learns.
+    pub actor_hold_updates: u64,
 }
 
 impl SacConfig {
@@ -88,6 +90,7 @@ impl SacConfig {
             entropy: EntropyCoef::Auto { target_entropy: -15.0, initial: 0.1 },
             critic_layer_norm: true,
             min_policy_std: 0.0,
+            actor_hold_updates: 0,
         }
     }
 }
@@ -339,6 +342,12 @@ impl Sac {
     /// Updates done so far.
     pub fn updates(&self) -> u64 {
         self.updates
+    }
+
+    /// Whether the current update (counted) steps the actor: not while it is held
+    /// ([`SacConfig::actor_hold_updates`]).
+    fn actor_learns(&self) -> bool {
+        self.updates > self.config.actor_hold_updates
     }
 
     /// Makes every later update draw its noise from a generator seeded by

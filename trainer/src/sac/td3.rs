@@ -63,7 +63,9 @@ impl Sac {
             None => Tensor::randn([rows, act], (Kind::Float, batch.obs.device())),
         };
         self.updates += 1;
-        let actor_step = self.updates.is_multiple_of(policy_delay.max(1));
+        let delayed_step = self.updates.is_multiple_of(policy_delay.max(1));
+        // While the actor is held the targets still follow the critics (and, unchanged, the actor).
+        let actor_step = delayed_step && self.actor_learns();
         // The BC weights come from the critics before this update's critic step, and only
         // an update with an actor step reads them.
         let bc_weight = if actor_step { self.bc_weight(batch) } else { None };
@@ -102,6 +104,8 @@ impl Sac {
             self.actor_opt.backward_step(&actor_loss);
             self.critic_vs.unfreeze();
             self.last_actor_loss = rl_loss.double_value(&[]);
+        }
+        if delayed_step {
             self.soft_update_target();
         }
         UpdateStats {
