@@ -414,7 +414,9 @@ pub struct Config {
     /// and the counters start fresh; the warm-up acts with the loaded actor instead of
     /// uniform random actions, and the normaliser is kept rather than refitted. The
     /// algorithm and network sizes must match the folder's. A relative path is taken from
-    /// the working directory. Only read when a run starts, not on `--resume`.
+    /// the working directory; `{seed}` in it becomes the run's seed, so that a sweep
+    /// fine-tunes each stage-1 seed into the same seed of stage 2. Only read when a run
+    /// starts, not on `--resume`.
     pub init_from: Option<PathBuf>,
     pub env: EnvSection,
     pub sac: SacSection,
@@ -471,6 +473,12 @@ impl Config {
             h = h.wrapping_mul(0x0100_0000_01b3);
         }
         format!("{h:016x}")
+    }
+
+    /// The run folder [`Self::init_from`] names, `{seed}` replaced by this run's seed.
+    pub fn init_from_dir(&self) -> Option<PathBuf> {
+        let path = self.init_from.as_ref()?;
+        Some(PathBuf::from(path.to_string_lossy().replace("{seed}", &self.seed.to_string())))
     }
 
     /// CS's configuration on `env`: its trajectory is H = `vge.horizon` steps long, the

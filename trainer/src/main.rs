@@ -1179,7 +1179,7 @@ fn train(
         controller.map_or(String::new(), |c| format!(" + {}", c.name())),
         config.algorithm.name(),
         config.seed,
-        config.init_from.as_ref().map_or(String::new(), |d| format!(" from the networks of {}", d.display())),
+        config.init_from_dir().map_or(String::new(), |d| format!(" from the networks of {}", d.display())),
         out_dir.display(),
         match (resuming, resumed_from) {
             (true, Some(step)) => format!(", resuming from step {step}"),

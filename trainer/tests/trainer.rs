@@ -670,7 +670,7 @@ fn a_network_the_deployed_runtime_cannot_hold_is_refused_before_training() {
 fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     let never = AtomicBool::new(false);
     let td3 = ["algorithm=\"td3\"", "method=rl"];
-    let source = tempdir("init-source");
+    let source = tempdir("init-seed-0");
     train(&tiny_config_with(100, &td3), &source, false, &never, &mut |_| {}).expect("source run");
     let policy = |dir: &std::path::Path| {
         let bytes = std::fs::read(dir.join("policy.vgep")).expect("policy.vgep");
@@ -678,7 +678,8 @@ fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     };
     let theirs = policy(&source);
     // Stage 2 under pushes and noise, from the source's networks.
-    let init = format!("init_from=\"{}\"", source.display());
+    // `{seed}` names the stage-1 run of the same seed (the tiny config's seed is 0).
+    let init = format!("init_from=\"{}\"", source.display().to_string().replace("seed-0", "seed-{seed}"));
     let stage2 = |total: u64, more: &[&str]| {
         let mut extra: Vec<&str> = td3.to_vec();
         extra.extend([init.as_str(), "env.perturb_force_std_n=0.5", "env.perturb_change_probability=0.1"]);

@@ -317,8 +317,8 @@ impl<'a> Trainer<'a> {
             c = state.counters();
             behaviour.stats = state.behaviour_stats();
             previous_wall_s = state.wall_s;
-        } else if let Some(source) = &config.init_from {
-            init_networks(config, source, &mut sac)?;
+        } else if let Some(source) = config.init_from_dir() {
+            init_networks(config, &source, &mut sac)?;
         }
         let folder = RunFolder::open(out_dir, config, c.step, resume)?;
         collector.set_progress(c.step);
