@@ -273,19 +273,21 @@ fn finished(dir: &Path) -> Outcome {
     if dir.join("policy.vgep").exists() { Outcome::Done } else { Outcome::Stopped(checkpoint_step(dir)) }
 }
 
-/// `seed 3: 120000/1000000 steps, 85 steps/s, return 12.3`, from the run's metrics.csv (the
-/// last complete row) and `steps` or else config.toml (a resumed run's config.toml keeps its
-/// first session's total); the child's stderr holds a progress bar only on a terminal, so
-/// the files are what every run has.
+/// `seed 3: 120000/1000000 steps, 85 steps/s, return 12.3, success 30% at 100000`, from the
+/// run's metrics.csv and eval.csv (their last complete rows) and `steps` or else
+/// config.toml (a resumed run's config.toml keeps its first session's total); the child's
+/// stderr holds a progress bar only on a terminal, so the files are what every run has.
 pub fn progress_line(dir: &Path, seed: u64, steps: Option<u64>) -> String {
     let from_config = || {
         let text = std::fs::read_to_string(dir.join("config.toml")).ok()?;
         u64::try_from(text.parse::<toml::Table>().ok()?.get("total_steps")?.as_integer()?).ok()
     };
     let total = steps.or_else(from_config).map_or_else(|| "?".to_owned(), |t| t.to_string());
+    let success = last_success(dir)
+        .map_or_else(String::new, |(step, rate)| format!(", success {:.0}% at {step}", 100.0 * rate));
     match last_metrics(dir) {
         Some(m) => format!(
-            "seed {seed}: {}/{total} steps, {:.0} steps/s, return {:.2}",
+            "seed {seed}: {}/{total} steps, {:.0} steps/s, return {:.2}{success}",
             m.step, m.steps_per_s, m.mean_return
         ),
         None => format!("seed {seed}: starting (no metrics row yet)"),
@@ -299,19 +301,40 @@ struct MetricsRow {
     steps_per_s: f64,
 }
 
-fn last_metrics(dir: &Path) -> Option<MetricsRow> {
-    let text = std::fs::read_to_string(dir.join("metrics.csv")).ok()?;
-    // A row being written has no newline yet: only complete lines count.
+/// The named columns of the last complete row of the CSV file `path` (a row being written
+/// has no newline yet).
+fn last_row(path: &Path, names: &[&str]) -> Option<Vec<String>> {
+    let text = std::fs::read_to_string(path).ok()?;
     let complete = &text[..text.rfind('\n')?];
     let mut lines = complete.lines();
     let header: Vec<&str> = lines.next()?.split(',').collect();
     let row: Vec<&str> = lines.next_back()?.split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).and_then(|i| row.get(i));
+    names
+        .iter()
+        .map(|name| header.iter().position(|h| h == name).and_then(|i| row.get(i)).map(|v| (*v).to_owned()))
+        .collect()
+}
+
+fn last_metrics(dir: &Path) -> Option<MetricsRow> {
+    let row = last_row(&dir.join("metrics.csv"), &["step", "return", "steps_per_s"])?;
     Some(MetricsRow {
-        step: col("step")?.parse().ok()?,
-        mean_return: col("return")?.parse().ok()?,
-        steps_per_s: col("steps_per_s")?.parse().ok()?,
+        step: row[0].parse().ok()?,
+        mean_return: row[1].parse().ok()?,
+        steps_per_s: row[2].parse().ok()?,
     })
+}
+
+/// The step and success rate of the run's last periodic success test (`eval.csv`).
+fn last_success(dir: &Path) -> Option<(u64, f64)> {
+    let row = last_row(&dir.join("eval.csv"), &["step", "success"])?;
+    Some((row[0].parse().ok()?, row[1].parse().ok()?))
+}
+
+/// The final policy's success rate and whether the seed learned (`final-eval.json`).
+fn final_success(dir: &Path) -> Option<(f64, bool)> {
+    let text = std::fs::read_to_string(dir.join("final-eval.json")).ok()?;
+    let doc: serde_json::Value = serde_json::from_str(&text).ok()?;
+    Some((doc.get("success_rate")?.as_f64()?, doc.get("learned")?.as_bool()?))
 }
 
 /// One line per seed for the end of a sweep.
@@ -321,9 +344,14 @@ pub fn summary_line(sweep: &Sweep, seed: u64, outcome: &Outcome) -> String {
         Outcome::Skipped => format!("seed {seed}: done already ({})", dir.join("policy.vgep").display()),
         Outcome::Done => match last_metrics(&dir) {
             Some(m) => format!(
-                "seed {seed}: done, {} steps, return {:.2}; {}",
+                "seed {seed}: done, {} steps, return {:.2}{}; {}",
                 m.step,
                 m.mean_return,
+                final_success(&dir).map_or_else(String::new, |(rate, learned)| format!(
+                    ", success {:.0}% ({})",
+                    100.0 * rate,
+                    if learned { "learned" } else { "did not learn" }
+                )),
                 dir.join("policy.vgep").display()
             ),
             None => format!("seed {seed}: done; {}", dir.join("policy.vgep").display()),
@@ -539,6 +567,31 @@ pub fn submit(script: &Path) -> Result<String, SweepError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn progress_lines_read_the_last_complete_rows_of_metrics_and_eval() {
+        let dir = std::env::temp_dir().join(format!("vge-sweep-progress-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        assert_eq!(progress_line(&dir, 3, Some(1000)), "seed 3: starting (no metrics row yet)");
+        let metrics = "step,episodes,return,steps_per_s\n100,1,2.5,80.4\n200,2,3.25,90.6\n300,3,9";
+        std::fs::write(dir.join("metrics.csv"), metrics).expect("metrics");
+        assert_eq!(progress_line(&dir, 3, Some(1000)), "seed 3: 200/1000 steps, 91 steps/s, return 3.25");
+        std::fs::write(
+            dir.join("eval.csv"),
+            "step,episodes,return,rotation,success\n200,20,5.0,1.0,0.3500\n",
+        )
+        .expect("eval");
+        assert_eq!(
+            progress_line(&dir, 3, Some(1000)),
+            "seed 3: 200/1000 steps, 91 steps/s, return 3.25, success 35% at 200"
+        );
+        assert_eq!(final_success(&dir), None);
+        std::fs::write(dir.join("final-eval.json"), r#"{"learned": true, "success_rate": 0.55}"#)
+            .expect("json");
+        assert_eq!(final_success(&dir), Some((0.55, true)));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn array_spec_joins_runs_of_seeds() {

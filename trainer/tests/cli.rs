@@ -153,6 +153,8 @@ fn sweep_jobs_trains_seeds_side_by_side_and_names_the_failed_seed() {
         let run_dir = out.join(format!("seed-{seed}"));
         assert!(run_dir.join("policy.vgep").exists(), "seed {seed}\n{stdout}{stderr}");
         assert!(stdout.contains(&format!("seed {seed}: done, 300 steps")), "{stdout}");
+        // With the final policy's success test (a 300-step policy does not learn).
+        assert!(stdout.contains("% (did not learn); "), "{stdout}");
         let log = std::fs::read_to_string(run_dir.join("train.log")).expect("train.log");
         assert!(log.contains("policy written to"), "{log}");
         // One libtorch thread per job unless --set says otherwise.
