@@ -209,3 +209,37 @@ fn a_held_actor_stays_put_while_the_critics_learn() {
         assert!(max_abs(&(action(&sac) - &action_0)) > 0.0, "{algorithm:?}: the actor never learned");
     }
 }
+
+/// Loaded networks are what the optimisers step from: an update after `load_networks`
+/// moves the loaded weights a little, never back to the fresh learner's own.
+#[test]
+fn updates_after_load_networks_start_from_the_loaded_weights() {
+    let dir = std::env::temp_dir().join(format!("vge-sac-load-networks-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let td3 =
+        Algorithm::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 1 };
+    for algorithm in [Algorithm::Sac, td3] {
+        let cfg = SacConfig { algorithm, actor_lr: 1e-6, critic_lr: 1e-6, ..config(EntropyCoef::Fixed(0.0)) };
+        let mut source = Sac::new_seeded(cfg.clone(), Device::Cpu, 1).expect("sac");
+        let batch = fixed_batch(&source.config.net);
+        for _ in 0..5 {
+            source.update(&batch);
+        }
+        source.save(&dir).expect("save");
+        let probe = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
+        let zeros = Tensor::zeros([16, 3], (Kind::Float, Device::Cpu));
+        let loaded_action = source.behaviour_action(&probe, &zeros);
+        let mut fresh = Sac::new_seeded(cfg, Device::Cpu, 2).expect("sac");
+        let own_action = fresh.behaviour_action(&probe, &zeros);
+        assert!(max_abs(&(&own_action - &loaded_action)) > 1e-3, "the two learners start alike");
+        fresh.load_networks(&dir).expect("load");
+        assert_eq!(max_abs(&(fresh.behaviour_action(&probe, &zeros) - &loaded_action)), 0.0);
+        for _ in 0..3 {
+            fresh.update(&batch);
+        }
+        let after = fresh.behaviour_action(&probe, &zeros);
+        assert!(max_abs(&(&after - &loaded_action)) < 1e-3, "{algorithm:?}: updates left the loaded weights");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
