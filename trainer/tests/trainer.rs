@@ -710,9 +710,9 @@ fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     assert_eq!((&trained.obs_mean, &trained.obs_std), (&theirs.obs_mean, &theirs.obs_std));
     // Networks of another shape or algorithm, or no run at all, are refused by name.
     let refused = |config: Config| {
-        let dir = tempdir("init-refused");
+        let dir = tempdir("init-refused").join("run");
         let err = train(&config, &dir, false, &never, &mut |_| {}).expect_err("refused").to_string();
-        let _ = std::fs::remove_dir_all(dir);
+        assert!(!dir.exists(), "a refused run left {}", dir.display());
         err
     };
     let err = refused(stage2(20, &["sac.hidden=[16, 16]"]));
@@ -724,7 +724,7 @@ fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     let mut nowhere = stage2(20, &[]);
     nowhere.init_from = Some(source.join("no-such-run"));
     assert!(refused(nowhere).contains("no-such-run"));
-    for d in [source, short, fresh, long] {
+    for d in [source, short, fresh, long, tempdir("init-refused")] {
         let _ = std::fs::remove_dir_all(d);
     }
 }

@@ -300,7 +300,6 @@ impl<'a> Trainer<'a> {
     /// A fresh run, or the run in `out_dir` resumed from its checkpoint; envs reset.
     fn new(config: &'a Config, out_dir: &Path, resume: bool) -> Result<Self, TrainError> {
         config.validate()?;
-        std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
         }
@@ -320,6 +319,8 @@ impl<'a> Trainer<'a> {
         } else if let Some(source) = config.init_from_dir() {
             init_networks(config, &source, &mut sac)?;
         }
+        // Only now: a run refused above (a bad init_from, say) leaves no folder behind.
+        std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
         let folder = RunFolder::open(out_dir, config, c.step, resume)?;
         collector.set_progress(c.step);
         collector.reset_all(&mut behaviour, &mut rng)?;
