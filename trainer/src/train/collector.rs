@@ -154,17 +154,18 @@ impl Collector {
         Ok(())
     }
 
-    /// The learner's behaviour action in every env: uniform in the warm-up, else the actor's
-    /// exploration action with noise seeded from (seed, step).
+    /// The learner's behaviour action in every env: uniform for the first `random_steps`
+    /// (the warm-up of a fresh run), else the actor's exploration action with noise seeded
+    /// from (seed, step).
     pub fn learner_actions(
         &self,
         sac: &Sac,
         step: u64,
-        warmup: u64,
+        random_steps: u64,
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<[f32; NUM_JOINTS]>, TrainError> {
         let (n, max) = (self.len(), self.max_action_rad);
-        if step < warmup {
+        if step < random_steps {
             return Ok((0..n).map(|_| std::array::from_fn(|_| rng.random_range(-max..=max))).collect());
         }
         let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
