@@ -233,31 +233,22 @@ fn init_networks(config: &Config, source: &Path, sac: &mut Sac) -> Result<(), Tr
         path: source.display().to_string(),
         what: format!("its config.toml: {e}"),
     })?;
-    let mismatch = |what: &str, ours: String, theirs: String| TrainError::InitFrom {
-        path: source.display().to_string(),
-        what: format!("{what} is {theirs} there and {ours} here"),
+    // What the networks' shapes and inputs depend on, as each config spells it.
+    let shape = |c: &Config| {
+        [
+            ("algorithm", c.algorithm.name().to_owned()),
+            ("sac.hidden", format!("{:?}", c.sac.hidden)),
+            ("sac.critic_layer_norm", c.sac.critic_layer_norm.to_string()),
+            ("sac.normalize_obs", c.sac.normalize_obs.to_string()),
+        ]
     };
-    if theirs.algorithm != config.algorithm {
-        return Err(mismatch(
-            "algorithm",
-            format!("{:?}", config.algorithm),
-            format!("{:?}", theirs.algorithm),
-        ));
-    }
-    if theirs.sac.hidden != config.sac.hidden {
-        return Err(mismatch(
-            "sac.hidden",
-            format!("{:?}", config.sac.hidden),
-            format!("{:?}", theirs.sac.hidden),
-        ));
-    }
-    if theirs.sac.critic_layer_norm != config.sac.critic_layer_norm {
-        let (a, b) = (config.sac.critic_layer_norm, theirs.sac.critic_layer_norm);
-        return Err(mismatch("sac.critic_layer_norm", a.to_string(), b.to_string()));
-    }
-    if theirs.sac.normalize_obs != config.sac.normalize_obs {
-        let (a, b) = (config.sac.normalize_obs, theirs.sac.normalize_obs);
-        return Err(mismatch("sac.normalize_obs", a.to_string(), b.to_string()));
+    for ((key, ours), (_, there)) in shape(config).into_iter().zip(shape(&theirs)) {
+        if ours != there {
+            return Err(TrainError::InitFrom {
+                path: source.display().to_string(),
+                what: format!("{key} is {there} there and {ours} here"),
+            });
+        }
     }
     Ok(crate::checkpoint::open(source)?.load_networks(sac)?)
 }
