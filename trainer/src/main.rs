@@ -381,6 +381,10 @@ enum Bench {
         /// Layer norm in the critics' hidden layers (`sac.critic_layer_norm`).
         #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
         layer_norm: bool,
+        /// Number format of the hidden layers' matmuls (`sac.matmul`): f32 or bf16 (f32
+        /// master weights; pays on CPUs with AVX512_BF16).
+        #[arg(long, default_value = "f32", value_parser = ["f32", "bf16"])]
+        matmul: String,
     },
     /// Simulator throughput: control steps per second of one world on one thread, and of N
     /// worlds stepped across all cores, at the default env rates.
@@ -854,12 +858,15 @@ fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::R
 
 fn run_bench(bench: Bench) -> anyhow::Result<()> {
     match bench {
-        Bench::Update { json, updates, batch, seed, algorithm, layer_norm } => {
+        Bench::Update { json, updates, batch, seed, algorithm, layer_norm, matmul } => {
             anyhow::ensure!(updates > 0, "--updates must be at least 1");
             anyhow::ensure!(batch > 0, "--batch must be at least 1");
             let mut config = vge_trainer::sac::SacConfig::hand_default(0.05);
             config.entropy = vge_trainer::sac::EntropyCoef::Fixed(0.0);
             config.critic_layer_norm = layer_norm;
+            if matmul == "bf16" {
+                config.matmul = vge_trainer::nets::MatmulPrecision::Bf16;
+            }
             if algorithm == "td3" {
                 config.algorithm = vge_trainer::sac::Algorithm::TD3;
             }
@@ -869,6 +876,7 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                     "bench": "update",
                     "algorithm": algorithm,
                     "layer_norm": layer_norm,
+                    "matmul": matmul,
                     "updates_per_s": r.updates_per_s,
                     "gflops": r.gflops,
                     "matmul_gflops": r.matmul_gflops,
@@ -881,7 +889,7 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                 println!("{line}");
             } else {
                 println!(
-                    "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}",
+                    "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}, {matmul} matmuls",
                     algorithm.to_uppercase(),
                     r.batch,
                     r.threads,

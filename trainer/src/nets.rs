@@ -3,8 +3,59 @@
 //! Parameter paths are part of the export contract (`vge-export` reads the actor by name):
 //! `actor.l{i}` hidden layers, `actor.mean`, `actor.log_std`; `critic.w{i}` / `critic.b{i}`.
 
+use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
+
+/// The number format of the hidden layers' matmuls in the learner's updates (the
+/// `sac.matmul` key). Weights, optimiser state, biases' master copies, layer norm, the
+/// heads and every loss stay f32; acting, evaluation and export are always f32, as the
+/// runtime computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MatmulPrecision {
+    #[default]
+    F32,
+    /// Inputs and weights rounded to bfloat16 for the matmul (f32 accumulation, f32
+    /// result): on a CPU with AVX512_BF16 a 256-wide layer runs ~2x as fast
+    /// (`examples/matmul_dtypes`); the 1- and 15-wide heads would run slower, so stay f32.
+    Bf16,
+}
+
+impl MatmulPrecision {
+    /// `x · wᵀ + b` of an `nn::Linear`, its matmul in this precision, the result f32.
+    fn linear(self, layer: &nn::Linear, x: &Tensor) -> Tensor {
+        match self {
+            Self::F32 => layer.forward(x),
+            Self::Bf16 => {
+                let bias = layer.bs.as_ref().map(|b| b.to_kind(Kind::BFloat16));
+                x.to_kind(Kind::BFloat16).linear(&layer.ws.to_kind(Kind::BFloat16), bias).to_kind(Kind::Float)
+            }
+        }
+    }
+
+    /// `b + h · w` for stacked twin weights (`[2, in, out]`), in this precision, the result f32.
+    fn baddbmm(self, h: &Tensor, w: &Tensor, b: &Tensor) -> Tensor {
+        match self {
+            Self::F32 => b.baddbmm(h, w, 1.0, 1.0),
+            Self::Bf16 => {
+                let bf = Kind::BFloat16;
+                b.to_kind(bf).baddbmm(&h.to_kind(bf), &w.to_kind(bf), 1.0, 1.0).to_kind(Kind::Float)
+            }
+        }
+    }
+
+    /// `b + h · w` for one twin's weights (`[in, out]`), in this precision, the result f32.
+    fn addmm(self, h: &Tensor, w: &Tensor, b: &Tensor) -> Tensor {
+        match self {
+            Self::F32 => b.addmm(h, w),
+            Self::Bf16 => {
+                let bf = Kind::BFloat16;
+                b.to_kind(bf).addmm(&h.to_kind(bf), &w.to_kind(bf)).to_kind(Kind::Float)
+            }
+        }
+    }
+}
 
 /// log σ is squashed into [LOG_STD_MIN, LOG_STD_MAX] (as in CleanRL's SAC) so that the policy
 /// can neither collapse to a point nor explode early in training.
@@ -69,7 +120,8 @@ fn torch_linear(path: nn::Path, fan_in: i64, fan_out: i64) -> nn::Linear {
 /// Squashed Gaussian policy: a ReLU trunk, then mean and log σ heads; a = tanh(u) · scale.
 #[derive(Debug)]
 pub struct GaussianActor {
-    trunk: nn::Sequential,
+    /// The hidden layers (ReLU after each).
+    trunk: Vec<nn::Linear>,
     mean: nn::Linear,
     log_std: nn::Linear,
     pub obs_norm: ObsNormaliser,
@@ -77,6 +129,8 @@ pub struct GaussianActor {
     action_scale: Tensor,
     /// Lower end of log σ's range (default [`LOG_STD_MIN`]).
     log_std_min: f64,
+    /// The trunk's matmuls ([`Self::set_matmul_precision`]; f32 unless an update sets it).
+    precision: MatmulPrecision,
 }
 
 /// An action drawn from the policy with its log-density (after the tanh change of variables),
@@ -93,16 +147,38 @@ impl GaussianActor {
         assert_eq!(action_scale.len() as i64, spec.act_dim, "one action scale per action dimension");
         let p = root / "actor";
         let obs_norm = ObsNormaliser::new(&p, spec.obs_dim);
-        let mut trunk = nn::seq();
+        let mut trunk = Vec::new();
         let mut width = spec.obs_dim;
         for (i, &h) in spec.hidden.iter().enumerate() {
-            trunk = trunk.add(torch_linear(&p / format!("l{i}"), width, h)).add_fn(|x| x.relu());
+            trunk.push(torch_linear(&p / format!("l{i}"), width, h));
             width = h;
         }
         let mean = torch_linear(&p / "mean", width, spec.act_dim);
         let log_std = torch_linear(&p / "log_std", width, spec.act_dim);
         let action_scale = Tensor::from_slice(action_scale).to_device(root.device());
-        Self { trunk, mean, log_std, obs_norm, action_scale, log_std_min: LOG_STD_MIN }
+        Self {
+            trunk,
+            mean,
+            log_std,
+            obs_norm,
+            action_scale,
+            log_std_min: LOG_STD_MIN,
+            precision: MatmulPrecision::F32,
+        }
+    }
+
+    /// The precision of the trunk's matmuls from now on (see [`MatmulPrecision`]).
+    pub fn set_matmul_precision(&mut self, precision: MatmulPrecision) {
+        self.precision = precision;
+    }
+
+    /// The trunk's features of normalised `obs`.
+    fn features(&self, obs: &Tensor) -> Tensor {
+        let mut h = self.obs_norm.apply(obs);
+        for layer in &self.trunk {
+            h = self.precision.linear(layer, &h).relu();
+        }
+        h
     }
 
     /// Raises the floor of σ to `min_std` (pre-tanh, unit action range; values at or below
@@ -126,12 +202,12 @@ impl GaussianActor {
 
     /// The deployed behaviour: tanh(mean) · scale, no noise.
     pub fn deterministic(&self, obs: &Tensor) -> Tensor {
-        self.mean.forward(&self.trunk.forward(&self.obs_norm.apply(obs))).tanh() * &self.action_scale
+        self.mean.forward(&self.features(obs)).tanh() * &self.action_scale
     }
 
     /// Mean and log σ of the pre-tanh Gaussian.
     pub fn distribution(&self, obs: &Tensor) -> (Tensor, Tensor) {
-        let h = self.trunk.forward(&self.obs_norm.apply(obs));
+        let h = self.features(obs);
         let min = self.log_std_min;
         let log_std = min + 0.5 * (LOG_STD_MAX - min) * (self.log_std.forward(&h).tanh() + 1.0);
         (self.mean.forward(&h), log_std)
@@ -217,6 +293,8 @@ pub struct TwinCritic {
     /// bounds the features the last layer extrapolates from, the remedy for Q divergence
     /// under off-policy bootstrapping that Ball et al. (RLPD, 2023) measured.
     layer_norm: bool,
+    /// The hidden layers' matmuls (the last, 1 wide, is always f32).
+    precision: MatmulPrecision,
 }
 
 impl TwinCritic {
@@ -239,7 +317,12 @@ impl TwinCritic {
             weights.push(p.var(&format!("w{i}"), &[Self::TWINS, fan_in, fan_out], init));
             biases.push(p.var(&format!("b{i}"), &[Self::TWINS, 1, fan_out], init));
         }
-        Self { weights, biases, obs_norm, inv_action_scale, layer_norm }
+        Self { weights, biases, obs_norm, inv_action_scale, layer_norm, precision: MatmulPrecision::F32 }
+    }
+
+    /// The precision of the hidden layers' matmuls from now on (see [`MatmulPrecision`]).
+    pub fn set_matmul_precision(&mut self, precision: MatmulPrecision) {
+        self.precision = precision;
     }
 
     /// Q-values of both twins, shape `[2, batch, 1]`.
@@ -247,14 +330,14 @@ impl TwinCritic {
         let x = self.input(obs, action);
         let batch = x.size()[0];
         let x = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
-        self.forward(x, |h, w, b| b.baddbmm(h, w, 1.0, 1.0))
+        self.forward(x, |p, h, w, b| p.baddbmm(h, w, b))
     }
 
     /// Q-values of the first twin alone, shape `[batch, 1]` (TD3's actor loss reads only
     /// Q₁: evaluating one twin halves that forward and its backward). Twin 0's slice of
     /// each stacked weight, in the same layer order as [`Self::q_values`].
     pub fn q1(&self, obs: &Tensor, action: &Tensor) -> Tensor {
-        self.forward(self.input(obs, action), |h, w, b| b.get(0).addmm(h, &w.get(0)))
+        self.forward(self.input(obs, action), |p, h, w, b| p.addmm(h, &w.get(0), &b.get(0)))
     }
 
     /// The critics' input: normalised observations beside actions in units of their range.
@@ -262,14 +345,19 @@ impl TwinCritic {
         Tensor::cat(&[self.obs_norm.apply(obs), action * &self.inv_action_scale], -1)
     }
 
-    /// The layer stack from input `x`, with `affine(h, weight, bias)` applying one layer's
-    /// stacked weights (both twins, or a slice); layer norm (over the last dimension) and
-    /// ReLU after each hidden layer.
-    fn forward(&self, x: Tensor, affine: impl Fn(&Tensor, &Tensor, &Tensor) -> Tensor) -> Tensor {
+    /// The layer stack from input `x`, with `affine(precision, h, weight, bias)` applying
+    /// one layer's stacked weights (both twins, or a slice); layer norm (over the last
+    /// dimension) and ReLU after each hidden layer.
+    fn forward(
+        &self,
+        x: Tensor,
+        affine: impl Fn(MatmulPrecision, &Tensor, &Tensor, &Tensor) -> Tensor,
+    ) -> Tensor {
         let mut h = x;
         let last = self.weights.len() - 1;
         for (i, (w, b)) in self.weights.iter().zip(&self.biases).enumerate() {
-            h = affine(&h, w, b);
+            let precision = if i < last { self.precision } else { MatmulPrecision::F32 };
+            h = affine(precision, &h, w, b);
             if i < last {
                 if self.layer_norm {
                     let width = h.size()[h.dim() - 1];

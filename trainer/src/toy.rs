@@ -87,6 +87,7 @@ pub fn train_point_mass(
         critic_layer_norm: true,
         min_policy_std: 0.0,
         actor_hold_updates: 0,
+        matmul: crate::nets::MatmulPrecision::F32,
     };
     // 64-wide layers gain nothing from a second intra-op thread, and a spinning pool thread
     // fighting another process (or test) for the core slows this loop several-fold.

@@ -130,6 +130,7 @@ fn config(entropy: EntropyCoef) -> SacConfig {
         critic_layer_norm: false,
         min_policy_std: 0.0,
         actor_hold_updates: 0,
+        matmul: vge_trainer::nets::MatmulPrecision::F32,
     }
 }
 
@@ -242,4 +243,78 @@ fn updates_after_load_networks_start_from_the_loaded_weights() {
         assert!(max_abs(&(&after - &loaded_action)) < 1e-3, "{algorithm:?}: updates left the loaded weights");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `sac.matmul = "bf16"`: updates at the hand's sizes follow the f32 ones to within bf16's
+/// rounding (the same seed, the same batches), while acting stays f32 as deployed.
+#[test]
+fn bf16_matmul_updates_track_f32_ones_and_acting_stays_f32() {
+    use vge_trainer::nets::MatmulPrecision;
+    for algorithm in [Algorithm::Sac, Algorithm::TD3] {
+        let learner = |matmul| {
+            let config = SacConfig {
+                algorithm,
+                matmul,
+                entropy: EntropyCoef::Fixed(0.0),
+                ..SacConfig::hand_default(0.05)
+            };
+            Sac::new_seeded(config, Device::Cpu, 3).expect("learner")
+        };
+        let (mut f32_learner, mut bf16_learner) =
+            (learner(MatmulPrecision::F32), learner(MatmulPrecision::Bf16));
+        let spec = f32_learner.config.net.clone();
+        tch::manual_seed(11);
+        let batches: Vec<Batch> = (0..4)
+            .map(|_| {
+                let opts = (Kind::Float, Device::Cpu);
+                Batch::new(
+                    Tensor::randn([256, spec.obs_dim], opts),
+                    (Tensor::rand([256, spec.act_dim], opts) * 2.0 - 1.0) * 0.05,
+                    Tensor::rand([256, 1], opts),
+                    Tensor::randn([256, spec.obs_dim], opts),
+                    Tensor::zeros([256, 1], opts),
+                )
+            })
+            .collect();
+        let obs = &batches[0].obs;
+        let eps = Tensor::randn([256, spec.act_dim], (Kind::Float, Device::Cpu));
+        // Same weights, f32 acting: the same actions to the bit.
+        let before =
+            max_abs(&(f32_learner.behaviour_action(obs, &eps) - bf16_learner.behaviour_action(obs, &eps)));
+        assert_eq!(before, 0.0, "{algorithm:?}");
+
+        let (mut worst_q, mut largest_q) = (0.0f64, 0.0f64);
+        for i in 0..120 {
+            let (a, b) = (f32_learner.update(&batches[i % 4]), bf16_learner.update(&batches[i % 4]));
+            worst_q = worst_q.max((a.mean_q - b.mean_q).abs());
+            largest_q = largest_q.max(a.mean_q.abs());
+        }
+        // Q climbs from ~0 towards r / (1 - γ) ≈ 50 on these batches; bf16 keeps ~3 significant
+        // digits per product, so the two runs agree closely but not exactly.
+        eprintln!("{algorithm:?}: mean Q apart by at most {worst_q} of {largest_q}");
+        assert!(largest_q > 0.3, "{algorithm:?}: Q did not move ({largest_q})");
+        assert!(worst_q > 0.0, "{algorithm:?}: bf16 updates computed exactly the f32 ones");
+        assert!(worst_q < 0.02 * largest_q, "{algorithm:?}: mean Q apart by {worst_q} of {largest_q}");
+
+        // After updates the learner acts in f32: its actions are those of an f32 forward of
+        // its weights, not of a bf16 one.
+        let acted = bf16_learner.behaviour_action(obs, &eps);
+        let deterministic = |learner: &mut Sac, precision| {
+            learner.actor.set_matmul_precision(precision);
+            let out = tch::no_grad(|| learner.actor.deterministic(obs));
+            learner.actor.set_matmul_precision(MatmulPrecision::F32);
+            out
+        };
+        let f32_out = deterministic(&mut bf16_learner, MatmulPrecision::F32);
+        let bf16_out = deterministic(&mut bf16_learner, MatmulPrecision::Bf16);
+        assert!(max_abs(&(f32_out - &bf16_out)) > 0.0);
+        if let Algorithm::Td3 { .. } = algorithm {
+            // TD3 acts with its mean plus noise: compare without the noise.
+            let zero = Tensor::zeros([256, spec.act_dim], (Kind::Float, Device::Cpu));
+            let f32_out = deterministic(&mut bf16_learner, MatmulPrecision::F32);
+            assert_eq!(max_abs(&(bf16_learner.behaviour_action(obs, &zero) - f32_out)), 0.0);
+        } else {
+            assert!(max_abs(&acted) > 0.0);
+        }
+    }
 }

@@ -228,6 +228,7 @@ fn small_learner(algorithm: Algorithm) -> Sac {
         critic_layer_norm: false,
         min_policy_std: 0.0,
         actor_hold_updates: 0,
+        matmul: vge_trainer::nets::MatmulPrecision::F32,
     };
     Sac::new(config, Device::Cpu).expect("sac")
 }
@@ -455,6 +456,13 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     refuse("env.noise_ramp_steps=1000", "init_from");
     let ramp_from = ["env.noise_ramp_steps=1000".to_owned(), "init_from=\"runs/stage-1\"".to_owned()];
     load_config(&path, &ramp_from).expect("noise ramp from trained networks");
+    // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
+    // hashes of configs from before the key stay), written when chosen.
+    let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
+    assert_eq!(bf16.sac_config().matmul, vge_trainer::nets::MatmulPrecision::Bf16);
+    assert!(bf16.to_toml_string().expect("toml").contains("matmul = \"bf16\""));
+    assert!(!Config::default().to_toml_string().expect("toml").contains("matmul"));
+    refuse("sac.matmul=\"f16\"", "matmul");
     let td3 = |o: &str| vec!["algorithm=\"td3\"".to_owned(), o.to_owned()];
     let e = load_config(&path, &td3("td3.policy_delay=0")).expect_err("delay 0");
     assert!(e.to_string().contains("td3.policy_delay"), "{e}");

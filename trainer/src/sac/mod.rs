@@ -16,7 +16,7 @@ use rand_chacha::ChaCha8Rng;
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use crate::nets::{GaussianActor, NetSpec, TwinCritic};
+use crate::nets::{GaussianActor, MatmulPrecision, NetSpec, TwinCritic};
 use crate::optim::{Adam, flatten_storage};
 
 mod soft_actor_critic;
@@ -74,6 +74,8 @@ pub struct SacConfig {
     pub min_policy_std: f64,
     /// Updates that step only the critics (and their targets) before the actor learns.
     pub actor_hold_updates: u64,
+    /// The hidden layers' matmuls inside updates (acting and export are always f32).
+    pub matmul: MatmulPrecision,
 }
 
 impl SacConfig {
@@ -91,6 +93,7 @@ impl SacConfig {
             critic_layer_norm: true,
             min_policy_std: 0.0,
             actor_hold_updates: 0,
+            matmul: MatmulPrecision::F32,
         }
     }
 }
@@ -363,11 +366,25 @@ impl Sac {
 
     /// One update of the configured algorithm (see [`Self::update_sac`], [`Self::update_td3`]).
     pub fn update(&mut self, batch: &Batch) -> UpdateStats {
-        match self.config.algorithm {
+        // Only the update's matmuls take the configured precision: acting and evaluation
+        // compute in f32, as the deployed runtime does.
+        self.set_matmul_precision(self.config.matmul);
+        let stats = match self.config.algorithm {
             Algorithm::Sac => self.update_sac(batch),
             Algorithm::Td3 { target_noise_std, target_noise_clip, policy_delay, .. } => {
                 self.update_td3(batch, target_noise_std, target_noise_clip, policy_delay)
             }
+        };
+        self.set_matmul_precision(MatmulPrecision::F32);
+        stats
+    }
+
+    fn set_matmul_precision(&mut self, precision: MatmulPrecision) {
+        self.actor.set_matmul_precision(precision);
+        self.critic.set_matmul_precision(precision);
+        self.target.set_matmul_precision(precision);
+        if let Some(target) = &mut self.target_actor {
+            target.actor.set_matmul_precision(precision);
         }
     }
 
