@@ -16,7 +16,7 @@ use tch::{Kind, Tensor};
 pub enum MatmulPrecision {
     #[default]
     F32,
-    /// Inputs and weights rounded to bfloat16 for the matmul (f32 accumulation, f32
+    /// Inputs, weights and biases rounded to bfloat16 for the matmul (f32 accumulation, f32
     /// result): on a CPU with AVX512_BF16 a 256-wide layer runs ~2x as fast
     /// (`examples/matmul_dtypes`); the 1- and 15-wide heads would run slower, so stay f32.
     Bf16,
