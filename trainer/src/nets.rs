@@ -23,36 +23,13 @@ pub enum MatmulPrecision {
 }
 
 impl MatmulPrecision {
-    /// `x · wᵀ + b` of an `nn::Linear`, its matmul in this precision, the result f32.
-    fn linear(self, layer: &nn::Linear, x: &Tensor) -> Tensor {
+    /// Runs `op`, which passes each matmul operand through the cast it is given: unchanged
+    /// in f32, rounded to bf16 in [`Self::Bf16`] (and the result back to f32). One place
+    /// for the rounding, whatever the layer's op (linear, addmm, baddbmm).
+    fn matmul(self, op: impl FnOnce(&dyn Fn(&Tensor) -> Tensor) -> Tensor) -> Tensor {
         match self {
-            Self::F32 => layer.forward(x),
-            Self::Bf16 => {
-                let bias = layer.bs.as_ref().map(|b| b.to_kind(Kind::BFloat16));
-                x.to_kind(Kind::BFloat16).linear(&layer.ws.to_kind(Kind::BFloat16), bias).to_kind(Kind::Float)
-            }
-        }
-    }
-
-    /// `b + h · w` for stacked twin weights (`[2, in, out]`), in this precision, the result f32.
-    fn baddbmm(self, h: &Tensor, w: &Tensor, b: &Tensor) -> Tensor {
-        match self {
-            Self::F32 => b.baddbmm(h, w, 1.0, 1.0),
-            Self::Bf16 => {
-                let bf = Kind::BFloat16;
-                b.to_kind(bf).baddbmm(&h.to_kind(bf), &w.to_kind(bf), 1.0, 1.0).to_kind(Kind::Float)
-            }
-        }
-    }
-
-    /// `b + h · w` for one twin's weights (`[in, out]`), in this precision, the result f32.
-    fn addmm(self, h: &Tensor, w: &Tensor, b: &Tensor) -> Tensor {
-        match self {
-            Self::F32 => b.addmm(h, w),
-            Self::Bf16 => {
-                let bf = Kind::BFloat16;
-                b.to_kind(bf).addmm(&h.to_kind(bf), &w.to_kind(bf)).to_kind(Kind::Float)
-            }
+            Self::F32 => op(&Tensor::shallow_clone),
+            Self::Bf16 => op(&|t: &Tensor| t.to_kind(Kind::BFloat16)).to_kind(Kind::Float),
         }
     }
 }
@@ -176,7 +153,10 @@ impl GaussianActor {
     fn features(&self, obs: &Tensor) -> Tensor {
         let mut h = self.obs_norm.apply(obs);
         for layer in &self.trunk {
-            h = self.precision.linear(layer, &h).relu();
+            let affine = |cast: &dyn Fn(&Tensor) -> Tensor| {
+                cast(&h).linear(&cast(&layer.ws), layer.bs.as_ref().map(cast))
+            };
+            h = self.precision.matmul(affine).relu();
         }
         h
     }
@@ -330,14 +310,16 @@ impl TwinCritic {
         let x = self.input(obs, action);
         let batch = x.size()[0];
         let x = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
-        self.forward(x, |p, h, w, b| p.baddbmm(h, w, b))
+        self.forward(x, |p, h, w, b| p.matmul(|cast| cast(b).baddbmm(&cast(h), &cast(w), 1.0, 1.0)))
     }
 
     /// Q-values of the first twin alone, shape `[batch, 1]` (TD3's actor loss reads only
     /// Q₁: evaluating one twin halves that forward and its backward). Twin 0's slice of
     /// each stacked weight, in the same layer order as [`Self::q_values`].
     pub fn q1(&self, obs: &Tensor, action: &Tensor) -> Tensor {
-        self.forward(self.input(obs, action), |p, h, w, b| p.addmm(h, &w.get(0), &b.get(0)))
+        self.forward(self.input(obs, action), |p, h, w, b| {
+            p.matmul(|cast| cast(&b.get(0)).addmm(&cast(h), &cast(&w.get(0))))
+        })
     }
 
     /// The critics' input: normalised observations beside actions in units of their range.

@@ -296,9 +296,11 @@ fn bf16_matmul_updates_track_f32_ones_and_acting_stays_f32() {
         assert!(worst_q > 0.0, "{algorithm:?}: bf16 updates computed exactly the f32 ones");
         assert!(worst_q < 0.02 * largest_q, "{algorithm:?}: mean Q apart by {worst_q} of {largest_q}");
 
-        // After updates the learner acts in f32: its actions are those of an f32 forward of
-        // its weights, not of a bf16 one.
-        let acted = bf16_learner.behaviour_action(obs, &eps);
+        // After updates the learner acts in f32: with zero noise (SAC's sample is then its
+        // mean, TD3 adds nothing) its actions are those of an f32 forward of its weights,
+        // not of a bf16 one.
+        let zero = Tensor::zeros([256, spec.act_dim], (Kind::Float, Device::Cpu));
+        let acted = bf16_learner.behaviour_action(obs, &zero);
         let deterministic = |learner: &mut Sac, precision| {
             learner.actor.set_matmul_precision(precision);
             let out = tch::no_grad(|| learner.actor.deterministic(obs));
@@ -307,14 +309,7 @@ fn bf16_matmul_updates_track_f32_ones_and_acting_stays_f32() {
         };
         let f32_out = deterministic(&mut bf16_learner, MatmulPrecision::F32);
         let bf16_out = deterministic(&mut bf16_learner, MatmulPrecision::Bf16);
-        assert!(max_abs(&(f32_out - &bf16_out)) > 0.0);
-        if let Algorithm::Td3 { .. } = algorithm {
-            // TD3 acts with its mean plus noise: compare without the noise.
-            let zero = Tensor::zeros([256, spec.act_dim], (Kind::Float, Device::Cpu));
-            let f32_out = deterministic(&mut bf16_learner, MatmulPrecision::F32);
-            assert_eq!(max_abs(&(bf16_learner.behaviour_action(obs, &zero) - f32_out)), 0.0);
-        } else {
-            assert!(max_abs(&acted) > 0.0);
-        }
+        assert!(max_abs(&(&f32_out - &bf16_out)) > 0.0, "{algorithm:?}");
+        assert_eq!(max_abs(&(acted - f32_out)), 0.0, "{algorithm:?}");
     }
 }
