@@ -27,6 +27,8 @@ pub mod error;
 pub mod gait;
 pub mod kinematics;
 #[cfg(feature = "physics")]
+pub mod mjcf;
+#[cfg(feature = "physics")]
 pub mod objects;
 pub mod observation;
 #[cfg(feature = "rerun")]

@@ -401,6 +401,14 @@ enum Bench {
         /// Threads for the vectorized run (0: all cores).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+        /// Write the benchmarked task as a MuJoCo model instead (MJCF: the same hand, object
+        /// and motors, the first world's settled grasp as keyframe `grasp`) and exit; what
+        /// scripts/bench-vs-mujoco.sh times MuJoCo on.
+        #[arg(long, value_name = "FILE")]
+        write_mjcf: Option<PathBuf>,
+        /// MuJoCo's time step in the written model (s); 1/240 as in issue 14's comparison.
+        #[arg(long, default_value_t = 1.0 / 240.0, requires = "write_mjcf")]
+        mujoco_timestep_s: f32,
     },
     /// The policy on a Cortex-M4F (runtime/firmware-m4 under qemu-system-arm -icount), as
     /// f32, f16 and i8 weights: flash and RAM of the firmware (linked against the STM32F405's
@@ -904,7 +912,12 @@ fn run_bench(bench: Bench) -> anyhow::Result<()> {
                 );
             }
         }
-        Bench::Sim { json, steps, worlds, threads } => {
+        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, .. } => {
+            let xml = vge_sim::mjcf::settled_grasp_mjcf(&EnvConfig::default(), 0, mujoco_timestep_s)?;
+            std::fs::write(&path, xml).with_context(|| format!("writing {}", path.display()))?;
+            eprintln!("wrote {} (MuJoCo, time step {mujoco_timestep_s} s)", path.display());
+        }
+        Bench::Sim { json, steps, worlds, threads, write_mjcf: None, .. } => {
             anyhow::ensure!(steps > 0 && worlds > 0, "--steps and --worlds must be at least 1");
             let settings = vge_sim::bench::BenchSettings {
                 env: EnvConfig::default(),

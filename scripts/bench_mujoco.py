@@ -1,0 +1,145 @@
+#!/usr/bin/env python3
+"""MuJoCo's throughput on vge's task, to compare with `vge bench sim` (issue 14).
+
+Loads the MJCF that `vge bench sim --write-mjcf` writes (the same hand, object, motors, and
+the settled grasp as keyframe `grasp`) and steps it the way `vge bench sim` steps one world:
+at the control rate, each control step adds a small deterministic pseudo-random change to
+the 15 motor targets (the same SplitMix hash as vge_sim::bench, clipped to the joint limits),
+runs the physics steps of one control period, and reads the fingertip contacts (position,
+normal, normal force per fingertip-object pair, as vge's observation does). An episode ends
+when the object falls 3 cm below its start height or after `--episode-steps`; then the
+settled grasp is restored (cheaper than vge's reset, which simulates the grasp closing: that
+favours MuJoCo). The settled grasp: the keyframe stepped for `--settle-s` untimed, because
+MuJoCo's softer contacts let the cube slide a few cm before three or four fingertips hold it.
+
+Prints one JSON line: control_steps_per_s, sim_seconds_per_s, and whether the grasp held
+(resets, mean fingertip contacts, the object's turn about z over the run).
+"""
+
+import argparse
+import json
+import math
+import time
+
+import mujoco
+import numpy as np
+
+MASK = (1 << 64) - 1
+
+
+def action(w, k, j, max_rad):
+    """vge_sim::bench::action: 0.2 * max * (2u - 1), u from a SplitMix-style hash."""
+    x = ((w << 40) ^ (k << 8) ^ j) & MASK
+    x = (x + 0x9E3779B97F4A7C15) & MASK
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK
+    x ^= x >> 31
+    u = np.float32(x >> 40) / np.float32(1 << 24)
+    return 0.2 * max_rad * (2.0 * u - 1.0)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("mjcf", help="model written by `vge bench sim --write-mjcf FILE`")
+    p.add_argument("--steps", type=int, default=2000, help="control steps to time (default 2000)")
+    p.add_argument("--control-hz", type=float, default=20.0, help="control rate (default 20, as vge's env)")
+    p.add_argument("--max-action-rad", type=float, default=0.05, help="vge's max_action_rad (default 0.05)")
+    p.add_argument("--settle-s", type=float, default=1.0, help="settling time after the keyframe (default 1 s)")
+    p.add_argument("--episode-steps", type=int, default=400, help="episode length in control steps (default 400)")
+    args = p.parse_args()
+
+    model = mujoco.MjModel.from_xml_path(args.mjcf)
+    data = mujoco.MjData(model)
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "grasp")
+    if key < 0:
+        raise SystemExit(f"{args.mjcf}: no keyframe `grasp` (write it with vge bench sim --write-mjcf)")
+    physics_per_control = round(1.0 / (args.control_hz * model.opt.timestep))
+    if physics_per_control < 1:
+        raise SystemExit("control rate above the physics rate")
+    tips = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"f{i}_tip") for i in range(5)]
+    obj_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object")
+    obj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "object")
+    lo, hi = model.actuator_ctrlrange[:, 0].copy(), model.actuator_ctrlrange[:, 1].copy()
+    force = np.zeros(6)
+
+    def read_contacts():
+        """Per fingertip: summed normal force, force-weighted position and normal (vge's readout)."""
+        n = np.zeros(5)
+        pos = np.zeros((5, 3))
+        nrm = np.zeros((5, 3))
+        for c in range(data.ncon):
+            con = data.contact[c]
+            pair = {con.geom1, con.geom2}
+            if obj_geom not in pair:
+                continue
+            other = con.geom2 if con.geom1 == obj_geom else con.geom1
+            if other not in tips:
+                continue
+            i = tips.index(other)
+            mujoco.mj_contactForce(model, data, c, force)
+            f = abs(force[0])
+            n[i] += f
+            pos[i] += f * con.pos
+            nrm[i] += f * con.frame[:3]
+        touching = n > 1e-6
+        return int(touching.sum())
+
+    # MuJoCo's softer contacts let the cube slide a few cm from rapier's settled grasp before
+    # three or four fingertips hold it: settle first, and restart episodes from there.
+    mujoco.mj_resetDataKeyframe(model, data, key)
+    mujoco.mj_step(model, data, nstep=round(args.settle_s / model.opt.timestep))
+    settled = mujoco.MjData(model)
+    mujoco.mj_copyData(settled, model, data)
+    settled_contacts = read_contacts()
+
+    def reset():
+        mujoco.mj_copyData(data, model, settled)
+        mujoco.mj_forward(model, data)
+        return float(data.xpos[obj_body][2])
+
+    def yaw():
+        q = data.xquat[obj_body]
+        return math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
+
+    # The actions are computed before timing, so that Python's speed does not count against MuJoCo.
+    table = np.array([[action(0, k, j, args.max_action_rad) for j in range(15)] for k in range(args.steps)])
+
+    def drive(steps):
+        z0 = reset()
+        resets, contacts, turned, last_yaw, t = 0, 0, 0.0, yaw(), 0
+        for k in range(steps):
+            data.ctrl[:] = np.clip(data.ctrl + table[k], lo, hi)
+            mujoco.mj_step(model, data, nstep=physics_per_control)
+            contacts += read_contacts()
+            y = yaw()
+            turned += (y - last_yaw + math.pi) % (2 * math.pi) - math.pi
+            last_yaw = y
+            t += 1
+            if data.xpos[obj_body][2] < z0 - 0.03 or t >= args.episode_steps:
+                resets += 1
+                reset()
+                last_yaw, t = yaw(), 0
+        return resets, contacts / steps, turned
+
+    drive(20)  # warm-up, as vge bench sim
+    start = time.perf_counter()
+    resets, mean_contacts, turned = drive(args.steps)
+    wall = time.perf_counter() - start
+    print(json.dumps({
+        "bench": "mujoco",
+        "mujoco_version": mujoco.__version__,
+        "control_steps_per_s_single": args.steps / wall,
+        "sim_seconds_per_s": args.steps / wall / args.control_hz,
+        "physics_steps_per_control": physics_per_control,
+        "timestep_s": model.opt.timestep,
+        "resets_single": resets,
+        "mean_tip_contacts": mean_contacts,
+        "settled_tip_contacts": settled_contacts,
+        "settled_height_m": float(settled.xpos[obj_body][2]),
+        "object_turn_rad": turned,
+        "steps": args.steps,
+    }))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,241 @@
+//! The hand, its object and a held grasp as a MuJoCo model (MJCF), written from the same
+//! [`HandModel`] and [`PhysicsConfig`] the rapier world is built from.
+//!
+//! Why: issue 14 compares the simulator's speed with MuJoCo's on "the same hand, grasp and
+//! contact readout". A hand-written MJCF would be a second copy of the geometry that could
+//! drift; this one is generated, and `scripts/bench-vs-mujoco.sh` times both in one run.
+//!
+//! What carries over: link frames, lengths and radii, joint axes, limits and torque caps,
+//! the roll link's point mass, link density, friction, gravity, the object's shape, size and
+//! mass, position motors with the same stiffness and damping, hand-object collisions only,
+//! and a keyframe of a settled grasp (joint angles, motor targets, object pose) taken from
+//! the rapier world. What cannot: contact softness and the solver. MuJoCo keeps its default
+//! contact softness and solver at the `timestep_s` the caller picks, with elliptic friction
+//! cones and `impratio` 10, its advice for grasping: with its default pyramidal cones the
+//! cube slides out of the grasp within 0.6 s (measured at 240 Hz).
+
+use std::fmt::Write as _;
+
+use nalgebra::{Isometry3, UnitQuaternion};
+
+use crate::error::SimError;
+use crate::kinematics::{HandModel, JOINT_NAMES, NUM_JOINTS};
+use crate::objects::{ObjectConfig, ObjectShape};
+use crate::world::{HandWorld, PhysicsConfig};
+
+/// A held grasp to start MuJoCo from (the rapier world's state after `Env::reset`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GraspKeyframe {
+    /// Joint angles (rad), finger-major.
+    pub q_rad: [f32; NUM_JOINTS],
+    /// Motor targets (rad), finger-major.
+    pub q_target_rad: [f32; NUM_JOINTS],
+    /// Object pose (world).
+    pub object_pose: Isometry3<f32>,
+}
+
+impl GraspKeyframe {
+    /// The current state of `world`.
+    #[must_use]
+    pub fn of(world: &HandWorld) -> Self {
+        Self {
+            q_rad: world.joint_positions(),
+            q_target_rad: *world.joint_targets(),
+            object_pose: world.object_state().pose,
+        }
+    }
+}
+
+/// What MuJoCo needs beyond the hand: physics, object, time step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MjcfSettings<'a> {
+    /// The hand (geometry, limits, torque caps).
+    pub hand: &'a HandModel,
+    /// Physics parameters (gravity, motors, density, friction).
+    pub physics: &'a PhysicsConfig,
+    /// The object (cube, sphere or cylinder: MuJoCo has no convex hulls without meshes).
+    pub object: &'a ObjectConfig,
+    /// MuJoCo's time step (s).
+    pub timestep_s: f32,
+}
+
+fn pos(iso: &Isometry3<f32>) -> String {
+    let t = iso.translation.vector;
+    format!("{} {} {}", t.x, t.y, t.z)
+}
+
+fn quat(q: &UnitQuaternion<f32>) -> String {
+    format!("{} {} {} {}", q.w, q.i, q.j, q.k)
+}
+
+/// The MJCF document: one fixed base body per finger (as in the rapier world), the object
+/// on a free joint, one position actuator per joint, and the keyframe `grasp`.
+pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<String, SimError> {
+    let MjcfSettings { hand, physics, object, timestep_s } = *settings;
+    if !(timestep_s.is_finite() && timestep_s > 0.0) {
+        return Err(SimError::InvalidConfig(format!("MuJoCo time step {timestep_s} s")));
+    }
+    physics.validate()?;
+    object.validate()?;
+    let half = 0.5 * object.width_m;
+    let object_geom = match object.shape {
+        ObjectShape::Cube => format!(r#"type="box" size="{half} {half} {half}""#),
+        ObjectShape::Sphere => format!(r#"type="sphere" size="{half}""#),
+        ObjectShape::Cylinder => format!(r#"type="cylinder" size="{half} {half}""#),
+        other => {
+            return Err(SimError::InvalidConfig(format!(
+                "no MJCF for the {other}: MuJoCo needs a mesh for convex hulls (cube, sphere, cylinder)"
+            )));
+        }
+    };
+    let friction = physics.finger_friction;
+    // contype/conaffinity: the hand touches the object only, as rapier's collision groups.
+    let mut xml = String::new();
+    let w = &mut xml;
+    // Writing into a String cannot fail; the results are discarded with `let _`.
+    let _ = writeln!(w, r#"<mujoco model="vge-hand">"#);
+    let _ = writeln!(
+        w,
+        r#"  <option timestep="{timestep_s}" gravity="0 0 {}" integrator="implicitfast" cone="elliptic" impratio="10"/>"#,
+        -physics.gravity_m_per_s2
+    );
+    let _ = writeln!(
+        w,
+        r#"  <default><geom contype="1" conaffinity="2" friction="{friction} 0.005 0.0001"/></default>"#
+    );
+    let _ = writeln!(w, "  <worldbody>");
+    for (i, finger) in hand.fingers.iter().enumerate() {
+        let base = &finger.base_in_world;
+        let (lp, ld) = (finger.proximal_length_m, finger.distal_length_m);
+        let (rl, rt) = (finger.link_radius_m, finger.tip_radius_m);
+        let density = physics.link_density_kg_per_m3;
+        let joint = |j: usize, axis: &str| {
+            let l = finger.joint_limits[j];
+            format!(
+                r#"<joint name="f{i}_{}" type="hinge" axis="{axis}" limited="true" range="{} {}"/>"#,
+                JOINT_NAMES[j], l.lower_rad, l.upper_rad
+            )
+        };
+        let _ =
+            writeln!(w, r#"    <body name="f{i}_base" pos="{}" quat="{}">"#, pos(base), quat(&base.rotation));
+        let _ = writeln!(w, r#"      <body name="f{i}_roll">"#);
+        let _ = writeln!(w, r#"        {}"#, joint(0, "1 0 0"));
+        let _ = writeln!(w, r#"        <inertial pos="0 0 0" mass="0.005" diaginertia="1e-6 1e-6 1e-6"/>"#);
+        let _ = writeln!(w, r#"        <body name="f{i}_prox">"#);
+        let _ = writeln!(w, r#"          {}"#, joint(1, "0 1 0"));
+        let _ = writeln!(
+            w,
+            r#"          <geom type="capsule" fromto="0 0 0 0 0 {}" size="{rl}" density="{density}"/>"#,
+            -lp
+        );
+        let _ = writeln!(w, r#"          <body name="f{i}_dist" pos="0 0 {}">"#, -lp);
+        let _ = writeln!(w, r#"            {}"#, joint(2, "0 1 0"));
+        let _ = writeln!(
+            w,
+            r#"            <geom type="capsule" fromto="0 0 0 0 0 {}" size="{rl}" density="{density}"/>"#,
+            -ld
+        );
+        let _ = writeln!(
+            w,
+            r#"            <geom name="f{i}_tip" type="sphere" pos="0 0 {}" size="{rt}" density="{density}"/>"#,
+            -ld
+        );
+        let _ = writeln!(w, "          </body>\n        </body>\n      </body>\n    </body>");
+    }
+    let o = &grasp.object_pose;
+    let _ = writeln!(w, r#"    <body name="object" pos="{}" quat="{}">"#, pos(o), quat(&o.rotation));
+    let _ = writeln!(w, r#"      <freejoint name="object"/>"#);
+    let _ = writeln!(
+        w,
+        r#"      <geom name="object" {object_geom} mass="{}" contype="2" conaffinity="1" friction="{} 0.005 0.0001"/>"#,
+        object.mass_kg, object.friction
+    );
+    let _ = writeln!(w, "    </body>\n  </worldbody>\n  <actuator>");
+    for (i, finger) in hand.fingers.iter().enumerate() {
+        for ((name, l), cap) in JOINT_NAMES.iter().zip(finger.joint_limits).zip(finger.torque_caps_nm) {
+            let _ = writeln!(
+                w,
+                r#"    <position name="f{i}_{name}" joint="f{i}_{name}" kp="{}" kv="{}" ctrllimited="true" ctrlrange="{} {}" forcelimited="true" forcerange="{} {cap}"/>"#,
+                physics.motor_stiffness_nm_per_rad,
+                physics.motor_damping_nms_per_rad,
+                l.lower_rad,
+                l.upper_rad,
+                -cap,
+            );
+        }
+    }
+    let _ = writeln!(w, "  </actuator>");
+    let joints = |v: &[f32; NUM_JOINTS]| v.iter().map(f32::to_string).collect::<Vec<_>>().join(" ");
+    let r = o.rotation;
+    let _ = writeln!(
+        w,
+        r#"  <keyframe><key name="grasp" qpos="{} {} {} {} {} {} {} {}" ctrl="{}"/></keyframe>"#,
+        joints(&grasp.q_rad),
+        o.translation.vector.x,
+        o.translation.vector.y,
+        o.translation.vector.z,
+        r.w,
+        r.i,
+        r.j,
+        r.k,
+        joints(&grasp.q_target_rad)
+    );
+    let _ = writeln!(w, "</mujoco>");
+    Ok(xml)
+}
+
+/// The MJCF of `env`'s task, with the grasp that `Env::reset(seed)` settles as keyframe
+/// `grasp` (the state `vge bench sim` starts its first world from, for seed 0).
+pub fn settled_grasp_mjcf(
+    env: &crate::env::EnvConfig,
+    seed: u64,
+    timestep_s: f32,
+) -> Result<String, SimError> {
+    let mut sim = crate::env::Env::new(env.clone())?;
+    sim.reset(seed)?;
+    let world = sim.world().ok_or_else(|| SimError::InvalidConfig("no world after reset".to_owned()))?;
+    let settings = MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s };
+    hand_mjcf(&settings, &GraspKeyframe::of(world))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::env::EnvConfig;
+
+    #[test]
+    fn the_model_has_every_joint_actuator_and_the_settled_grasp_as_keyframe() {
+        let env = EnvConfig::default();
+        let xml = settled_grasp_mjcf(&env, 0, 1.0 / 240.0).unwrap();
+        assert_eq!(xml.matches(r#"type="hinge""#).count(), NUM_JOINTS);
+        assert_eq!(xml.matches("<position ").count(), NUM_JOINTS);
+        assert_eq!(xml.matches(r#"type="sphere""#).count(), 5, "one fingertip per finger");
+        // The keyframe holds 15 joint angles and the object's 7 pose numbers, then 15 targets.
+        let key = xml.lines().find(|l| l.contains("<key ")).unwrap();
+        let attr = |name: &str| -> Vec<f32> {
+            let start = key.find(&format!(r#"{name}=""#)).unwrap() + name.len() + 2;
+            let end = start + key[start..].find('"').unwrap();
+            key[start..end].split(' ').map(|v| v.parse().unwrap()).collect()
+        };
+        let (qpos, ctrl) = (attr("qpos"), attr("ctrl"));
+        assert_eq!((qpos.len(), ctrl.len()), (NUM_JOINTS + 7, NUM_JOINTS));
+        // A settled grasp: fingers flexed onto the object, targets squeezed past the angles.
+        let mut sim = crate::env::Env::new(env.clone()).unwrap();
+        sim.reset(0).unwrap();
+        let world = sim.world().unwrap();
+        assert_eq!(&qpos[..NUM_JOINTS], &world.joint_positions()[..]);
+        assert_eq!(&ctrl[..], &world.joint_targets()[..]);
+        assert!(qpos[1] > 0.1, "thumb flexed: {}", qpos[1]);
+        assert!(ctrl[1] > qpos[1], "squeezed past contact");
+    }
+
+    #[test]
+    fn shapes_mujoco_cannot_build_without_a_mesh_are_refused() {
+        let env = EnvConfig { object: ObjectConfig::of(ObjectShape::Dodecahedron), ..EnvConfig::default() };
+        let err = settled_grasp_mjcf(&env, 0, 1.0 / 240.0).unwrap_err();
+        assert!(err.to_string().contains("dodecahedron"), "{err}");
+        let env = EnvConfig::default();
+        assert!(settled_grasp_mjcf(&env, 0, 0.0).is_err());
+    }
+}
