@@ -5,7 +5,7 @@
 #
 # `vge bench sim --write-mjcf` writes the task as MJCF (generated from the hand model, so the
 # two cannot disagree about the geometry); scripts/bench_mujoco.py steps it in MuJoCo (from
-# PyPI, into .deps/mujoco-venv) with the same actions and contact readout. The two
+# PyPI, into .deps/py) with the same actions and contact readout. The two
 # alternate ROUNDS times (default 3) pinned to one core; the medians and their ratio are
 # printed, and every round's JSON line is kept in target/bench-vs-mujoco.jsonl.
 # Compare only figures from one run: the CPU model varies between machines. Exits 2, saying so,
@@ -14,11 +14,12 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 rounds=${1:-3}
 mujoco_hz=${2:-240}
-venv=.deps/mujoco-venv
-if ! "$venv/bin/python" -c "import mujoco" 2>/dev/null; then
-  echo "installing mujoco into $venv (PyPI)..." >&2
-  python3 -m venv "$venv"
-  "$venv/bin/pip" install --quiet mujoco
+# The venv scripts/test.sh makes; MuJoCo pinned as there.
+venv=.deps/py
+if ! "$venv/bin/python" -c 'import mujoco; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
+  echo "installing mujoco 4.0.0 into $venv (PyPI)..." >&2
+  [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check mujoco==4.0.0
 fi
 cargo build --release -p vge-trainer --bin vge >&2
 vge=target/release/vge
