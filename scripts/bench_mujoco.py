@@ -48,6 +48,8 @@ def main():
     p.add_argument("--settle-s", type=float, default=1.0, help="settling time after the keyframe (default 1 s)")
     p.add_argument("--episode-steps", type=int, default=400, help="episode length in control steps (default 400)")
     args = p.parse_args()
+    if args.steps < 1 or args.episode_steps < 1 or not args.control_hz > 0 or args.settle_s < 0:
+        p.error("--steps and --episode-steps must be >= 1, --control-hz > 0, --settle-s >= 0")
 
     model = mujoco.MjModel.from_xml_path(args.mjcf)
     data = mujoco.MjData(model)
@@ -64,7 +66,8 @@ def main():
     force = np.zeros(6)
 
     def read_contacts():
-        """Per fingertip: summed normal force, force-weighted position and normal (vge's readout)."""
+        """vge's readout: per fingertip the summed normal force and the force-weighted contact
+        position and normal; returns how many fingertips touch the object."""
         n = np.zeros(5)
         pos = np.zeros((5, 3))
         nrm = np.zeros((5, 3))
