@@ -282,15 +282,35 @@ pub fn progress_line(dir: &Path, seed: u64, steps: Option<u64>) -> String {
         let text = std::fs::read_to_string(dir.join("config.toml")).ok()?;
         u64::try_from(text.parse::<toml::Table>().ok()?.get("total_steps")?.as_integer()?).ok()
     };
-    let total = steps.or_else(from_config).map_or_else(|| "?".to_owned(), |t| t.to_string());
+    let total_steps = steps.or_else(from_config);
+    let total = total_steps.map_or_else(|| "?".to_owned(), |t| t.to_string());
     let success = last_success(dir)
         .map_or_else(String::new, |(step, rate)| format!(", success {:.0}% at {step}", 100.0 * rate));
     match last_metrics(dir) {
-        Some(m) => format!(
-            "seed {seed}: {}/{total} steps, {:.0} steps/s, return {:.2}{success}",
-            m.step, m.steps_per_s, m.mean_return
-        ),
+        Some(m) => {
+            let left =
+                total_steps.filter(|t| *t > m.step && m.steps_per_s > 0.0).map_or_else(String::new, |t| {
+                    format!(" ({} left)", duration_text((t - m.step) as f64 / m.steps_per_s))
+                });
+            format!(
+                "seed {seed}: {}/{total} steps, {:.0} steps/s{left}, return {:.2}{success}",
+                m.step, m.steps_per_s, m.mean_return
+            )
+        }
         None => format!("seed {seed}: starting (no metrics row yet)"),
+    }
+}
+
+/// A remaining time at the precision a user plans with: `40 s`, `25 min`, `1 h 05 min`.
+fn duration_text(seconds: f64) -> String {
+    let s = seconds.round() as u64;
+    match s {
+        0..90 => format!("{s} s"),
+        90..5400 => format!("{} min", (s + 30) / 60),
+        _ => {
+            let minutes = (s + 30) / 60;
+            format!("{} h {:02} min", minutes / 60, minutes % 60)
+        }
     }
 }
 
@@ -576,7 +596,12 @@ mod tests {
         assert_eq!(progress_line(&dir, 3, Some(1000)), "seed 3: starting (no metrics row yet)");
         let metrics = "step,episodes,return,steps_per_s\n100,1,2.5,80.4\n200,2,3.25,90.6\n300,3,9";
         std::fs::write(dir.join("metrics.csv"), metrics).expect("metrics");
-        assert_eq!(progress_line(&dir, 3, Some(1000)), "seed 3: 200/1000 steps, 91 steps/s, return 3.25");
+        // 800 steps left at 90.6 steps/s.
+        assert_eq!(
+            progress_line(&dir, 3, Some(1000)),
+            "seed 3: 200/1000 steps, 91 steps/s (9 s left), return 3.25"
+        );
+        assert_eq!(progress_line(&dir, 3, Some(200)), "seed 3: 200/200 steps, 91 steps/s, return 3.25");
         std::fs::write(
             dir.join("eval.csv"),
             "step,episodes,return,rotation,success\n200,20,5.0,1.0,0.3500\n",
@@ -584,13 +609,23 @@ mod tests {
         .expect("eval");
         assert_eq!(
             progress_line(&dir, 3, Some(1000)),
-            "seed 3: 200/1000 steps, 91 steps/s, return 3.25, success 35% at 200"
+            "seed 3: 200/1000 steps, 91 steps/s (9 s left), return 3.25, success 35% at 200"
         );
         assert_eq!(final_success(&dir), None);
         std::fs::write(dir.join("final-eval.json"), r#"{"learned": true, "success_rate": 0.55}"#)
             .expect("json");
         assert_eq!(final_success(&dir), Some((0.55, true)));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn time_left_reads_in_seconds_minutes_or_hours() {
+        assert_eq!(duration_text(0.4), "0 s");
+        assert_eq!(duration_text(89.0), "89 s");
+        assert_eq!(duration_text(90.0), "2 min");
+        assert_eq!(duration_text(1_500.0), "25 min");
+        assert_eq!(duration_text(5_400.0), "1 h 30 min");
+        assert_eq!(duration_text(3_900.0 + 3_600.0), "2 h 05 min");
     }
 
     #[test]
