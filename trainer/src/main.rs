@@ -406,7 +406,8 @@ enum Bench {
         /// scripts/bench-vs-mujoco.sh times MuJoCo on.
         #[arg(long, value_name = "FILE")]
         write_mjcf: Option<PathBuf>,
-        /// MuJoCo's time step in the written model (s); 1/240 as in issue 14's comparison.
+        /// MuJoCo's time step in the written model (s); default 1/240, the rate of the stored
+        /// comparison (docs/results/sim-vs-mujoco/).
         #[arg(long, default_value_t = 1.0 / 240.0, requires = "write_mjcf")]
         mujoco_timestep_s: f32,
     },
