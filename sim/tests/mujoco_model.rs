@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use vge_sim::EnvConfig;
+use vge_sim::mjcf::{GraspKeyframe, MjcfSettings, hand_mjcf};
 
 fn python() -> PathBuf {
     if let Ok(p) = std::env::var("VGE_PYTHON") {
@@ -19,15 +20,19 @@ fn python() -> PathBuf {
 
 #[test]
 fn mujoco_holds_the_settled_grasp_on_five_fingertips() {
+    // One reset gives both the model's keyframe and rapier's height to compare with.
     let env = EnvConfig::default();
-    let xml = vge_sim::mjcf::settled_grasp_mjcf(&env, 0, 1.0 / 240.0).expect("model");
+    let mut sim = vge_sim::Env::new(env.clone()).expect("env");
+    sim.reset(0).expect("reset");
+    let world = sim.world().expect("world");
+    let keyframe_z = world.object_state().pose.translation.vector.z;
+    let settings =
+        MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s: 1.0 / 240.0 };
+    let xml = hand_mjcf(&settings, &GraspKeyframe::of(world)).expect("model");
     let dir = std::env::temp_dir().join(format!("vge-mjcf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let model = dir.join("hand.xml");
     std::fs::write(&model, &xml).expect("write model");
-    let mut sim = vge_sim::Env::new(env).expect("env");
-    sim.reset(0).expect("reset");
-    let keyframe_z = sim.world().expect("world").object_state().pose.translation.vector.z;
 
     let harness = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/bench_mujoco.py");
     let out = Command::new(python())
