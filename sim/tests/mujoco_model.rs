@@ -10,12 +10,12 @@ use std::process::Command;
 use vge_sim::EnvConfig;
 use vge_sim::mjcf::{GraspKeyframe, MjcfSettings, hand_mjcf};
 
+#[path = "../../tests/support/python.rs"]
+mod python_env;
+
+/// See `tests/support/python.rs`.
 fn python() -> PathBuf {
-    if let Ok(p) = std::env::var("VGE_PYTHON") {
-        return p.into();
-    }
-    let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.deps/py/bin/python");
-    if venv.exists() { venv } else { "python3".into() }
+    python_env::python(env!("CARGO_MANIFEST_DIR"))
 }
 
 #[test]

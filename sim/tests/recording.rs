@@ -7,13 +7,12 @@ use std::process::Command;
 
 use vge_sim::{Env, EnvConfig, EpisodeRecorder, NUM_JOINTS, ObjectShape};
 
-/// VGE_PYTHON, else the project's venv, else python3.
+#[path = "../../tests/support/python.rs"]
+mod python_env;
+
+/// See `tests/support/python.rs`.
 fn python() -> PathBuf {
-    if let Ok(p) = std::env::var("VGE_PYTHON") {
-        return p.into();
-    }
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../.deps/py/bin/python");
-    if venv.exists() { venv } else { "python3".into() }
+    python_env::python(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// `rrd_summary.py`'s JSON for `rrd`.

@@ -4,12 +4,12 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+#[path = "../../../tests/support/python.rs"]
+mod python_env;
+
+/// See `tests/support/python.rs`.
 pub fn python() -> PathBuf {
-    if let Ok(p) = std::env::var("VGE_PYTHON") {
-        return p.into();
-    }
-    let venv = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../.deps/py/bin/python");
-    if venv.exists() { venv } else { "python3".into() }
+    python_env::python(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// `tag step value` lines for every scalar in `dir`, as TensorBoard reads them.

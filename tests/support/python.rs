@@ -1,0 +1,17 @@
+//! The Python interpreter the tests that read vge's outputs back with real Python packages
+//! (rerun-sdk, MuJoCo, TensorBoard's reader) run: VGE_PYTHON, else the venv that
+//! scripts/test.sh fills in `.deps/py`, else `python3`. Included by path
+//! (`#[path = ".../tests/support/python.rs"] mod python_env;`) from every crate's tests, since
+//! no test-support crate is shared across the workspace.
+
+use std::path::{Path, PathBuf};
+
+/// VGE_PYTHON, else `<workspace>/.deps/py/bin/python`, else `python3`. `manifest_dir` is
+/// the including crate's `CARGO_MANIFEST_DIR` (every crate sits one level below the root).
+pub fn python(manifest_dir: &str) -> PathBuf {
+    if let Ok(p) = std::env::var("VGE_PYTHON") {
+        return p.into();
+    }
+    let venv = Path::new(manifest_dir).join("../.deps/py/bin/python");
+    if venv.exists() { venv } else { "python3".into() }
+}
