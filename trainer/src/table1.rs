@@ -381,7 +381,7 @@ mod tests {
 
     #[test]
     fn a_seed_is_still_rising_when_its_last_test_beats_its_best_earlier_one_by_a_quarter() {
-        // RL + FG seed 1 (docs/results/table1): 20 at 800k, 75 at 900k, 255 at 1M.
+        // RL + FG seed 1 (docs/results/utd05-hs400k/table1): 20 at 800k, 75 at 900k, 255 at 1M.
         assert!(still_rising(&[3.5, 20.3, 74.7, 254.6]));
         // FGE + FG seed 1: 342 at 900k, 407 at 1M (19% more) and 244 before.
         assert!(!still_rising(&[244.1, 186.7, 342.1, 406.8]));

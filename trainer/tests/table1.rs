@@ -108,9 +108,10 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
 fn committed_table1_is_what_its_run_folders_give() {
     let results = repo().join("docs/results");
     // Each committed table and the roots its README names: the table's own folder and
-    // VGE + FG's seeds. The two archives (the Euler-yaw reward, then the paper's reward)
-    // always; the current table once its first runs are in.
-    let mut tables: Vec<_> = ["euler-yaw-reward", "paper-reward"]
+    // VGE + FG's seeds. The three archives (the Euler-yaw reward, the paper's reward, then
+    // utd 0.5 with the controllers stopped at 400k) always; the current table once its
+    // first runs are in.
+    let mut tables: Vec<_> = ["euler-yaw-reward", "paper-reward", "utd05-hs400k"]
         .map(|archive| {
             (results.join(archive).join("table1"), results.join(archive).join("cube-fg-vge-seeds"))
         })
