@@ -12,11 +12,7 @@ use vge_sim::mjcf::{GraspKeyframe, MjcfSettings, hand_mjcf};
 
 #[path = "../../tests/support/python.rs"]
 mod python_env;
-
-/// See `tests/support/python.rs`.
-fn python() -> PathBuf {
-    python_env::python(env!("CARGO_MANIFEST_DIR"))
-}
+use python_env::python;
 
 #[test]
 fn mujoco_holds_the_settled_grasp_on_five_fingertips() {

@@ -2,18 +2,14 @@
 //! (`rrd_summary.py`, rerun-sdk 0.36.3, which scripts/test.sh installs in .deps/py): every
 //! entity is there, with one row per control step, and the rewards are the episode's.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use vge_sim::{Env, EnvConfig, EpisodeRecorder, NUM_JOINTS, ObjectShape};
 
 #[path = "../../tests/support/python.rs"]
 mod python_env;
-
-/// See `tests/support/python.rs`.
-fn python() -> PathBuf {
-    python_env::python(env!("CARGO_MANIFEST_DIR"))
-}
+use python_env::python;
 
 /// `rrd_summary.py`'s JSON for `rrd`.
 fn summary(rrd: &Path) -> serde_json::Value {

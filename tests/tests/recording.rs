@@ -15,11 +15,7 @@ fn workspace_bin(name: &str) -> PathBuf {
 
 #[path = "../support/python.rs"]
 mod python_env;
-
-/// See `tests/support/python.rs`.
-fn python() -> PathBuf {
-    python_env::python(env!("CARGO_MANIFEST_DIR"))
-}
+use python_env::python;
 
 #[test]
 fn bridge_run_records_the_simulated_episode_and_refuses_to_over_can() {

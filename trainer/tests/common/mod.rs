@@ -6,11 +6,7 @@ use std::process::Command;
 
 #[path = "../../../tests/support/python.rs"]
 mod python_env;
-
-/// See `tests/support/python.rs`.
-pub fn python() -> PathBuf {
-    python_env::python(env!("CARGO_MANIFEST_DIR"))
-}
+pub use python_env::python;
 
 /// `tag step value` lines for every scalar in `dir`, as TensorBoard reads them.
 pub fn tensorboard_scalars(dir: &std::path::Path) -> Vec<(String, u64, f64)> {
