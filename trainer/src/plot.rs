@@ -106,6 +106,8 @@ pub(crate) struct FinalEvalFields {
     pub(crate) mean_contact_switches: Option<f64>,
     pub(crate) env_steps: u64,
     pub(crate) wall_s: f64,
+    #[serde(default)]
+    pub(crate) cpu_s: Option<f64>,
 }
 
 fn read(path: &Path) -> Result<String, PlotError> {

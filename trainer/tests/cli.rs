@@ -387,7 +387,7 @@ fn eval_plot_draws_the_gait_diagram_of_one_episode() {
 
 /// `vge eval --run DIR` scores a finished run's final policy again on its own episodes, shows
 /// the stored figures beside the new ones, and with `--write` replaces `final-eval.json`
-/// keeping what describes the training (env steps, wall time).
+/// keeping what describes the training (env steps, wall and CPU time).
 #[test]
 fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -401,6 +401,7 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     )
     .expect("json");
     doc["success_rate"] = serde_json::json!(0.125);
+    doc["cpu_s"] = serde_json::json!(11.5);
     std::fs::write(dir.join("final-eval.json"), doc.to_string()).expect("write");
     let arg = dir.display().to_string();
 
@@ -416,6 +417,7 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     assert_eq!(now["success_rate"], 0.85);
     assert_eq!(now["env_steps"], doc["env_steps"]);
     assert_eq!(now["wall_s"], doc["wall_s"]);
+    assert_eq!(now["cpu_s"], doc["cpu_s"]);
     assert_eq!(now["per_episode"].as_array().map(Vec::len), Some(20));
 
     // An unfinished run (no final-eval.json) cannot be rewritten; neither flag: an error.

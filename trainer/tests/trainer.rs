@@ -564,11 +564,28 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert!(part.stopped);
     assert_eq!(part.steps, 120);
     assert!(!part_dir.join("policy.vgep").exists());
+    let state: toml::Value =
+        toml::from_str(&std::fs::read_to_string(part_dir.join("checkpoint/state.toml")).expect("state.toml"))
+            .expect("toml");
+    let first = |key: &str| state[key].as_float().unwrap_or_else(|| panic!("{key} in state.toml"));
+    let (first_wall_s, first_cpu_s) = (first("wall_s"), first("cpu_s"));
+    assert!(first_wall_s > 0.0 && first_cpu_s > 0.0, "{first_wall_s} {first_cpu_s}");
     let resumed = train(&tiny_config(140), &part_dir, true, &never, &mut |_| {}).expect("resumed run");
     assert_eq!(resumed.steps, 140);
     assert_eq!(resumed.updates, full.updates);
     assert_eq!(resumed.behaviour, full.behaviour);
     assert_eq!(metrics_without_speed(&part_dir), metrics_without_speed(&full_dir));
+    // The run's cost counts both sessions: wall time, and CPU time (which pauses do not add to).
+    let cost = |d: &std::path::Path| -> (f64, f64) {
+        let text = std::fs::read_to_string(d.join("final-eval.json")).expect("final-eval.json");
+        let doc: serde_json::Value = serde_json::from_str(&text).expect("json");
+        (doc["wall_s"].as_f64().expect("wall_s"), doc["cpu_s"].as_f64().expect("cpu_s"))
+    };
+    let (wall_s, cpu_s) = cost(&part_dir);
+    assert!(
+        wall_s > first_wall_s && cpu_s > first_cpu_s,
+        "{wall_s} {cpu_s} after {first_wall_s} {first_cpu_s}"
+    );
     let resumed_policy = std::fs::read(part_dir.join("policy.vgep")).expect("policy");
     assert!(resumed_policy == full_policy, "resumed actor differs from the uninterrupted one");
     check_model_selection(&full_dir, &full_policy);

@@ -10,6 +10,7 @@ use serde::Serialize;
 use vge_export::Provenance;
 use vge_sim::EnvConfig;
 
+use super::clock::RunCost;
 use super::{TrainError, io_err};
 use crate::config::Config;
 use crate::eval::{EpisodeOutcome, EvalReport};
@@ -193,7 +194,12 @@ struct FinalEval<'a> {
     drop_rate: f64,
     mean_contact_switches: f64,
     env_steps: u64,
+    /// Wall time of the training run, pauses and time waiting for a core included.
     wall_s: f64,
+    /// CPU time of the training process, all threads (absent where a session of the run was
+    /// made by a vge that did not count it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cpu_s: Option<f64>,
     per_episode: &'a [EpisodeOutcome],
 }
 
@@ -202,7 +208,7 @@ fn write_final_eval(
     config: &Config,
     r: &EvalReport,
     env_steps: u64,
-    wall_s: f64,
+    cost: RunCost,
 ) -> Result<(), TrainError> {
     let path = out_dir.join("final-eval.json");
     let doc = FinalEval {
@@ -216,7 +222,8 @@ fn write_final_eval(
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
         env_steps,
-        wall_s,
+        wall_s: cost.wall_s,
+        cpu_s: cost.cpu_s,
         per_episode: &r.per_episode,
     };
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
@@ -236,13 +243,14 @@ pub struct Rescored {
 }
 
 /// Re-runs the final success test of the finished run in `dir`; with `write`, replaces its
-/// `final-eval.json` (keeping `env_steps` and `wall_s`, which describe the training run).
+/// `final-eval.json` (keeping `env_steps`, `wall_s` and `cpu_s`, which describe the training
+/// run).
 pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainError> {
     let config = super::run_config(dir)?;
     let stored = crate::plot::read_final_eval(dir);
     // What --write keeps must be there before the episodes run.
     let kept = match (&stored, write) {
-        (Ok(Some(s)), true) => Some((s.env_steps, s.wall_s)),
+        (Ok(Some(s)), true) => Some((s.env_steps, RunCost { wall_s: s.wall_s, cpu_s: s.cpu_s })),
         (_, false) => None,
         (Ok(None), true) => {
             return Err(TrainError::NotFinished {
@@ -260,8 +268,8 @@ pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainErro
     let policy = dir.join("policy.vgep");
     let bytes = std::fs::read(&policy).map_err(io_err(&policy))?;
     let report = evaluate_policy(&config, &bytes, EpisodeSet::Validation)?;
-    if let Some((env_steps, wall_s)) = kept {
-        write_final_eval(dir, &config, &report, env_steps, wall_s)?;
+    if let Some((env_steps, cost)) = kept {
+        write_final_eval(dir, &config, &report, env_steps, cost)?;
     }
     let stored = stored.ok().flatten();
     Ok(Rescored {
@@ -297,7 +305,7 @@ pub(super) fn finish(
     config: &Config,
     bytes: &[u8],
     step: u64,
-    wall_s: f64,
+    cost: RunCost,
     evaluated: Option<EvalReport>,
 ) -> Result<PathBuf, TrainError> {
     let path = out_dir.join("policy.vgep");
@@ -306,7 +314,7 @@ pub(super) fn finish(
         Some(report) => report,
         None => evaluate_policy(config, bytes, EpisodeSet::Validation)?,
     };
-    write_final_eval(out_dir, config, &report, step, wall_s)?;
+    write_final_eval(out_dir, config, &report, step, cost)?;
     select_best_snapshot(out_dir, config)?;
     Ok(path)
 }

@@ -6,7 +6,8 @@
 //! own module: `collector` (the envs, their episodes, acting and storing transitions),
 //! `metrics` (the window behind each `metrics.csv` row), `run_folder` (the files a run
 //! writes as it goes, the checkpoint), `state` (`state.toml`: counters and the generator),
-//! `evaluation` (periodic and final evaluations, model selection).
+//! `evaluation` (periodic and final evaluations, model selection), `clock` (the run's wall
+//! and CPU time across sessions).
 //!
 //! Output directory:
 //! - `config.toml`: the effective configuration;
@@ -40,6 +41,7 @@
 //! (Ctrl-C) checkpoints at the current step: the resumed run is then the run whose
 //! checkpoint boundary fell at that step.
 
+mod clock;
 mod collector;
 mod evaluation;
 mod metrics;
@@ -62,6 +64,7 @@ use crate::config::{Config, ConfigError};
 use crate::eval::EvalError;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::Sac;
+use clock::{RunClock, RunCost};
 use collector::Collector;
 pub use evaluation::{Rescored, export_actor, rescore_final_eval};
 use run_folder::RunFolder;
@@ -275,9 +278,8 @@ struct Trainer<'a> {
     c: Counters,
     folder: RunFolder,
     config_hash: String,
-    /// Wall time of the earlier sessions of this run (s).
-    previous_wall_s: f64,
-    session_start: Instant,
+    /// Wall and CPU time of this run, its earlier sessions included.
+    cost: RunClock,
     session_first_step: u64,
     /// The step of the last checkpoint written or resumed from.
     checkpointed_at: Option<u64>,
@@ -299,14 +301,14 @@ impl<'a> Trainer<'a> {
         let mut behaviour = Behaviour::from_config(config);
         let mut collector = Collector::new(config)?;
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-        let (mut c, mut previous_wall_s) = (Counters::default(), 0.0);
+        let (mut c, mut before) = (Counters::default(), RunCost { wall_s: 0.0, cpu_s: Some(0.0) });
         if resume {
             // Every file is checked against the manifest before any is read.
             let state = run_folder::load_checkpoint(out_dir, &mut sac, &mut replay)?;
             rng = state.rng()?;
             c = state.counters();
             behaviour.stats = state.behaviour_stats();
-            previous_wall_s = state.wall_s;
+            before = state.cost();
         } else if let Some(source) = config.init_from_dir() {
             init_networks(config, &source, &mut sac)?;
         }
@@ -328,8 +330,7 @@ impl<'a> Trainer<'a> {
             c,
             folder,
             config_hash: config.hash_hex(),
-            previous_wall_s,
-            session_start: now,
+            cost: RunClock::start(before),
             times: PhaseTimes::default(),
             clock: now,
             last_evaluation: None,
@@ -387,8 +388,7 @@ impl<'a> Trainer<'a> {
     fn periodic(&mut self, prev_step: u64, progress: &mut dyn FnMut(&Progress)) -> Result<(), TrainError> {
         let (config, step) = (self.config, self.c.step);
         let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
-        let steps_per_s =
-            (step - self.session_first_step) as f64 / self.session_start.elapsed().as_secs_f64().max(1e-9);
+        let steps_per_s = (step - self.session_first_step) as f64 / self.cost.session_wall_s().max(1e-9);
         if crossed(config.run.log_interval) || step >= config.total_steps {
             let values = self.c.window.values(self.c.episodes, self.beta(), self.sac.updates(), steps_per_s);
             self.folder.log(step, &values)?;
@@ -426,14 +426,13 @@ impl<'a> Trainer<'a> {
     }
 
     fn checkpoint(&mut self) -> Result<(), TrainError> {
-        let wall_s = self.previous_wall_s + self.session_start.elapsed().as_secs_f64();
         let state = TrainState::capture(
             &self.c,
             &self.rng,
             &self.config_hash,
             &self.behaviour.stats,
             self.config.run.save_replay,
-            wall_s,
+            self.cost.now(),
         );
         self.folder.checkpoint(&self.sac, &self.replay, &state)?;
         self.checkpointed_at = Some(self.c.step);
@@ -453,11 +452,11 @@ impl<'a> Trainer<'a> {
         } else {
             let eval_start = Instant::now();
             let bytes = export_actor(self.config, &self.sac, self.c.step)?;
-            let wall_s = self.previous_wall_s + self.session_start.elapsed().as_secs_f64();
+            let cost = self.cost.now();
             // The periodic evaluation at this very step ran the same actor on the same episodes.
             let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
             let path =
-                evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, wall_s, evaluated)?;
+                evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, cost, evaluated)?;
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)
         };
@@ -468,7 +467,7 @@ impl<'a> Trainer<'a> {
             stopped,
             policy,
             behaviour: self.behaviour.stats,
-            times: PhaseTimes { total_s: self.session_start.elapsed().as_secs_f64(), ..self.times },
+            times: PhaseTimes { total_s: self.cost.session_wall_s(), ..self.times },
         })
     }
 }

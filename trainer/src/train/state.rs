@@ -6,6 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::TrainError;
+use super::clock::RunCost;
 use super::metrics::Window;
 use crate::behaviour::BehaviourStats;
 
@@ -44,6 +45,10 @@ pub(super) struct TrainState {
     /// Wall time of the sessions up to this checkpoint (s).
     #[serde(default)]
     pub wall_s: f64,
+    /// CPU time of those sessions (s); absent from checkpoints of a vge that did not count
+    /// it, and then unknown for the rest of the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_s: Option<f64>,
 }
 
 impl TrainState {
@@ -53,7 +58,7 @@ impl TrainState {
         config_hash: &str,
         s: &BehaviourStats,
         has_replay: bool,
-        wall_s: f64,
+        cost: RunCost,
     ) -> Self {
         let rng_seed_hex: String = rng.get_seed().iter().map(|b| format!("{b:02x}")).collect();
         Self {
@@ -74,8 +79,15 @@ impl TrainState {
             window: c.window.clone(),
             last_window: c.last_window.clone(),
             has_replay,
-            wall_s,
+            wall_s: cost.wall_s,
+            cpu_s: cost.cpu_s,
         }
+    }
+
+    /// What the sessions up to this checkpoint cost. A checkpoint without `wall_s` (older
+    /// still) is a run whose earlier cost is unknown: its CPU time stays unknown too.
+    pub fn cost(&self) -> RunCost {
+        RunCost { wall_s: self.wall_s, cpu_s: self.cpu_s }
     }
 
     pub fn counters(&self) -> Counters {
@@ -131,10 +143,15 @@ mod tests {
     fn the_generator_comes_back_where_it_was_and_corruption_is_refused() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let _ = rng.next_u64();
+        let cost = RunCost { wall_s: 1.0, cpu_s: Some(0.5) };
         let state =
-            TrainState::capture(&Counters::default(), &rng, "h", &BehaviourStats::default(), false, 1.0);
+            TrainState::capture(&Counters::default(), &rng, "h", &BehaviourStats::default(), false, cost);
         let text = toml::to_string(&state).expect("serialises");
         let back: TrainState = toml::from_str(&text).expect("parses");
+        assert_eq!(back.cost(), cost);
+        // A checkpoint of a vge that did not count CPU time resumes with it unknown.
+        let older: TrainState = toml::from_str(&text.replace("cpu_s = 0.5\n", "")).expect("parses");
+        assert_eq!(older.cost(), RunCost { wall_s: 1.0, cpu_s: None });
         assert_eq!(back.rng().expect("restores").next_u64(), rng.next_u64());
         let mut bad = back.clone();
         bad.rng_seed_hex.replace_range(0..2, "zz");

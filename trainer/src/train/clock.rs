@@ -1,0 +1,88 @@
+//! What a run has cost so far, summed over its sessions: wall time, and the CPU time of the
+//! training process.
+//!
+//! Wall time counts every second the process existed, including time it was stopped
+//! (SIGSTOP, to benchmark beside it) or waiting for a core another job held; CPU time counts
+//! only the seconds its threads ran. A one-thread run that had its core to itself has the
+//! two about equal, so a gap between them says the wall figure includes pauses or sharing.
+
+use std::time::Instant;
+
+/// Cost of a run up to some moment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunCost {
+    pub wall_s: f64,
+    /// None when an earlier session was run by a vge that did not count it.
+    pub cpu_s: Option<f64>,
+}
+
+/// The run's clock: the earlier sessions' cost plus this session's so far.
+#[derive(Debug)]
+pub struct RunClock {
+    before: RunCost,
+    session_start: Instant,
+    session_cpu_start_s: Option<f64>,
+}
+
+impl RunClock {
+    /// Starts this session's count on top of `before` (zero for a new run).
+    pub fn start(before: RunCost) -> Self {
+        Self { before, session_start: Instant::now(), session_cpu_start_s: process_cpu_s() }
+    }
+
+    /// Wall time of this session alone (s).
+    pub fn session_wall_s(&self) -> f64 {
+        self.session_start.elapsed().as_secs_f64()
+    }
+
+    pub fn now(&self) -> RunCost {
+        let cpu_s = match (self.before.cpu_s, self.session_cpu_start_s, process_cpu_s()) {
+            (Some(before), Some(start), Some(now)) => Some(before + (now - start)),
+            _ => None,
+        };
+        RunCost { wall_s: self.before.wall_s + self.session_wall_s(), cpu_s }
+    }
+}
+
+/// CPU time of this process, all threads, user and system (s); None where the OS does
+/// not say.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn process_cpu_s() -> Option<f64> {
+    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer to a local.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
+    (rc == 0).then_some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
+}
+
+#[cfg(not(target_os = "linux"))]
+fn process_cpu_s() -> Option<f64> {
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_clocks_add_this_session_to_the_earlier_ones() {
+        // Other tests run threads in this process, so only lower bounds hold for CPU time.
+        let clock = RunClock::start(RunCost { wall_s: 10.0, cpu_s: Some(4.0) });
+        let spin = Instant::now();
+        let mut x = 0u64;
+        while spin.elapsed().as_millis() < 300 {
+            x = std::hint::black_box(x.wrapping_add(1));
+        }
+        let cost = clock.now();
+        assert!(cost.wall_s >= 10.3, "{cost:?}");
+        let cpu_s = cost.cpu_s.expect("linux counts CPU time");
+        assert!(cpu_s >= 4.2, "spinning 0.3 s on top of 4 s counted {cpu_s} s of CPU");
+    }
+
+    #[test]
+    fn an_uncounted_earlier_session_leaves_cpu_time_unknown() {
+        let clock = RunClock::start(RunCost { wall_s: 5.0, cpu_s: None });
+        assert_eq!(clock.now().cpu_s, None);
+        assert!(clock.now().wall_s >= 5.0);
+    }
+}
