@@ -411,7 +411,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-fge-robust".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust-ramp".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust-finetune".to_owned()));
-    assert_eq!(names.len(), 20);
+    assert!(names.contains(&"cube-fg-vge-robust".to_owned()));
+    assert_eq!(names.len(), 21);
 }
 
 #[test]
