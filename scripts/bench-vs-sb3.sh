@@ -11,6 +11,10 @@
 # one run: the CPU model varies between machines. Stop other work first: a training run on
 # the same cores halves every figure.
 set -euo pipefail
+if [[ ${1:-} == -h || ${1:-} == --help ]]; then
+  sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
+  exit 0
+fi
 cd "$(dirname "$0")/.."
 rounds=${1:-3}
 [ $# -gt 0 ] && shift
