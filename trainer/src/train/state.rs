@@ -84,8 +84,9 @@ impl TrainState {
         }
     }
 
-    /// What the sessions up to this checkpoint cost. A checkpoint without `wall_s` (older
-    /// still) is a run whose earlier cost is unknown: its CPU time stays unknown too.
+    /// What the sessions up to this checkpoint cost. Checkpoints of a vge that wrote neither
+    /// field read as 0 s of wall time (as before) and unknown CPU time, which stays unknown
+    /// for the rest of the run.
     pub fn cost(&self) -> RunCost {
         RunCost { wall_s: self.wall_s, cpu_s: self.cpu_s }
     }
