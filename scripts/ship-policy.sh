@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Ships a finished training run's final policy as the gait that comes with vge, measured:
+# Ships a policy of a finished training run (its final one unless told) as the gait that comes with vge, measured:
 #
-#   scripts/ship-policy.sh RUN_DIR [NAME]     # NAME: cube (default)
+#   scripts/ship-policy.sh RUN_DIR [NAME] [POLICY]   # NAME: cube (default)
 #
-# Copies RUN_DIR/policy.vgep and RUN_DIR/config.toml to policies/NAME.vgep and NAME.toml,
+# POLICY is the run's policy file to ship, relative to RUN_DIR: policy.vgep (the final one,
+# default), policy-best.vgep (the snapshot the run's selection picked on its validation
+# grasps) or snapshots/policy-STEP.vgep; its training step is in its provenance line.
+# Copies it and RUN_DIR/config.toml to policies/NAME.vgep and NAME.toml,
 # then measures the copy with the success test (`vge eval`: 20 randomised 30 s episodes) and
 # the robustness test (`vge robustness`: 10 episodes per level, 5 levels per axis up to the
 # paper's), and writes both, the run it came from and the issue's goals with whether each
@@ -11,16 +14,17 @@
 # VGE_BIN chooses the vge binary (default target/release/vge). About 5 min on 2 cores.
 set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-[[ $# -ge 1 ]] || { echo "usage: $0 RUN_DIR [NAME]" >&2; exit 2; }
+[[ $# -ge 1 && $# -le 3 ]] || { echo "usage: $0 RUN_DIR [NAME] [POLICY]" >&2; exit 2; }
 run=$(cd "$1" && pwd)
 name=${2:-cube}
+policy=${3:-policy.vgep}
 vge=${VGE_BIN:-$repo/target/release/vge}
-for f in policy.vgep config.toml final-eval.json; do
+for f in "$policy" config.toml final-eval.json; do
   [[ -f $run/$f ]] || { echo "$run/$f is missing: not a finished training run" >&2; exit 1; }
 done
 cd "$repo"
 mkdir -p policies
-cp "$run/policy.vgep" "policies/$name.vgep"
+cp "$run/$policy" "policies/$name.vgep"
 cp "$run/config.toml" "policies/$name.toml"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
@@ -30,9 +34,9 @@ echo "==> the robustness test"
 "$vge" robustness --policy "policies/$name.vgep" --out "$tmp/robustness"
 cp "$tmp/robustness/robustness.png" "policies/$name-robustness.png"
 provenance=$("$vge" inspect "policies/$name.vgep" | sed -n 's/^provenance: *//p')
-python3 - "$run" "$provenance" "$tmp/eval.json" "$tmp/robustness/robustness.json" "policies/$name.json" <<'PY'
+python3 - "$run" "$policy" "$provenance" "$tmp/eval.json" "$tmp/robustness/robustness.json" "policies/$name.json" <<'PY'
 import json, os, sys
-run, provenance, eval_path, robustness_path, out = sys.argv[1:]
+run, policy, provenance, eval_path, robustness_path, out = sys.argv[1:]
 success = json.load(open(eval_path))
 robustness = json.load(open(robustness_path))
 # Issue 12's goals: success >= 80% of 20 randomised 30 s episodes, and >= 75% of the clean
@@ -46,6 +50,7 @@ for axis, fraction in at_paper_level.items():
     goals[f"{axis}: return at the paper's level >= 0.75 of clean"] = fraction >= 0.75
 doc = {
     "source_run": os.path.relpath(run),
+    "source_policy": policy,
     "provenance": provenance,
     "success_test": success,
     "robustness": robustness,
