@@ -117,6 +117,12 @@ pub struct EnvSection {
     /// 50% normal error a policy trained without it kept 8% of its return, one trained
     /// with 25% from the start 85%).
     pub perturb_ramp_steps: u64,
+    /// The step the force's ramp starts at: no force on the object before it, then
+    /// `perturb_ramp_steps` of linear growth (0: from the first step). Lets the gait be
+    /// learned undisturbed first: a run whose pushes grew from step 0 was at half force by
+    /// 300k, before any gait (`docs/results/cube-fg-vge-robust/`).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub perturb_ramp_start: u64,
     /// Curriculum for a run that starts from trained networks ([`Config::init_from`]): the
     /// sensor noise (`noise_*`) grows linearly from 0 to its level over the first this-many
     /// env steps, set at each episode's start (0: full from the start). Refused for a run
@@ -152,6 +158,7 @@ impl Default for EnvSection {
             friction_scale: env.randomization.friction_scale,
             action_latency_steps: env.randomization.action_latency_steps,
             perturb_ramp_steps: 0,
+            perturb_ramp_start: 0,
             noise_ramp_steps: 0,
         }
     }
@@ -592,6 +599,12 @@ impl EnvSection {
         }
         if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
             return Err(invalid("env.max_action_rad must be > 0"));
+        }
+        if (self.perturb_ramp_steps > 0 || self.perturb_ramp_start > 0) && self.perturb_force_std_n == 0.0 {
+            return Err(invalid(
+                "env.perturb_ramp_steps / env.perturb_ramp_start ramp the force on the object, but \
+                 env.perturb_force_std_n is 0: set the force to ramp to",
+            ));
         }
         Ok(())
     }

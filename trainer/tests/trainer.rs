@@ -457,6 +457,13 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     refuse("env.noise_ramp_steps=1000", "init_from");
     let ramp_from = ["env.noise_ramp_steps=1000".to_owned(), "init_from=\"runs/stage-1\"".to_owned()];
     load_config(&path, &ramp_from).expect("noise ramp from trained networks");
+    // A force ramp with no force to ramp would silently do nothing.
+    refuse("env.perturb_ramp_start=1000", "perturb_force_std_n");
+    refuse("env.perturb_ramp_steps=1000", "perturb_force_std_n");
+    let pushed = |o: &str| vec!["env.perturb_force_std_n=1.0".to_owned(), o.to_owned()];
+    assert_eq!(load_config(&path, &pushed("env.perturb_ramp_start=1000")).expect("ramp").env.perturb_ramp_start, 1000);
+    // Left out of the serialised config when off, so older configs keep their hash.
+    assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_ramp_start"));
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");

@@ -41,12 +41,14 @@ pub(super) struct Collector {
     ramp: Option<DisturbanceRamp>,
 }
 
-/// Raises each env's random force on the object (over `perturb_ramp_steps`) and its sensor
-/// noise (over `noise_ramp_steps`) linearly from 0 to its config's level; 0 steps: the
-/// full level from the start. An env gets the levels of the step its episode starts at.
+/// Raises each env's random force on the object (over `perturb_ramp_steps`, from step
+/// `perturb_ramp_start`) and its sensor noise (over `noise_ramp_steps`, from step 0)
+/// linearly from 0 to its config's level; 0 steps: the full level from the start (of the
+/// ramp). An env gets the levels of the step its episode starts at.
 #[derive(Debug, Clone)]
 struct DisturbanceRamp {
     perturb_ramp_steps: u64,
+    perturb_ramp_start: u64,
     noise_ramp_steps: u64,
     /// Each env's full levels.
     full: Vec<(NoiseConfig, PerturbationConfig)>,
@@ -55,14 +57,20 @@ struct DisturbanceRamp {
 }
 
 impl DisturbanceRamp {
-    fn fraction(&self, ramp_steps: u64) -> f32 {
-        if ramp_steps == 0 { 1.0 } else { (self.step as f64 / ramp_steps as f64).min(1.0) as f32 }
+    /// How far a ramp of `ramp_steps` that starts at step `start` has come.
+    fn fraction(&self, start: u64, ramp_steps: u64) -> f32 {
+        match self.step.checked_sub(start) {
+            None => 0.0,
+            Some(_) if ramp_steps == 0 => 1.0,
+            Some(done) => (done as f64 / ramp_steps as f64).min(1.0) as f32,
+        }
     }
 
     /// The noise and force for an episode of env `env` starting now.
     fn levels(&self, env: usize) -> (NoiseConfig, PerturbationConfig) {
         let (noise, push) = self.full[env];
-        let (n, p) = (self.fraction(self.noise_ramp_steps), self.fraction(self.perturb_ramp_steps));
+        let n = self.fraction(0, self.noise_ramp_steps);
+        let p = self.fraction(self.perturb_ramp_start, self.perturb_ramp_steps);
         let noise = NoiseConfig {
             q_std_rad: noise.q_std_rad * n,
             normal_std_frac: noise.normal_std_frac * n,
@@ -83,13 +91,15 @@ impl Collector {
             }
             None => Vec::new(),
         };
-        let (perturb_ramp_steps, noise_ramp_steps) =
-            (config.env.perturb_ramp_steps, config.env.noise_ramp_steps);
-        let ramp = (perturb_ramp_steps > 0 || noise_ramp_steps > 0).then(|| DisturbanceRamp {
-            perturb_ramp_steps,
-            noise_ramp_steps,
-            full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
-            step: 0,
+        let e = &config.env;
+        let ramp = (e.perturb_ramp_steps > 0 || e.perturb_ramp_start > 0 || e.noise_ramp_steps > 0).then(|| {
+            DisturbanceRamp {
+                perturb_ramp_steps: e.perturb_ramp_steps,
+                perturb_ramp_start: e.perturb_ramp_start,
+                noise_ramp_steps: e.noise_ramp_steps,
+                full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+                step: 0,
+            }
         });
         Ok(Self {
             ramp,
@@ -357,5 +367,39 @@ mod tests {
         let (q, n, p, f) = levels(&both, 1);
         assert_eq!((q, n, p), (0.08, 0.4, 0.002), "noise ramp over");
         assert!((f - 0.72).abs() < 1e-6, "force still ramping: {f}");
+    }
+
+    /// `env.perturb_ramp_start` holds the force at 0 until its step, then ramps it over
+    /// `perturb_ramp_steps` (or switches it on at once with no ramp); the noise is untouched.
+    #[test]
+    fn a_delayed_push_ramp_starts_at_its_step() {
+        let force_at = |config: &Config, step: u64| {
+            let mut c = Collector::new(config).expect("envs");
+            let mut behaviour = Behaviour::from_config(config);
+            c.set_progress(step);
+            c.reset_all(&mut behaviour, &mut ChaCha8Rng::seed_from_u64(0)).expect("reset");
+            let e = c.envs[0].config();
+            assert_eq!(e.noise.normal_std_frac, 0.4, "noise at its level at step {step}");
+            e.perturbation.force_std_n
+        };
+        let mut config = Config::default();
+        for o in [
+            "num_envs=1",
+            "method=rl",
+            "env.noise_normal_std_frac=0.4",
+            "env.perturb_force_std_n=1.2",
+            "env.perturb_change_probability=0.1",
+            "env.perturb_ramp_start=1000",
+        ] {
+            apply_override(&mut config, o).expect(o);
+        }
+        assert_eq!(force_at(&config, 999), 0.0, "no ramp steps: off before the start");
+        assert_eq!(force_at(&config, 1000), 1.2, "no ramp steps: full from the start");
+        apply_override(&mut config, "env.perturb_ramp_steps=400").expect("ramp");
+        assert_eq!(force_at(&config, 0), 0.0);
+        assert_eq!(force_at(&config, 1000), 0.0);
+        assert!((force_at(&config, 1100) - 0.3).abs() < 1e-6);
+        assert_eq!(force_at(&config, 1400), 1.2);
+        assert_eq!(force_at(&config, 9000), 1.2);
     }
 }
