@@ -461,7 +461,10 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     refuse("env.perturb_ramp_start=1000", "perturb_force_std_n");
     refuse("env.perturb_ramp_steps=1000", "perturb_force_std_n");
     let pushed = |o: &str| vec!["env.perturb_force_std_n=1.0".to_owned(), o.to_owned()];
-    assert_eq!(load_config(&path, &pushed("env.perturb_ramp_start=1000")).expect("ramp").env.perturb_ramp_start, 1000);
+    assert_eq!(
+        load_config(&path, &pushed("env.perturb_ramp_start=1000")).expect("ramp").env.perturb_ramp_start,
+        1000
+    );
     // Left out of the serialised config when off, so older configs keep their hash.
     assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_ramp_start"));
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the

@@ -92,15 +92,16 @@ impl Collector {
             None => Vec::new(),
         };
         let e = &config.env;
-        let ramp = (e.perturb_ramp_steps > 0 || e.perturb_ramp_start > 0 || e.noise_ramp_steps > 0).then(|| {
-            DisturbanceRamp {
-                perturb_ramp_steps: e.perturb_ramp_steps,
-                perturb_ramp_start: e.perturb_ramp_start,
-                noise_ramp_steps: e.noise_ramp_steps,
-                full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
-                step: 0,
-            }
-        });
+        let ramp =
+            (e.perturb_ramp_steps > 0 || e.perturb_ramp_start > 0 || e.noise_ramp_steps > 0).then(|| {
+                DisturbanceRamp {
+                    perturb_ramp_steps: e.perturb_ramp_steps,
+                    perturb_ramp_start: e.perturb_ramp_start,
+                    noise_ramp_steps: e.noise_ramp_steps,
+                    full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+                    step: 0,
+                }
+            });
         Ok(Self {
             ramp,
             envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
