@@ -249,8 +249,14 @@ impl EnvConfig {
                 )));
             }
         }
-        if self.min_contacts > NUM_FINGERS || self.reward_min_contacts > NUM_FINGERS {
-            return Err(SimError::InvalidConfig("contact counts above the number of fingers".to_owned()));
+        for (what, n) in
+            [("min_contacts", self.min_contacts), ("reward_min_contacts", self.reward_min_contacts)]
+        {
+            if n > NUM_FINGERS {
+                return Err(SimError::InvalidConfig(format!(
+                    "{what} = {n} contacts: the hand has {NUM_FINGERS} fingertips"
+                )));
+            }
         }
         if self.episode_length_steps == 0 {
             return Err(SimError::InvalidConfig("episode length 0".to_owned()));

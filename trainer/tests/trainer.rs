@@ -412,7 +412,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-fge-robust-ramp".to_owned()));
     assert!(names.contains(&"cube-fg-fge-robust-finetune".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust".to_owned()));
-    assert_eq!(names.len(), 21);
+    assert!(names.contains(&"cube-fg-vge-robust-4tips".to_owned()));
+    assert_eq!(names.len(), 22);
 }
 
 #[test]
@@ -467,6 +468,13 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     );
     // Left out of the serialised config when off, so older configs keep their hash.
     assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_ramp_start"));
+    // The reward's contact threshold reaches the sim; the paper's 3 is not written out.
+    let four = load_config(&path, &["env.reward_min_contacts=4".to_owned()]).expect("4 contacts");
+    assert_eq!(four.env.env_config(0).reward_min_contacts, 4);
+    assert!(four.to_toml_string().expect("toml").contains("reward_min_contacts = 4"));
+    assert_eq!(Config::default().env.env_config(0).reward_min_contacts, 3);
+    assert!(!Config::default().to_toml_string().expect("toml").contains("reward_min_contacts"));
+    refuse("env.reward_min_contacts=6", "reward_min_contacts = 6");
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
