@@ -502,7 +502,18 @@ fn bad_frames_from_a_third_socket_are_counted_and_ignored() {
     let injected = 30;
     let injector = thread::spawn(move || {
         let socket = open(&injector_iface);
-        thread::sleep(Duration::from_millis(300));
+        // Inject only once the bridge is on the bus (its first joint command): a fixed
+        // 300 ms head start lost the first frame when a loaded machine started it later.
+        socket.set_read_timeout(READ_TIMEOUT).expect("read timeout");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            assert!(Instant::now() < deadline, "the bridge sent no joint command within 20 s");
+            let Ok(frame) = socket.read_frame() else { continue };
+            let Ok((id, _)) = standard_id_and_data(&frame) else { continue };
+            if (ids::JOINT_COMMAND..ids::JOINT_POSITION).contains(&id) {
+                break;
+            }
+        }
         for i in 0..injected {
             let frame = match i % 3 {
                 // An id no node uses.
