@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Ships a policy of a finished training run (its final one unless told) as the gait that comes with vge, measured:
+# Ships a policy of a finished training run (its final one unless told) as the gait that
+# comes with vge, measured:
 #
 #   scripts/ship-policy.sh RUN_DIR [NAME] [POLICY]   # NAME: cube (default)
 #
@@ -13,6 +14,10 @@
 # holds, to policies/NAME.json (the robustness figure to policies/NAME-robustness.png).
 # VGE_BIN chooses the vge binary (default target/release/vge). About 5 min on 2 cores.
 set -euo pipefail
+if [[ ${1:-} == -h || ${1:-} == --help ]]; then
+  sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
+  exit 0
+fi
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 [[ $# -ge 1 && $# -le 3 ]] || { echo "usage: $0 RUN_DIR [NAME] [POLICY]" >&2; exit 2; }
 run=$(cd "$1" && pwd)
