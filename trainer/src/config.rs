@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use vge_sim::{DomainRandomization, EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig};
+use vge_sim::{
+    DomainRandomization, EnvConfig, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig,
+};
 
 use crate::controllers::{ControllerKind, CsConfig};
 use crate::nets::{MatmulPrecision, NetSpec};
@@ -608,6 +610,15 @@ impl EnvSection {
     fn validate(&self) -> Result<(), ConfigError> {
         if self.objects.is_empty() {
             return Err(invalid("env.objects must name at least one object"));
+        }
+        // Checked here, before the sim's own check, so the message names the key the user wrote.
+        for (key, n) in [
+            ("env.terminate_below_contacts", self.terminate_below_contacts),
+            ("env.reward_min_contacts", self.reward_min_contacts),
+        ] {
+            if n > NUM_FINGERS {
+                return Err(invalid(format!("{key} = {n}: the hand has {NUM_FINGERS} fingertips")));
+            }
         }
         for i in 0..self.objects.len() {
             self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;

@@ -474,7 +474,8 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     assert!(four.to_toml_string().expect("toml").contains("reward_min_contacts = 4"));
     assert_eq!(Config::default().env.env_config(0).reward_min_contacts, 3);
     assert!(!Config::default().to_toml_string().expect("toml").contains("reward_min_contacts"));
-    refuse("env.reward_min_contacts=6", "reward_min_contacts = 6");
+    refuse("env.reward_min_contacts=6", "env.reward_min_contacts = 6");
+    refuse("env.terminate_below_contacts=6", "env.terminate_below_contacts = 6");
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
