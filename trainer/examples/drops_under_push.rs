@@ -10,17 +10,19 @@
 //! Arguments: POLICY FORCE_STD_N [EPISODES=20] [SEED=2000].
 use anyhow::Context;
 use vge_runtime::{AlignedBytes, Policy};
-use vge_sim::{EnvConfig, NUM_FINGERS, PerturbationConfig};
+use vge_sim::{EnvConfig, NUM_FINGERS};
 use vge_trainer::eval::{
     EVAL_MAX_LAYERS, EVAL_MAX_WIDTH, SUCCESS_TEST_EPISODE_S, SUCCESS_TEST_GRASP_NOISE_RAD,
     run_episode_observed, success_test_env,
 };
+use vge_trainer::robustness::Axis;
 
 /// How far the object may sink below its starting height before a drop counts as begun (m).
 const ONSET_M: f32 = 0.005;
 const FINGERS: [&str; NUM_FINGERS] = ["thumb", "index", "middle", "ring", "little"];
 
 /// One control step: which fingertips touch, the object's height, the force on it.
+#[derive(Clone)]
 struct Step {
     tips: [bool; NUM_FINGERS],
     height_m: f32,
@@ -44,7 +46,8 @@ fn main() -> anyhow::Result<()> {
         success_test_env(&EnvConfig::default(), SUCCESS_TEST_EPISODE_S, SUCCESS_TEST_GRASP_NOISE_RAD);
     env.control_hz = info.control_hz;
     env.episode_length_steps = (SUCCESS_TEST_EPISODE_S * env.control_hz).round() as usize;
-    env.perturbation = PerturbationConfig { force_std_n, change_probability: 0.1 };
+    // The robustness test's own force axis, so both apply the same force process.
+    Axis::Perturbation.apply(&mut env, force_std_n);
 
     let act = |obs: &[f32; vge_sim::OBS_DIM], a: &mut [f32; vge_sim::NUM_JOINTS]| {
         policy.forward(obs, a).map_err(|e| e.to_string())
@@ -66,8 +69,7 @@ fn main() -> anyhow::Result<()> {
             // The first step's height stands for the held height: the grasp has settled by reset.
             let start = steps.first().map_or(0.0, |s| s.height_m);
             if let Some(i) = steps.iter().rposition(|s| s.height_m >= start - ONSET_M) {
-                let s = &steps[i];
-                onsets.push(Step { tips: s.tips, height_m: s.height_m, force_n: s.force_n });
+                onsets.push(steps[i].clone());
             }
         }
         all.extend(steps);
