@@ -81,18 +81,20 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     let fge = &written.rows[0];
     assert_eq!((fge.controller, fge.seeds, fge.learned, fge.unfinished), (ControllerKind::Fg, 3, 2, 1));
     let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
-    // Contact switches: the mean of 6, 4 and 5.
+    // Contact switches: the mean of 6, 4 and 5. The last tests: each seed's two periodic
+    // tests (0 and its final 0.6, 0.4, 0.5) average 0.3, 0.2, 0.25.
     assert!(
         md.contains(
-            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 73% | 0.50 | 200.0 ± 100.0 | 5.0 | 20000 |"
+            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
         ),
         "{md}"
     );
-    assert!(md.contains("| FG | controller-alone | (no learning) | - | 0.05 | 11.5 | 7.3 | - |"), "{md}");
+    assert!(md.contains("| FG | controller-alone | (no learning) | - | 0.05 | - | 11.5 | 7.3 | - |"), "{md}");
+    assert!(md.contains("\nThe last 3 periodic tests (the final one included)"), "{md}");
     // Not learned, and its last test (12.5) beat its first (5.0) by more than a quarter.
     assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 27% |"), "{md}");
     assert!(md.contains("\nStill rising: a seed that did not learn"), "{md}");
-    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | 67% | - | - | - | - |"), "{md}");
+    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | 67% | - | - | - | - | - |"), "{md}");
     for png in ["curves-fg.png", "curves-cs.png"] {
         let bytes = std::fs::read(out.join(png)).expect(png);
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");
