@@ -27,8 +27,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for fraction in [0.5_f32, 1.0] {
                 let mut config = EnvConfig { episode_length_steps: 600, ..EnvConfig::default() };
                 config.grasp.pose_noise_rad = 0.02;
-                config.perturbation =
-                    PerturbationConfig { force_std_n: fraction * weight_n, change_probability: 0.1 };
+                config.perturbation = PerturbationConfig {
+                    force_std_n: fraction * weight_n,
+                    change_probability: 0.1,
+                    ..Default::default()
+                };
                 let (mut held, mut steps_total) = (0, 0usize);
                 for seed in 0..episodes {
                     let mut env = Env::new(config.clone())?;

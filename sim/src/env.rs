@@ -80,14 +80,27 @@ pub struct NoiseConfig {
 }
 
 /// Random external forces on the object: at each control step, with probability
-/// `change_probability` a new force is drawn (each component Gaussian with standard
-/// deviation `force_std_n`), otherwise the previous one is kept.
+/// `change_probability` a new force is drawn, otherwise the previous one is kept. A draw is
+/// either Gaussian per component (`force_std_n`) or of a fixed magnitude in a uniformly
+/// random direction (`force_magnitude_n`); at most one of the two is set.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PerturbationConfig {
-    /// Standard deviation of each force component (N); 0 disables perturbations.
+    /// Standard deviation of each force component (N); 0 disables this draw. At the object's
+    /// weight the force's mean magnitude is about 1.6 times the weight, and often over 3.
     pub force_std_n: f32,
+    /// Magnitude of the force (N) in a uniformly random direction; 0 disables this draw.
+    /// The paper's "perturbation forces equivalent to the full weight of the object", read
+    /// literally: the force is the object's weight in size whatever its direction.
+    pub force_magnitude_n: f32,
     /// Probability per control step of drawing a new force.
     pub change_probability: f32,
+}
+
+impl PerturbationConfig {
+    /// Whether any force is drawn.
+    pub fn is_active(&self) -> bool {
+        self.force_std_n > 0.0 || self.force_magnitude_n > 0.0
+    }
 }
 
 /// Everything that defines an environment.
@@ -230,6 +243,7 @@ impl EnvConfig {
             ("normal noise", self.noise.normal_std_frac),
             ("position noise (m)", self.noise.position_std_m),
             ("perturbation force (N)", self.perturbation.force_std_n),
+            ("perturbation force magnitude (N)", self.perturbation.force_magnitude_n),
         ] {
             if !v.is_finite() || v < 0.0 {
                 return bad(what, v);
@@ -238,6 +252,12 @@ impl EnvConfig {
         let p = self.perturbation.change_probability;
         if !(0.0..=1.0).contains(&p) {
             return bad("perturbation change probability", p);
+        }
+        if self.perturbation.force_std_n > 0.0 && self.perturbation.force_magnitude_n > 0.0 {
+            return Err(SimError::InvalidConfig(
+                "perturbation: set either the force's std per component or its magnitude, not both"
+                    .to_owned(),
+            ));
         }
         for (what, [lo, hi]) in [
             ("mass scale", self.randomization.mass_scale),
@@ -557,9 +577,15 @@ impl Env {
         let target: [f32; NUM_JOINTS] = std::array::from_fn(|k| current[k] + action[k].clamp(-max, max));
         world.set_joint_targets(&target);
         let pert = cfg.perturbation;
-        if pert.force_std_n > 0.0 && self.rng.random::<f32>() < pert.change_probability {
+        if pert.is_active() && self.rng.random::<f32>() < pert.change_probability {
             let f = Vector3::new(gaussian(&mut self.rng), gaussian(&mut self.rng), gaussian(&mut self.rng));
-            self.external_force_n = f * pert.force_std_n;
+            self.external_force_n = if pert.force_magnitude_n > 0.0 {
+                // An isotropic Gaussian's direction is uniform on the sphere; a draw of norm
+                // ~0 (probability ~1e-20) has no direction and pushes along x.
+                f.try_normalize(1e-12).unwrap_or_else(Vector3::x) * pert.force_magnitude_n
+            } else {
+                f * pert.force_std_n
+            };
             world.set_object_external_force(&self.external_force_n);
         }
         // The reward is the object's angular velocity about z averaged over the control

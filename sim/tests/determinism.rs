@@ -9,7 +9,11 @@ fn noisy_config(shape: ObjectShape) -> EnvConfig {
     let mut c = EnvConfig {
         object: ObjectConfig::of(shape),
         noise: NoiseConfig { q_std_rad: 0.01, normal_std_frac: 0.05, position_std_m: 0.002 },
-        perturbation: PerturbationConfig { force_std_n: 0.3, change_probability: 0.2 },
+        perturbation: PerturbationConfig {
+            force_std_n: 0.3,
+            change_probability: 0.2,
+            ..PerturbationConfig::default()
+        },
         episode_length_steps: 60,
         ..EnvConfig::default()
     };

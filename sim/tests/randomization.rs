@@ -53,8 +53,10 @@ fn an_action_takes_effect_after_the_latency() {
 #[test]
 fn disturbances_can_be_changed_between_episodes_and_invalid_ones_are_refused() {
     let mut env = env_with(DomainRandomization::default());
-    let push = PerturbationConfig { force_std_n: 1.0, change_probability: 1.0 };
-    let bad = PerturbationConfig { force_std_n: -1.0, change_probability: 1.0 };
+    let push =
+        PerturbationConfig { force_std_n: 1.0, change_probability: 1.0, ..PerturbationConfig::default() };
+    let bad =
+        PerturbationConfig { force_std_n: -1.0, change_probability: 1.0, ..PerturbationConfig::default() };
     assert!(env.set_disturbances(NoiseConfig::default(), bad).is_err());
     let nan = NoiseConfig { q_std_rad: f32::NAN, ..NoiseConfig::default() };
     assert!(env.set_disturbances(nan, push).is_err());
@@ -66,4 +68,43 @@ fn disturbances_can_be_changed_between_episodes_and_invalid_ones_are_refused() {
     env.reset(0).expect("reset");
     env.step(&[0.0; NUM_JOINTS]).expect("step");
     assert!(env.external_force_n().norm() > 0.0, "the new level pushes the object");
+}
+
+/// A force of fixed magnitude (the paper's "equivalent to the full weight of the object") has
+/// that magnitude at every draw, in directions that cover the sphere (each component takes
+/// both signs); the per-component Gaussian's magnitude varies. Setting both draws is refused.
+#[test]
+fn a_fixed_magnitude_force_has_its_magnitude_in_random_directions() {
+    let weight_n = 0.15 * 9.81;
+    let forces = |push: PerturbationConfig| -> Vec<nalgebra::Vector3<f32>> {
+        let mut env =
+            Env::new(EnvConfig { perturbation: push, ..EnvConfig::default() }).expect("valid config");
+        env.reset(3).expect("reset");
+        (0..40).map(|_| env.step(&[0.0; NUM_JOINTS]).map(|_| env.external_force_n()).expect("step")).collect()
+    };
+    let fixed = PerturbationConfig {
+        force_magnitude_n: weight_n,
+        change_probability: 1.0,
+        ..PerturbationConfig::default()
+    };
+    let drawn = forces(fixed);
+    assert!(drawn.iter().all(|f| (f.norm() - weight_n).abs() < 1e-4), "{drawn:?}");
+    for k in 0..3 {
+        assert!(drawn.iter().any(|f| f[k] > 0.1) && drawn.iter().any(|f| f[k] < -0.1), "axis {k}: {drawn:?}");
+    }
+    assert!(drawn.windows(2).all(|w| w[0] != w[1]), "redrawn at every step");
+
+    let gaussian = forces(PerturbationConfig {
+        force_std_n: weight_n,
+        change_probability: 1.0,
+        ..PerturbationConfig::default()
+    });
+    let norms: Vec<f32> = gaussian.iter().map(|f| f.norm()).collect();
+    assert!(norms.iter().any(|&n| n > 1.5 * weight_n) && norms.iter().any(|&n| n < weight_n), "{norms:?}");
+
+    let both = PerturbationConfig { force_std_n: 1.0, ..fixed };
+    assert!(
+        Env::new(EnvConfig { perturbation: both, ..EnvConfig::default() }).is_err(),
+        "one draw or the other"
+    );
 }

@@ -110,7 +110,13 @@ pub struct EnvSection {
     pub noise_q_std_rad: f32,
     pub noise_normal_std_frac: f32,
     pub noise_position_std_m: f32,
+    /// Random force on the object, Gaussian per component with this std (N).
     pub perturb_force_std_n: f32,
+    /// Or a force of this magnitude (N) in a random direction, as the robustness test's
+    /// `perturbation_magnitude_n` axis; at most one of the two is set.
+    #[serde(skip_serializing_if = "is_zero_f32")]
+    pub perturb_force_magnitude_n: f32,
+    /// Probability per control step that a new force is drawn.
     pub perturb_change_probability: f32,
     /// Domain randomisation: the object's mass times a factor drawn per episode from
     /// `[lo, hi]` (`[1.0, 1.0]`: off).
@@ -146,6 +152,11 @@ fn is_zero(v: &u64) -> bool {
     *v == 0
 }
 
+/// [`is_zero`] for a level.
+fn is_zero_f32(v: &f32) -> bool {
+    *v == 0.0
+}
+
 /// Keeps the paper's reward threshold (the default) out of the serialised config, as
 /// [`is_zero`] does.
 fn is_paper_reward_min_contacts(v: &usize) -> bool {
@@ -169,6 +180,7 @@ impl Default for EnvSection {
             noise_normal_std_frac: 0.0,
             noise_position_std_m: 0.0,
             perturb_force_std_n: 0.0,
+            perturb_force_magnitude_n: 0.0,
             perturb_change_probability: 0.0,
             mass_scale: env.randomization.mass_scale,
             friction_scale: env.randomization.friction_scale,
@@ -202,6 +214,7 @@ impl EnvSection {
         };
         env.perturbation = PerturbationConfig {
             force_std_n: self.perturb_force_std_n,
+            force_magnitude_n: self.perturb_force_magnitude_n,
             change_probability: self.perturb_change_probability,
         };
         env.randomization = DomainRandomization {
@@ -620,16 +633,25 @@ impl EnvSection {
                 return Err(invalid(format!("{key} = {n}: the hand has {NUM_FINGERS} fingertips")));
             }
         }
+        if self.perturb_force_std_n > 0.0 && self.perturb_force_magnitude_n > 0.0 {
+            return Err(invalid(
+                "env.perturb_force_std_n and env.perturb_force_magnitude_n are two ways to draw the \
+                 force on the object: set one",
+            ));
+        }
         for i in 0..self.objects.len() {
             self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
         }
         if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
             return Err(invalid("env.max_action_rad must be > 0"));
         }
-        if (self.perturb_ramp_steps > 0 || self.perturb_ramp_start > 0) && self.perturb_force_std_n == 0.0 {
+        if (self.perturb_ramp_steps > 0 || self.perturb_ramp_start > 0)
+            && self.perturb_force_std_n == 0.0
+            && self.perturb_force_magnitude_n == 0.0
+        {
             return Err(invalid(
                 "env.perturb_ramp_steps / env.perturb_ramp_start ramp the force on the object, but \
-                 env.perturb_force_std_n is 0: set the force to ramp to",
+                 env.perturb_force_std_n and env.perturb_force_magnitude_n are 0: set the force to ramp to",
             ));
         }
         Ok(())

@@ -141,8 +141,11 @@ enum Command {
     ///
     /// Axes, each from 0 to the paper's level in --levels even steps, the others off: noise
     /// on the observed joint positions (0..0.1 rad), error on the contact normals (0..50%),
-    /// error on the contact positions (0..3 mm), a random force on the object (0..its weight,
-    /// redrawn with probability 0.1 per step). Every level runs the same --episodes episodes
+    /// error on the contact positions (0..3 mm), and a random force on the object redrawn with
+    /// probability 0.1 per step, two ways: Gaussian per component with std 0..its weight
+    /// (perturbation_force_n; its mean size is 1.6 times the std), and of magnitude 0..its
+    /// weight in a random direction (perturbation_magnitude_n, the paper's "forces
+    /// equivalent to the full weight of the object"). Every level runs the same --episodes episodes
     /// (same grasps). Writes DIR/robustness.csv (one row per axis and level, with
     /// return_fraction = return / undisturbed return), DIR/robustness.json and
     /// DIR/robustness.png.
@@ -181,7 +184,7 @@ struct EvalArgs {
     /// Instead of --policy: score a finished training run's final policy again, with its
     /// config and the very episodes of its `final-eval.json`, by this vge's success test, and
     /// print the stored figures beside the new ones (for runs scored by an older vge).
-    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n"])]
+    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n", "perturb_magnitude_n"])]
     run: Option<PathBuf>,
     /// With --run: replace the run's `final-eval.json` by the new score.
     #[arg(long, requires = "run")]
@@ -203,6 +206,9 @@ struct EvalArgs {
     /// Random external force on the object, std per axis (N).
     #[arg(long, default_value_t = 0.0)]
     perturb_force_n: f32,
+    /// Instead: a random external force of this magnitude (N) in a random direction.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "perturb_force_n")]
+    perturb_magnitude_n: f32,
     /// Also draw the gait diagram of the first episode (seed --seed) into this PNG: each
     /// finger's contact over time above the object's rotation.
     #[arg(long)]
@@ -538,6 +544,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         noise_normal_frac,
         noise_position_m,
         perturb_force_n,
+        perturb_magnitude_n,
         plot,
         record,
         json,
@@ -558,6 +565,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         ("noise-normal-frac", noise_normal_frac),
         ("noise-position-m", noise_position_m),
         ("perturb-force-n", perturb_force_n),
+        ("perturb-magnitude-n", perturb_magnitude_n),
         ("grasp-noise-rad", grasp_noise_rad),
     ] {
         anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
@@ -572,6 +580,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         (Axis::NormalError, noise_normal_frac),
         (Axis::PositionError, noise_position_m),
         (Axis::Perturbation, perturb_force_n),
+        (Axis::PerturbationMagnitude, perturb_magnitude_n),
     ] {
         axis.apply(&mut env, level);
     }

@@ -1,7 +1,10 @@
 //! The paper's robustness test (its Fig. 4): a policy's return, success and drops against the
 //! level of one disturbance at a time, the others off: noise on the measured joint positions
 //! (0..0.1 rad), error on the contact normals (0..50%), error on the contact positions
-//! (0..3 mm), and a random external force on the object (0..its weight). Every level runs the
+//! (0..3 mm), and a random external force on the object (0..its weight), drawn two ways: the
+//! issue's Gaussian of the weight per component, and the paper's words ("perturbation forces
+//! equivalent to the full weight of the object") read literally, a force of the weight's
+//! magnitude in a random direction. Every level runs the
 //! same episodes (same seeds, so the same initial grasps): the differences are the
 //! disturbance's. `vge robustness` writes `robustness.csv`, `robustness.json` and
 //! `robustness.png`.
@@ -29,10 +32,19 @@ pub enum Axis {
     PositionError,
     /// A random force on the object, std per axis in N, redrawn with probability 0.1 per step.
     Perturbation,
+    /// A random force on the object of this magnitude in N in a uniformly random direction,
+    /// redrawn as [`Axis::Perturbation`]'s.
+    PerturbationMagnitude,
 }
 
 impl Axis {
-    pub const ALL: [Axis; 4] = [Axis::JointNoise, Axis::NormalError, Axis::PositionError, Axis::Perturbation];
+    pub const ALL: [Axis; 5] = [
+        Axis::JointNoise,
+        Axis::NormalError,
+        Axis::PositionError,
+        Axis::Perturbation,
+        Axis::PerturbationMagnitude,
+    ];
 
     /// The column value in `robustness.csv`.
     pub fn name(self) -> &'static str {
@@ -41,6 +53,7 @@ impl Axis {
             Axis::NormalError => "normal_error_frac",
             Axis::PositionError => "position_error_m",
             Axis::Perturbation => "perturbation_force_n",
+            Axis::PerturbationMagnitude => "perturbation_magnitude_n",
         }
     }
 
@@ -49,17 +62,18 @@ impl Axis {
             Axis::JointNoise => "joint position noise (rad)",
             Axis::NormalError => "contact normal error (fraction)",
             Axis::PositionError => "contact position error (mm)",
-            Axis::Perturbation => "force on the object (N)",
+            Axis::Perturbation => "force on the object, std per axis (N)",
+            Axis::PerturbationMagnitude => "force on the object, magnitude (N)",
         }
     }
 
-    /// The paper's largest level: 0.1 rad, 50%, 3 mm, the object's weight.
+    /// The paper's largest level: 0.1 rad, 50%, 3 mm, the object's weight (both forces).
     pub fn max_level(self, env: &EnvConfig) -> f32 {
         match self {
             Axis::JointNoise => 0.1,
             Axis::NormalError => 0.5,
             Axis::PositionError => 0.003,
-            Axis::Perturbation => env.object.mass_kg * GRAVITY_MPS2,
+            Axis::Perturbation | Axis::PerturbationMagnitude => env.object.mass_kg * GRAVITY_MPS2,
         }
     }
 
@@ -69,8 +83,12 @@ impl Axis {
             Axis::JointNoise => env.noise.q_std_rad = level,
             Axis::NormalError => env.noise.normal_std_frac = level,
             Axis::PositionError => env.noise.position_std_m = level,
-            Axis::Perturbation => {
-                env.perturbation.force_std_n = level;
+            Axis::Perturbation | Axis::PerturbationMagnitude => {
+                if self == Axis::Perturbation {
+                    env.perturbation.force_std_n = level;
+                } else {
+                    env.perturbation.force_magnitude_n = level;
+                }
                 if level > 0.0 && env.perturbation.change_probability == 0.0 {
                     env.perturbation.change_probability = 0.1;
                 }
@@ -206,9 +224,9 @@ pub fn to_csv(report: &RobustnessReport) -> String {
 pub fn plot(report: &RobustnessReport, out: &Path) -> Result<(), PlotError> {
     crate::plot::load_font()?;
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
-    let root = BitMapBackend::new(out, (1800, 450)).into_drawing_area();
+    let root = BitMapBackend::new(out, (450 * Axis::ALL.len() as u32, 450)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    for (panel, axis) in root.split_evenly((1, 4)).iter().zip(Axis::ALL) {
+    for (panel, axis) in root.split_evenly((1, Axis::ALL.len())).iter().zip(Axis::ALL) {
         let rows: Vec<&RobustnessRow> = report.rows.iter().filter(|r| r.axis == axis.name()).collect();
         // Millimetres read better than metres on the position axis.
         let scale = if axis == Axis::PositionError { 1e3 } else { 1.0 };
@@ -265,11 +283,14 @@ mod tests {
                 env.noise.normal_std_frac > 0.0,
                 env.noise.position_std_m > 0.0,
                 env.perturbation.force_std_n > 0.0,
+                env.perturbation.force_magnitude_n > 0.0,
             ];
             assert_eq!(set.iter().filter(|&&s| s).count(), 1, "{axis:?}");
         }
-        let mut env = base.clone();
-        Axis::Perturbation.apply(&mut env, 1.0);
-        assert!(env.perturbation.change_probability > 0.0, "a force that is never drawn is no test");
+        for axis in [Axis::Perturbation, Axis::PerturbationMagnitude] {
+            let mut env = base.clone();
+            axis.apply(&mut env, 1.0);
+            assert!(env.perturbation.change_probability > 0.0, "a force that is never drawn is no test");
+        }
     }
 }

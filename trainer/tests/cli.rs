@@ -334,12 +334,13 @@ fn robustness_writes_csv_json_and_png_with_one_row_per_axis_and_level() {
 
     let csv = std::fs::read_to_string(out.join("robustness.csv")).expect("robustness.csv");
     let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 4 * 3, "{csv}");
+    assert_eq!(rows.len(), 5 * 3, "{csv}");
     for (axis, max) in [
         ("joint_noise_rad", 0.1),
         ("normal_error_frac", 0.5),
         ("position_error_m", 0.003),
         ("perturbation_force_n", 0.15 * 9.81),
+        ("perturbation_magnitude_n", 0.15 * 9.81),
     ] {
         let levels: Vec<f64> =
             rows.iter().filter(|r| r[0] == axis).map(|r| r[1].parse().expect("level")).collect();
@@ -348,13 +349,13 @@ fn robustness_writes_csv_json_and_png_with_one_row_per_axis_and_level() {
     }
     // Level 0 of every axis is the same undisturbed run: return fraction exactly 1.
     let clean: Vec<&Vec<&str>> = rows.iter().filter(|r| r[1] == "0").collect();
-    assert_eq!(clean.len(), 4);
+    assert_eq!(clean.len(), 5);
     assert!(clean.iter().all(|r| r[3] == clean[0][3]), "{csv}");
 
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("robustness.json")).expect("json"))
             .expect("valid");
-    assert_eq!(json["rows"].as_array().map(Vec::len), Some(12));
+    assert_eq!(json["rows"].as_array().map(Vec::len), Some(15));
     assert_eq!(json["episodes"], 2);
     let png = std::fs::read(out.join("robustness.png")).expect("png");
     assert!(png.len() > 10_000 && png.starts_with(b"\x89PNG"), "{} bytes", png.len());

@@ -447,6 +447,10 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
         let e = load_config(&path, &[o.to_owned()]).expect_err(o);
         assert!(e.to_string().contains(needle), "{o}: {e}");
     };
+    let refuse_all = |o: &[String], needle: &str| {
+        let e = load_config(&path, o).expect_err("refused");
+        assert!(e.to_string().contains(needle), "{o:?}: {e}");
+    };
     refuse("vge.horizon=0", "vge.horizon");
     refuse("sac.buffer_size=10", "buffer_size");
     refuse("sac.gamma=1.5", "sac.gamma");
@@ -467,8 +471,15 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
         load_config(&path, &pushed("env.perturb_ramp_start=1000")).expect("ramp").env.perturb_ramp_start,
         1000
     );
+    // A force of fixed magnitude ramps too, reaches the sim, and excludes the Gaussian one.
+    let magnitude =
+        ["env.perturb_force_magnitude_n=1.47".to_owned(), "env.perturb_ramp_steps=1000".to_owned()];
+    let loaded = load_config(&path, &magnitude).expect("a ramped magnitude");
+    assert_eq!(loaded.env.env_config(0).perturbation.force_magnitude_n, 1.47);
+    refuse_all(&pushed("env.perturb_force_magnitude_n=1.0"), "set one");
     // Left out of the serialised config when off, so older configs keep their hash.
     assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_ramp_start"));
+    assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_force_magnitude_n"));
     // The reward's contact threshold reaches the sim; the paper's 3 is not written out.
     let four = load_config(&path, &["env.reward_min_contacts=4".to_owned()]).expect("4 contacts");
     assert_eq!(four.env.env_config(0).reward_min_contacts, 4);

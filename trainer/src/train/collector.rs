@@ -76,7 +76,14 @@ impl DisturbanceRamp {
             normal_std_frac: noise.normal_std_frac * n,
             position_std_m: noise.position_std_m * n,
         };
-        (noise, PerturbationConfig { force_std_n: push.force_std_n * p, ..push })
+        (
+            noise,
+            PerturbationConfig {
+                force_std_n: push.force_std_n * p,
+                force_magnitude_n: push.force_magnitude_n * p,
+                ..push
+            },
+        )
     }
 }
 
