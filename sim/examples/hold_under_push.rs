@@ -1,7 +1,8 @@
-//! How long a frozen grasp holds the cube under the robustness test's random forces (each
-//! component N(0, f²), redrawn with probability 0.1 per control step): the limit of what a
-//! policy gains by holding still, on all five fingertips or on the four or three a gait
-//! keeps while fingers are away, and how much a firmer squeeze helps.
+//! How long a frozen grasp holds the cube under the robustness test's random forces (redrawn
+//! with probability 0.1 per control step; each component N(0, f²), or of magnitude f in a
+//! random direction): the limit of what a policy gains by holding still, on all five
+//! fingertips or on the four or three a gait keeps while fingers are away, and how much a
+//! firmer squeeze helps.
 //!
 //! Each grasp lifts the listed fingers (proximal flexion opened 0.4 rad over 8 steps), then
 //! closes every other finger's proximal flexion by SQUEEZE rad over 8 steps, then holds the
@@ -21,16 +22,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let weight_n = 1.4715_f32;
     // Fingers 0-4 (0: the thumb); none lifted keeps five fingertips, one four, two three.
     let lifted_sets: [&[usize]; 5] = [&[], &[2], &[0], &[1, 3], &[0, 2]];
-    println!("lifted fingers, squeeze (rad), force std per axis (N): episodes held 30 s, mean time held (s)");
+    println!(
+        "lifted fingers, squeeze (rad), force (N, std per axis or magnitude): episodes held 30 s, mean time held (s)"
+    );
     for lifted in lifted_sets {
         for &squeeze_rad in &squeezes {
-            for fraction in [0.5_f32, 1.0] {
+            for (fraction, magnitude) in [(0.5_f32, false), (1.0, false), (0.5, true), (1.0, true)] {
                 let mut config = EnvConfig { episode_length_steps: 600, ..EnvConfig::default() };
                 config.grasp.pose_noise_rad = 0.02;
-                config.perturbation = PerturbationConfig {
-                    force_std_n: fraction * weight_n,
-                    change_probability: 0.1,
-                    ..Default::default()
+                let force_n = fraction * weight_n;
+                config.perturbation = if magnitude {
+                    PerturbationConfig {
+                        force_magnitude_n: force_n,
+                        change_probability: 0.1,
+                        ..Default::default()
+                    }
+                } else {
+                    PerturbationConfig { force_std_n: force_n, change_probability: 0.1, ..Default::default() }
                 };
                 let (mut held, mut steps_total) = (0, 0usize);
                 for seed in 0..episodes {
@@ -59,8 +67,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     steps_total += steps;
                 }
                 println!(
-                    "{lifted:?} {squeeze_rad:.2} {:.2}: {held}/{episodes} {:.1}",
-                    fraction * weight_n,
+                    "{lifted:?} {squeeze_rad:.2} {force_n:.2} {}: {held}/{episodes} {:.1}",
+                    if magnitude { "magnitude" } else { "std" },
                     steps_total as f32 / episodes as f32 / config.control_hz
                 );
             }

@@ -414,7 +414,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-vge-robust".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-4tips".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-hold4".to_owned()));
-    assert_eq!(names.len(), 23);
+    assert!(names.contains(&"cube-fg-vge-robust-4tips-magnitude".to_owned()));
+    assert_eq!(names.len(), 24);
 }
 
 #[test]
