@@ -31,15 +31,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let mut config = EnvConfig { episode_length_steps: 600, ..EnvConfig::default() };
                 config.grasp.pose_noise_rad = 0.02;
                 let force_n = fraction * weight_n;
-                config.perturbation = if magnitude {
-                    PerturbationConfig {
-                        force_magnitude_n: force_n,
-                        change_probability: 0.1,
-                        ..Default::default()
-                    }
+                config.perturbation = PerturbationConfig { change_probability: 0.1, ..Default::default() };
+                if magnitude {
+                    config.perturbation.force_magnitude_n = force_n;
                 } else {
-                    PerturbationConfig { force_std_n: force_n, change_probability: 0.1, ..Default::default() }
-                };
+                    config.perturbation.force_std_n = force_n;
+                }
                 let (mut held, mut steps_total) = (0, 0usize);
                 for seed in 0..episodes {
                     let mut env = Env::new(config.clone())?;

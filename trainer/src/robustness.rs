@@ -83,16 +83,13 @@ impl Axis {
             Axis::JointNoise => env.noise.q_std_rad = level,
             Axis::NormalError => env.noise.normal_std_frac = level,
             Axis::PositionError => env.noise.position_std_m = level,
-            Axis::Perturbation | Axis::PerturbationMagnitude => {
-                if self == Axis::Perturbation {
-                    env.perturbation.force_std_n = level;
-                } else {
-                    env.perturbation.force_magnitude_n = level;
-                }
-                if level > 0.0 && env.perturbation.change_probability == 0.0 {
-                    env.perturbation.change_probability = 0.1;
-                }
-            }
+            Axis::Perturbation => env.perturbation.force_std_n = level,
+            Axis::PerturbationMagnitude => env.perturbation.force_magnitude_n = level,
+        }
+        // A force with no redraw rate is never drawn.
+        let is_push = matches!(self, Axis::Perturbation | Axis::PerturbationMagnitude);
+        if is_push && level > 0.0 && env.perturbation.change_probability == 0.0 {
+            env.perturbation.change_probability = 0.1;
         }
     }
 }
