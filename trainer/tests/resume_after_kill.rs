@@ -14,26 +14,17 @@ const TOTAL_STEPS: u64 = 3000;
 
 fn config_file(dir: &Path) -> PathBuf {
     let mut c = Config::default();
-    for o in [
+    // TINY, then this test's own: VGE + BC with its hard stop and BC decay inside the run,
+    // one thread, and a checkpoint every 400 steps (after TINY's 200, so it wins).
+    let own = [
         "name=\"kill-test\"",
-        "num_envs=2",
         "method=vge-bc",
-        "env.episode_length=25",
-        "sac.hidden=[32, 32]",
-        "sac.batch=32",
-        "sac.warmup=40",
-        "sac.buffer_size=5000",
-        "sac.utd=0.5",
         "sac.threads=1",
-        "vge.horizon=4",
         "vge.hard_stop=1000",
         "bc.beta_zero_step=2000",
-        "run.log_interval=50",
         "run.checkpoint_interval=400",
-        "run.eval_interval=0",
-        "run.eval_episodes=2",
-        "run.eval_episode_s=1.0",
-    ] {
+    ];
+    for o in common::TINY.iter().chain(&own) {
         apply_override(&mut c, o).expect(o);
     }
     c.total_steps = TOTAL_STEPS;
