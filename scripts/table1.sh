@@ -7,8 +7,9 @@
 #   VGE_CELLS="cube-fg-rl cube-cs-vge" scripts/table1.sh OUT
 #   VGE_SET="total_steps=20000 sac.warmup=2000" scripts/table1.sh /tmp/t1   # a smoke test
 #
-# Each run is 1M env steps (about 90 minutes for one one-thread job beside another on this
-# project's 2-core machines), so the whole table is days of compute: run it in the background
+# Each run is 1M env steps (25-50 minutes for one one-thread job beside another on this
+# project's 2-core machines: 1,400-2,850 s measured, docs/results/README.md), so the whole
+# table (43 runs) is most of a day of compute: run it in the background
 # and call it again after an interruption: vge sweep skips finished seeds and resumes
 # unfinished ones from their last checkpoint (every 50k steps here). Writes OUT/cube-<c>-<m>/
 # seed-N/ and OUT/table1.csv, table1.md, curves-fg.png, curves-cs.png; the controllers alone
