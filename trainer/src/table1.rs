@@ -69,6 +69,9 @@ pub struct Row {
     /// Mean over seeds of [`late_success`] (table1.md only; None where no run has periodic
     /// tests).
     pub late_success_mean: Option<f64>,
+    /// Finished runs that did not learn although a periodic test passed during the run
+    /// ([`passed_a_periodic_test`]; table1.md only): the late swing, not a failure to find a gait.
+    pub passed_then_fell: usize,
 }
 
 /// Periodic tests a seed's [`late_success`] averages.
@@ -82,6 +85,13 @@ pub const LATE_TESTS: usize = 3;
 pub fn late_success(eval_success: &[f64]) -> Option<f64> {
     let late = &eval_success[eval_success.len().saturating_sub(LATE_TESTS)..];
     (!late.is_empty()).then(|| mean(late))
+}
+
+/// Whether any of a run's periodic tests reached the learned success rate: with a final
+/// verdict of not learned, the seed found a gait and lost it by the end of its budget.
+#[must_use]
+pub fn passed_a_periodic_test(eval_success: &[f64]) -> bool {
+    eval_success.iter().any(|&s| s >= crate::eval::LEARNED_SUCCESS_RATE)
 }
 
 /// How much a seed's last periodic test must beat its best earlier one to count as still
@@ -199,6 +209,10 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                     .filter(|r| r.learned() == Some(false) && still_rising(&r.eval_return))
                     .count(),
                 late_success_mean: (!late.is_empty()).then(|| mean(&late)),
+                passed_then_fell: finished
+                    .iter()
+                    .filter(|r| r.learned() == Some(false) && passed_a_periodic_test(&r.eval_success))
+                    .count(),
             });
         }
         if let Some(&(success_rate, mean_return, switches)) = alone.get(&controller) {
@@ -215,6 +229,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                 unfinished: 0,
                 rising: 0,
                 late_success_mean: None,
+                passed_then_fell: 0,
             });
         }
     }
@@ -262,6 +277,9 @@ pub fn to_markdown(rows: &[Row]) -> String {
         } else {
             let share = if r.seeds > 0 { 100.0 * r.learned as f64 / r.seeds as f64 } else { 0.0 };
             let mut cell = format!("{}/{} ({share:.0}%)", r.learned, r.seeds);
+            if r.passed_then_fell > 0 {
+                cell.push_str(&format!(", {} passed earlier", r.passed_then_fell));
+            }
             if r.rising > 0 {
                 cell.push_str(&format!(", {} still rising", r.rising));
             }
@@ -300,6 +318,16 @@ pub fn to_markdown(rows: &[Row]) -> String {
              one because a final policy's success swings by tens of points between policies a few \
              hundred updates apart (docs/results/polyak-actor/); seeds are learned or not by the \
              final test alone.\n"
+        ));
+    }
+    let not_learned: usize =
+        rows.iter().filter(|r| r.method != CONTROLLER_ALONE).map(|r| r.seeds - r.learned).sum();
+    if not_learned > 0 {
+        let fell: usize = rows.iter().map(|r| r.passed_then_fell).sum();
+        text.push_str(&format!(
+            "\nPassed earlier: of the {not_learned} seeds that did not learn, {fell} passed a periodic \
+             test (success >= {:.0}%) during the run and fell below it by the final test.\n",
+            100.0 * crate::eval::LEARNED_SUCCESS_RATE
         ));
     }
     if rows.iter().any(|r| r.rising > 0) {
@@ -417,6 +445,15 @@ mod tests {
         assert!(still_rising(&[-5.0, 2.0]));
         assert!(!still_rising(&[300.0]), "one test: nothing to compare");
         assert!(!still_rising(&[]));
+    }
+
+    #[test]
+    fn a_seed_passed_a_periodic_test_when_any_test_reached_half() {
+        // CS + VGE seed 3 (table1/cube-cs-vge/seed-3): 80% at 600k, 0% at 1M.
+        assert!(passed_a_periodic_test(&[0.45, 0.8, 0.7, 0.0, 0.0, 0.0]));
+        assert!(passed_a_periodic_test(&[0.0, 0.5]), "the threshold itself passes");
+        assert!(!passed_a_periodic_test(&[0.0, 0.1, 0.35, 0.25, 0.3]));
+        assert!(!passed_a_periodic_test(&[]));
     }
 
     #[test]

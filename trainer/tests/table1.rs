@@ -107,6 +107,31 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
 }
 
 #[test]
+fn a_seed_that_passed_a_periodic_test_and_ended_below_it_is_counted_apart() {
+    let root = tempdir("fell");
+    // Passed at 10k (80%), 0% at the end: the late swing.
+    fake_run(&root.join("fell"), "cube-cs-vge.toml", Some((0.0, 12.5)));
+    std::fs::write(
+        root.join("fell/eval.csv"),
+        "step,episodes,return,rotation,success\n10000,20,300.0,15.0,0.8\n20000,20,12.5,1.0,0.0\n",
+    )
+    .expect("eval");
+    // Never passed (and still rising: 5 then 40).
+    fake_run(&root.join("never"), "cube-cs-vge.toml", Some((0.2, 40.0)));
+    // Learned: not counted, whatever its periodic tests did.
+    fake_run(&root.join("learned"), "cube-cs-vge.toml", Some((0.9, 400.0)));
+    let out = tempdir("fell-out");
+    let written = table1::write(&[root], &out).expect("table");
+    assert_eq!((written.rows[0].learned, written.rows[0].passed_then_fell), (1, 1));
+    let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
+    assert!(md.contains("| CS | vge | 1/3 (33%), 1 passed earlier, 1 still rising |"), "{md}");
+    assert!(
+        md.contains("\nPassed earlier: of the 2 seeds that did not learn, 1 passed a periodic test"),
+        "{md}"
+    );
+}
+
+#[test]
 fn committed_table1_is_what_its_run_folders_give() {
     let results = repo().join("docs/results");
     // Each committed table and the roots its README names: the table's own folder and
