@@ -39,6 +39,8 @@ pub struct RunCurves {
     pub dir: PathBuf,
     /// The experiment, from the run's config (`name`): runs with one name are seeds of it.
     pub experiment: String,
+    /// The run config's seed.
+    pub seed: u64,
     /// The run config's method and controller (the cell of Table I it belongs to).
     pub method: Method,
     pub controller: Option<ControllerKind>,
@@ -174,6 +176,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
     Ok(RunCurves {
         dir: dir.to_owned(),
         experiment,
+        seed: config.seed,
         method: config.method,
         controller: config.controller,
         objects: config.env.objects.clone(),

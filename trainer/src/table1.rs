@@ -72,6 +72,9 @@ pub struct Row {
     /// Finished runs that did not learn although a periodic test passed during the run
     /// ([`passed_a_periodic_test`]; table1.md only): the late swing, not a failure to find a gait.
     pub passed_then_fell: usize,
+    /// (seed, final success rate) of each finished run, by seed (table1.md only): the
+    /// verdicts behind the count, which swing from seed to seed.
+    pub per_seed: Vec<(u64, f64)>,
 }
 
 /// Periodic tests a seed's [`late_success`] averages.
@@ -193,6 +196,9 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
             let steps: Vec<f64> = finished.iter().filter_map(|r| r.env_steps).map(|s| s as f64).collect();
             let switches: Vec<f64> = finished.iter().filter_map(|r| r.final_contact_switches).collect();
             let late: Vec<f64> = finished.iter().filter_map(|r| late_success(&r.eval_success)).collect();
+            let mut per_seed: Vec<(u64, f64)> =
+                finished.iter().filter_map(|r| r.final_success.map(|s| (r.seed, s))).collect();
+            per_seed.sort_by_key(|&(seed, _)| seed);
             rows.push(Row {
                 controller,
                 method: method.name().to_owned(),
@@ -213,6 +219,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                     .iter()
                     .filter(|r| r.learned() == Some(false) && passed_a_periodic_test(&r.eval_success))
                     .count(),
+                per_seed,
             });
         }
         if let Some(&(success_rate, mean_return, switches)) = alone.get(&controller) {
@@ -230,6 +237,7 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                 rising: 0,
                 late_success_mean: None,
                 passed_then_fell: 0,
+                per_seed: Vec::new(),
             });
         }
     }
@@ -267,7 +275,7 @@ pub fn to_csv(rows: &[Row]) -> String {
 #[must_use]
 pub fn to_markdown(rows: &[Row]) -> String {
     let mut text = String::from(
-        "| controller | method | seeds learned (ours) | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| controller | method | seeds learned (ours) | final success per seed (seed: rate) | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let paper = paper_learned_share(r.controller, &r.method)
@@ -293,10 +301,17 @@ pub fn to_markdown(rows: &[Row]) -> String {
             None => format!("{:.1}", r.return_mean),
         };
         let paper = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { paper };
+        let per_seed = if r.per_seed.is_empty() {
+            "-".to_owned()
+        } else {
+            let seeds: Vec<String> =
+                r.per_seed.iter().map(|(seed, rate)| format!("{seed}: {:.0}%", 100.0 * rate)).collect();
+            seeds.join(", ")
+        };
         if r.method != CONTROLLER_ALONE && r.seeds == 0 {
             // All of the cell's runs are still running: no figures yet.
             text.push_str(&format!(
-                "| {} | {} | {learned} | {paper} | - | - | - | - | - |\n",
+                "| {} | {} | {learned} | - | {paper} | - | - | - | - | - |\n",
                 r.controller.name().to_uppercase(),
                 r.method
             ));
@@ -306,7 +321,7 @@ pub fn to_markdown(rows: &[Row]) -> String {
         let switches = r.contact_switches_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.1}"));
         let late = r.late_success_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.2}"));
         text.push_str(&format!(
-            "| {} | {} | {learned} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
+            "| {} | {} | {learned} | {per_seed} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
             r.controller.name().to_uppercase(),
             r.method,
             r.success_rate_mean,
