@@ -642,6 +642,27 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     }
 }
 
+#[test]
+fn a_finished_run_extended_with_more_steps_records_them_in_its_config() {
+    let never = AtomicBool::new(false);
+    let dir = tempdir("extended");
+    train(&tiny_config_with(120, &[]), &dir, false, &never, &mut |_| {}).expect("first run");
+    let total = |d: &std::path::Path| -> i64 {
+        let text = std::fs::read_to_string(d.join("config.toml")).expect("config.toml");
+        let doc: toml::Value = toml::from_str(&text).expect("toml");
+        doc["total_steps"].as_integer().expect("total_steps")
+    };
+    assert_eq!(total(&dir), 120);
+    // `vge train --resume DIR --steps 140`: the run goes on from its last checkpoint.
+    let extended = train(&tiny_config_with(140, &[]), &dir, true, &never, &mut |_| {}).expect("extended");
+    assert_eq!(extended.steps, 140);
+    assert_eq!(total(&dir), 140, "config.toml still names the first session's budget");
+    let text = std::fs::read_to_string(dir.join("final-eval.json")).expect("final-eval.json");
+    let doc: serde_json::Value = serde_json::from_str(&text).expect("json");
+    assert_eq!(doc["env_steps"].as_u64(), Some(140));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// The metrics of the short run against the stored ones (`tests/fixtures/`): refactors must
 /// not change what training does. Counts must match exactly; real numbers to a relative
 /// 1e-3, because libtorch's kernels round differently on other CPUs (the stored file was

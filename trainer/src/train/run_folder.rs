@@ -23,15 +23,22 @@ pub(super) struct RunFolder {
 
 impl RunFolder {
     /// Opens `dir` for a session that starts at `step`: a fresh run writes `config.toml` and
-    /// the metrics header; a resumed one (`resumed`) drops the rows past its checkpoint.
+    /// the metrics header; a resumed one (`resumed`) drops the rows past its checkpoint, and
+    /// writes `config.toml` again if this session's config differs (a run extended with
+    /// `--steps`), so that the folder says what the run finished under.
     pub fn open(dir: &Path, config: &Config, step: u64, resumed: bool) -> Result<Self, TrainError> {
         let metrics_path = dir.join("metrics.csv");
+        let config_path = dir.join("config.toml");
+        let effective = config.to_toml_string()?;
         if resumed {
             truncate_csv(&metrics_path, step)?;
             truncate_csv(&dir.join("eval.csv"), step)?;
+            let stored = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
+            if stored != effective {
+                std::fs::write(&config_path, &effective).map_err(io_err(&config_path))?;
+            }
         } else {
-            let path = dir.join("config.toml");
-            std::fs::write(&path, config.to_toml_string()?).map_err(io_err(&path))?;
+            std::fs::write(&config_path, &effective).map_err(io_err(&config_path))?;
             std::fs::write(&metrics_path, format!("{METRICS_HEADER}\n")).map_err(io_err(&metrics_path))?;
         }
         // A new event file per session; a resumed one starts with a session-start marker so
