@@ -85,19 +85,19 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     // tests (0 and its final 0.6, 0.4, 0.5) average 0.3, 0.2, 0.25.
     assert!(
         md.contains(
-            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
+            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | - | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
         ),
         "{md}"
     );
     assert!(
-        md.contains("| FG | controller-alone | (no learning) | - | - | 0.05 | - | 11.5 | 7.3 | - |"),
+        md.contains("| FG | controller-alone | (no learning) | - | - | - | 0.05 | - | 11.5 | 7.3 | - |"),
         "{md}"
     );
     assert!(md.contains("\nThe last 3 periodic tests (the final one included)"), "{md}");
     // Not learned, and its last test (12.5) beat its first (5.0) by more than a quarter.
-    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | 27% |"), "{md}");
+    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | - | 27% |"), "{md}");
     assert!(md.contains("\nStill rising: a seed that did not learn"), "{md}");
-    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | - | 67% | - | - | - | - | - |"), "{md}");
+    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | - | - | 67% | - | - | - | - | - |"), "{md}");
     for png in ["curves-fg.png", "curves-cs.png"] {
         let bytes = std::fs::read(out.join(png)).expect(png);
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");
@@ -119,6 +119,9 @@ fn a_seed_that_passed_a_periodic_test_and_ended_below_it_is_counted_apart() {
         "step,episodes,return,rotation,success\n10000,20,300.0,15.0,0.8\n20000,20,12.5,1.0,0.0\n",
     )
     .expect("eval");
+    // Its own selection (the 10k snapshot) learned on held-out grasps: counted by the selection.
+    std::fs::write(root.join("fell/best-eval.json"), r#"{"selected_step":10000,"success_rate":0.8}"#)
+        .expect("best eval");
     // Never passed (and still rising: 5 then 40).
     fake_run(&root.join("never"), "cube-cs-vge.toml", Some((0.2, 40.0)));
     // Learned: not counted, whatever its periodic tests did.
@@ -135,7 +138,9 @@ fn a_seed_that_passed_a_periodic_test_and_ended_below_it_is_counted_apart() {
     let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
     // Per seed, in seed order whatever the folders' order.
     assert!(
-        md.contains("| CS | vge | 1/3 (33%), 1 passed earlier, 1 still rising | 2: 0%, 7: 20%, 11: 90% |"),
+        md.contains(
+            "| CS | vge | 1/3 (33%), 1 passed earlier, 1 still rising | 2: 0%, 7: 20%, 11: 90% | 1/1 |"
+        ),
         "{md}"
     );
     assert!(
