@@ -46,6 +46,11 @@ impl Axis {
         Axis::PerturbationMagnitude,
     ];
 
+    /// The axis whose [`Axis::name`] is `name`.
+    pub fn from_name(name: &str) -> Option<Axis> {
+        Axis::ALL.into_iter().find(|a| a.name() == name)
+    }
+
     /// The column value in `robustness.csv`.
     pub fn name(self) -> &'static str {
         match self {
@@ -94,8 +99,8 @@ impl Axis {
     }
 }
 
-/// What episodes each level runs.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// What episodes each level runs, and on which axes.
+#[derive(Debug, Clone, PartialEq)]
 pub struct RobustnessOptions {
     pub episodes: usize,
     pub episode_s: f32,
@@ -103,6 +108,8 @@ pub struct RobustnessOptions {
     pub seed: u64,
     /// Levels per axis, evenly from 0 to the axis's largest (at least 2).
     pub levels: usize,
+    /// The axes to test, in this order (at least one; [`Axis::ALL`] for the paper's figure).
+    pub axes: Vec<Axis>,
 }
 
 /// One (axis, level) of the test.
@@ -161,14 +168,17 @@ pub fn run(
             "the robustness test needs at least 2 levels per axis".to_owned(),
         ));
     }
+    if options.axes.is_empty() {
+        return Err(EvalError::InvalidOption("the robustness test needs at least one axis".to_owned()));
+    }
     let mut clean_env = success_test_env(base, options.episode_s, options.grasp_noise_rad);
     for axis in Axis::ALL {
         axis.apply(&mut clean_env, 0.0);
     }
     let eval = |env: &EnvConfig| eval_policy_bytes(policy_bytes, env, options.episodes, options.seed);
     let clean = eval(&clean_env)?;
-    let mut rows = Vec::with_capacity(Axis::ALL.len() * options.levels);
-    for axis in Axis::ALL {
+    let mut rows = Vec::with_capacity(options.axes.len() * options.levels);
+    for &axis in &options.axes {
         let max = axis.max_level(base);
         for i in 0..options.levels {
             let level = max * i as f32 / (options.levels - 1) as f32;
@@ -216,14 +226,17 @@ pub fn to_csv(report: &RobustnessReport) -> String {
     text
 }
 
-/// `robustness.png`: one panel per axis, return fraction (solid) and success rate (dashed)
-/// against the level.
+/// `robustness.png`: one panel per axis tested, return fraction (solid) and success rate
+/// (dashed) against the level.
 pub fn plot(report: &RobustnessReport, out: &Path) -> Result<(), PlotError> {
     crate::plot::load_font()?;
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
-    let root = BitMapBackend::new(out, (450 * Axis::ALL.len() as u32, 450)).into_drawing_area();
+    let axes: Vec<Axis> =
+        Axis::ALL.into_iter().filter(|a| report.rows.iter().any(|r| r.axis == a.name())).collect();
+    let panels = axes.len().max(1);
+    let root = BitMapBackend::new(out, (450 * panels as u32, 450)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    for (panel, axis) in root.split_evenly((1, Axis::ALL.len())).iter().zip(Axis::ALL) {
+    for (panel, &axis) in root.split_evenly((1, panels)).iter().zip(&axes) {
         let rows: Vec<&RobustnessRow> = report.rows.iter().filter(|r| r.axis == axis.name()).collect();
         // Millimetres read better than metres on the position axis.
         let scale = if axis == Axis::PositionError { 1e3 } else { 1.0 };

@@ -365,6 +365,44 @@ fn robustness_writes_csv_json_and_png_with_one_row_per_axis_and_level() {
         &[policy.display().to_string(), "--out".into(), out.display().to_string()],
     );
     assert!(!refused.status.success() && text(&refused.stderr).contains("--levels"));
+
+    // Screening on the pushes alone: only the named axes, in the order given.
+    let pushes = dir.join("pushes");
+    let run = vge(
+        &["robustness", "--episodes", "1", "--episode-s", "0.5", "--levels", "2", "--policy"],
+        &[
+            policy.display().to_string(),
+            "--axes".to_owned(),
+            "perturbation_magnitude_n,perturbation_force_n".to_owned(),
+            "--out".to_owned(),
+            pushes.display().to_string(),
+        ],
+    );
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let csv = std::fs::read_to_string(pushes.join("robustness.csv")).expect("robustness.csv");
+    let axes: Vec<&str> = csv.lines().skip(1).filter_map(|l| l.split(',').next()).collect();
+    assert_eq!(
+        axes,
+        [
+            "perturbation_magnitude_n",
+            "perturbation_magnitude_n",
+            "perturbation_force_n",
+            "perturbation_force_n"
+        ],
+        "{csv}"
+    );
+    assert!(std::fs::read(pushes.join("robustness.png")).expect("png").starts_with(b"\x89PNG"));
+    for (bad, says) in [("joint_noise", "unknown axis"), ("joint_noise_rad,joint_noise_rad", "twice")] {
+        let refused = vge(
+            &["robustness", "--axes", bad, "--policy"],
+            &[policy.display().to_string(), "--out".into(), pushes.display().to_string()],
+        );
+        assert!(
+            !refused.status.success() && text(&refused.stderr).contains(says),
+            "{}",
+            text(&refused.stderr)
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
