@@ -158,6 +158,43 @@ fn dropping_the_object_terminates() {
     assert!(world.object_state().pose.translation.vector.z < -0.05);
 }
 
+/// The drop penalty is charged on the drop's step and nowhere else: the same opening of the
+/// hand with and without it differs by exactly the penalty, on the last step.
+#[test]
+fn a_drop_costs_the_drop_penalty_on_its_step_only() {
+    let rewards = |penalty: f32| {
+        let mut env = env_for(ObjectShape::Cube);
+        env.set_drop_penalty(penalty).expect("a valid penalty");
+        env.reset(5).expect("reset");
+        let mut open = [0.0; NUM_JOINTS];
+        for f in 0..NUM_FINGERS {
+            open[vge_sim::kinematics::joint_index(f, 1)] = -1.0;
+            open[vge_sim::kinematics::joint_index(f, 2)] = -1.0;
+        }
+        let mut rewards = Vec::new();
+        for _ in 0..steps_for(&env, 2.0) {
+            let r = env.step(&open).expect("step");
+            rewards.push(r.reward);
+            if r.terminated {
+                assert!(r.info.dropped);
+                return rewards;
+            }
+        }
+        panic!("the cube did not drop");
+    };
+    let (plain, charged) = (rewards(0.0), rewards(7.5));
+    assert_eq!(plain.len(), charged.len());
+    let last = plain.len() - 1;
+    assert_eq!(plain[..last], charged[..last]);
+    assert_eq!(charged[last], plain[last] - 7.5);
+
+    let mut env = env_for(ObjectShape::Cube);
+    for bad in [-1.0, f32::NAN, f32::INFINITY] {
+        assert!(env.set_drop_penalty(bad).is_err(), "{bad}");
+    }
+    assert_eq!(env.config().drop_penalty, 0.0, "a refused penalty changes nothing");
+}
+
 /// NaN, infinite and wrong-length actions are errors and leave the world finite and
 /// unchanged.
 #[test]

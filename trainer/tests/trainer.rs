@@ -415,7 +415,8 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-vge-robust-4tips".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-hold4".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-4tips-magnitude".to_owned()));
-    assert_eq!(names.len(), 24);
+    assert!(names.contains(&"cube-fg-vge-robust-4tips-droppenalty".to_owned()));
+    assert_eq!(names.len(), 25);
 }
 
 #[test]

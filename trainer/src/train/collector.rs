@@ -41,10 +41,11 @@ pub(super) struct Collector {
     ramp: Option<DisturbanceRamp>,
 }
 
-/// Raises each env's random force on the object (over `perturb_ramp_steps`, from step
-/// `perturb_ramp_start`) and its sensor noise (over `noise_ramp_steps`, from step 0)
-/// linearly from 0 to its config's level; 0 steps: the full level from the start (of the
-/// ramp). An env gets the levels of the step its episode starts at.
+/// Raises each env's random force on the object and its drop penalty (over
+/// `perturb_ramp_steps`, from step `perturb_ramp_start`) and its sensor noise (over
+/// `noise_ramp_steps`, from step 0) linearly from 0 to its config's level; 0 steps: the
+/// full level from the start (of the ramp). An env gets the levels of the step its episode
+/// starts at.
 #[derive(Debug, Clone)]
 struct DisturbanceRamp {
     perturb_ramp_steps: u64,
@@ -52,6 +53,8 @@ struct DisturbanceRamp {
     noise_ramp_steps: u64,
     /// Each env's full levels.
     full: Vec<(NoiseConfig, PerturbationConfig)>,
+    /// Each env's full drop penalty.
+    full_drop_penalty: Vec<f32>,
     /// Env steps taken so far.
     step: u64,
 }
@@ -64,6 +67,11 @@ impl DisturbanceRamp {
             Some(_) if ramp_steps == 0 => 1.0,
             Some(done) => (done as f64 / ramp_steps as f64).min(1.0) as f32,
         }
+    }
+
+    /// The drop penalty for an episode of env `env` starting now: it ramps with the force.
+    fn drop_penalty(&self, env: usize) -> f32 {
+        self.full_drop_penalty[env] * self.fraction(self.perturb_ramp_start, self.perturb_ramp_steps)
     }
 
     /// The noise and force for an episode of env `env` starting now.
@@ -106,6 +114,7 @@ impl Collector {
                     perturb_ramp_start: e.perturb_ramp_start,
                     noise_ramp_steps: e.noise_ramp_steps,
                     full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
+                    full_drop_penalty: env_configs.iter().map(|e| e.drop_penalty).collect(),
                     step: 0,
                 }
             });
@@ -154,6 +163,7 @@ impl Collector {
             if let Some(ramp) = &self.ramp {
                 let (noise, push) = ramp.levels(i);
                 self.envs[i].set_disturbances(noise, push)?;
+                self.envs[i].set_drop_penalty(ramp.drop_penalty(i))?;
             }
         }
         let resets: Vec<Option<[f32; OBS_DIM]>> = self
@@ -409,5 +419,18 @@ mod tests {
         assert!((force_at(&config, 1100) - 0.3).abs() < 1e-6);
         assert_eq!(force_at(&config, 1400), 1.2);
         assert_eq!(force_at(&config, 9000), 1.2);
+
+        // The drop penalty ramps with the force: what it is for is holding under pushes.
+        apply_override(&mut config, "env.drop_penalty=40").expect("penalty");
+        let penalty_at = |step: u64| {
+            let mut c = Collector::new(&config).expect("envs");
+            let mut behaviour = Behaviour::from_config(&config);
+            c.set_progress(step);
+            c.reset_all(&mut behaviour, &mut ChaCha8Rng::seed_from_u64(0)).expect("reset");
+            c.envs[0].config().drop_penalty
+        };
+        assert_eq!(penalty_at(999), 0.0);
+        assert!((penalty_at(1100) - 10.0).abs() < 1e-5, "{}", penalty_at(1100));
+        assert_eq!(penalty_at(9000), 40.0);
     }
 }

@@ -334,12 +334,14 @@ mod tests {
         config.env.perturb_change_probability = 0.1;
         config.env.mass_scale = [0.8, 1.2];
         config.env.action_latency_steps = 1;
+        config.env.drop_penalty = 30.0;
         let env = success_test_env_of(&config);
         let nominal = EnvConfig::default();
         assert_eq!(env.noise, nominal.noise);
         assert_eq!(env.perturbation, nominal.perturbation);
         assert_eq!(env.randomization, nominal.randomization);
         assert_eq!(env.min_contacts, 0, "the paper's ends: a drop or the time limit");
+        assert_eq!(env.drop_penalty, 0.0, "the paper's return");
         // What defines the task stays the run's.
         assert_eq!((env.control_hz, env.max_action_rad), (30.0, 0.04));
         assert_eq!(env.episode_length_steps, (config.run.eval_episode_s * 30.0).round() as usize);
