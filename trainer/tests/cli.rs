@@ -492,3 +492,51 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
     assert!(!out.status.success() && !err.contains("predates") && err.contains("checkpoint"), "{err}");
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// `scripts/screen-snapshots.sh` screens the snapshots whose periodic test passed (and the
+/// final policy) on the success test and the two pushes, with the real vge.
+#[test]
+fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
+    let run = common::temp_dir("screen-snapshots");
+    let snapshots = run.join("snapshots");
+    std::fs::create_dir_all(&snapshots).expect("snapshots/");
+    for (name, seed) in
+        [("snapshots/policy-100.vgep", "4"), ("snapshots/policy-200.vgep", "5"), ("policy.vgep", "6")]
+    {
+        let export =
+            vge(&["export", "--init", "--seed", seed, "--out"], &[run.join(name).display().to_string()]);
+        assert!(export.status.success(), "{}", text(&export.stderr));
+    }
+    // 200 failed its test; 300 passed but its snapshot is gone.
+    let header = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
+    let eval_csv =
+        format!("{header}\n100,20,1,1,0.9000,0,4,1\n200,20,1,1,0.1000,0,4,1\n300,20,1,1,1.0000,0,4,1\n");
+    std::fs::write(run.join("eval.csv"), eval_csv).expect("eval.csv");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/screen-snapshots.sh");
+    let screen = |dir: &Path| {
+        Command::new("bash")
+            .arg(&script)
+            .args([dir.display().to_string(), "11000".to_owned(), "1".to_owned()])
+            .env("VGE_BIN", env!("CARGO_BIN_EXE_vge"))
+            .output()
+            .expect("bash runs")
+    };
+    let out = screen(&run);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let csv = std::fs::read_to_string(run.join("screen.csv")).expect("screen.csv");
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows[0][0], "step");
+    let steps: Vec<&str> = rows[1..].iter().map(|r| r[0]).collect();
+    assert_eq!(steps, ["100", "final"], "{csv}");
+    for row in &rows[1..] {
+        assert_eq!(row.len(), rows[0].len(), "{csv}");
+        let success: f64 = row[1].parse().expect("success");
+        assert!((0.0..=1.0).contains(&success), "{csv}");
+    }
+
+    let empty = common::temp_dir("screen-snapshots-empty");
+    let refused = screen(&empty);
+    assert!(!refused.status.success() && text(&refused.stderr).contains("eval.csv is missing"));
+    let _ = std::fs::remove_dir_all(&run);
+    let _ = std::fs::remove_dir_all(&empty);
+}
