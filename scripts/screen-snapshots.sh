@@ -30,15 +30,19 @@ vge=${VGE_BIN:-$repo/target/release/vge}
 [[ -x $vge ]] || { echo "$vge is not an executable vge (build it, or set VGE_BIN)" >&2; exit 1; }
 # Which policies: the passing snapshots present, then the final policy if the run finished.
 mapfile -t policies < <(python3 - "$run" "$min_success" <<'PY'
-import csv, os, sys
+import csv, filecmp, os, sys
 run, min_success = sys.argv[1], float(sys.argv[2])
+listed = []
 with open(os.path.join(run, "eval.csv")) as f:
     for row in csv.DictReader(f):
         path = os.path.join(run, "snapshots", f"policy-{row['step']}.vgep")
         if float(row["success"]) >= min_success and os.path.exists(path):
             print(f"{row['step']} {path}")
-if os.path.exists(os.path.join(run, "policy.vgep")):
-    print(f"final {os.path.join(run, 'policy.vgep')}")
+            listed.append(path)
+final = os.path.join(run, "policy.vgep")
+# The final policy is often the last snapshot itself: screen it once.
+if os.path.exists(final) and not any(filecmp.cmp(final, p, shallow=False) for p in listed):
+    print(f"final {final}")
 PY
 )
 [[ ${#policies[@]} -gt 0 ]] || { echo "no snapshot in $run passed (success >= $min_success)" >&2; exit 1; }

@@ -11,7 +11,9 @@
 # then measures the copy with the success test (`vge eval`: 20 randomised 30 s episodes) and
 # the robustness test (`vge robustness`: 10 episodes per level, 5 levels per axis up to the
 # paper's), and writes both, the run it came from and the issue's goals with whether each
-# holds, to policies/NAME.json (the robustness figure to policies/NAME-robustness.png).
+# holds (the push at the object's weight read as the paper's, a force of its size; the
+# per-component Gaussian beside them), to policies/NAME.json (the robustness figure to
+# policies/NAME-robustness.png).
 # VGE_BIN chooses the vge binary (default target/release/vge). About 5 min on 2 cores.
 set -euo pipefail
 if [[ ${1:-} == -h || ${1:-} == --help ]]; then
@@ -45,14 +47,21 @@ run, policy, provenance, eval_path, robustness_path, out = sys.argv[1:]
 success = json.load(open(eval_path))
 robustness = json.load(open(robustness_path))
 # Issue 12's goals: success >= 80% of 20 randomised 30 s episodes, and >= 75% of the clean
-# return at each axis's paper level (the last level of each axis).
+# return at each axis's paper level (the last level of each axis), "perturbation at the
+# object's full weight included": a force of the weight's size (perturbation_magnitude_n),
+# the paper's "perturbation forces equivalent to the full weight of the object". The
+# Gaussian with the weight as each component's std (perturbation_force_n) averages 1.6
+# times the weight; it is measured and reported beside the goals, not as one of them.
 at_paper_level = {}
 for row in robustness["rows"]:
     if row["fraction_of_max"] == 1.0:
         at_paper_level[row["axis"]] = row["return_fraction"]
+held = lambda fraction: fraction is not None and fraction >= 0.75
 goals = {"success_rate >= 0.8": success["success_rate"] >= 0.8}
+beside_goals = {}
 for axis, fraction in at_paper_level.items():
-    goals[f"{axis}: return at the paper's level >= 0.75 of clean"] = fraction >= 0.75
+    key = f"{axis}: return at the paper's level >= 0.75 of clean"
+    (beside_goals if axis == "perturbation_force_n" else goals)[key] = held(fraction)
 doc = {
     "source_run": os.path.relpath(run),
     "source_policy": policy,
@@ -61,10 +70,13 @@ doc = {
     "robustness": robustness,
     "return_fraction_at_paper_level": at_paper_level,
     "goals": goals,
+    "beside_goals": beside_goals,
 }
 json.dump(doc, open(out, "w"), indent=2)
 open(out, "a").write("\n")
-for goal, held in goals.items():
-    print(f"  {'holds' if held else 'FAILS'}  {goal}")
+for goal, ok in goals.items():
+    print(f"  {'holds' if ok else 'FAILS'}  {goal}")
+for goal, ok in beside_goals.items():
+    print(f"  ({'holds' if ok else 'fails'}, beside the goals: 1.6x the weight on average)  {goal}")
 PY
 echo "wrote policies/$name.vgep, $name.toml, $name.json, $name-robustness.png"

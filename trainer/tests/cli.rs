@@ -507,10 +507,12 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
             vge(&["export", "--init", "--seed", seed, "--out"], &[run.join(name).display().to_string()]);
         assert!(export.status.success(), "{}", text(&export.stderr));
     }
-    // 200 failed its test; 300 passed but its snapshot is gone.
+    // 200 failed its test; 300 passed but its snapshot is gone; 400 is the final policy.
+    std::fs::copy(run.join("policy.vgep"), snapshots.join("policy-400.vgep")).expect("copy");
     let header = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
-    let eval_csv =
-        format!("{header}\n100,20,1,1,0.9000,0,4,1\n200,20,1,1,0.1000,0,4,1\n300,20,1,1,1.0000,0,4,1\n");
+    let eval_csv = format!(
+        "{header}\n100,20,1,1,0.9000,0,4,1\n200,20,1,1,0.1000,0,4,1\n300,20,1,1,1.0000,0,4,1\n400,20,1,1,0.8000,0,4,1\n"
+    );
     std::fs::write(run.join("eval.csv"), eval_csv).expect("eval.csv");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/screen-snapshots.sh");
     let screen = |dir: &Path| {
@@ -527,7 +529,7 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     assert_eq!(rows[0][0], "step");
     let steps: Vec<&str> = rows[1..].iter().map(|r| r[0]).collect();
-    assert_eq!(steps, ["100", "final"], "{csv}");
+    assert_eq!(steps, ["100", "400"], "the final policy is snapshot 400, screened once: {csv}");
     for row in &rows[1..] {
         assert_eq!(row.len(), rows[0].len(), "{csv}");
         let success: f64 = row[1].parse().expect("success");
