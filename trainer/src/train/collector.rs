@@ -51,10 +51,8 @@ struct DisturbanceRamp {
     perturb_ramp_steps: u64,
     perturb_ramp_start: u64,
     noise_ramp_steps: u64,
-    /// Each env's full levels.
-    full: Vec<(NoiseConfig, PerturbationConfig)>,
-    /// Each env's full drop penalty.
-    full_drop_penalty: Vec<f32>,
+    /// Each env's full levels: noise, force, drop penalty.
+    full: Vec<(NoiseConfig, PerturbationConfig, f32)>,
     /// Env steps taken so far.
     step: u64,
 }
@@ -69,14 +67,10 @@ impl DisturbanceRamp {
         }
     }
 
-    /// The drop penalty for an episode of env `env` starting now: it ramps with the force.
-    fn drop_penalty(&self, env: usize) -> f32 {
-        self.full_drop_penalty[env] * self.fraction(self.perturb_ramp_start, self.perturb_ramp_steps)
-    }
-
-    /// The noise and force for an episode of env `env` starting now.
-    fn levels(&self, env: usize) -> (NoiseConfig, PerturbationConfig) {
-        let (noise, push) = self.full[env];
+    /// The noise, force and drop penalty (which ramps with the force) for an episode of env
+    /// `env` starting now.
+    fn levels(&self, env: usize) -> (NoiseConfig, PerturbationConfig, f32) {
+        let (noise, push, drop_penalty) = self.full[env];
         let n = self.fraction(0, self.noise_ramp_steps);
         let p = self.fraction(self.perturb_ramp_start, self.perturb_ramp_steps);
         let noise = NoiseConfig {
@@ -91,6 +85,7 @@ impl DisturbanceRamp {
                 force_magnitude_n: push.force_magnitude_n * p,
                 ..push
             },
+            drop_penalty * p,
         )
     }
 }
@@ -113,8 +108,7 @@ impl Collector {
                     perturb_ramp_steps: e.perturb_ramp_steps,
                     perturb_ramp_start: e.perturb_ramp_start,
                     noise_ramp_steps: e.noise_ramp_steps,
-                    full: env_configs.iter().map(|e| (e.noise, e.perturbation)).collect(),
-                    full_drop_penalty: env_configs.iter().map(|e| e.drop_penalty).collect(),
+                    full: env_configs.iter().map(|e| (e.noise, e.perturbation, e.drop_penalty)).collect(),
                     step: 0,
                 }
             });
@@ -161,9 +155,9 @@ impl Collector {
             self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
             behaviour.episode_reset(i);
             if let Some(ramp) = &self.ramp {
-                let (noise, push) = ramp.levels(i);
+                let (noise, push, drop_penalty) = ramp.levels(i);
                 self.envs[i].set_disturbances(noise, push)?;
-                self.envs[i].set_drop_penalty(ramp.drop_penalty(i))?;
+                self.envs[i].set_drop_penalty(drop_penalty)?;
             }
         }
         let resets: Vec<Option<[f32; OBS_DIM]>> = self
