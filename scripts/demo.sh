@@ -16,11 +16,14 @@
 # test command's (scripts/test.sh): after the tests, the demo starts at once.
 set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+caller_dir=$PWD
 cd "$repo"
 unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
 
 steps=${VGE_DEMO_STEPS:-30000}
-out=${VGE_DEMO_OUT:-runs/demo-$(date +%Y%m%d-%H%M%S)}
+out=${VGE_DEMO_OUT:-$repo/runs/demo-$(date +%Y%m%d-%H%M%S)}
+# A relative VGE_DEMO_OUT is taken from where the demo was called, like any path argument.
+[[ $out == /* ]] || out=$caller_dir/$out
 
 echo "==> system packages (user-mode-linux: a CAN-capable guest where this kernel has no vcan)"
 scripts/ensure-packages.sh user-mode-linux kmod iproute2
@@ -28,8 +31,8 @@ echo "==> libtorch"
 scripts/setup-libtorch.sh
 echo "==> build (release, as scripts/test.sh builds it, so one build serves both)"
 cargo test --release --workspace --no-run
-vge=target/release/vge
-bridge=target/release/vge-bridge
+vge=$repo/target/release/vge
+bridge=$repo/target/release/vge-bridge
 
 echo "==> the gait that ships with vge: policies/cube.vgep (policies/README.md)"
 "$vge" inspect policies/cube.vgep | head -5
@@ -46,3 +49,16 @@ echo "==> evaluate it on vge-runtime (the success test: 20 episodes of 30 s from
 "$vge" eval --policy "$out/policy.vgep"
 echo "==> run it through vge-bridge against the simulated hand, 10 s at its control rate"
 "$bridge" run --policy "$out/policy.vgep" --backend sim --duration 10
+
+cat <<NEXT
+
+==> done. The brief run's files are in $out:
+    config.toml (the resolved config), metrics.csv and eval.csv (training curves),
+    policy.vgep (the exported actor), checkpoint/ (resume with \`vge train --resume $out\`).
+    The binaries are $vge and $bridge. Next, from any directory:
+  - the success test on more episodes:   $vge eval --policy $out/policy.vgep --episodes 100
+  - its gait diagram and curves:         $vge eval --policy $out/policy.vgep --plot gait.png
+                                         $vge plot $out --out curves.png
+  - the shipped gait over CAN (vcan0):   $repo/scripts/canvm/run.sh $repo/scripts/canvm/bridge-demo.sh $bridge $repo/policies/cube.vgep 30
+  - train to a gait (about 1M steps):    $vge train --config $repo/configs/cube-fg-vge.toml --out my-run
+NEXT
