@@ -1,0 +1,119 @@
+//! Pure-Rust reference runs that python/tests compare the Python package with, so that
+//! "the same as Rust" is checked against Rust that never passed through Python:
+//!
+//! - `vge-python-reference env-trace`: reads `{"object", "env", "seed", "actions"}` (JSON)
+//!   from stdin, resets a `vge_sim::Env` with the seed and steps it with the actions, and
+//!   prints every observation and reward as the bits of their `f32`s (JSON), with the
+//!   terminated and truncated flags, until the episode ends (later actions are not used).
+//! - `vge-python-reference policy-actions POLICY OBS OUT`: the actions of the policy file
+//!   for the `f32` little-endian observations in OBS (rows of the policy's input width),
+//!   written to OUT the same way, loaded and run the way `vge eval` does
+//!   (`vge_trainer::eval::with_runtime_policy`: the file's dimensions and observation layout
+//!   checked against the hand, its bytes copied to a 16-byte aligned buffer, a
+//!   `Policy<8, 1024>`).
+
+use std::io::Read;
+use std::process::ExitCode;
+
+use serde::Deserialize;
+use vge_env_keys::EnvKeys;
+use vge_runtime::{AlignedBytes, Policy};
+use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
+
+/// `vge eval`'s runtime capacity (`vge_trainer::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
+const EVAL_MAX_LAYERS: usize = 8;
+const EVAL_MAX_WIDTH: usize = 1024;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TraceRequest {
+    object: String,
+    /// `[env]` keys.
+    #[serde(default)]
+    env: toml::Table,
+    seed: u64,
+    actions: Vec<Vec<f32>>,
+}
+
+fn bits(values: &[f32]) -> Vec<u32> {
+    values.iter().map(|v| v.to_bits()).collect()
+}
+
+fn env_trace() -> Result<(), String> {
+    let mut text = String::new();
+    std::io::stdin().read_to_string(&mut text).map_err(|e| format!("reading stdin: {e}"))?;
+    let request: TraceRequest = serde_json::from_str(&text).map_err(|e| format!("request: {e}"))?;
+    let mut table = request.env;
+    table.insert("objects".to_owned(), toml::Value::Array(vec![toml::Value::String(request.object)]));
+    let keys = EnvKeys::from_table(table, "request").map_err(|e| e.to_string())?;
+    let mut env =
+        Env::new(keys.env_config(0, "request").map_err(|e| e.to_string())?).map_err(|e| e.to_string())?;
+    let (obs, _) = env.reset(request.seed).map_err(|e| e.to_string())?;
+    let mut observations = vec![bits(&obs)];
+    let (mut rewards, mut terminated, mut truncated) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, action) in request.actions.iter().enumerate() {
+        if terminated.last() == Some(&true) || truncated.last() == Some(&true) {
+            break;
+        }
+        let r = env.step(action).map_err(|e| format!("step {i}: {e}"))?;
+        observations.push(bits(&r.obs));
+        rewards.push(r.reward.to_bits());
+        terminated.push(r.terminated);
+        truncated.push(r.truncated);
+    }
+    let out = serde_json::json!({
+        "obs_bits": observations,
+        "reward_bits": rewards,
+        "terminated": terminated,
+        "truncated": truncated,
+    });
+    println!("{out}");
+    Ok(())
+}
+
+fn policy_actions(policy: &str, obs_path: &str, out_path: &str) -> Result<(), String> {
+    let bytes = std::fs::read(policy).map_err(|e| format!("reading {policy}: {e}"))?;
+    let info = vge_runtime::policy::inspect(&bytes).map_err(|e| format!("{policy}: {e}"))?;
+    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
+        return Err(format!(
+            "{policy} maps {} observations to {} actions, the hand needs {OBS_DIM} -> {NUM_JOINTS}",
+            info.obs_dim, info.act_dim
+        ));
+    }
+    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
+        .map_err(|e| format!("{policy}: {e}"))?;
+    let aligned = AlignedBytes::new(&bytes);
+    let mut storage = vec![0.0f32; info.storage_len];
+    let runtime = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(&aligned, &mut storage)
+        .map_err(|e| format!("{policy}: {e}"))?;
+    let raw = std::fs::read(obs_path).map_err(|e| format!("reading {obs_path}: {e}"))?;
+    if raw.len() % (4 * OBS_DIM) != 0 {
+        return Err(format!("{obs_path}: {} bytes is not a whole number of {OBS_DIM}-float rows", raw.len()));
+    }
+    let obs: Vec<f32> = raw.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let mut out = Vec::with_capacity(obs.len() / OBS_DIM * NUM_JOINTS * 4);
+    for (i, row) in obs.chunks_exact(OBS_DIM).enumerate() {
+        let mut action = [0.0f32; NUM_JOINTS];
+        runtime.forward(row, &mut action).map_err(|e| format!("observation {i}: {e}"))?;
+        out.extend(action.iter().flat_map(|a| a.to_le_bytes()));
+    }
+    std::fs::write(out_path, out).map_err(|e| format!("writing {out_path}: {e}"))
+}
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.iter().map(String::as_str).collect::<Vec<_>>().as_slice() {
+        ["env-trace"] => env_trace(),
+        ["policy-actions", policy, obs, out] => policy_actions(policy, obs, out),
+        _ => Err("usage: vge-python-reference env-trace < REQUEST.json\n       \
+                  vge-python-reference policy-actions POLICY OBS.f32 OUT.f32"
+            .to_owned()),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("vge-python-reference: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,40 @@
+//! `vge._vge`: the Rust half of the Python package `vge` (the Python half, in `vge/`, makes
+//! these into a Gymnasium `Env` and `VectorEnv`).
+//!
+//! - [`env::EnvCore`]: one `vge_sim::Env` built from `[env]` keys;
+//! - [`vec_env::VecEnvCore`]: N of them stepped on rayon's threads into preallocated numpy
+//!   arrays, with Gymnasium's next-step autoreset;
+//! - [`controllers::ControllerCore`]: IGM, CS or FG acting on an `EnvCore`'s state;
+//! - [`policy::PolicyCore`]: a policy file on the no_std runtime.
+//!
+//! Nothing here panics on Python input: every value is checked and refused with an
+//! exception carrying the Rust error's message ([`errors`]).
+
+use pyo3::prelude::*;
+
+mod controllers;
+mod env;
+mod errors;
+mod keys;
+mod policy;
+mod vec_env;
+
+#[pymodule]
+fn _vge(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<env::EnvCore>()?;
+    m.add_class::<vec_env::VecEnvCore>()?;
+    m.add_class::<controllers::ControllerCore>()?;
+    m.add_class::<policy::PolicyCore>()?;
+    m.add("PolicyError", m.py().get_type::<errors::PolicyError>())?;
+    m.add("OBS_DIM", vge_sim::OBS_DIM)?;
+    m.add("NUM_JOINTS", vge_sim::NUM_JOINTS)?;
+    m.add("NUM_FINGERS", vge_sim::NUM_FINGERS)?;
+    m.add("ENV_KEYS", vge_env_keys::KEYS.to_vec())?;
+    let objects: Vec<&str> = vge_sim::ObjectShape::ALL.iter().map(|o| o.name()).collect();
+    m.add("OBJECTS", objects)?;
+    let layout: Vec<(&str, usize, usize)> =
+        vge_sim::observation::OBS_LAYOUT.iter().map(|(n, r)| (*n, r.start, r.end)).collect();
+    m.add("OBS_LAYOUT", layout)?;
+    m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,319 @@
+//! N environments stepped on rayon's threads, writing into numpy arrays allocated once,
+//! with Gymnasium 1.x's next-step autoreset: an env whose episode ended on step t is reset
+//! on step t+1 (its action ignored; reward 0, not terminated, not truncated) instead of being
+//! stepped.
+//!
+//! Not `vge_sim::VecEnv`: that steps every env every call and returns fresh vectors; here a
+//! call may reset some envs and step the others, and the results land in place.
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rayon::prelude::*;
+use vge_sim::{Env, NUM_FINGERS, NUM_JOINTS, OBS_DIM, SimError};
+
+use crate::env::tip_forces_n;
+use crate::{errors, keys};
+
+/// One env's row of every output array.
+struct Row<'a> {
+    obs: &'a mut [f32],
+    reward: &'a mut f64,
+    terminated: &'a mut bool,
+    truncated: &'a mut bool,
+    autoreset: &'a mut bool,
+    tip_contacts: &'a mut [bool],
+    contact_forces_n: &'a mut [f32],
+    external_force_n: &'a mut [f32],
+    rotation_z_rad: &'a mut f32,
+    height_m: &'a mut f32,
+    dropped: &'a mut bool,
+    step: &'a mut i64,
+}
+
+/// What one env does on a call.
+#[derive(Debug, Clone, Copy)]
+enum Op {
+    Reset(u64),
+    Step([f32; NUM_JOINTS]),
+}
+
+fn run(env: &mut Env, op: Op, row: Row<'_>) -> Result<bool, SimError> {
+    let (rotation, dropped, step, ended) = match op {
+        Op::Reset(seed) => {
+            let (obs, _) = env.reset(seed)?;
+            row.obs.copy_from_slice(&obs);
+            *row.reward = 0.0;
+            (*row.terminated, *row.truncated, *row.autoreset) = (false, false, true);
+            (0.0, false, 0, false)
+        }
+        Op::Step(action) => {
+            let r = env.step(&action)?;
+            row.obs.copy_from_slice(&r.obs);
+            *row.reward = f64::from(r.reward);
+            (*row.terminated, *row.truncated, *row.autoreset) = (r.terminated, r.truncated, false);
+            (r.info.object_rotation_z_rad, r.info.dropped, r.info.step as i64, r.terminated || r.truncated)
+        }
+    };
+    let state = env.privileged().ok_or(SimError::NotReset)?;
+    for (t, c) in row.tip_contacts.iter_mut().zip(&state.contacts) {
+        *t = c.is_some();
+    }
+    row.contact_forces_n.copy_from_slice(&tip_forces_n(state));
+    let f = env.external_force_n();
+    row.external_force_n.copy_from_slice(&[f.x, f.y, f.z]);
+    *row.rotation_z_rad = rotation;
+    *row.height_m = state.object.pose.translation.vector.dot(&env.config().physics.hand_orientation.up());
+    *row.dropped = dropped;
+    *row.step = step;
+    Ok(ended)
+}
+
+/// The output arrays, allocated once (shapes: `n`, `n x 65`, `n x 5`, `n x 3`).
+#[derive(Debug)]
+struct Buffers {
+    obs: Py<PyArray2<f32>>,
+    rewards: Py<PyArray1<f64>>,
+    terminations: Py<PyArray1<bool>>,
+    truncations: Py<PyArray1<bool>>,
+    autoreset: Py<PyArray1<bool>>,
+    tip_contacts: Py<PyArray2<bool>>,
+    contact_forces_n: Py<PyArray2<f32>>,
+    external_force_n: Py<PyArray2<f32>>,
+    rotation_z_rad: Py<PyArray1<f32>>,
+    height_m: Py<PyArray1<f32>>,
+    dropped: Py<PyArray1<bool>>,
+    step: Py<PyArray1<i64>>,
+}
+
+/// The batch behind `vge.VecHandEnv`.
+#[pyclass(module = "vge._vge")]
+#[derive(Debug)]
+pub struct VecEnvCore {
+    envs: Vec<Env>,
+    /// Envs whose episode ended on the last call: the next call resets them.
+    pending_reset: Vec<bool>,
+    buffers: Buffers,
+    training_only_keys: Vec<&'static str>,
+}
+
+fn borrow_error(e: impl std::fmt::Display) -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(format!(
+        "the vector env's output arrays are borrowed elsewhere: {e}"
+    ))
+}
+
+impl VecEnvCore {
+    /// Runs `ops[i]` on env `i`, side by side, writing each env's row of the outputs; the
+    /// GIL is released meanwhile.
+    fn run_all(&mut self, py: Python<'_>, ops: &[Op]) -> PyResult<()> {
+        let b = &self.buffers;
+        macro_rules! rw {
+            ($a:expr) => {
+                $a.bind(py).try_readwrite().map_err(borrow_error)?
+            };
+        }
+        let (mut obs, mut rew, mut term, mut trunc, mut auto) =
+            (rw!(b.obs), rw!(b.rewards), rw!(b.terminations), rw!(b.truncations), rw!(b.autoreset));
+        let (mut tips, mut forces, mut ext) =
+            (rw!(b.tip_contacts), rw!(b.contact_forces_n), rw!(b.external_force_n));
+        let (mut rot, mut height, mut dropped, mut step) =
+            (rw!(b.rotation_z_rad), rw!(b.height_m), rw!(b.dropped), rw!(b.step));
+        macro_rules! slice {
+            ($a:expr) => {
+                $a.as_slice_mut().map_err(borrow_error)?
+            };
+        }
+        let n = self.envs.len();
+        let (mut obs, mut rew, mut term, mut trunc, mut auto) = (
+            slice!(obs).chunks_exact_mut(OBS_DIM),
+            slice!(rew).iter_mut(),
+            slice!(term).iter_mut(),
+            slice!(trunc).iter_mut(),
+            slice!(auto).iter_mut(),
+        );
+        let (mut tips, mut forces, mut ext) = (
+            slice!(tips).chunks_exact_mut(NUM_FINGERS),
+            slice!(forces).chunks_exact_mut(NUM_FINGERS),
+            slice!(ext).chunks_exact_mut(3),
+        );
+        let (mut rot, mut height, mut dropped, mut step) = (
+            slice!(rot).iter_mut(),
+            slice!(height).iter_mut(),
+            slice!(dropped).iter_mut(),
+            slice!(step).iter_mut(),
+        );
+        let rows = (0..n)
+            .map(|_| {
+                Some(Row {
+                    obs: obs.next()?,
+                    reward: rew.next()?,
+                    terminated: term.next()?,
+                    truncated: trunc.next()?,
+                    autoreset: auto.next()?,
+                    tip_contacts: tips.next()?,
+                    contact_forces_n: forces.next()?,
+                    external_force_n: ext.next()?,
+                    rotation_z_rad: rot.next()?,
+                    height_m: height.next()?,
+                    dropped: dropped.next()?,
+                    step: step.next()?,
+                })
+            })
+            .collect::<Option<Vec<Row<'_>>>>()
+            .ok_or_else(|| borrow_error("an output array is shorter than the batch"))?;
+        let envs = &mut self.envs;
+        let ended: Vec<bool> = py
+            .detach(|| {
+                envs.par_iter_mut()
+                    .zip(ops.par_iter())
+                    .zip(rows.into_par_iter())
+                    .map(|((env, op), row)| run(env, *op, row))
+                    .collect::<Result<Vec<bool>, SimError>>()
+            })
+            .map_err(errors::sim)?;
+        self.pending_reset = ended;
+        Ok(())
+    }
+
+    fn seeds(&self, seeds: &PyReadonlyArray1<'_, u64>) -> PyResult<Vec<u64>> {
+        let n = self.envs.len();
+        let s = seeds.as_slice().map_err(|e| errors::value(format!("seeds: {e}")))?;
+        if s.len() != n {
+            return Err(errors::sim(SimError::BatchLength { got: s.len(), expected: n }));
+        }
+        Ok(s.to_vec())
+    }
+}
+
+#[pymethods]
+impl VecEnvCore {
+    /// `num_envs` envs of the `[env]` keys in `keys` (over those of `config_path`), env `i`
+    /// with object `objects[i % len]` as in training.
+    #[new]
+    #[pyo3(signature = (num_envs, keys=None, config_path=None))]
+    fn new(
+        py: Python<'_>,
+        num_envs: usize,
+        keys: Option<&Bound<'_, PyDict>>,
+        config_path: Option<&str>,
+    ) -> PyResult<Self> {
+        if num_envs == 0 {
+            return Err(errors::value("num_envs must be at least 1"));
+        }
+        let (keys, origin) = keys::read(config_path, keys)?;
+        let envs = (0..num_envs)
+            .map(|i| {
+                keys.env_config(i, &origin)
+                    .map_err(errors::keys)
+                    .and_then(|c| Env::new(c).map_err(errors::sim))
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let n = num_envs;
+        let buffers = Buffers {
+            obs: PyArray2::zeros(py, [n, OBS_DIM], false).unbind(),
+            rewards: PyArray1::zeros(py, n, false).unbind(),
+            terminations: PyArray1::zeros(py, n, false).unbind(),
+            truncations: PyArray1::zeros(py, n, false).unbind(),
+            autoreset: PyArray1::zeros(py, n, false).unbind(),
+            tip_contacts: PyArray2::zeros(py, [n, NUM_FINGERS], false).unbind(),
+            contact_forces_n: PyArray2::zeros(py, [n, NUM_FINGERS], false).unbind(),
+            external_force_n: PyArray2::zeros(py, [n, 3], false).unbind(),
+            rotation_z_rad: PyArray1::zeros(py, n, false).unbind(),
+            height_m: PyArray1::zeros(py, n, false).unbind(),
+            dropped: PyArray1::zeros(py, n, false).unbind(),
+            step: PyArray1::zeros(py, n, false).unbind(),
+        };
+        Ok(Self {
+            envs,
+            pending_reset: vec![false; n],
+            buffers,
+            training_only_keys: keys.training_only_keys(),
+        })
+    }
+
+    /// Resets env `i` with `seeds[i]`, every env side by side.
+    fn reset(&mut self, py: Python<'_>, seeds: PyReadonlyArray1<'_, u64>) -> PyResult<()> {
+        let ops: Vec<Op> = self.seeds(&seeds)?.into_iter().map(Op::Reset).collect();
+        self.run_all(py, &ops)
+    }
+
+    /// Steps every env with its row of `actions` (float32, `n x 15`), except those whose
+    /// episode ended on the last call, which are reset with their entry of `seeds`. Every
+    /// action is checked before any env moves.
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        actions: PyReadonlyArray2<'_, f32>,
+        seeds: PyReadonlyArray1<'_, u64>,
+    ) -> PyResult<()> {
+        let n = self.envs.len();
+        let shape = actions.shape().to_vec();
+        if shape != [n, NUM_JOINTS] {
+            return Err(errors::value(format!("actions have shape {shape:?}, expected [{n}, {NUM_JOINTS}]")));
+        }
+        let seeds = self.seeds(&seeds)?;
+        let a = actions.as_slice().map_err(|e| errors::value(format!("actions: {e}")))?;
+        let mut ops = Vec::with_capacity(n);
+        for (i, row) in a.chunks_exact(NUM_JOINTS).enumerate() {
+            ops.push(if self.pending_reset[i] {
+                Op::Reset(seeds[i])
+            } else {
+                let action =
+                    Env::check_action(row).map_err(|e| errors::value(format!("actions row {i}: {e}")))?;
+                Op::Step(action)
+            });
+        }
+        self.run_all(py, &ops)
+    }
+
+    /// Envs whose episode ended on the last call (the next step resets them).
+    fn pending_resets(&self) -> Vec<bool> {
+        self.pending_reset.clone()
+    }
+
+    /// The output arrays (the same objects on every call; each call overwrites them).
+    fn buffers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let b = &self.buffers;
+        let d = PyDict::new(py);
+        d.set_item("obs", b.obs.bind(py))?;
+        d.set_item("rewards", b.rewards.bind(py))?;
+        d.set_item("terminations", b.terminations.bind(py))?;
+        d.set_item("truncations", b.truncations.bind(py))?;
+        d.set_item("autoreset", b.autoreset.bind(py))?;
+        d.set_item("tip_contacts", b.tip_contacts.bind(py))?;
+        d.set_item("contact_forces_n", b.contact_forces_n.bind(py))?;
+        d.set_item("external_force_n", b.external_force_n.bind(py))?;
+        d.set_item("object_rotation_z_rad", b.rotation_z_rad.bind(py))?;
+        d.set_item("object_height_m", b.height_m.bind(py))?;
+        d.set_item("dropped", b.dropped.bind(py))?;
+        d.set_item("step", b.step.bind(py))?;
+        Ok(d)
+    }
+
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.envs.len()
+    }
+
+    /// Largest action entry of each env (rad).
+    #[getter]
+    fn max_action_rad(&self) -> Vec<f32> {
+        self.envs.iter().map(|e| e.config().max_action_rad).collect()
+    }
+
+    #[getter]
+    fn control_hz(&self) -> Vec<f32> {
+        self.envs.iter().map(|e| e.config().control_hz).collect()
+    }
+
+    #[getter]
+    fn objects(&self) -> Vec<&'static str> {
+        self.envs.iter().map(|e| e.config().object.shape.name()).collect()
+    }
+
+    #[getter]
+    fn training_only_keys(&self) -> Vec<&'static str> {
+        self.training_only_keys.clone()
+    }
+}
