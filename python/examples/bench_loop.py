@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""Control steps per second of a Python loop over vge's env: one `vge.HandEnv`, and
+`vge.VecHandEnv(N)` (N hands stepped in Rust on rayon's threads per call), for
+scripts/bench-python-vs-mujoco.sh, beside scripts/bench_mujoco.py's loop over MuJoCo on the
+same hand.
+
+The workload is bench_mujoco.py's: from the settled grasp, each control step changes the 15
+joint targets by the same deterministic pseudo-random table (0.2 x max_action_rad), and an
+episode ends on a drop or after 400 steps. vge's reset simulates the grasp closing (MuJoCo's
+restores a settled state): vge pays for its resets here, as in `vge bench sim`.
+
+Prints one JSON line.
+"""
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+import vge
+
+MASK = (1 << 64) - 1
+
+
+def action(w, k, j, max_rad):
+    """vge_sim::bench::action (as scripts/bench_mujoco.py): 0.2 * max * (2u - 1)."""
+    x = ((w << 40) ^ (k << 8) ^ j) & MASK
+    x = (x + 0x9E3779B97F4A7C15) & MASK
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK
+    x ^= x >> 31
+    u = np.float32(x >> 40) / np.float32(1 << 24)
+    return np.float32(0.2 * max_rad * (2.0 * u - 1.0))
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--steps", type=int, default=2000, help="control steps to time per env (default 2000)")
+    p.add_argument("--num-envs", type=int, default=8, help="envs of the VecHandEnv (default 8)")
+    args = p.parse_args()
+    max_rad = 0.05
+    # Computed before timing, as bench_mujoco.py does.
+    table = np.array([[action(0, k, j, max_rad) for j in range(15)] for k in range(args.steps)], np.float32)
+
+    env = vge.HandEnv("cube")
+    env.reset(seed=0)
+    for k in range(20):  # warm-up
+        env.step(table[k])
+    env.reset(seed=0)
+    resets, contacts = 0, 0
+    start = time.perf_counter()
+    for k in range(args.steps):
+        _, _, terminated, truncated, info = env.step(table[k])
+        contacts += info["num_tip_contacts"]
+        if terminated or truncated:
+            resets += 1
+            env.reset()
+    single_s = time.perf_counter() - start
+
+    n = args.num_envs
+    venv = vge.VecHandEnv(n, "cube")
+    venv.reset(seed=0)
+    batch = np.repeat(table[:, None, :], n, axis=1)
+    for k in range(20):
+        venv.step(batch[k])
+    venv.reset(seed=0)
+    vec_resets = 0
+    start = time.perf_counter()
+    for k in range(args.steps):
+        _, _, terminated, truncated, _ = venv.step(batch[k])
+        vec_resets += int(terminated.sum() + truncated.sum())
+    vec_s = time.perf_counter() - start
+
+    print(json.dumps({
+        "bench": "vge-python",
+        "vge_version": vge.__version__,
+        "control_steps_per_s_single": args.steps / single_s,
+        "sim_seconds_per_s": args.steps / single_s / env.control_hz,
+        "resets_single": resets,
+        "mean_tip_contacts": contacts / args.steps,
+        "num_envs": n,
+        "control_steps_per_s_vec": n * args.steps / vec_s,
+        "resets_vec": vec_resets,
+        "steps": args.steps,
+    }))
+
+
+if __name__ == "__main__":
+    main()
