@@ -3,7 +3,7 @@
 # loop over vge (the `vge` package: one HandEnv, and VecHandEnv(NUM_ENVS), default 8) beside a
 # Python loop over MuJoCo on the same hand, timed in one run.
 #
-# MuJoCo steps the model `vge bench sim --write-mjcf` writes, with scripts/bench_mujoco.py's
+# MuJoCo (240 Hz) steps the model `vge bench sim --write-mjcf` writes, with scripts/bench_mujoco.py's
 # loop (the same action table, contact readout and episode ends as
 # python/examples/bench_loop.py's). Rounds alternate the two (default 3), unpinned: the
 # VecHandEnv uses every core, the single loops one. Prints the medians, the ratios, and the
@@ -20,10 +20,13 @@ venv=.deps/py
   echo "needs vge and mujoco in $venv: .deps/py/bin/pip install ./python mujoco==4.0.0" >&2
   exit 1
 }
-vge=target/release/vge
-[ -x "$vge" ] || cargo build --release -p vge-trainer --bin vge >&2
+# The model `vge bench sim --write-mjcf` writes, by the same call, from python/'s reference
+# binary: a Python bench needs no libtorch build.
+reference=python/target/release/vge-python-reference
+[ -x "$reference" ] || cargo build --release --manifest-path python/Cargo.toml --workspace >&2
 model=target/vge-hand.mjcf.xml
-"$vge" bench sim --write-mjcf "$model" --mujoco-timestep-s "$(python3 -c "print(1/240)")"
+mkdir -p target
+"$reference" write-mjcf "$model"
 out=target/bench-python-vs-mujoco.jsonl
 : >"$out"
 for r in $(seq 1 "$rounds"); do

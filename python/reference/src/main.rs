@@ -11,6 +11,10 @@
 //!   (`vge_trainer::eval::with_runtime_policy`: the file's dimensions and observation layout
 //!   checked against the hand, its bytes copied to a 16-byte aligned buffer, a
 //!   `Policy<8, 1024>`).
+//! - `vge-python-reference write-mjcf FILE [TIMESTEP_S]`: the hand, cube and settled grasp
+//!   as MJCF for MuJoCo, by the call `vge bench sim --write-mjcf` makes
+//!   (`vge_sim::mjcf::settled_grasp_mjcf` of the default env, seed 0; default timestep
+//!   1/240 s), for scripts/bench-python-vs-mujoco.sh without a libtorch build.
 
 use std::io::Read;
 use std::process::ExitCode;
@@ -100,13 +104,29 @@ fn policy_actions(policy: &str, obs_path: &str, out_path: &str) -> Result<(), St
     std::fs::write(out_path, out).map_err(|e| format!("writing {out_path}: {e}"))
 }
 
+fn write_mjcf(path: &str, timestep_s: Option<&str>) -> Result<(), String> {
+    let timestep_s: f32 = match timestep_s {
+        None => 1.0 / 240.0,
+        Some(t) => t.parse().map_err(|e| format!("timestep `{t}`: {e}"))?,
+    };
+    if !(timestep_s.is_finite() && timestep_s > 0.0) {
+        return Err(format!("timestep {timestep_s} s: needs a positive number"));
+    }
+    let xml = vge_sim::mjcf::settled_grasp_mjcf(&vge_sim::EnvConfig::default(), 0, timestep_s)
+        .map_err(|e| e.to_string())?;
+    std::fs::write(path, xml).map_err(|e| format!("writing {path}: {e}"))
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.iter().map(String::as_str).collect::<Vec<_>>().as_slice() {
         ["env-trace"] => env_trace(),
         ["policy-actions", policy, obs, out] => policy_actions(policy, obs, out),
+        ["write-mjcf", path] => write_mjcf(path, None),
+        ["write-mjcf", path, timestep_s] => write_mjcf(path, Some(timestep_s)),
         _ => Err("usage: vge-python-reference env-trace < REQUEST.json\n       \
-                  vge-python-reference policy-actions POLICY OBS.f32 OUT.f32"
+                  vge-python-reference policy-actions POLICY OBS.f32 OUT.f32\n       \
+                  vge-python-reference write-mjcf FILE [TIMESTEP_S]"
             .to_owned()),
     };
     match result {
