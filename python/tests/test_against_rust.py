@@ -104,44 +104,53 @@ def rollout_controller(env, controller, seed):
             return ret, rot, steps, te
 
 
+# The success test's env, as `vge controller --config` runs a config: its [env] without the
+# training disturbances, with the episode length and grasp noise of the command line.
+SUCCESS_TEST_KEYS = {
+    "grasp_pose_noise_rad": 0.02,
+    "noise_q_std_rad": 0.0,
+    "noise_normal_std_frac": 0.0,
+    "noise_position_std_m": 0.0,
+    "perturb_force_std_n": 0.0,
+    "perturb_force_magnitude_n": 0.0,
+    "perturb_change_probability": 0.0,
+    "mass_scale": [1.0, 1.0],
+    "friction_scale": [1.0, 1.0],
+    "action_latency_steps": 0,
+    "drop_penalty": 0.0,
+    "terminate_below_contacts": 0,
+    "perturb_ramp_steps": 0,
+    "perturb_ramp_start": 0,
+    "noise_ramp_steps": 0,
+}
+
+
 @pytest.mark.parametrize(
-    "kind,config", [("igm", "configs/cube-fg-vge.toml"), ("fg", "configs/variants/heavy-cube.toml")]
+    "kind,config",
+    [
+        ("cs", None),
+        ("igm", "configs/cube-fg-vge.toml"),
+        ("fg", "configs/variants/heavy-cube.toml"),
+    ],
 )
 def test_controllers_and_config_keys_reproduce_vge_controller(vge_cli, repo, kind, config):
-    """`vge controller --config` maps the config's [env] with the trainer's code; the Python
-    loop maps it with the package's, and drives the package's controller: the returns agree
-    to the bit."""
-    config = repo / config
-    hz = vge.HandEnv.from_config(config).control_hz
-    want = run_json(
-        [vge_cli, "controller", "--kind", kind, "--config", config, "--episodes", "1", "--seed", "4", "--episode-s", "6", "--json"]
-    )
-    # The success test's env, as `vge controller --config` runs it: the config's [env] without
-    # the training disturbances, 6 s, the success test's grasp noise.
-    env = vge.HandEnv.from_config(
-        config,
-        episode_length=round(6 * hz),
-        grasp_pose_noise_rad=0.02,
-        noise_q_std_rad=0.0,
-        noise_normal_std_frac=0.0,
-        noise_position_std_m=0.0,
-        perturb_force_std_n=0.0,
-        perturb_force_magnitude_n=0.0,
-        perturb_change_probability=0.0,
-        mass_scale=[1.0, 1.0],
-        friction_scale=[1.0, 1.0],
-        action_latency_steps=0,
-        drop_penalty=0.0,
-        terminate_below_contacts=0,
-        perturb_ramp_steps=0,
-        perturb_ramp_start=0,
-        noise_ramp_steps=0,
-    )
-    controller = {"igm": vge.controllers.IGM, "fg": vge.controllers.FG}[kind](env)
+    """`vge controller` rolls a controller out in Rust (with --config, the config's [env]
+    mapped by the trainer's code); the Python loop drives the package's controller in an env
+    from the package's mapping: the returns and rotations agree to the bit."""
+    args = [vge_cli, "controller", "--kind", kind, "--episodes", "1", "--seed", "4", "--episode-s", "6", "--json"]
+    if config is None:
+        want = run_json(args)
+        env = vge.HandEnv(episode_length=round(6 * 20.0), grasp_pose_noise_rad=0.02)
+    else:
+        want = run_json(args + ["--config", repo / config])
+        hz = vge.HandEnv.from_config(repo / config).control_hz
+        env = vge.HandEnv.from_config(repo / config, episode_length=round(6 * hz), **SUCCESS_TEST_KEYS)
+    controller = {"igm": vge.controllers.IGM, "cs": vge.controllers.CS, "fg": vge.controllers.FG}[kind](env)
     ret, rot, steps, dropped = rollout_controller(env, controller, 4)
     assert np.float32(ret) == np.float32(want["mean_return"])
     assert np.float32(rot) == np.float32(want["mean_rotation_rad"])
     assert (steps, int(dropped)) == (want["mean_steps"], want["drops"])
+    assert abs(rot) > 0, "the controller moved the object"
 
 
 def test_shipped_gait_reproduces_vge_eval(vge_cli, repo):
