@@ -3,7 +3,8 @@
 //! [`build_actor`] builds the deterministic head of a SAC actor in a [`tch::nn::VarStore`];
 //! [`extract_actor`] reads such an actor's parameters back by variable name into owned,
 //! validated [`ExportedLayer`]s. [`export_policy`] / [`PolicyFile`] write and read policy
-//! files (`docs/policy-format.md`), and [`inspect::report`] describes one.
+//! files (`docs/policy-format.md`), and [`inspect::report`] describes one. [`onnx`] writes a
+//! policy as an ONNX model and imports MLP actors from ONNX (`docs/onnx.md`).
 
 mod actor;
 pub mod bench;
@@ -12,6 +13,7 @@ mod extract;
 pub mod firmware;
 pub mod firmware_bench;
 pub mod inspect;
+pub mod onnx;
 mod policy_file;
 pub mod quantise;
 mod v2;
