@@ -12,7 +12,9 @@ use rand_chacha::ChaCha8Rng;
 use tch::Device;
 use tch::nn::VarStore;
 use vge_export::onnx::{self, ActionScale, ImportOptions, ImportTarget, OnnxError};
-use vge_export::{ActorSpec, ObsNorm, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor, export_policy};
+use vge_export::{
+    ActorSpec, ObsNorm, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor, export_policy,
+};
 use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
 use vge_runtime::{AlignedBytes, HandPolicy};
 
@@ -39,11 +41,8 @@ fn py(args: &[&str]) -> String {
         "{} is missing: run scripts/test.sh, which creates it with onnx and onnxruntime",
         python.display()
     );
-    let out = Command::new(&python)
-        .arg(root().join("export/tests/onnx_check.py"))
-        .args(args)
-        .output()
-        .unwrap();
+    let out =
+        Command::new(&python).arg(root().join("export/tests/onnx_check.py")).args(args).output().unwrap();
     assert!(
         out.status.success(),
         "onnx_check.py {args:?} failed (are onnx and onnxruntime installed in .deps/py?):\n{}{}",
@@ -77,8 +76,12 @@ fn init_policy(seed: i64) -> Vec<u8> {
     let spec = ActorSpec { obs_dim: 65, hidden: vec![256, 256], act_dim: 15 };
     build_actor(&(vs.root() / "actor"), &spec).unwrap();
     let hand = hand();
-    let provenance =
-        Provenance { vge_version: "0.1.0".into(), config_hash: "untrained".into(), seed: seed as u64, steps: 0 };
+    let provenance = Provenance {
+        vge_version: "0.1.0".into(),
+        config_hash: "untrained".into(),
+        seed: seed as u64,
+        steps: 0,
+    };
     let meta = PolicyMeta {
         obs_layout: hand.obs_layout,
         action_names: hand.action_names,
@@ -96,7 +99,14 @@ fn init_policy(seed: i64) -> Vec<u8> {
 fn observations(policy: &PolicyFile, n: usize, seed: u64) -> Vec<f32> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)
-        .flat_map(|_| policy.obs_mean.iter().zip(&policy.obs_std).map(|(m, s)| m + s * 3.0 * (2.0 * rng.random::<f32>() - 1.0)).collect::<Vec<_>>())
+        .flat_map(|_| {
+            policy
+                .obs_mean
+                .iter()
+                .zip(&policy.obs_std)
+                .map(|(m, s)| m + s * 3.0 * (2.0 * rng.random::<f32>() - 1.0))
+                .collect::<Vec<_>>()
+        })
         .collect()
 }
 
@@ -149,7 +159,9 @@ fn export_check_and_compare(name: &str, vgep: &[u8]) {
     let (ours, theirs) = (runtime_actions(vgep, &obs), onnxruntime_actions(&model, &obs));
     let diff = max_abs_diff(&ours, &theirs);
     let spread = ours.iter().fold(0.0f32, |m, a| m.max(a.abs()));
-    println!("{name}: max |runtime - onnxruntime| = {diff:e} over {N_OBS} observations (|action| up to {spread})");
+    println!(
+        "{name}: max |runtime - onnxruntime| = {diff:e} over {N_OBS} observations (|action| up to {spread})"
+    );
     assert!(diff <= TOLERANCE, "{name}: actions differ by {diff}");
     // The comparison is not vacuous: the actions vary and are not all zero.
     assert!(spread > 0.01, "{name}: actions all near zero ({spread})");
@@ -222,7 +234,11 @@ fn broken_graphs_are_refused_with_the_node_named_and_nothing_written() {
     let dir = scratch("refused");
     let graph = Some(ActionScale::Graph);
     let cases: [(&str, &[&str], &[&str]); 5] = [
-        ("unsupported.onnx", &["--variant", "unsupported"], &["/latent_pi/latent_pi.1/Sigmoid", "(Sigmoid)", "unsupported op"]),
+        (
+            "unsupported.onnx",
+            &["--variant", "unsupported"],
+            &["/latent_pi/latent_pi.1/Sigmoid", "(Sigmoid)", "unsupported op"],
+        ),
         ("elu.onnx", &["--variant", "elu"], &["/latent_pi/latent_pi.1/Elu", "(Elu)", "no such activation"]),
         ("narrow.onnx", &["--obs", "64"], &["/latent_pi/latent_pi.0/Gemm", "takes 64 inputs", "observes 65"]),
         ("nan.onnx", &["--variant", "nan"], &["/mu/Gemm", "mu.weight", "NaN", "flat index 775"]),

@@ -349,7 +349,8 @@ impl<'a> Walk<'a> {
         let mut cur = input.name.clone();
         while let Some(next) = readers.get(cur.as_str()) {
             let (&i, rest) = next.split_first().unwrap_or((&usize::MAX, &[]));
-            let node = g.node.get(i).ok_or_else(|| OnnxError::Graph(format!("`{cur}` is read by no node")))?;
+            let node =
+                g.node.get(i).ok_or_else(|| OnnxError::Graph(format!("`{cur}` is read by no node")))?;
             if let Some(&j) = rest.first()
                 && let Some(other) = g.node.get(j)
             {
@@ -382,7 +383,10 @@ impl<'a> Walk<'a> {
                 return Err(refusal(
                     i,
                     n,
-                    format!("is not on the chain from `{}` to `{}`: vge imports one chain", input.name, output.name),
+                    format!(
+                        "is not on the chain from `{}` to `{}`: vge imports one chain",
+                        input.name, output.name
+                    ),
                 ));
             }
         }
@@ -421,10 +425,19 @@ impl<'a> Walk<'a> {
     }
 
     /// Folds `node` (which reads `cur`) into the policy; returns the value it writes.
-    fn step(&mut self, i: usize, node: &NodeProto, cur: &str, notes: &mut Vec<String>) -> Result<String, OnnxError> {
+    fn step(
+        &mut self,
+        i: usize,
+        node: &NodeProto,
+        cur: &str,
+        notes: &mut Vec<String>,
+    ) -> Result<String, OnnxError> {
         let refuse = |reason: String| refusal(i, node, reason);
         if !(node.domain.is_empty() || node.domain == "ai.onnx") {
-            return Err(refuse(format!("op of domain `{}`: vge imports standard ONNX ops only", node.domain)));
+            return Err(refuse(format!(
+                "op of domain `{}`: vge imports standard ONNX ops only",
+                node.domain
+            )));
         }
         let [out] = node.output.as_slice() else {
             return Err(refuse(format!("has {} outputs; vge imports ops with one", node.output.len())));
@@ -436,7 +449,9 @@ impl<'a> Walk<'a> {
             "Flatten" => {
                 let axis = attr_i(node, "axis").unwrap_or(1);
                 if axis != 1 {
-                    return Err(refuse(format!("axis {axis}: only Flatten(axis=1), a no-op on [batch, obs]")));
+                    return Err(refuse(format!(
+                        "axis {axis}: only Flatten(axis=1), a no-op on [batch, obs]"
+                    )));
                 }
             }
             "Cast" => {
@@ -508,17 +523,22 @@ impl<'a> Walk<'a> {
     }
 
     /// `node`'s constant `name` as `len` values (a scalar, `[len]` or `[1, len]`).
-    fn vector(&self, i: usize, node: &NodeProto, name: &str, len: usize, what: &str) -> Result<Vec<f32>, OnnxError> {
+    fn vector(
+        &self,
+        i: usize,
+        node: &NodeProto,
+        name: &str,
+        len: usize,
+        what: &str,
+    ) -> Result<Vec<f32>, OnnxError> {
         let f = self.constant(i, node, name)?;
         let leading_ones = f.dims.iter().rev().skip(1).all(|&d| d == 1);
         match f.values.len() {
             n if n == len && leading_ones => Ok(f.values),
             1 => Ok(vec![f.values.first().copied().unwrap_or(0.0); len]),
-            _ => Err(refusal(
-                i,
-                node,
-                format!("tensor `{name}` has shape {:?}, {what} {len} values", f.dims),
-            )),
+            _ => {
+                Err(refusal(i, node, format!("tensor `{name}` has shape {:?}, {what} {len} values", f.dims)))
+            }
         }
     }
 
@@ -591,8 +611,11 @@ impl<'a> Walk<'a> {
         } else {
             false
         };
-        let (alpha, beta) =
-            if is_gemm { (attr_f(node, "alpha").unwrap_or(1.0), attr_f(node, "beta").unwrap_or(1.0)) } else { (1.0, 1.0) };
+        let (alpha, beta) = if is_gemm {
+            (attr_f(node, "alpha").unwrap_or(1.0), attr_f(node, "beta").unwrap_or(1.0))
+        } else {
+            (1.0, 1.0)
+        };
         let w = self.constant(i, node, b_name)?;
         let &[rows, cols] = w.dims.as_slice() else {
             return Err(refuse(format!("weight `{b_name}` has shape {:?}, not a matrix", w.dims)));
@@ -629,7 +652,10 @@ impl<'a> Walk<'a> {
         let mut weights = if trans_b {
             w.values
         } else {
-            (0..out_dim).flat_map(|o| (0..in_dim).map(move |k| (k, o))).map(|(k, o)| w.values[k * out_dim + o]).collect()
+            (0..out_dim)
+                .flat_map(|o| (0..in_dim).map(move |k| (k, o)))
+                .map(|(k, o)| w.values[k * out_dim + o])
+                .collect()
         };
         let mut bias = match c_name {
             Some(c) => self.vector(i, node, c, out_dim, "the layer has")?,
@@ -650,7 +676,8 @@ impl<'a> Walk<'a> {
             weights,
             bias,
         };
-        self.pending = Some(Pending { node: label(i, node), layer, activation: None, takes_bias: c_name.is_none() });
+        self.pending =
+            Some(Pending { node: label(i, node), layer, activation: None, takes_bias: c_name.is_none() });
         self.stage = Stage::Layers;
         Ok(())
     }
@@ -697,7 +724,11 @@ impl<'a> Walk<'a> {
         }
         self.finish_layer();
         if self.offset.is_some() {
-            return Err(refusal(i, node, "a second Add after the last layer: the runtime adds one offset".to_owned()));
+            return Err(refusal(
+                i,
+                node,
+                "a second Add after the last layer: the runtime adds one offset".to_owned(),
+            ));
         }
         let v = self.vector(i, node, c, self.action_width(), "the action has")?;
         self.range.iter_mut().zip(&v).for_each(|(r, o)| *r = (r.0 + o, r.1 + o));
@@ -733,7 +764,13 @@ impl<'a> Walk<'a> {
         Ok(())
     }
 
-    fn clip(&mut self, i: usize, node: &NodeProto, first_is_cur: bool, notes: &mut Vec<String>) -> Result<(), OnnxError> {
+    fn clip(
+        &mut self,
+        i: usize,
+        node: &NodeProto,
+        first_is_cur: bool,
+        notes: &mut Vec<String>,
+    ) -> Result<(), OnnxError> {
         if !first_is_cur {
             return Err(refusal(i, node, "the value clipped must be its first input".to_owned()));
         }
@@ -756,7 +793,9 @@ impl<'a> Walk<'a> {
                 return Err(refusal(
                     i,
                     node,
-                    format!("clips the observation to [{lo}, {hi}]: the runtime clips once, to [-c, c] with c > 0"),
+                    format!(
+                        "clips the observation to [{lo}, {hi}]: the runtime clips once, to [-c, c] with c > 0"
+                    ),
                 ));
             }
             self.clip = Some(hi);
@@ -776,7 +815,10 @@ impl<'a> Walk<'a> {
                 ),
             ));
         }
-        notes.push(format!("node `{}`: Clip to [{lo}, {hi}] cannot bind here and was left out", label(i, node)));
+        notes.push(format!(
+            "node `{}`: Clip to [{lo}, {hi}] cannot bind here and was left out",
+            label(i, node)
+        ));
         Ok(())
     }
 }
@@ -786,7 +828,11 @@ fn constant_node(node: &NodeProto) -> Result<Floats, String> {
     for a in &node.attribute {
         match a.name.as_str() {
             "value" => {
-                return a.t.as_ref().ok_or_else(|| "Constant without its tensor".to_owned()).and_then(read_floats);
+                return a
+                    .t
+                    .as_ref()
+                    .ok_or_else(|| "Constant without its tensor".to_owned())
+                    .and_then(read_floats);
             }
             "value_float" => return Ok(Floats { dims: Vec::new(), values: vec![a.f] }),
             "value_floats" => return Ok(Floats { dims: vec![a.floats.len()], values: a.floats.clone() }),
@@ -815,7 +861,10 @@ fn check_io_type(
         return Ok(());
     };
     if t.elem_type != DataType::FLOAT as i32 {
-        return Err(OnnxError::Graph(format!("{what} `{}` is not float32 (elem_type {})", v.name, t.elem_type)));
+        return Err(OnnxError::Graph(format!(
+            "{what} `{}` is not float32 (elem_type {})",
+            v.name, t.elem_type
+        )));
     }
     let last = t.shape.as_ref().and_then(|s| s.dim.last()).and_then(|d| match d.value {
         Some(dimension::Value::DimValue(n)) => Some(n),
@@ -863,12 +912,18 @@ impl<'a> Metadata<'a> {
         if let Some(n) = self.number::<usize>(keys::OBS_DIM)?
             && n != target.obs_dim()
         {
-            return Err(Self::bad(keys::OBS_DIM, format!("claims {n}, the hand observes {}", target.obs_dim())));
+            return Err(Self::bad(
+                keys::OBS_DIM,
+                format!("claims {n}, the hand observes {}", target.obs_dim()),
+            ));
         }
         if let Some(n) = self.number::<usize>(keys::ACT_DIM)?
             && n != target.act_dim()
         {
-            return Err(Self::bad(keys::ACT_DIM, format!("claims {n}, the hand has {} actions", target.act_dim())));
+            return Err(Self::bad(
+                keys::ACT_DIM,
+                format!("claims {n}, the hand has {} actions", target.act_dim()),
+            ));
         }
         if let Some(text) = self.props.get(keys::OBS_LAYOUT) {
             let layout = parse_layout(text).map_err(|why| Self::bad(keys::OBS_LAYOUT, why))?;
@@ -889,7 +944,11 @@ impl<'a> Metadata<'a> {
             if names != target.action_names {
                 return Err(Self::bad(
                     keys::ACTION_NAMES,
-                    format!("the file acts on [{}], the hand on [{}]", names.join(", "), target.action_names.join(", ")),
+                    format!(
+                        "the file acts on [{}], the hand on [{}]",
+                        names.join(", "),
+                        target.action_names.join(", ")
+                    ),
                 ));
             }
         }
@@ -908,14 +967,21 @@ impl<'a> Metadata<'a> {
 
     /// vge's provenance, when the file carries all of it (a file `vge export` wrote).
     fn provenance(&self) -> Result<Option<Provenance>, OnnxError> {
-        let (Some(version), Some(hash)) = (self.props.get(keys::VGE_VERSION), self.props.get(keys::CONFIG_HASH))
+        let (Some(version), Some(hash)) =
+            (self.props.get(keys::VGE_VERSION), self.props.get(keys::CONFIG_HASH))
         else {
             return Ok(None);
         };
-        let (Some(seed), Some(steps)) = (self.number::<u64>(keys::SEED)?, self.number::<u64>(keys::STEPS)?) else {
+        let (Some(seed), Some(steps)) = (self.number::<u64>(keys::SEED)?, self.number::<u64>(keys::STEPS)?)
+        else {
             return Ok(None);
         };
-        Ok(Some(Provenance { vge_version: (*version).to_owned(), config_hash: (*hash).to_owned(), seed, steps }))
+        Ok(Some(Provenance {
+            vge_version: (*version).to_owned(),
+            config_hash: (*hash).to_owned(),
+            seed,
+            steps,
+        }))
     }
 }
 

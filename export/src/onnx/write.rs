@@ -49,7 +49,11 @@ pub fn export(policy: &PolicyFile) -> Result<ModelProto, OnnxError> {
 
     for (k, layer) in policy.layers.iter().enumerate() {
         let (w, b) = (format!("layer{k}.weight"), format!("layer{k}.bias"));
-        g.initializer.push(float_tensor(&w, &[layer.out_dim as usize, layer.in_dim as usize], &layer.weights));
+        g.initializer.push(float_tensor(
+            &w,
+            &[layer.out_dim as usize, layer.in_dim as usize],
+            &layer.weights,
+        ));
         g.initializer.push(float_tensor(&b, &[layer.out_dim as usize], &layer.bias));
         let linear = format!("layer{k}.linear");
         let mut gemm = node(&format!("layer{k}/gemm"), "Gemm", &[&x, &w, &b], &linear);
@@ -58,7 +62,8 @@ pub fn export(policy: &PolicyFile) -> Result<ModelProto, OnnxError> {
         x = match layer.activation {
             ACT_IDENTITY => linear,
             ACT_RELU | ACT_TANH => {
-                let (op, short) = if layer.activation == ACT_RELU { ("Relu", "relu") } else { ("Tanh", "tanh") };
+                let (op, short) =
+                    if layer.activation == ACT_RELU { ("Relu", "relu") } else { ("Tanh", "tanh") };
                 let out = format!("layer{k}.out");
                 g.node.push(node(&format!("layer{k}/{short}"), op, &[&linear], &out));
                 out
