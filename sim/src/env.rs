@@ -13,7 +13,9 @@
 //!   default) a turn backwards (negative) is charged whatever the number of contacts, so
 //!   no back-and-forth earns reward. No other penalty is added.
 //! - Terminated: the object centre fell more than [`EnvConfig::drop_height_m`] below its
-//!   height after the grasp (a drop, the paper's only end besides the time limit), or,
+//!   height after the grasp, measured along gravity (world -z with the palm down, the
+//!   hand's +x side on: [`crate::HandOrientation`]), i.e. it left the hand (a drop, the
+//!   paper's only end besides the time limit), or,
 //!   when [`EnvConfig::min_contacts`] > 0, fewer than that many fingertips touch it.
 //! - Truncated: [`EnvConfig::episode_length_steps`] control steps without termination.
 //!
@@ -132,7 +134,8 @@ pub struct EnvConfig {
     /// net, 10.6 rad turned back unpaid). With this on, an episode's return (times the
     /// control period) is at most its net rotation, up to the clip. `false`: the paper's.
     pub charge_reverse_rotation: bool,
-    /// Terminate when the object centre is this far below its post-grasp height (m).
+    /// Terminate when the object centre has fallen this far along gravity from its
+    /// post-grasp position (m).
     pub drop_height_m: f32,
     /// Subtracted from the reward of the step on which the object drops (the reward's units,
     /// rad/s). 0: the paper's reward, where a drop costs only the turn it ends. A training
@@ -223,6 +226,14 @@ impl EnvConfig {
     pub fn validate(&self) -> Result<(), SimError> {
         self.physics.validate()?;
         self.object.validate()?;
+        for (i, f) in self.hand.fingers.iter().enumerate() {
+            if let Some(c) = f.torque_caps_nm.iter().find(|c| !(c.is_finite() && **c > 0.0)) {
+                return Err(SimError::InvalidConfig(format!(
+                    "hand: finger {i} ({}) motor torque cap {c} N m: needs a positive number",
+                    f.name
+                )));
+            }
+        }
         let bad = |what: &str, v: f32| Err(SimError::InvalidConfig(format!("{what} {v}")));
         if !(self.control_hz.is_finite()
             && self.control_hz > 0.0
@@ -299,7 +310,8 @@ pub struct ResetInfo {
     pub grasping_fingers: [bool; NUM_FINGERS],
     /// Fingertips touching the object after settling.
     pub num_tip_contacts: usize,
-    /// Object height after settling (m): the reference for the drop test.
+    /// Object height after settling (m), its position against gravity (world z with the
+    /// palm down): the reference for the drop test.
     pub object_height_m: f32,
 }
 
@@ -315,7 +327,7 @@ pub struct StepInfo {
     pub object_angvel_z_rad_per_s: f32,
     /// Object rotation about world z during this step (rad; [`crate::rotation_about_z_rad`]).
     pub object_rotation_z_rad: f32,
-    /// Object height (m).
+    /// Object height (m): its position against gravity (world z with the palm down).
     pub object_height_m: f32,
     /// Whether the object dropped below the termination height.
     pub dropped: bool,
@@ -512,7 +524,7 @@ impl Env {
         self.in_flight
             .extend(std::iter::repeat_n([0.0; NUM_JOINTS], self.config.randomization.action_latency_steps));
         let state = self.read_state()?;
-        self.reference_height_m = state.object.pose.translation.vector.z;
+        self.reference_height_m = self.height_m(&state);
         let info = ResetInfo {
             grasping_fingers: grasping,
             num_tip_contacts: state.num_tip_contacts(),
@@ -521,6 +533,12 @@ impl Env {
         self.state = Some(state);
         let obs = self.observe(&state);
         Ok((obs, info))
+    }
+
+    /// The object's position along the up direction (against gravity). Palm down this is
+    /// exactly its z: the other components are multiplied by 0.
+    fn height_m(&self, state: &PrivilegedState) -> f32 {
+        state.object.pose.translation.vector.dot(&self.config.physics.hand_orientation.up())
     }
 
     fn read_state(&self) -> Result<PrivilegedState, SimError> {
@@ -629,7 +647,7 @@ impl Env {
         } else {
             0.0
         };
-        let height = state.object.pose.translation.vector.z;
+        let height = self.height_m(&state);
         let dropped = height < self.reference_height_m - cfg.drop_height_m;
         let reward = if dropped { reward - cfg.drop_penalty } else { reward };
         let terminated = dropped || n_contacts < cfg.min_contacts;

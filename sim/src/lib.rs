@@ -58,4 +58,4 @@ pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
 pub use vec_env::VecEnv;
 #[cfg(feature = "physics")]
-pub use world::{ContactReading, HandWorld, ObjectState, PhysicsConfig};
+pub use world::{ContactReading, HandOrientation, HandWorld, ObjectState, PhysicsConfig};

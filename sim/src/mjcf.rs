@@ -7,7 +7,8 @@
 //!
 //! What carries over: link frames, lengths and radii, joint axes, limits and torque caps,
 //! the roll link's point mass, link density, friction, gravity, the object's shape, size and
-//! mass, position motors with the same stiffness and damping, hand-object collisions only,
+//! mass, position motors with the same stiffness and damping, the hand's orientation to
+//! gravity, hand-object collisions only (and finger-finger ones when the world has them),
 //! and a keyframe of a settled grasp (joint angles, motor targets, object pose) taken from
 //! the rapier world. What cannot: contact softness and the solver. MuJoCo keeps its default
 //! contact softness and solver at the `timestep_s` the caller picks, with elliptic friction
@@ -107,7 +108,10 @@ pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<S
     let friction = physics.finger_friction;
     // The smallest joint inertia at which MuJoCo's explicit motor spring is stable (module docs).
     let armature = physics.motor_stiffness_nm_per_rad * timestep_s * timestep_s / 4.0;
-    // contype/conaffinity: the hand touches the object only, as rapier's collision groups.
+    // contype/conaffinity: the hand touches the object (and, with `finger_collisions`, other
+    // fingers: MuJoCo skips parent-child pairs, as rapier's joints do), as rapier's groups.
+    let hand_affinity = if physics.finger_collisions { 3 } else { 2 };
+    let gravity = physics.gravity_m_per_s2_vector();
     let mut xml = String::new();
     let w = &mut xml;
     // Writing into a String cannot fail; the results are discarded with `let _`.
@@ -116,12 +120,12 @@ pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<S
     let _ = writeln!(w, r#"  <compiler angle="radian"/>"#);
     let _ = writeln!(
         w,
-        r#"  <option timestep="{timestep_s}" gravity="0 0 {}" integrator="implicitfast" cone="elliptic" impratio="10"/>"#,
-        -physics.gravity_m_per_s2
+        r#"  <option timestep="{timestep_s}" gravity="{} {} {}" integrator="implicitfast" cone="elliptic" impratio="10"/>"#,
+        gravity.x, gravity.y, gravity.z
     );
     let _ = writeln!(
         w,
-        r#"  <default><geom contype="1" conaffinity="2" friction="{friction} 0.005 0.0001"/></default>"#
+        r#"  <default><geom contype="1" conaffinity="{hand_affinity}" friction="{friction} 0.005 0.0001"/></default>"#
     );
     let _ = writeln!(w, "  <worldbody>");
     for (i, finger) in hand.fingers.iter().enumerate() {

@@ -43,8 +43,15 @@ pub struct PhysicsConfig {
     pub motor_damping_nms_per_rad: f32,
     /// Density of the finger links.
     pub link_density_kg_per_m3: f32,
-    /// Gravity magnitude, along world -z.
+    /// Gravity magnitude; its direction in the hand's frame is set by `hand_orientation`.
     pub gravity_m_per_s2: f32,
+    /// How the hand is held relative to gravity (palm down: gravity along the hand's -z,
+    /// the rotation axis).
+    pub hand_orientation: HandOrientation,
+    /// Whether the fingers collide with each other (links and tips of different fingers).
+    /// Off by default: the hand's colliders touch the object only, and two fingers can pass
+    /// through each other. A finger's own links never collide (they meet at its joints).
+    pub finger_collisions: bool,
     /// Distance below which rapier creates predictive contacts (m). Default 5 mm:
     /// rapier's 0.02 (human-scale scenes) made every link within 2 cm of the object a
     /// contact constraint and cost 35% of the step time (measured: 2.1k -> 3.2k control
@@ -64,6 +71,8 @@ impl Default for PhysicsConfig {
             motor_damping_nms_per_rad: 0.1,
             link_density_kg_per_m3: 1000.0,
             gravity_m_per_s2: 9.81,
+            hand_orientation: HandOrientation::PalmDown,
+            finger_collisions: false,
             contact_prediction_distance_m: 0.005,
         }
     }
@@ -105,6 +114,77 @@ impl PhysicsConfig {
     #[must_use]
     pub fn dt_s(&self) -> f32 {
         1.0 / self.physics_hz
+    }
+
+    /// Gravity (m/s^2) in the world frame, which is the hand's frame (the palm is fixed).
+    #[must_use]
+    pub fn gravity_m_per_s2_vector(&self) -> Vector3<f32> {
+        self.hand_orientation.down() * self.gravity_m_per_s2
+    }
+}
+
+/// How the hand is held relative to gravity. The world frame is the hand's frame (palm fixed,
+/// knuckles in the plane z = 0.085 m above the object centre, thumb on -x, the object turned
+/// about +z), so an orientation is the direction gravity takes in it. The observation and the
+/// reward live in the hand's frame and do not change; the drop test measures the object's
+/// fall along gravity ([`Self::down`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HandOrientation {
+    /// Palm down (the paper's hand): gravity along the hand's -z, the rotation axis, so the
+    /// fingertips share the object's weight.
+    #[default]
+    PalmDown,
+    /// The hand on its side, thumb up: gravity along the hand's +x, from the thumb (on -x)
+    /// towards the middle and ring fingers (at +-36 deg about +x), perpendicular to the
+    /// rotation axis. The middle and ring fingertips carry the object's weight from below.
+    SideOn,
+}
+
+impl HandOrientation {
+    /// All orientations, in a fixed order.
+    pub const ALL: [Self; 2] = [Self::PalmDown, Self::SideOn];
+
+    /// The name configs use (`"palm_down"`, `"side_on"`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PalmDown => "palm_down",
+            Self::SideOn => "side_on",
+        }
+    }
+
+    /// Unit vector along gravity in the hand's frame.
+    #[must_use]
+    pub fn down(self) -> Vector3<f32> {
+        match self {
+            Self::PalmDown => Vector3::new(0.0, 0.0, -1.0),
+            Self::SideOn => Vector3::new(1.0, 0.0, 0.0),
+        }
+    }
+
+    /// Unit vector against gravity: the object's height is its position along it.
+    #[must_use]
+    pub fn up(self) -> Vector3<f32> {
+        -self.down()
+    }
+}
+
+impl std::str::FromStr for HandOrientation {
+    type Err = String;
+
+    /// Parses [`HandOrientation::name`].
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|o| o.name() == s).ok_or_else(|| {
+            let names: Vec<_> = Self::ALL.iter().map(|o| o.name()).collect();
+            format!("hand_orientation: unknown orientation `{s}` (one of: {})", names.join(", "))
+        })
+    }
+}
+
+impl std::fmt::Display for HandOrientation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -213,7 +293,8 @@ impl HandWorld {
         physics.validate()?;
         object.validate()?;
         let mut world = PhysicsWorld::new();
-        world.gravity = Vector::new(0.0, 0.0, -physics.gravity_m_per_s2);
+        let g = physics.gravity_m_per_s2_vector();
+        world.gravity = Vector::new(g.x, g.y, g.z);
         world.integration_parameters = IntegrationParameters {
             dt: physics.dt_s(),
             num_solver_iterations: physics.solver_iterations,
@@ -225,7 +306,8 @@ impl HandWorld {
             normalized_prediction_distance: physics.contact_prediction_distance_m,
             ..IntegrationParameters::default()
         };
-        let hand_groups = InteractionGroups::new(HAND_GROUP, OBJECT_GROUP, InteractionTestMode::And);
+        let hand_filter = if physics.finger_collisions { OBJECT_GROUP | HAND_GROUP } else { OBJECT_GROUP };
+        let hand_groups = InteractionGroups::new(HAND_GROUP, hand_filter, InteractionTestMode::And);
         let object_groups = InteractionGroups::new(OBJECT_GROUP, HAND_GROUP, InteractionTestMode::And);
 
         let mut fingers = Vec::with_capacity(NUM_FINGERS);
@@ -284,6 +366,9 @@ impl HandWorld {
                 let limit = finger.joint_limits[j];
                 let target = limit.clamp(q[j]);
                 let joint = GenericJointBuilder::new(JointAxesMask::LOCKED_REVOLUTE_AXES)
+                    // A finger's links overlap at its joints: with the fingers colliding, only
+                    // different fingers may touch.
+                    .contacts_enabled(!physics.finger_collisions)
                     .local_frame1(joint_frames[j].0)
                     .local_frame2(joint_frames[j].1)
                     .limits(JointAxis::AngX, [limit.lower_rad, limit.upper_rad])

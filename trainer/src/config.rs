@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use vge_sim::{
-    DomainRandomization, EnvConfig, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig,
+    DomainRandomization, EnvConfig, HandOrientation, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape,
+    PerturbationConfig,
 };
 
 use crate::controllers::{ControllerKind, CsConfig};
@@ -152,6 +153,44 @@ pub struct EnvSection {
     /// that fits its observation normaliser, whose warm-up data would then hold no noise.
     #[serde(skip_serializing_if = "is_zero")]
     pub noise_ramp_steps: u64,
+    /// Task variant: the object's mass (kg), absolute, in place of the object's default
+    /// (0.15 kg). It stays in the success test (it is the object, not a disturbance);
+    /// `mass_scale` multiplies it per episode. Absent: the default.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_mass_kg: Option<f32>,
+    /// Task variant: the object's Coulomb friction coefficient, absolute, in place of the
+    /// default 0.8 (combined with the fingers' 0.8 by average); `friction_scale` multiplies
+    /// it per episode. Absent: the default.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_friction: Option<f32>,
+    /// Task variant: the finger motors' torque cap (N m) on the four fingers, the thumb's 1.5
+    /// times it as by default (it opposes two fingers). The cap sets the grip force: by
+    /// default (0.3 N m) the motors saturate about 0.015 rad past contact. Absent: 0.3.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_torque_cap_nm: Option<f32>,
+    /// Task variant: the finger motors' position stiffness (N m/rad, every joint). Absent:
+    /// the default 20.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_stiffness_nm_per_rad: Option<f32>,
+    /// Task variant: the hand's orientation to gravity, `"palm_down"` (default: gravity along
+    /// the rotation axis) or `"side_on"` (gravity along the hand's +x, from the thumb towards
+    /// the middle and ring fingers; see `vge_sim::HandOrientation`).
+    #[serde(skip_serializing_if = "is_palm_down")]
+    pub hand_orientation: HandOrientation,
+    /// Task variant: whether the fingers collide with each other (default false: the hand
+    /// touches the object only, and fingers can pass through each other).
+    #[serde(skip_serializing_if = "is_false")]
+    pub finger_collisions: bool,
+}
+
+/// Keeps the default orientation out of the serialised config, as [`is_zero`] does.
+fn is_palm_down(o: &HandOrientation) -> bool {
+    *o == HandOrientation::PalmDown
+}
+
+/// Keeps a switch that is off out of the serialised config, as [`is_zero`] does.
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 /// Keeps a key that is off out of the serialised config, so that configs from before it
@@ -197,6 +236,12 @@ impl Default for EnvSection {
             perturb_ramp_steps: 0,
             perturb_ramp_start: 0,
             noise_ramp_steps: 0,
+            object_mass_kg: None,
+            object_friction: None,
+            motor_torque_cap_nm: None,
+            motor_stiffness_nm_per_rad: None,
+            hand_orientation: env.physics.hand_orientation,
+            finger_collisions: env.physics.finger_collisions,
         }
     }
 }
@@ -232,6 +277,20 @@ impl EnvSection {
             friction_scale: self.friction_scale,
             action_latency_steps: self.action_latency_steps,
         };
+        if let Some(mass_kg) = self.object_mass_kg {
+            env.object.mass_kg = mass_kg;
+        }
+        if let Some(friction) = self.object_friction {
+            env.object.friction = friction;
+        }
+        if let Some(cap_nm) = self.motor_torque_cap_nm {
+            env.hand.set_finger_torque_cap_nm(cap_nm);
+        }
+        if let Some(kp) = self.motor_stiffness_nm_per_rad {
+            env.physics.motor_stiffness_nm_per_rad = kp;
+        }
+        env.physics.hand_orientation = self.hand_orientation;
+        env.physics.finger_collisions = self.finger_collisions;
         env
     }
 }
@@ -781,6 +840,20 @@ impl BcSection {
     fn validate(&self) -> Result<(), ConfigError> {
         if !(self.beta_start.is_finite() && self.beta_start >= 0.0) {
             return Err(invalid(format!("bc.beta_start must be >= 0, got {}", self.beta_start)));
+        }
+        // The task variants, named here before the sim's own check sees them unnamed.
+        for (key, value, zero_ok) in [
+            ("env.object_mass_kg", self.object_mass_kg, false),
+            ("env.object_friction", self.object_friction, true),
+            ("env.motor_torque_cap_nm", self.motor_torque_cap_nm, false),
+            ("env.motor_stiffness_nm_per_rad", self.motor_stiffness_nm_per_rad, false),
+        ] {
+            if let Some(v) = value
+                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
+            {
+                let need = if zero_ok { ">= 0" } else { "> 0" };
+                return Err(invalid(format!("{key} must be a finite number {need}, got {v}")));
+            }
         }
         Ok(())
     }

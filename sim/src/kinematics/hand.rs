@@ -48,9 +48,9 @@ const DISTAL_LENGTH_M: f32 = 0.045;
 const TIP_RADIUS_M: f32 = 0.012;
 const LINK_RADIUS_M: f32 = 0.009;
 /// Motor torque cap of an ordinary finger: sets the grip force (rapier-hand notes).
-const FINGER_TORQUE_CAP_NM: f32 = 0.3;
+pub const FINGER_TORQUE_CAP_NM: f32 = 0.3;
 /// The thumb alone opposes two fingers, so it gets a higher cap to balance them.
-const THUMB_TORQUE_CAP_NM: f32 = 0.45;
+pub const THUMB_TORQUE_CAP_NM: f32 = 0.45;
 
 /// Position of joint `joint` (0 = roll, 1 = proximal flexion, 2 = distal flexion) of
 /// finger `finger` in the hand's 15-vector (finger-major order).
@@ -212,6 +212,21 @@ impl HandModel {
     #[must_use]
     pub fn joint_limits(&self) -> [JointLimit; NUM_JOINTS] {
         std::array::from_fn(|j| self.fingers[j / JOINTS_PER_FINGER].joint_limits[j % JOINTS_PER_FINGER])
+    }
+
+    /// Sets every joint's motor torque cap: `finger_cap_nm` on the four fingers, the thumb's
+    /// in the default proportion ([`THUMB_TORQUE_CAP_NM`] / [`FINGER_TORQUE_CAP_NM`] = 1.5),
+    /// since it alone opposes two fingers. At [`FINGER_TORQUE_CAP_NM`] this is the default
+    /// hand's caps exactly.
+    pub fn set_finger_torque_cap_nm(&mut self, finger_cap_nm: f32) {
+        for (i, finger) in self.fingers.iter_mut().enumerate() {
+            let cap = if i == 0 {
+                THUMB_TORQUE_CAP_NM * (finger_cap_nm / FINGER_TORQUE_CAP_NM)
+            } else {
+                finger_cap_nm
+            };
+            finger.torque_caps_nm = [cap; JOINTS_PER_FINGER];
+        }
     }
 
     /// Torque caps of all 15 joints, finger-major, in N*m.

@@ -17,7 +17,8 @@ mod stacked;
 pub use error::KinematicsError;
 pub use grasp::grasp_map;
 pub use hand::{
-    FINGER_NAMES, FingerModel, HandModel, JOINT_NAMES, JOINTS_PER_FINGER, JointLimit, NOMINAL_BASE_RADIUS_M,
-    NOMINAL_CUBE_SIDE_M, NOMINAL_PALM_HEIGHT_M, NUM_FINGERS, NUM_JOINTS, joint_index,
+    FINGER_NAMES, FINGER_TORQUE_CAP_NM, FingerModel, HandModel, JOINT_NAMES, JOINTS_PER_FINGER, JointLimit,
+    NOMINAL_BASE_RADIUS_M, NOMINAL_CUBE_SIDE_M, NOMINAL_PALM_HEIGHT_M, NUM_FINGERS, NUM_JOINTS,
+    THUMB_TORQUE_CAP_NM, joint_index,
 };
 pub use stacked::Contact;
