@@ -24,13 +24,15 @@ step "system packages"
 scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm
 
 step "python tools (cantools, tensorboard, rerun-sdk, mujoco, in .deps/py)"
+# export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
+# imported actors) in onnxruntime.
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
 # event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
 # the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py); MuJoCo steps the
 # model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs).
-if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
+if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, onnx, onnxruntime; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 onnx onnxruntime
 fi
 .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__)'
 

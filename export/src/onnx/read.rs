@@ -159,15 +159,15 @@ pub fn import(bytes: &[u8], target: &ImportTarget, options: &ImportOptions) -> R
             target.control_hz
         }
     };
+    let producer = format!("{} {}", model.producer_name, model.producer_version);
     let provenance = match meta.provenance()? {
         Some(p) => p,
         None => Provenance {
             vge_version: env!("CARGO_PKG_VERSION").to_owned(),
             config_hash: format!(
-                "onnx:{} (producer {} {}, crc32 {:08x})",
+                "onnx:{} (producer {}, crc32 {:08x})",
                 options.source,
-                if model.producer_name.is_empty() { "unnamed" } else { &model.producer_name },
-                model.producer_version,
+                if producer.trim().is_empty() { "unnamed" } else { producer.trim() },
                 vge_runtime::format::crc32(bytes)
             ),
             seed: 0,
