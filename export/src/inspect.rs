@@ -76,7 +76,8 @@ pub fn report(bytes: &[u8]) -> Result<InspectReport, ExportError> {
 /// [`report`] on the file at `path`.
 pub fn report_file(path: impl AsRef<Path>) -> Result<InspectReport, ExportError> {
     let path = path.as_ref();
-    report(&crate::read_policy_bytes(path, crate::MAX_FILE_LEN)?)
+    let bytes = std::fs::read(path).map_err(|source| ExportError::Io { path: path.to_owned(), source })?;
+    report(&bytes)
 }
 
 fn act_name(code: u8) -> &'static str {

@@ -1,5 +1,7 @@
 //! The objects the hand turns: a cube (default), a sphere, a cylinder (axis along z) and
-//! two convex polyhedra (dodecahedron, icosahedron) whose vertices are generated here.
+//! two convex polyhedra (dodecahedron, icosahedron) whose vertices are generated here: the
+//! paper's five ([`ObjectShape::PAPER`]). A sixth, the hexagonal prism (axis along z), is
+//! no object of the paper's: it tests a policy on a shape it never trained on.
 //!
 //! Every shape is scaled so that its *width* (twice the distance from its centre to its
 //! closest surface point, i.e. twice the inradius) equals [`ObjectConfig::width_m`]: the
@@ -25,11 +27,24 @@ pub enum ObjectShape {
     Dodecahedron,
     /// A regular icosahedron (convex hull of its 12 vertices).
     Icosahedron,
+    /// A regular hexagonal prism standing on a hexagon (axis along world z, convex hull of
+    /// its 12 vertices), as tall as it is wide across its flats: the unseen object.
+    HexagonalPrism,
 }
 
 impl ObjectShape {
     /// All shapes, in a fixed order.
-    pub const ALL: [Self; 5] =
+    pub const ALL: [Self; 6] = [
+        Self::Cube,
+        Self::Sphere,
+        Self::Cylinder,
+        Self::Dodecahedron,
+        Self::Icosahedron,
+        Self::HexagonalPrism,
+    ];
+
+    /// The paper's five objects (its multi-object experiment), in a fixed order.
+    pub const PAPER: [Self; 5] =
         [Self::Cube, Self::Sphere, Self::Cylinder, Self::Dodecahedron, Self::Icosahedron];
 
     /// Lower-case name, e.g. "cube".
@@ -41,6 +56,7 @@ impl ObjectShape {
             Self::Cylinder => "cylinder",
             Self::Dodecahedron => "dodecahedron",
             Self::Icosahedron => "icosahedron",
+            Self::HexagonalPrism => "hexagonal-prism",
         }
     }
 }
@@ -118,6 +134,7 @@ impl ObjectConfig {
             ObjectShape::Cylinder => SharedShape::cylinder(half, half),
             ObjectShape::Dodecahedron => hull(dodecahedron_vertices(), DODECAHEDRON_INRADIUS)?,
             ObjectShape::Icosahedron => hull(icosahedron_vertices(), ICOSAHEDRON_INRADIUS)?,
+            ObjectShape::HexagonalPrism => hull(hexagonal_prism_vertices(), HEXAGONAL_PRISM_INRADIUS)?,
         })
     }
 
@@ -175,6 +192,25 @@ pub fn icosahedron_vertices() -> Vec<Vector> {
     v
 }
 
+/// Inradius of [`hexagonal_prism_vertices`]: the hexagon's apothem and the half height are
+/// both 1.
+const HEXAGONAL_PRISM_INRADIUS: f32 = 1.0;
+
+/// The 12 vertices of a regular hexagonal prism with apothem 1 and height 2 (axis z), a
+/// vertex of each hexagon on the x axis (so its flats face ±y).
+#[must_use]
+pub fn hexagonal_prism_vertices() -> Vec<Vector> {
+    let circumradius = 1.0 / (std::f32::consts::PI / 6.0).cos();
+    let mut v = Vec::with_capacity(12);
+    for z in [-1.0f32, 1.0] {
+        for k in 0..6 {
+            let angle = k as f32 * std::f32::consts::PI / 3.0;
+            v.push(Vector::new(circumradius * angle.cos(), circumradius * angle.sin(), z));
+        }
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -202,6 +238,28 @@ mod tests {
                 .fold(f32::INFINITY, f32::min);
             assert!((inradius - 0.05).abs() < 1e-5, "{}: inradius {inradius}", shape.name());
         }
+    }
+
+    #[test]
+    fn names_parse_back_to_their_shapes() {
+        for shape in ObjectShape::ALL {
+            assert_eq!(shape.name().parse::<ObjectShape>(), Ok(shape));
+        }
+        assert!(ObjectShape::PAPER.iter().all(|s| ObjectShape::ALL.contains(s)));
+        assert!(!ObjectShape::PAPER.contains(&ObjectShape::HexagonalPrism), "the unseen object");
+    }
+
+    #[test]
+    fn the_hexagonal_prism_stands_on_its_hexagon() {
+        let cfg = ObjectConfig::of(ObjectShape::HexagonalPrism);
+        let shape = cfg.shape().expect("shape");
+        let s = shape.as_support_map().expect("convex");
+        let support = |d: Vector| s.local_support_point(d).dot(d);
+        // Flats face ±y, corners ±x (at the circumradius, 2/sqrt(3) times the apothem),
+        // the hexagons ±z.
+        assert!((support(Vector::Y) - 0.05).abs() < 1e-5);
+        assert!((support(Vector::X) - 0.05 / (std::f32::consts::PI / 6.0).cos()).abs() < 1e-5);
+        assert!((support(Vector::Z) - 0.05).abs() < 1e-5);
     }
 
     #[test]

@@ -242,7 +242,7 @@ fn log_object_shape(rec: &RecordingStream, object: &ObjectConfig) -> Result<(), 
             "world/object",
             &Cylinders3D::from_lengths_and_radii([object.width_m], [half]).with_colors([color]),
         )?,
-        ObjectShape::Dodecahedron | ObjectShape::Icosahedron => {
+        ObjectShape::Dodecahedron | ObjectShape::Icosahedron | ObjectShape::HexagonalPrism => {
             let shape = object.shape().map_err(|e| RecordingError::Shape(e.to_string()))?;
             let hull = shape
                 .as_convex_polyhedron()

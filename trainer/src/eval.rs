@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
 use vge_runtime::Policy;
-use vge_sim::{Env, EnvConfig, EpisodeTracker, NUM_JOINTS, OBS_DIM, SimError, StepResult};
+use vge_sim::{Env, EnvConfig, EpisodeTracker, NUM_JOINTS, OBS_DIM, ObjectShape, SimError, StepResult};
 
 /// Episodes of the success test.
 pub const SUCCESS_TEST_EPISODES: usize = 20;
@@ -203,6 +203,123 @@ pub fn eval_policy_bytes(
     with_runtime_policy(bytes, env, |env, policy| run_episodes(env, episodes, seed, policy))
 }
 
+/// The objects `vge eval --objects` names: `all` (the paper's five, [`ObjectShape::PAPER`])
+/// or a comma-separated list of names, each once.
+pub fn parse_objects(s: &str) -> Result<Vec<ObjectShape>, String> {
+    if s.trim() == "all" {
+        return Ok(ObjectShape::PAPER.to_vec());
+    }
+    let mut objects = Vec::new();
+    for name in s.split(',').map(str::trim) {
+        let object: ObjectShape = name.parse()?;
+        if objects.contains(&object) {
+            return Err(format!("`{name}` is named twice in `{s}`"));
+        }
+        objects.push(object);
+    }
+    Ok(objects)
+}
+
+/// A success test on several objects: each object's report and the overall one, which
+/// pools every object's episodes (with as many episodes per object, the mean over objects).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ObjectsReport {
+    pub overall: EvalReport,
+    /// Per object, in the order asked for.
+    pub per_object: Vec<(ObjectShape, EvalReport)>,
+}
+
+impl ObjectsReport {
+    /// The object with the lowest success rate (the first such) and that rate.
+    pub fn worst_object(&self) -> Option<(ObjectShape, f64)> {
+        self.per_object.iter().map(|(o, r)| (*o, r.success_rate)).fold(None, |worst, (o, s)| match worst {
+            Some((_, w)) if w <= s => worst,
+            _ => Some((o, s)),
+        })
+    }
+
+    /// Whether every object's success rate reaches [`LEARNED_SUCCESS_RATE`]: a policy for
+    /// several objects has learned only when it turns each of them.
+    pub fn every_object_learned(&self) -> bool {
+        self.per_object.iter().all(|(_, r)| r.learned())
+    }
+
+    /// The figures `per_object` of `final-eval.json`, `best-eval.json` and `vge eval --json`
+    /// hold, keyed by object name in the order asked for.
+    pub fn figures(&self) -> PerObjectFigures {
+        PerObjectFigures(self.per_object.iter().map(|(o, r)| (*o, ObjectFigures::of(r))).collect())
+    }
+}
+
+/// One object's figures in a per-object report (its episodes are in the overall report).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct ObjectFigures {
+    pub success_rate: f64,
+    pub drop_rate: f64,
+    pub mean_return: f64,
+    pub mean_rotation_rad: f64,
+    pub mean_contact_switches: f64,
+    pub episodes: usize,
+}
+
+impl ObjectFigures {
+    pub fn of(r: &EvalReport) -> Self {
+        Self {
+            success_rate: r.success_rate,
+            drop_rate: r.drop_rate,
+            mean_return: r.mean_return,
+            mean_rotation_rad: r.mean_rotation_rad,
+            mean_contact_switches: r.mean_contact_switches,
+            episodes: r.episodes,
+        }
+    }
+}
+
+/// Per-object figures, serialised as a JSON object keyed by object name in their order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PerObjectFigures(pub Vec<(ObjectShape, ObjectFigures)>);
+
+impl Serialize for PerObjectFigures {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (object, figures) in &self.0 {
+            map.serialize_entry(object.name(), figures)?;
+        }
+        map.end()
+    }
+}
+
+/// The success test of an encoded policy file on each of `envs` (one per object, each
+/// `episodes` episodes from env seeds `seed`, `seed + 1`, ...: every object meets the same
+/// seeds), all episodes side by side on rayon's threads. The env runs at the policy's
+/// control rate as in [`eval_policy_bytes`].
+pub fn eval_policy_bytes_per_object(
+    bytes: &[u8],
+    envs: &[EnvConfig],
+    episodes: usize,
+    seed: u64,
+) -> Result<ObjectsReport, EvalError> {
+    if episodes == 0 || envs.is_empty() {
+        return Err(EvalError::NoEpisodes);
+    }
+    let first = &envs[0];
+    with_runtime_policy(bytes, first, |at_rate, policy| {
+        // Every env at the policy's rate, as `with_runtime_policy` set the first.
+        let envs: Vec<EnvConfig> = envs.iter().map(|e| at_control_rate(e, at_rate.control_hz)).collect();
+        let outcomes = (0..envs.len() * episodes)
+            .into_par_iter()
+            .map(|i| run_episode(&envs[i / episodes], seed.wrapping_add((i % episodes) as u64), policy))
+            .collect::<Result<Vec<_>, _>>()?;
+        let per_object = envs
+            .iter()
+            .zip(outcomes.chunks(episodes))
+            .map(|(env, chunk)| (env.object.shape, summarise(chunk)))
+            .collect();
+        Ok(ObjectsReport { overall: summarise(&outcomes), per_object })
+    })
+}
+
 /// One episode of an encoded policy file on the runtime, step by step: each finger's
 /// contact and the object's rotation (for `vge eval --plot`'s gait diagram).
 pub fn trace_policy_bytes(bytes: &[u8], env: &EnvConfig, seed: u64) -> Result<GaitTrace, EvalError> {
@@ -271,17 +388,22 @@ fn with_runtime_policy<T>(
     }
     vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
         .map_err(EvalError::Policy)?;
-    let mut env = env.clone();
-    // Same episode duration at the policy's rate.
-    let duration_s = env.episode_length_steps as f32 / env.control_hz;
-    env.control_hz = info.control_hz;
-    env.episode_length_steps = (duration_s * env.control_hz).round().max(1.0) as usize;
+    let env = at_control_rate(env, info.control_hz);
     // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
     let aligned = vge_runtime::AlignedBytes::new(bytes);
     let mut storage = vec![0.0f32; info.storage_len];
     let policy = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(&aligned, &mut storage)
         .map_err(|e| EvalError::Policy(e.to_string()))?;
     f(&env, &|obs, action| policy.forward(obs, action).map_err(|e| e.to_string()))
+}
+
+/// `env` stepped at `control_hz`, its episodes as long in seconds as before.
+fn at_control_rate(env: &EnvConfig, control_hz: f32) -> EnvConfig {
+    let duration_s = env.episode_length_steps as f32 / env.control_hz;
+    let mut env = env.clone();
+    env.control_hz = control_hz;
+    env.episode_length_steps = (duration_s * env.control_hz).round().max(1.0) as usize;
+    env
 }
 
 /// [`eval_policy_bytes`] of the file at `path`.

@@ -1,8 +1,5 @@
 //! `vge`: train, evaluate, export and inspect finger-gaiting policies.
 
-mod closed_output;
-
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -19,7 +16,6 @@ use vge_trainer::{bench_update, policy_export};
 /// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
 #[derive(Debug, Parser)]
 #[command(version, about, long_about = None)]
-#[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0.")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -104,6 +100,8 @@ enum Command {
     /// Panels: episode return, rotation, controller share, and the critic's mean Q beside the
     /// discounted Monte-Carlo returns of its data (a sound critic stays within them). A run
     /// learned when its final-eval.json success rate is >= 50% (`vge eval`'s success test).
+    /// Runs trained on several objects also get OUT-per-object.png beside OUT: each object's
+    /// success in the periodic evaluations, one panel per object.
     ///
     /// --table1 DIR places every run by its config's controller and method and writes
     /// DIR/table1.csv (controller,method,seeds,learned,success_rate_mean,return_mean,
@@ -187,8 +185,9 @@ struct EvalArgs {
     policy: Option<PathBuf>,
     /// Instead of --policy: score a finished training run's final policy again, with its
     /// config and the very episodes of its `final-eval.json`, by this vge's success test, and
-    /// print the stored figures beside the new ones (for runs scored by an older vge).
-    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n", "perturb_magnitude_n"])]
+    /// print the stored figures beside the new ones (for runs scored by an older vge). A run
+    /// on several objects is scored on each of them.
+    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n", "perturb_magnitude_n", "objects"])]
     run: Option<PathBuf>,
     /// With --run: replace the run's `final-eval.json` by the new score.
     #[arg(long, requires = "run")]
@@ -198,6 +197,14 @@ struct EvalArgs {
     episodes: usize,
     #[command(flatten)]
     episode: EpisodeArgs,
+    /// Instead of --object: the success test on each of these objects, `all` (the paper's
+    /// five: cube, sphere, cylinder, dodecahedron, icosahedron) or a comma-separated list
+    /// (e.g. `cube,hexagonal-prism`, the prism being no training object): --episodes episodes
+    /// per object, every object on the same seeds; one row per object and the overall
+    /// figures (all episodes pooled). With --plot F.png: one gait diagram per object,
+    /// F-<object>.png.
+    #[arg(long, value_name = "all|NAME,NAME,...", value_parser = parse_object_list, conflicts_with_all = ["object", "record"])]
+    objects: Option<ObjectList>,
     /// Gaussian noise on observed joint positions (rad).
     #[arg(long, default_value_t = 0.0)]
     noise_q_rad: f32,
@@ -311,6 +318,14 @@ fn parse_seed_range(s: &str) -> Result<std::ops::Range<u64>, String> {
         return Err(format!("empty seed range {s}"));
     }
     Ok(a..b)
+}
+
+/// The objects of `vge eval --objects`.
+#[derive(Debug, Clone)]
+struct ObjectList(Vec<ObjectShape>);
+
+fn parse_object_list(s: &str) -> Result<ObjectList, String> {
+    vge_trainer::eval::parse_objects(s).map(ObjectList)
 }
 
 fn parse_controller_kind(s: &str) -> Result<ControllerKind, String> {
@@ -552,7 +567,6 @@ pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
 }
 
 fn main() -> ExitCode {
-    closed_output::end_quietly_when_closed();
     // Before libtorch allocates anything; a refusal only costs speed (heap.rs).
     if !vge_trainer::heap::keep_freed_memory() {
         eprintln!("vge: note: glibc heap settings not applied; updates may run slower");
@@ -560,8 +574,7 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // Not eprintln!: with stderr closed the failure must still exit 1, not 0.
-            let _ = writeln!(std::io::stderr(), "vge: {e:#}");
+            eprintln!("vge: {e:#}");
             ExitCode::FAILURE
         }
     }
@@ -601,6 +614,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let table = vge_trainer::plot::plot(&curves, &out)?;
             print!("{table}");
             eprintln!("wrote {}", out.display());
+            if let Some(path) = vge_trainer::plot::plot_per_object(&curves, &out)? {
+                eprintln!("wrote {} (success per object)", path.display());
+            }
             if let Some(path) = success_csv {
                 std::fs::write(&path, vge_trainer::plot::success_csv(&curves))
                     .with_context(|| format!("writing {}", path.display()))?;
@@ -620,6 +636,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         policy,
         episodes,
         episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
+        objects,
         noise_q_rad,
         noise_normal_frac,
         noise_position_m,
@@ -650,20 +667,29 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     ] {
         anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
     }
-    let mut env = EnvConfig::default();
-    env.object.shape = object;
-    let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
-    // The robustness test's disturbances, set the one way it sets them.
-    use vge_trainer::robustness::Axis;
-    for (axis, level) in [
-        (Axis::JointNoise, noise_q_rad),
-        (Axis::NormalError, noise_normal_frac),
-        (Axis::PositionError, noise_position_m),
-        (Axis::Perturbation, perturb_force_n),
-        (Axis::PerturbationMagnitude, perturb_magnitude_n),
-    ] {
-        axis.apply(&mut env, level);
+    // The success test's env for an object, with the robustness test's disturbances set the
+    // one way it sets them.
+    let env_for = |object: ObjectShape| {
+        let mut env = EnvConfig::default();
+        env.object = vge_sim::ObjectConfig::of(object);
+        let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
+        use vge_trainer::robustness::Axis;
+        for (axis, level) in [
+            (Axis::JointNoise, noise_q_rad),
+            (Axis::NormalError, noise_normal_frac),
+            (Axis::PositionError, noise_position_m),
+            (Axis::Perturbation, perturb_force_n),
+            (Axis::PerturbationMagnitude, perturb_magnitude_n),
+        ] {
+            axis.apply(&mut env, level);
+        }
+        env
+    };
+    if let Some(ObjectList(objects)) = objects {
+        let envs: Vec<EnvConfig> = objects.iter().map(|&o| env_for(o)).collect();
+        return eval_objects(&policy, &envs, episodes, seed, episode_s, plot.as_deref(), json);
     }
+    let env = env_for(object);
     // Before the evaluation, so that a path that cannot be written fails at once.
     if let Some(rrd) = &record {
         record_episode(&policy, &env, seed, rrd)?;
@@ -678,6 +704,146 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
         println!("{}", report.to_json_line());
     } else {
         print_eval_report(&report, &policy, episode_s, object);
+    }
+    Ok(())
+}
+
+/// `vge eval --objects`: the success test on each of `envs` (one per object).
+fn eval_objects(
+    policy: &Path,
+    envs: &[EnvConfig],
+    episodes: usize,
+    seed: u64,
+    episode_s: f32,
+    plot: Option<&Path>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let report = vge_trainer::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
+        .with_context(|| format!("evaluating {}", policy.display()))?;
+    if let Some(png) = plot {
+        for env in envs {
+            draw_gait_diagram(policy, env, seed, &per_object_path(png, env.object.shape))?;
+        }
+    }
+    if json {
+        /// The overall report with the per-object figures beside it.
+        #[derive(serde::Serialize)]
+        struct Line<'a> {
+            #[serde(flatten)]
+            overall: &'a vge_trainer::eval::EvalReport,
+            per_object: vge_trainer::eval::PerObjectFigures,
+        }
+        let line = Line { overall: &report.overall, per_object: report.figures() };
+        println!("{}", serde_json::to_string(&line).context("writing the report as JSON")?);
+        return Ok(());
+    }
+    println!("{episodes} episodes of {episode_s} s per object, policy {}", policy.display());
+    print_objects_table(&report.per_object, &report.overall);
+    let verdict = match report.worst_object() {
+        Some(_) if report.every_object_learned() => "learned on every object".to_owned(),
+        Some((object, success)) => format!("not learned on every object (worst: the {object}, {success:.2})"),
+        None => "no objects".to_owned(),
+    };
+    println!(
+        "verdict: {verdict} (success >= {:.0}% of an object's episodes)",
+        100.0 * vge_trainer::eval::LEARNED_SUCCESS_RATE
+    );
+    Ok(())
+}
+
+/// One row per object and the overall figures: success, drops, rotation, return, switches.
+fn print_objects_table(
+    per_object: &[(ObjectShape, vge_trainer::eval::EvalReport)],
+    overall: &vge_trainer::eval::EvalReport,
+) {
+    println!(
+        "  {:<16} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9}",
+        "object", "episodes", "success", "drops", "rot_rad", "return", "switches"
+    );
+    let row = |name: &str, r: &vge_trainer::eval::EvalReport| {
+        println!(
+            "  {name:<16} {:>8} {:>7.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}",
+            r.episodes,
+            r.success_rate,
+            r.drop_rate,
+            r.mean_rotation_rad,
+            r.mean_return,
+            r.mean_contact_switches
+        );
+    };
+    for (object, r) in per_object {
+        row(object.name(), r);
+    }
+    row("overall", overall);
+}
+
+/// `F.png` -> `F-<object>.png`: an object's file beside the others.
+fn per_object_path(path: &Path, object: ObjectShape) -> PathBuf {
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-{}.{}", object.name(), ext.to_string_lossy()),
+        None => format!("{stem}-{}", object.name()),
+    };
+    path.with_file_name(name)
+}
+
+/// `vge score`: every run in turn, its episodes on `threads` threads, a progress line per
+/// batch of episodes.
+fn score(runs: &[PathBuf], episodes: usize, seed: u64, force: bool, threads: Option<u32>) -> anyhow::Result<()> {
+    use vge_trainer::score::{ScoreOptions, ScoreOutcome, score_run};
+    let options = ScoreOptions { episodes, seed, force };
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        pool = pool.num_threads(n as usize);
+    }
+    let pool = pool.build().context("starting the scoring threads")?;
+    let mut failed = Vec::new();
+    for (i, dir) in runs.iter().enumerate() {
+        let started = std::time::Instant::now();
+        let mut last_shown = std::time::Instant::now();
+        let mut show = |p: &vge_trainer::score::ScoreProgress| {
+            if p.done == p.total || last_shown.elapsed().as_secs_f64() >= 10.0 {
+                eprintln!(
+                    "vge score: run {}/{} {}: {} episodes of {} ({}), {:.0} s",
+                    i + 1,
+                    runs.len(),
+                    p.dir.display(),
+                    p.done,
+                    p.total,
+                    p.file,
+                    started.elapsed().as_secs_f64()
+                );
+                last_shown = std::time::Instant::now();
+            }
+        };
+        match pool.install(|| score_run(dir, &options, &mut show)) {
+            Ok((outcome, notes)) => {
+                for note in notes {
+                    eprintln!("vge score: {}: {note}", dir.display());
+                }
+                let (verb, s) = match &outcome {
+                    ScoreOutcome::Scored(s) => ("scored", s),
+                    ScoreOutcome::Skipped(s) => ("already scored, skipped", s),
+                };
+                let selected = s.selected.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                let last = s.last_snapshots.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                println!(
+                    "{}: {verb}: success on {} held-out episodes: selected {selected}, final {:.2}, last snapshots {last} ({:.0} s)",
+                    dir.display(),
+                    s.episodes,
+                    s.final_policy.success_rate,
+                    started.elapsed().as_secs_f64()
+                );
+            }
+            Err(e) => {
+                eprintln!("vge score: {e}");
+                failed.push(dir.display().to_string());
+            }
+        }
+    }
+    if !failed.is_empty() {
+        bail!("{} of {} runs not scored: {}", failed.len(), runs.len(), failed.join(", "));
     }
     Ok(())
 }
@@ -708,6 +874,9 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
         r.report.mean_contact_switches,
         r.report.learned()
     );
+    if !r.per_object.is_empty() {
+        print_objects_table(&r.per_object, &r.report);
+    }
     if write {
         println!("  final-eval.json rewritten");
     }
@@ -721,8 +890,9 @@ fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> a
         .with_context(|| format!("tracing {}", policy.display()))?;
     let o = &trace.outcome;
     let title = format!(
-        "{}: episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+        "{}: the {}, episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
         policy.display(),
+        env.object.shape,
         o.rotation_rad,
         o.length as f32 * trace.dt_s,
         o.contact_switches,

@@ -511,6 +511,90 @@ pub fn success_csv(runs: &[RunCurves]) -> String {
     text
 }
 
+/// The objects of the runs trained on several (`env.objects`), each once, in the order
+/// they first appear.
+fn multi_object_objects(runs: &[RunCurves]) -> Vec<vge_sim::ObjectShape> {
+    let mut objects = Vec::new();
+    for r in runs {
+        let mut own = r.objects.clone();
+        own.dedup();
+        if own.iter().any(|o| *o != own[0]) {
+            for &o in &r.objects {
+                if !objects.contains(&o) {
+                    objects.push(o);
+                }
+            }
+        }
+    }
+    objects
+}
+
+/// Per-object curves of the runs trained on several objects: one panel per object with each
+/// experiment's success on that object in the periodic evaluations (`eval.csv`'s
+/// `<object>_success`, mean and min-max over seeds), into `<out stem>-per-object.png` beside
+/// `out`. Returns the file written, or `None` when no run trained on several objects.
+pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>, PlotError> {
+    let objects = multi_object_objects(runs);
+    if objects.is_empty() {
+        return Ok(None);
+    }
+    let stem = out.file_stem().map_or_else(|| "plot".to_owned(), |s| s.to_string_lossy().into_owned());
+    let path = out.with_file_name(format!("{stem}-per-object.png"));
+    // Each experiment keeps its colour in every panel.
+    let mut palette: Vec<&str> = Vec::new();
+    for r in runs {
+        if !palette.contains(&r.experiment.as_str()) {
+            palette.push(&r.experiment);
+        }
+    }
+    // Per object, each run's curves with that object's success as its evaluation success.
+    let mut per_object: Vec<Vec<RunCurves>> = Vec::new();
+    for &object in &objects {
+        let column = format!("{}_success", object.name());
+        let mut curves = Vec::new();
+        for r in runs.iter().filter(|r| r.objects.contains(&object)) {
+            let eval = r.dir.join("eval.csv");
+            if !eval.exists() {
+                continue;
+            }
+            let columns = match csv_columns(&eval, &["step", &column]) {
+                Ok(c) => c,
+                // A run from before the per-object columns has no curve to show.
+                Err(PlotError::Csv { message, .. }) if message.starts_with("no column") => continue,
+                Err(e) => return Err(e),
+            };
+            let [step, success]: [Vec<f64>; 2] = columns
+                .try_into()
+                .map_err(|_| PlotError::Csv { path: eval.clone(), message: "columns".into() })?;
+            curves.push(RunCurves { eval_step: step, eval_success: success, ..r.clone() });
+        }
+        per_object.push(curves);
+    }
+    // The drawing borrows the path: it ends before the path is returned.
+    {
+        load_font()?;
+        let width = 420 * objects.len() as u32;
+        let root = BitMapBackend::new(&path, (width, 420)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let root =
+            root.titled("success per object (periodic evaluations)", ("sans-serif", 20)).map_err(draw_err)?;
+        let panels = root.split_evenly((1, objects.len()));
+        for ((panel, object), curves) in panels.iter().zip(&objects).zip(&per_object) {
+            let mut groups: Groups = BTreeMap::new();
+            for r in curves {
+                groups.entry(r.experiment.as_str()).or_default().push(r);
+            }
+            let drawn: Vec<Curve> = groups
+                .iter()
+                .map(|(name, rs)| (*name, spread(rs, |r| (&r.eval_step, &r.eval_success)), false))
+                .collect();
+            draw_panel(panel, &format!("the {object}: success"), &drawn, &groups, &palette)?;
+        }
+        root.present().map_err(draw_err)?;
+    }
+    Ok(Some(path))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -2,18 +2,28 @@
 //! selection: every periodic evaluation keeps its actor in `snapshots/`, and at the end the
 //! snapshot with the best validation evaluation is reported on held-out test grasps
 //! (`policy-best.vgep`, `best-eval.json`) apart from the final policy (`final-eval.json`).
+//!
+//! A run on several objects (`env.objects`) is tested on each of them: `run.eval_episodes`
+//! episodes per object, every object on the same episode seeds, for every snapshot alike.
+//! `eval.csv` then gains each object's columns (`cube_success`, `cube_return`, ...), the
+//! JSON files a `per_object` table, and the overall figures (all episodes pooled, i.e. the
+//! mean over objects) stay where they were. Selection ranks snapshots by their worst
+//! object's success, then the mean success, then the mean return ([`best_eval_row`]): a
+//! policy for five objects is only as good as its worst, and the mean alone would prefer a
+//! snapshot that turns four objects perfectly and drops the fifth. With one object the rule
+//! is the single-object one, and a single-object run writes exactly what it wrote before.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use vge_export::Provenance;
-use vge_sim::EnvConfig;
+use vge_sim::{EnvConfig, ObjectShape};
 
 use super::clock::RunCost;
 use super::{TrainError, io_err};
 use crate::config::Config;
-use crate::eval::{EpisodeOutcome, EvalReport};
+use crate::eval::{EpisodeOutcome, EvalReport, ObjectsReport, PerObjectFigures};
 use crate::policy_export::export_hand_actor;
 use crate::sac::Sac;
 
@@ -30,29 +40,68 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
     Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
 }
 
-/// The success test's env for a run: its first env without the disturbances it may train
-/// with (a config with domain randomisation is judged by the same test as any other),
-/// `run.eval_episode_s` long, grasps randomised by `run.eval_grasp_noise_rad`.
-fn success_test_env_of(config: &Config) -> EnvConfig {
+/// The success test's env for a run's object `index` (of `env.objects`): that object's env
+/// without the disturbances it may train with (a config with domain randomisation is judged
+/// by the same test as any other), `run.eval_episode_s` long, grasps randomised by
+/// `run.eval_grasp_noise_rad`.
+fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
     let run = &config.run;
     crate::eval::success_test_env(
-        &crate::eval::without_training_disturbances(&config.env.env_config(0)),
+        &crate::eval::without_training_disturbances(&config.env.env_config(index)),
         run.eval_episode_s,
         run.eval_grasp_noise_rad,
     )
 }
 
+/// The objects a run trains on, each once, in the order of `env.objects` (a list may name
+/// one twice to give it more envs), with the index of its first place there.
+fn training_objects(config: &Config) -> Vec<(usize, ObjectShape)> {
+    let mut seen = Vec::new();
+    for (i, &object) in config.env.objects.iter().enumerate() {
+        if !seen.iter().any(|&(_, o)| o == object) {
+            seen.push((i, object));
+        }
+    }
+    seen
+}
+
+/// Whether the run trains on more than one object (and is tested per object).
+fn is_multi_object(config: &Config) -> bool {
+    training_objects(config).len() > 1
+}
+
 /// The success test ([`crate::eval`]) of an exported actor (policy-file bytes) on the
-/// runtime: `run.eval_episodes` episodes of [`success_test_env_of`], seeded from the
-/// config's seed only (training is not perturbed).
-fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<EvalReport, TrainError> {
+/// runtime: `run.eval_episodes` episodes of [`success_test_env_of`] per training object,
+/// seeded from the config's seed only (training is not perturbed), every object on the same
+/// seeds.
+fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<ObjectsReport, TrainError> {
     let run = &config.run;
-    let env = success_test_env_of(config);
     let eval_seed = match set {
         EpisodeSet::Validation => config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1),
         EpisodeSet::Test => config.seed.wrapping_mul(1_000_033).wrapping_add(0x7e57),
     };
-    Ok(crate::eval::eval_policy_bytes(bytes, &env, run.eval_episodes.max(1), eval_seed)?)
+    let episodes = run.eval_episodes.max(1);
+    let objects = training_objects(config);
+    if let [(index, object)] = objects.as_slice() {
+        // One object: the single-object test as it always ran.
+        let env = success_test_env_of(config, *index);
+        let report = crate::eval::eval_policy_bytes(bytes, &env, episodes, eval_seed)?;
+        return Ok(ObjectsReport { overall: report.clone(), per_object: vec![(*object, report)] });
+    }
+    let envs: Vec<EnvConfig> = objects.iter().map(|&(i, _)| success_test_env_of(config, i)).collect();
+    Ok(crate::eval::eval_policy_bytes_per_object(bytes, &envs, episodes, eval_seed)?)
+}
+
+/// The per-object figures a JSON file holds: only for a run on several objects (a
+/// single-object run's files stay as they were).
+fn per_object_figures(r: &ObjectsReport) -> Option<PerObjectFigures> {
+    (r.per_object.len() > 1).then(|| r.figures())
+}
+
+/// Whether a policy with this report learned: its success rate reaches
+/// [`crate::eval::LEARNED_SUCCESS_RATE`], on every object for a run on several.
+fn learned(r: &ObjectsReport) -> bool {
+    r.overall.learned() && r.every_object_learned()
 }
 
 /// Which grasps an evaluation draws: the periodic (and final) evaluations share one set, the
@@ -75,16 +124,26 @@ fn snapshot_path(out_dir: &Path, step: u64) -> PathBuf {
 struct EvalRow {
     step: u64,
     mean_return: f64,
+    /// Over all episodes (the mean over objects).
     success: f64,
+    /// The lowest of the objects' success rates (`success` for a single-object run).
+    worst_object_success: f64,
 }
 
-/// The evaluation row model selection picks: highest success rate, then highest return, then
-/// the earlier step.
+/// The evaluation row model selection picks ([module docs](self)): highest success rate of
+/// the worst object, then highest mean success rate, then highest return, then the earlier
+/// step. With one object: highest success rate, then return, then the earlier step.
 fn best_eval_row(rows: &[EvalRow]) -> Option<EvalRow> {
+    let key = |r: &EvalRow| (r.worst_object_success, r.success, r.mean_return);
     rows.iter().copied().fold(None, |best: Option<EvalRow>, r| match best {
-        Some(b) if (b.success, b.mean_return) >= (r.success, r.mean_return) => Some(b),
+        Some(b) if key(&b) >= key(&r) => Some(b),
         _ => Some(r),
     })
+}
+
+/// `eval.csv`'s column `{object}_{figure}` for a run on several objects.
+fn object_column(object: ObjectShape, figure: &str) -> String {
+    format!("{}_{figure}", object.name())
 }
 
 /// What `best-eval.json` holds: which snapshot was selected on the validation episodes, and
@@ -93,8 +152,12 @@ fn best_eval_row(rows: &[EvalRow]) -> Option<EvalRow> {
 struct BestEval<'a> {
     selected_step: u64,
     validation_success_rate: f64,
+    /// Several objects: the lowest object success rate on the validation episodes, what the
+    /// selection ranked by first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    validation_worst_object_success_rate: Option<f64>,
     validation_mean_return: f64,
-    /// Whether the selected policy learned on the test episodes.
+    /// Whether the selected policy learned on the test episodes (on every object).
     learned: bool,
     success_rate: f64,
     episodes: usize,
@@ -102,6 +165,9 @@ struct BestEval<'a> {
     mean_rotation_rad: f64,
     drop_rate: f64,
     mean_contact_switches: f64,
+    /// Several objects: each object's test figures (the overall ones above pool them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    per_object: Option<PerObjectFigures>,
     per_episode: &'a [EpisodeOutcome],
 }
 
@@ -115,9 +181,24 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     }
     let columns = crate::plot::csv_columns(&csv_path, &["step", "return", "success"])
         .map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?;
+    let multi = is_multi_object(config);
+    let per_object_success: Vec<Vec<f64>> = if multi {
+        let names: Vec<String> =
+            training_objects(config).iter().map(|&(_, o)| object_column(o, "success")).collect();
+        let names: Vec<&str> = names.iter().map(String::as_str).collect();
+        crate::plot::csv_columns(&csv_path, &names)
+            .map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?
+    } else {
+        Vec::new()
+    };
     let rows: Vec<EvalRow> = match columns.as_slice() {
         [step, ret, success] => (0..step.len())
-            .map(|i| EvalRow { step: step[i] as u64, mean_return: ret[i], success: success[i] })
+            .map(|i| EvalRow {
+                step: step[i] as u64,
+                mean_return: ret[i],
+                success: success[i],
+                worst_object_success: per_object_success.iter().map(|c| c[i]).fold(success[i], f64::min),
+            })
             .collect(),
         _ => Vec::new(),
     };
@@ -134,17 +215,22 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     let r = evaluate_policy(config, &bytes, EpisodeSet::Test)?;
     let path = out_dir.join("policy-best.vgep");
     std::fs::write(&path, &bytes).map_err(io_err(&path))?;
+    let per_object = per_object_figures(&r);
+    let learned = learned(&r);
+    let r = &r.overall;
     let doc = BestEval {
         selected_step: best.step,
         validation_success_rate: best.success,
+        validation_worst_object_success_rate: multi.then_some(best.worst_object_success),
         validation_mean_return: best.mean_return,
-        learned: r.learned(),
+        learned,
         success_rate: r.success_rate,
         episodes: r.episodes,
         mean_return: r.mean_return,
         mean_rotation_rad: r.mean_rotation_rad,
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
+        per_object,
         per_episode: &r.per_episode,
     };
     let path = out_dir.join("best-eval.json");
@@ -154,36 +240,56 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
 
 const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
 
-/// Appends one evaluation to `eval.csv`.
-fn append_eval_row(out_dir: &Path, step: u64, r: &EvalReport) -> Result<(), TrainError> {
+/// The figures of each object's columns in `eval.csv` (a run on several objects), in order.
+const OBJECT_FIGURES: [&str; 5] = ["success", "return", "rotation", "drops", "contact_switches"];
+
+/// Appends one evaluation to `eval.csv`: the overall figures, then, for a run on several
+/// objects, each object's [`OBJECT_FIGURES`].
+fn append_eval_row(out_dir: &Path, step: u64, report: &ObjectsReport) -> Result<(), TrainError> {
     let path = out_dir.join("eval.csv");
     let new = !path.exists();
     let file = File::options().append(true).create(true).open(&path).map_err(io_err(&path))?;
     let mut writer = csv::WriterBuilder::new().has_headers(false).from_writer(file);
     let csv_err = |e: csv::Error| io_err(&path)(std::io::Error::other(e));
+    let per_object: &[(ObjectShape, EvalReport)] =
+        if report.per_object.len() > 1 { &report.per_object } else { &[] };
     if new {
-        writer.write_record(EVAL_HEADER.split(',')).map_err(csv_err)?;
+        let mut header: Vec<String> = EVAL_HEADER.split(',').map(str::to_owned).collect();
+        for (object, _) in per_object {
+            header.extend(OBJECT_FIGURES.iter().map(|f| object_column(*object, f)));
+        }
+        writer.write_record(&header).map_err(csv_err)?;
     }
     let fraction = |x: f64| format!("{x:.4}");
-    writer
-        .write_record([
-            step.to_string(),
-            r.episodes.to_string(),
+    let r = &report.overall;
+    let mut record = vec![
+        step.to_string(),
+        r.episodes.to_string(),
+        format!("{:.6}", r.mean_return),
+        format!("{:.6}", r.mean_rotation_rad),
+        fraction(r.success_rate),
+        fraction(r.drop_rate),
+        fraction(r.mean_contacts),
+        fraction(r.mean_contact_switches),
+    ];
+    for (_, r) in per_object {
+        record.extend([
+            fraction(r.success_rate),
             format!("{:.6}", r.mean_return),
             format!("{:.6}", r.mean_rotation_rad),
-            fraction(r.success_rate),
             fraction(r.drop_rate),
-            fraction(r.mean_contacts),
             fraction(r.mean_contact_switches),
-        ])
-        .map_err(csv_err)?;
+        ]);
+    }
+    writer.write_record(&record).map_err(csv_err)?;
     writer.flush().map_err(io_err(&path))
 }
 
 /// What `final-eval.json` holds: the final policy's success test, and what it cost.
 #[derive(Debug, Serialize)]
 struct FinalEval<'a> {
-    /// Whether the seed learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`]).
+    /// Whether the seed learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`], on
+    /// every object for a run on several).
     learned: bool,
     success_rate: f64,
     episodes: usize,
@@ -193,6 +299,9 @@ struct FinalEval<'a> {
     mean_rotation_rad: f64,
     drop_rate: f64,
     mean_contact_switches: f64,
+    /// Several objects: each object's figures (the overall ones above pool them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    per_object: Option<PerObjectFigures>,
     env_steps: u64,
     /// Wall time of the training run, pauses and time waiting for a core included.
     wall_s: f64,
@@ -206,13 +315,14 @@ struct FinalEval<'a> {
 fn write_final_eval(
     out_dir: &Path,
     config: &Config,
-    r: &EvalReport,
+    report: &ObjectsReport,
     env_steps: u64,
     cost: RunCost,
 ) -> Result<(), TrainError> {
     let path = out_dir.join("final-eval.json");
+    let r = &report.overall;
     let doc = FinalEval {
-        learned: r.learned(),
+        learned: learned(report),
         success_rate: r.success_rate,
         episodes: r.episodes,
         episode_s: config.run.eval_episode_s,
@@ -221,6 +331,7 @@ fn write_final_eval(
         mean_rotation_rad: r.mean_rotation_rad,
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
+        per_object: per_object_figures(report),
         env_steps,
         wall_s: cost.wall_s,
         cpu_s: cost.cpu_s,
@@ -234,8 +345,10 @@ fn write_final_eval(
 /// config, episodes and grasps as its `final-eval.json`): for runs scored by an older test.
 #[derive(Debug, Clone)]
 pub struct Rescored {
-    /// This vge's success test of `DIR/policy.vgep`.
+    /// This vge's success test of `DIR/policy.vgep` (all objects' episodes pooled).
     pub report: EvalReport,
+    /// Each object's report, for a run on several objects (empty for one).
+    pub per_object: Vec<(ObjectShape, EvalReport)>,
     /// The success rate `DIR/final-eval.json` held before, when it could be read.
     pub stored_success_rate: Option<f64>,
     /// The rotation (rad per episode) `DIR/final-eval.json` held before.
@@ -272,21 +385,24 @@ pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainErro
         write_final_eval(dir, &config, &report, env_steps, cost)?;
     }
     let stored = stored.ok().flatten();
+    let per_object = if report.per_object.len() > 1 { report.per_object } else { Vec::new() };
     Ok(Rescored {
         stored_success_rate: stored.as_ref().map(|s| s.success_rate),
         stored_rotation_rad: stored.as_ref().and_then(|s| s.mean_rotation_rad),
-        report,
+        report: report.overall,
+        per_object,
     })
 }
 
 /// The periodic evaluation at `step`: the actor (policy-file `bytes`) on the validation
-/// episodes, a row of `eval.csv`, and the actor kept as a snapshot. Returns the report.
+/// episodes of every training object, a row of `eval.csv`, and the actor kept as a snapshot.
+/// Returns the report.
 pub(super) fn periodic(
     out_dir: &Path,
     config: &Config,
     step: u64,
     bytes: &[u8],
-) -> Result<EvalReport, TrainError> {
+) -> Result<ObjectsReport, TrainError> {
     let report = evaluate_policy(config, bytes, EpisodeSet::Validation)?;
     append_eval_row(out_dir, step, &report)?;
     let dir = out_dir.join(SNAPSHOT_DIR);
@@ -306,7 +422,7 @@ pub(super) fn finish(
     bytes: &[u8],
     step: u64,
     cost: RunCost,
-    evaluated: Option<EvalReport>,
+    evaluated: Option<ObjectsReport>,
 ) -> Result<PathBuf, TrainError> {
     let path = out_dir.join("policy.vgep");
     std::fs::write(&path, bytes).map_err(io_err(&path))?;
@@ -335,7 +451,7 @@ mod tests {
         config.env.mass_scale = [0.8, 1.2];
         config.env.action_latency_steps = 1;
         config.env.drop_penalty = 30.0;
-        let env = success_test_env_of(&config);
+        let env = success_test_env_of(&config, 0);
         let nominal = EnvConfig::default();
         assert_eq!(env.noise, nominal.noise);
         assert_eq!(env.perturbation, nominal.perturbation);
@@ -350,10 +466,47 @@ mod tests {
 
     #[test]
     fn model_selection_takes_success_then_return_then_the_earlier_step() {
-        let row = |step, mean_return, success| EvalRow { step, mean_return, success };
+        let row = |step, mean_return, success| EvalRow {
+            step,
+            mean_return,
+            success,
+            worst_object_success: success,
+        };
         assert!(best_eval_row(&[]).is_none());
         let rows =
             [row(1, 50.0, 0.2), row(2, 40.0, 0.8), row(3, 90.0, 0.8), row(4, 90.0, 0.8), row(5, 300.0, 0.1)];
         assert_eq!(best_eval_row(&rows).map(|r| r.step), Some(3));
+    }
+
+    #[test]
+    fn model_selection_across_objects_takes_the_worst_object_then_the_mean_then_return() {
+        let row = |step, mean_return, success, worst_object_success| EvalRow {
+            step,
+            mean_return,
+            success,
+            worst_object_success,
+        };
+        // Step 1 turns four objects perfectly and drops the fifth (mean 0.8, worst 0); step 2
+        // turns every object half the time: the worst object decides.
+        let rows =
+            [row(1, 90.0, 0.8, 0.0), row(2, 40.0, 0.5, 0.5), row(3, 30.0, 0.6, 0.5), row(4, 50.0, 0.6, 0.5)];
+        assert_eq!(best_eval_row(&rows).map(|r| r.step), Some(4), "worst, then mean, then return");
+    }
+
+    #[test]
+    fn a_multi_object_run_is_tested_once_on_each_of_its_objects() {
+        use ObjectShape::{Cube, Sphere};
+        let mut config = Config::default();
+        assert!(!is_multi_object(&config));
+        config.env.objects = vec![Cube, Sphere, Cube];
+        assert_eq!(training_objects(&config), vec![(0, Cube), (1, Sphere)]);
+        assert!(is_multi_object(&config));
+        let envs: Vec<ObjectShape> = training_objects(&config)
+            .iter()
+            .map(|&(i, _)| success_test_env_of(&config, i).object.shape)
+            .collect();
+        assert_eq!(envs, vec![Cube, Sphere]);
+        config.env.objects = vec![Sphere, Sphere];
+        assert!(!is_multi_object(&config), "one object named twice is one object");
     }
 }

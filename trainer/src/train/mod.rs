@@ -25,7 +25,8 @@
 //! - `policy.vgep`: the exported actor at the end;
 //! - `snapshots/policy-<step>.vgep`: the actor exported at each periodic evaluation;
 //! - `policy-best.vgep`, `best-eval.json`: model selection, reported apart from the final
-//!   policy. The snapshot with the best periodic evaluation (success, then return; these are
+//!   policy. The snapshot with the best periodic evaluation (success, then return; a run on
+//!   several objects: the worst object's success first, see `evaluation`; these are
 //!   the validation episodes) is run again on held-out test episodes drawn from another
 //!   seed, so that the selection does not inflate the number it reports. Training itself is
 //!   unchanged by it.
@@ -286,7 +287,7 @@ struct Trainer<'a> {
     times: PhaseTimes,
     clock: Instant,
     /// This session's latest periodic evaluation (step, report).
-    last_evaluation: Option<(u64, crate::eval::EvalReport)>,
+    last_evaluation: Option<(u64, crate::eval::ObjectsReport)>,
 }
 
 impl<'a> Trainer<'a> {

@@ -1,0 +1,218 @@
+//! One policy for several objects: a run on two objects tests each of them (eval.csv's
+//! per-object columns, `per_object` in final-eval.json and best-eval.json, the per-object
+//! curves of `vge plot`), and `vge eval --objects` gives one row per object whose figures are
+//! those of `vge eval --object` on the same episodes.
+
+mod common;
+
+use std::path::Path;
+use std::process::Output;
+
+use serde_json::Value;
+
+fn vge(args: &[&str], extra: &[String]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_vge")).args(args).args(extra).output().expect("vge runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+const FIGURES: [&str; 6] =
+    ["success_rate", "drop_rate", "mean_return", "mean_rotation_rad", "mean_contact_switches", "episodes"];
+
+/// The overall figures of a report are its objects' pooled: with as many episodes per object,
+/// the mean of theirs.
+fn assert_overall_pools(doc: &Value, objects: &[&str], episodes_per_object: u64) {
+    let per_object = doc["per_object"].as_object().unwrap_or_else(|| panic!("per_object in {doc}"));
+    // (serde_json's map sorts its keys: the order is checked on the text where it matters.)
+    let mut names: Vec<&str> = per_object.keys().map(String::as_str).collect();
+    let mut want = objects.to_vec();
+    names.sort_unstable();
+    want.sort_unstable();
+    assert_eq!(names, want, "one entry per object");
+    for (name, figures) in per_object {
+        for key in FIGURES {
+            assert!(figures[key].is_number(), "{name}: {key} in {figures}");
+        }
+        assert_eq!(figures["episodes"].as_u64(), Some(episodes_per_object), "{name}");
+    }
+    assert_eq!(doc["episodes"].as_u64(), Some(episodes_per_object * objects.len() as u64));
+    for key in ["success_rate", "drop_rate", "mean_return", "mean_rotation_rad", "mean_contact_switches"] {
+        let mean =
+            per_object.values().map(|f| f[key].as_f64().expect("number")).sum::<f64>() / objects.len() as f64;
+        let overall = doc[key].as_f64().expect("overall figure");
+        assert!((overall - mean).abs() < 1e-9, "{key}: overall {overall}, mean of objects {mean}");
+    }
+}
+
+/// A tiny run of the multi-object config on two objects (one env each) with periodic
+/// evaluations: every evaluation tests both objects, and the files say so.
+#[test]
+fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
+    let dir = common::temp_dir("multi-object-run");
+    let run = dir.join("run");
+    let config = common::config("multi-object-fg-vge.toml");
+    let mut args = vec!["--config".to_owned(), config.display().to_string()];
+    args.extend(common::tiny_args());
+    for o in ["env.objects=[\"cube\", \"sphere\"]", "run.eval_interval=100", "sac.threads=1"] {
+        args.extend(["--set".to_owned(), o.to_owned()]);
+    }
+    args.extend(["--steps".to_owned(), "300".to_owned(), "--out".to_owned(), run.display().to_string()]);
+    let out = vge(&["train"], &args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    // eval.csv: the overall columns as in a single-object run, then each object's.
+    let csv = std::fs::read_to_string(run.join("eval.csv")).expect("eval.csv");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let mut want: Vec<String> = "step,episodes,return,rotation,success,drops,contacts,contact_switches"
+        .split(',')
+        .map(str::to_owned)
+        .collect();
+    for object in ["cube", "sphere"] {
+        want.extend(
+            ["success", "return", "rotation", "drops", "contact_switches"].map(|f| format!("{object}_{f}")),
+        );
+    }
+    assert_eq!(header, want.iter().map(String::as_str).collect::<Vec<_>>());
+    let rows: Vec<Vec<f64>> =
+        lines.map(|l| l.split(',').map(|f| f.parse().expect("a number")).collect()).collect();
+    assert_eq!(rows.iter().map(|r| r[0] as u64).collect::<Vec<_>>(), [100, 200, 300]);
+    for r in &rows {
+        assert_eq!(r.len(), header.len());
+        assert_eq!(r[1], 4.0, "two episodes on each of two objects");
+        let column = |name: &str| r[header.iter().position(|h| *h == name).expect(name)];
+        let mean = (column("cube_success") + column("sphere_success")) / 2.0;
+        assert!((column("success") - mean).abs() < 1e-3, "{r:?}");
+    }
+
+    // final-eval.json and best-eval.json: per_object beside the overall figures.
+    let final_eval = json(&run.join("final-eval.json"));
+    assert_overall_pools(&final_eval, &["cube", "sphere"], 2);
+    assert_eq!(final_eval["per_episode"].as_array().map(Vec::len), Some(4));
+    let learned = final_eval["per_object"]
+        .as_object()
+        .expect("per_object")
+        .values()
+        .all(|f| f["success_rate"].as_f64() >= Some(0.5));
+    assert_eq!(final_eval["learned"].as_bool(), Some(learned), "learned means every object");
+    let best = json(&run.join("best-eval.json"));
+    assert_overall_pools(&best, &["cube", "sphere"], 2);
+    let selected = best["selected_step"].as_u64().expect("selected_step");
+    assert!([100, 200, 300].contains(&selected), "{best}");
+    let row = rows.iter().find(|r| r[0] as u64 == selected).expect("the selected row");
+    let worst = row[header.iter().position(|h| *h == "cube_success").unwrap()]
+        .min(row[header.iter().position(|h| *h == "sphere_success").unwrap()]);
+    assert_eq!(best["validation_worst_object_success_rate"].as_f64(), Some(worst));
+    assert!(run.join("policy-best.vgep").exists());
+
+    // vge plot draws the per-object curves beside the usual figure.
+    let png = dir.join("curves.png");
+    let plot = vge(&["plot", "--out", &png.display().to_string()], &[run.display().to_string()]);
+    assert!(plot.status.success(), "{}", text(&plot.stderr));
+    let per_object = std::fs::read(dir.join("curves-per-object.png")).expect("curves-per-object.png");
+    assert!(per_object.starts_with(b"\x89PNG"), "a PNG");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A single-object run writes no per-object columns or fields (it writes what it always did).
+#[test]
+fn a_single_object_run_writes_no_per_object_figures() {
+    let dir = common::temp_dir("single-object-run");
+    let config = common::config("cube-fg-vge.toml");
+    let mut args = vec!["--config".to_owned(), config.display().to_string()];
+    args.extend(common::tiny_args());
+    for o in ["run.eval_interval=100", "sac.threads=1"] {
+        args.extend(["--set".to_owned(), o.to_owned()]);
+    }
+    args.extend(["--steps".to_owned(), "200".to_owned(), "--out".to_owned(), dir.display().to_string()]);
+    let out = vge(&["train"], &args);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let csv = std::fs::read_to_string(dir.join("eval.csv")).expect("eval.csv");
+    assert_eq!(
+        csv.lines().next(),
+        Some("step,episodes,return,rotation,success,drops,contacts,contact_switches")
+    );
+    for file in ["final-eval.json", "best-eval.json"] {
+        let doc = json(&dir.join(file));
+        assert!(doc.get("per_object").is_none(), "{file}: {doc}");
+        assert!(doc.get("validation_worst_object_success_rate").is_none(), "{file}");
+        assert_eq!(doc["episodes"].as_u64(), Some(2), "{file}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `vge eval --objects all` on an untrained policy: one row per object of the paper's five
+/// and the overall figures; each object's figures are `vge eval --object` on the same seeds.
+#[test]
+fn eval_objects_gives_one_row_per_object_on_the_episodes_of_eval_object() {
+    let dir = common::temp_dir("eval-objects");
+    let policy = dir.join("init.vgep");
+    let export = vge(&["export", "--init", "--seed", "4", "--out"], &[policy.display().to_string()]);
+    assert!(export.status.success(), "{}", text(&export.stderr));
+    let p = policy.display().to_string();
+    let common_args = ["--episodes", "2", "--episode-s", "1", "--seed", "9"];
+
+    let table = vge(&["eval", "--objects", "all", "--policy", &p], &common_args.map(str::to_owned));
+    assert!(table.status.success(), "{}", text(&table.stderr));
+    let out = text(&table.stdout);
+    let rows: Vec<&str> =
+        out.lines().filter(|l| l.starts_with("  ") && !l.trim_start().starts_with("object")).collect();
+    let names: Vec<&str> = rows.iter().map(|l| l.split_whitespace().next().expect("name")).collect();
+    assert_eq!(names, ["cube", "sphere", "cylinder", "dodecahedron", "icosahedron", "overall"], "{out}");
+    assert!(out.contains("verdict"), "{out}");
+
+    let objects = ["sphere", "hexagonal-prism"];
+    let png = dir.join("gait.png");
+    let line = vge(
+        &[
+            "eval",
+            "--json",
+            "--objects",
+            &objects.join(","),
+            "--policy",
+            &p,
+            "--plot",
+            &png.display().to_string(),
+        ],
+        &common_args.map(str::to_owned),
+    );
+    assert!(line.status.success(), "{}", text(&line.stderr));
+    let doc: Value = serde_json::from_slice(&line.stdout).expect("one JSON line");
+    assert_overall_pools(&doc, &objects, 2);
+    let raw = text(&line.stdout);
+    let at = |key: &str| raw.find(&format!("\"{key}\":{{")).unwrap_or_else(|| panic!("{key} in {raw}"));
+    assert!(at("sphere") < at("hexagonal-prism"), "per_object in the order asked for: {raw}");
+    assert_eq!(doc["per_episode"].as_array().map(Vec::len), Some(4));
+    for object in objects {
+        let single =
+            vge(&["eval", "--json", "--object", object, "--policy", &p], &common_args.map(str::to_owned));
+        assert!(single.status.success(), "{}", text(&single.stderr));
+        let single: Value = serde_json::from_slice(&single.stdout).expect("one JSON line");
+        for key in FIGURES {
+            assert_eq!(doc["per_object"][object][key], single[key], "{object}: {key}");
+        }
+        let diagram =
+            std::fs::read(dir.join(format!("gait-{object}.png"))).expect("a gait diagram per object");
+        assert!(diagram.starts_with(b"\x89PNG"));
+    }
+
+    // A name twice, an unknown name, or both --object and --objects: refused, naming it.
+    for (args, says) in [
+        (vec!["--objects", "cube,cube"], "named twice"),
+        (vec!["--objects", "cube,torus"], "torus"),
+        (vec!["--objects", "all", "--object", "sphere"], "--object"),
+    ] {
+        let refused =
+            vge(&["eval", "--policy", &p], &args.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>());
+        assert!(!refused.status.success(), "{args:?}");
+        assert!(text(&refused.stderr).contains(says), "{args:?}: {}", text(&refused.stderr));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
