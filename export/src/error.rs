@@ -40,4 +40,11 @@ pub enum ExportError {
     /// Reading or writing a policy file failed.
     #[error("{}", path.display())]
     Io { path: PathBuf, source: std::io::Error },
+    /// The file is longer than any policy the reader can load: refused before it is read.
+    #[error(
+        "{}: {len} bytes, longer than any policy file this reader loads (at most {max} bytes); \
+         not read",
+        path.display()
+    )]
+    TooLarge { path: PathBuf, len: u64, max: usize },
 }

@@ -76,8 +76,7 @@ pub fn report(bytes: &[u8]) -> Result<InspectReport, ExportError> {
 /// [`report`] on the file at `path`.
 pub fn report_file(path: impl AsRef<Path>) -> Result<InspectReport, ExportError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|source| ExportError::Io { path: path.to_owned(), source })?;
-    report(&bytes)
+    report(&crate::read_policy_bytes(path, crate::MAX_FILE_LEN)?)
 }
 
 fn act_name(code: u8) -> &'static str {

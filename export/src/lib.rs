@@ -21,5 +21,8 @@ mod v2;
 pub use actor::{ActorSpec, TchActor, build_actor};
 pub use error::ExportError;
 pub use extract::{ExportedActor, ExportedLayer, extract_actor};
-pub use policy_file::{LayerRecord, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, export_policy};
+pub use policy_file::{
+    LayerRecord, MAX_FILE_LEN, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, export_policy,
+    read_policy_bytes,
+};
 pub use vge_runtime::{Activation, WeightType};

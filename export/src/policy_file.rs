@@ -246,13 +246,34 @@ impl PolicyFile {
         std::fs::write(path, bytes).map_err(|source| ExportError::Io { path: path.to_owned(), source })
     }
 
-    /// Reads and validates the file at `path`.
+    /// Reads ([`read_policy_bytes`], at most [`MAX_FILE_LEN`]) and validates the file at `path`.
     pub fn read(path: impl AsRef<Path>) -> Result<Self, ExportError> {
-        let path = path.as_ref();
-        let bytes =
-            std::fs::read(path).map_err(|source| ExportError::Io { path: path.to_owned(), source })?;
-        Self::from_bytes(&bytes)
+        Self::from_bytes(&read_policy_bytes(path.as_ref(), MAX_FILE_LEN)?)
     }
+}
+
+/// The longest policy file the host tools read: [`vge_runtime::policy::max_file_len`] of the
+/// largest actor `vge eval` loads (8 layers of width 1024).
+pub const MAX_FILE_LEN: usize = vge_runtime::policy::max_file_len(8, 1024);
+
+/// The bytes of the policy file at `path`, refused unread ([`ExportError::TooLarge`]) when
+/// its length (from its metadata) exceeds `max_len`, and never more than `max_len` read (a
+/// file that grows meanwhile is refused too).
+pub fn read_policy_bytes(path: &Path, max_len: usize) -> Result<Vec<u8>, ExportError> {
+    use std::io::Read;
+    let io = |source| ExportError::Io { path: path.to_owned(), source };
+    let too_large = |len: u64| ExportError::TooLarge { path: path.to_owned(), len, max: max_len };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    if len > max_len as u64 {
+        return Err(too_large(len));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(max_len as u64 + 1).read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() > max_len {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
 }
 
 /// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`

@@ -10,6 +10,8 @@
 //! What the loop does not trust, and what it does then (docs/can-protocol.md, Semantics):
 //! - no fresh joint state for `watchdog_periods`: halt (watchdog);
 //! - a node fault (fault frame, status bit, heartbeat state): halt;
+//! - a node that restarted (boot-up heartbeat, counter started again, enable state
+//!   forgotten): halt, since a rebooted joint controller has lost what the host set up;
 //! - a node heartbeat missing for `heartbeat_timeout`, or its counter stuck: halt;
 //! - a stale frame (seq lagging the last command) or an implausible joint position: the
 //!   frame is dropped and counted, the step holds the last safe targets, and the loop halts
@@ -53,6 +55,8 @@ pub struct LoopConfig {
     pub rate_hz: f64,
     /// Stop after this long; `None` runs until the stop flag is raised.
     pub duration: Option<Duration>,
+    /// Stop after this many steps (command sets sent), if given.
+    pub max_steps: Option<u64>,
     /// No fresh joint state for more than this many periods trips the watchdog; any other
     /// problem that persists this many periods halts the loop.
     pub watchdog_periods: u32,
@@ -81,6 +85,7 @@ impl LoopConfig {
         Self {
             rate_hz,
             duration: None,
+            max_steps: None,
             watchdog_periods: 5,
             startup_timeout: Duration::from_secs(5),
             halt_hold_periods: 3,
@@ -104,11 +109,15 @@ pub const HEARTBEAT_MAX_REPEATS: u32 = 3;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
     DurationReached,
+    /// The configured number of steps was sent.
+    StepsReached,
     StopRequested,
     /// No fresh joint state for longer than the watchdog allows.
     Watchdog,
     /// A node reported a fault.
     NodeFault,
+    /// A node restarted mid-run (its heartbeats said so).
+    NodeRestarted,
     /// A node's heartbeat stopped or its counter stuck.
     HeartbeatLost,
     /// Stale or implausible joint state persisted.
@@ -128,15 +137,56 @@ impl StopReason {
     pub fn as_str(self) -> &'static str {
         match self {
             Self::DurationReached => "duration",
+            Self::StepsReached => "steps",
             Self::StopRequested => "stop_requested",
             Self::Watchdog => "watchdog",
             Self::NodeFault => "node_fault",
+            Self::NodeRestarted => "node_restarted",
             Self::HeartbeatLost => "heartbeat_lost",
             Self::ImplausibleState => "implausible_state",
             Self::PolicyFailure => "policy_failure",
             Self::BusOff => "bus_off",
             Self::BusOverload => "bus_overload",
             Self::TxFailure => "tx_failure",
+        }
+    }
+
+    /// Every stop reason, in the order of their exit statuses.
+    pub const ALL: [Self; 12] = [
+        Self::DurationReached,
+        Self::StepsReached,
+        Self::StopRequested,
+        Self::Watchdog,
+        Self::NodeFault,
+        Self::HeartbeatLost,
+        Self::NodeRestarted,
+        Self::ImplausibleState,
+        Self::PolicyFailure,
+        Self::BusOff,
+        Self::BusOverload,
+        Self::TxFailure,
+    ];
+
+    /// Whether the loop halted for safety (anything but the duration or a stop request).
+    pub fn is_safety_halt(self) -> bool {
+        !matches!(self, Self::DurationReached | Self::StepsReached | Self::StopRequested)
+    }
+
+    /// The exit status of `vge-bridge run` that ends this way: 0 for a normal end, one status
+    /// per safety halt from 10 up, so a supervisor tells them apart without parsing output
+    /// (1 and 2 stay with errors and usage; docs/can-protocol.md lists them).
+    pub fn exit_code(self) -> u8 {
+        match self {
+            Self::DurationReached | Self::StepsReached | Self::StopRequested => 0,
+            Self::Watchdog => 10,
+            Self::NodeFault => 11,
+            Self::HeartbeatLost => 12,
+            Self::NodeRestarted => 13,
+            Self::ImplausibleState => 14,
+            Self::PolicyFailure => 15,
+            Self::BusOff => 16,
+            Self::BusOverload => 17,
+            Self::TxFailure => 18,
         }
     }
 }
@@ -358,11 +408,19 @@ fn start_up<T: Transport>(
         io.drain(config.rx_budget)?;
         let heartbeats =
             io.state.heartbeat_problem(Instant::now(), config.heartbeat_timeout, HEARTBEAT_MAX_REPEATS);
-        match (io.state.q_rad(), io.state.q_target_rad(), heartbeats) {
-            (Some(_), Some(targets), None) => return Ok(targets),
-            (Some(q), None, None) if rounds_with_positions >= 3 => return Ok(q),
-            (Some(_), None, _) => rounds_with_positions += 1,
-            _ => {}
+        let start = match (io.state.q_rad(), io.state.q_target_rad(), heartbeats) {
+            (Some(_), Some(targets), None) => Some(targets),
+            (Some(q), None, None) if rounds_with_positions >= 3 => Some(q),
+            (Some(_), None, _) => {
+                rounds_with_positions += 1;
+                None
+            }
+            _ => None,
+        };
+        if let Some(start) = start {
+            // Restarts before the nodes answered are part of the state taken over.
+            io.state.clear_restarts();
+            return Ok(start);
         }
         if started.elapsed() > config.startup_timeout || stop.load(Ordering::Relaxed) {
             let missing = match (io.state.q_rad(), heartbeats) {
@@ -388,6 +446,10 @@ fn start_up<T: Transport>(
 fn distrust<T: Transport>(io: &Io<'_, T>, config: &LoopConfig, now: Instant) -> Option<(StopReason, String)> {
     if io.counts.error_frames.bus_off > 0 {
         return Some((StopReason::BusOff, "the CAN controller reported bus-off".to_owned()));
+    }
+    if let Some((f, sign)) = io.state.restart() {
+        let detail = format!("node {f} ({}) restarted: {sign}", FINGER_NAMES[f]);
+        return Some((StopReason::NodeRestarted, detail));
     }
     if let Some(f) = io.state.fault.iter().position(|&f| f) {
         return Some((StopReason::NodeFault, format!("node {f} ({}) reported a fault", FINGER_NAMES[f])));
@@ -469,6 +531,9 @@ pub fn run<T: Transport, P: PolicyRunner>(
         if config.duration.is_some_and(|d| woke.saturating_duration_since(start) >= d) {
             break (StopReason::DurationReached, String::new());
         }
+        if config.max_steps.is_some_and(|n| steps >= n) {
+            break (StopReason::StepsReached, String::new());
+        }
         let flooded = io.drain(config.rx_budget)?;
         if flooded {
             io.counts.overload_periods += 1;
@@ -548,11 +613,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
 
     // Halt: hold the last safe targets (motors on, so the grasp does not drop), then disable.
     // Best effort: a bus that refuses frames now leaves the nodes to their command timeout.
-    let halting = if matches!(stop_reason, StopReason::DurationReached | StopReason::StopRequested) {
-        NodeState::Ready
-    } else {
-        NodeState::Fault
-    };
+    let halting = if stop_reason.is_safety_halt() { NodeState::Fault } else { NodeState::Ready };
     for _ in 0..config.halt_hold_periods {
         std::thread::sleep(period);
         let _ = io.drain(config.rx_budget);
@@ -592,6 +653,15 @@ mod tests {
         assert!(!p.record(true, 2) && !p.record(true, 2));
         assert!(!p.record(false, 2), "a good period resets the count");
         assert!(!p.record(true, 2) && !p.record(true, 2) && p.record(true, 2));
+    }
+
+    #[test]
+    fn every_safety_halt_exits_with_a_status_of_its_own_and_a_normal_end_with_0() {
+        let codes: Vec<u8> = StopReason::ALL.iter().map(|r| r.exit_code()).collect();
+        assert_eq!(codes, [0, 0, 0, 10, 11, 12, 13, 14, 15, 16, 17, 18]);
+        for r in StopReason::ALL {
+            assert_eq!(r.is_safety_halt(), r.exit_code() != 0, "{}", r.as_str());
+        }
     }
 
     #[test]

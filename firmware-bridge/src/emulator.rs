@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use thiserror::Error;
 
-use crate::node_supervisor::NodeSupervisor;
+use crate::node_supervisor::{NodeSupervisor, RestartPlan};
 use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError};
 use crate::transport::{Received, Transport, TransportError};
 
@@ -58,6 +58,8 @@ pub struct EmulatorStats {
     /// Command-timeout faults the nodes raised.
     pub command_timeouts: u64,
     pub heartbeats_sent: u64,
+    /// Node restarts emulated ([`ServeLimits::restart`]).
+    pub restarts: u64,
 }
 
 /// When [`serve`] stops, and the nodes' command timeout.
@@ -68,6 +70,8 @@ pub struct ServeLimits {
     /// Stop when no frame arrived for this long.
     pub idle_timeout: Duration,
     pub command_timeout: Duration,
+    /// A node to restart mid-run, if any.
+    pub restart: Option<RestartPlan>,
 }
 
 /// Serves joint commands on `transport` until `limits` or `stop` end it, sending the
@@ -80,6 +84,9 @@ pub fn serve<T: Transport>(
 ) -> Result<EmulatorStats, EmulatorError> {
     let mut stats = EmulatorStats::default();
     let mut nodes = NodeSupervisor::new(limits.command_timeout, Instant::now());
+    if let Some(plan) = limits.restart {
+        nodes.plan_restart(plan);
+    }
     let mut last_frame = Instant::now();
     while stats.commands < limits.max_commands && !stop.load(Ordering::Relaxed) {
         let now = Instant::now();
@@ -108,6 +115,7 @@ pub fn serve<T: Transport>(
     }
     stats.command_timeouts = nodes.command_timeouts;
     stats.heartbeats_sent = nodes.heartbeats_sent;
+    stats.restarts = nodes.restarts;
     Ok(stats)
 }
 

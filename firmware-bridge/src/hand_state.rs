@@ -6,6 +6,10 @@
 //! range plus a margin is implausible. Neither enters the state; [`HandState::apply`] says
 //! which it was (the loop counts them), and both flag their finger as suspect until the loop
 //! takes the flags ([`HandState::take_suspects`]).
+//!
+//! A node that restarts is noticed from its heartbeats ([`RestartSign`]): its boot-up
+//! heartbeat (state booting), its counter starting again, or its enable state forgotten. The
+//! loop clears what start-up saw ([`HandState::clear_restarts`]) and halts on any later one.
 
 use std::time::{Duration, Instant};
 
@@ -33,6 +37,36 @@ pub struct HeartbeatSeen {
     pub counter: u8,
     pub state: NodeState,
     pub repeats: u32,
+}
+
+/// Counter steps a heartbeat may advance by: 1, or more where beats were lost on the bus. A
+/// larger step (a counter that went back, typically to 0) is a node that started counting
+/// again: it restarted. Five beats lost are half a second without a heartbeat, which is a
+/// lost node anyway.
+pub const HEARTBEAT_MAX_STEP: u8 = 5;
+
+/// What in a node's heartbeats says it restarted (docs/can-protocol.md, Semantics: restart).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RestartSign {
+    /// A heartbeat with state booting: the node's boot-up message.
+    BootUp,
+    /// The counter moved by more than [`HEARTBEAT_MAX_STEP`] (went back): it counts afresh.
+    CounterJump { from: u8, to: u8 },
+    /// The node reported enabled, then ready, with no disabling command in between: it lost
+    /// the enable state the host's commands gave it.
+    EnableLost,
+}
+
+impl std::fmt::Display for RestartSign {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::BootUp => write!(f, "boot-up heartbeat (state booting)"),
+            Self::CounterJump { from, to } => write!(f, "heartbeat counter went from {from} to {to}"),
+            Self::EnableLost => {
+                write!(f, "heartbeat state went from enabled to ready without a disabling command")
+            }
+        }
+    }
 }
 
 /// What happened to one received message.
@@ -63,6 +97,8 @@ pub struct HandState {
     /// heartbeat state fault).
     pub fault: [bool; FINGERS],
     pub heartbeat: [Option<HeartbeatSeen>; FINGERS],
+    /// The first sign of a restart of each node since the last `clear_restarts`.
+    pub restarted: [Option<RestartSign>; FINGERS],
     /// Fingers that sent a stale or implausible frame since the last `take_suspects`.
     suspect: [bool; FINGERS],
 }
@@ -120,6 +156,19 @@ impl HandState {
                     Some(last) if last.counter == h.counter => last.repeats + 1,
                     _ => 0,
                 };
+                let sign = match self.heartbeat[f] {
+                    _ if h.state == NodeState::Booting => Some(RestartSign::BootUp),
+                    Some(last) if h.counter.wrapping_sub(last.counter) > HEARTBEAT_MAX_STEP => {
+                        Some(RestartSign::CounterJump { from: last.counter, to: h.counter })
+                    }
+                    Some(last) if last.state == NodeState::Enabled && h.state == NodeState::Ready => {
+                        Some(RestartSign::EnableLost)
+                    }
+                    _ => None,
+                };
+                if let Some(sign) = sign {
+                    self.restarted[f].get_or_insert(sign);
+                }
                 self.heartbeat[f] =
                     Some(HeartbeatSeen { at: now, counter: h.counter, state: h.state, repeats });
                 self.fault[f] |= h.state == NodeState::Fault;
@@ -132,6 +181,17 @@ impl HandState {
     /// Which fingers sent a stale or implausible frame since the last call; clears the flags.
     pub fn take_suspects(&mut self) -> [bool; FINGERS] {
         std::mem::take(&mut self.suspect)
+    }
+
+    /// The first node that showed a sign of a restart since the last [`Self::clear_restarts`],
+    /// with the sign.
+    pub fn restart(&self) -> Option<(usize, RestartSign)> {
+        self.restarted.iter().enumerate().find_map(|(f, sign)| sign.map(|s| (f, s)))
+    }
+
+    /// Forgets the restarts seen so far (start-up takes the nodes as they are once they answer).
+    pub fn clear_restarts(&mut self) {
+        self.restarted = [None; FINGERS];
     }
 
     /// The first node whose heartbeat is missing for longer than `timeout` (or never came),
@@ -360,5 +420,63 @@ mod tests {
             None,
         );
         assert!(s.fault[4], "a node in state fault is a fault");
+    }
+
+    /// A heartbeat as it is on the wire: id 0x700 + node, byte 0 the state, byte 1 the counter.
+    fn heartbeat_frame(node: u8, state: u8, counter: u8) -> Message {
+        Message::decode(0x700 + u16::from(node), &[state, counter, 0, 0, 0, 0, 0, 0]).expect("a heartbeat")
+    }
+
+    #[test]
+    fn a_heartbeat_counter_that_starts_again_is_a_restart_and_lost_beats_are_not() {
+        let mut s = HandState::default();
+        let t0 = Instant::now();
+        // Ready (1), then enabled (2): counters 250, 251, 253 (one lost), wrapping to 2 (three lost).
+        for (state, counter) in [(1, 250), (2, 251), (2, 253), (2, 254), (2, 255), (2, 2)] {
+            s.apply(&heartbeat_frame(3, state, counter), t0, &check(), None);
+        }
+        assert_eq!(s.restart(), None, "steps of 1 to 5, across the wrap, are lost beats");
+        s.apply(&heartbeat_frame(3, 2, 8), t0, &check(), None);
+        assert_eq!(s.restart(), Some((3, RestartSign::CounterJump { from: 2, to: 8 })), "six beats missing");
+        s.clear_restarts();
+        s.apply(&heartbeat_frame(3, 2, 9), t0, &check(), None);
+        // The node restarted and counts from 0 again, its boot-up heartbeat lost.
+        s.apply(&heartbeat_frame(3, 2, 0), t0, &check(), None);
+        s.apply(&heartbeat_frame(3, 2, 1), t0, &check(), None);
+        assert_eq!(s.restart(), Some((3, RestartSign::CounterJump { from: 9, to: 0 })));
+        assert_eq!(
+            s.restarted[3].map(|r| r.to_string()).as_deref(),
+            Some("heartbeat counter went from 9 to 0")
+        );
+    }
+
+    #[test]
+    fn a_boot_up_heartbeat_or_a_forgotten_enable_is_a_restart() {
+        let mut s = HandState::default();
+        let t0 = Instant::now();
+        // The boot-up message of node 1 (state 0 booting, counter 0), then ready.
+        s.apply(&heartbeat_frame(1, 0, 0), t0, &check(), None);
+        assert_eq!(s.restart(), Some((1, RestartSign::BootUp)));
+        s.apply(&heartbeat_frame(1, 1, 1), t0, &check(), None);
+        s.clear_restarts();
+        // Enabled, then fault: a fault, not a restart.
+        s.apply(&heartbeat_frame(1, 2, 2), t0, &check(), None);
+        s.apply(&heartbeat_frame(1, 3, 3), t0, &check(), None);
+        assert_eq!(s.restart(), None);
+        assert!(s.fault[1]);
+        // Node 4 restarts at counter 252: back to 0 is a step of 4, like lost beats, but its
+        // boot-up message gives it away.
+        s.apply(&heartbeat_frame(4, 2, 252), t0, &check(), None);
+        s.apply(&heartbeat_frame(4, 0, 0), t0, &check(), None);
+        assert_eq!(s.restart(), Some((4, RestartSign::BootUp)));
+        s.clear_restarts();
+        // And with that message lost, its next beat (counter 1: a step of 5 from 252) says
+        // ready where it was enabled.
+        s.apply(&heartbeat_frame(4, 2, 251), t0, &check(), None);
+        s.apply(&heartbeat_frame(4, 2, 252), t0, &check(), None);
+        s.clear_restarts();
+        s.apply(&heartbeat_frame(4, 1, 1), t0, &check(), None);
+        s.apply(&heartbeat_frame(4, 0, 2), t0, &check(), None);
+        assert_eq!(s.restart(), Some((4, RestartSign::EnableLost)), "the first sign is kept");
     }
 }

@@ -3,6 +3,8 @@
 //! `sim` feature it drives real hands only: asking it for the simulator is an error that says
 //! so.
 
+use std::fmt;
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -13,10 +15,12 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use serde_json::{Value, json};
-use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner};
+use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner, StopReason};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
 use vge_bridge::hand_file::{self, JointLimits};
+use vge_bridge::node_supervisor::RestartPlan;
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
+use vge_bridge::protocol::FingerId;
 use vge_bridge::report::{SimHandSummary, json_line};
 #[cfg(feature = "sim")]
 use vge_bridge::sim_hand::{self, SimHand};
@@ -39,11 +43,34 @@ type ObjectArg = String;
 /// while the fingers were enabled): the summary is printed, and scripts see the fault.
 const EXIT_NODE_FAULT: u8 = 2;
 
+/// A line to stdout. A reader that has gone (EPIPE: `vge-bridge ... | head -1`) ends the
+/// output, not the command, which runs on and exits with its own status (a safety halt's
+/// included); any other write error (a full disk) is an error.
+macro_rules! out {
+    ($($arg:tt)*) => { stdout_line(format_args!($($arg)*))? };
+}
+
+/// A line to stderr. Diagnostics that cannot be written (stderr closed) are dropped: there is
+/// nowhere left to report that, and the exit status still tells.
+macro_rules! note {
+    ($($arg:tt)*) => {{ let _ = writeln!(io::stderr(), $($arg)*); }};
+}
+
+fn stdout_line(line: fmt::Arguments<'_>) -> anyhow::Result<()> {
+    match writeln!(io::stdout(), "{line}") {
+        Err(e) if e.kind() != io::ErrorKind::BrokenPipe => Err(e).context("writing to stdout"),
+        _ => Ok(()),
+    }
+}
+
 /// Runs exported vge policies against the simulator or a real hand over SocketCAN.
 ///
 /// The hand protocol (frames, units, bus load) is in docs/can-protocol.md. On a kernel
 /// without CAN, run any of these inside a guest that has vcan0 with
 /// `scripts/canvm/run.sh target/release/vge-bridge ...`.
+///
+/// A closed stdout or stderr (`vge-bridge ... | head -1`) ends the output, not the command:
+/// it runs on and exits with its own status.
 #[derive(Debug, Parser)]
 #[command(version, about, long_about)]
 struct Cli {
@@ -75,12 +102,21 @@ struct LoopArgs {
     /// Seconds to run; 0 runs until Ctrl-C.
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
+    /// Stop after this many control steps (stop reason `steps`), or at --duration if that
+    /// comes first: a run of a fixed length whatever the host's speed.
+    #[arg(long)]
+    steps: Option<u64>,
     /// Largest joint-target change per step (rad), enforced whatever the policy says.
     #[arg(long, default_value_t = DEFAULT_MAX_ACTION_RAD)]
     max_delta_rad: f32,
-    /// Periods without fresh joint state before the watchdog holds and stops.
+    /// Periods without fresh joint state before the watchdog holds and stops; any other
+    /// problem that persists this many periods (stale or implausible state, a failing policy,
+    /// an overloaded bus, unsent commands) halts too.
     #[arg(long, default_value_t = 5)]
     watchdog_periods: u32,
+    /// Seconds without a node's heartbeat before the loop halts (heartbeat_lost).
+    #[arg(long, default_value_t = 0.5)]
+    heartbeat_timeout_s: f64,
     /// Print one JSON line of statistics instead of a summary.
     #[arg(long)]
     json: bool,
@@ -108,15 +144,15 @@ impl RealtimeArgs {
             vge_bridge::realtime::make_current_thread_realtime(self.realtime_priority.unwrap_or(1), self.cpu);
         if self.realtime_priority.is_some() {
             match outcome.fifo {
-                Ok(p) => eprintln!("vge-bridge: SCHED_FIFO priority {p}"),
+                Ok(p) => note!("vge-bridge: SCHED_FIFO priority {p}"),
                 Err(e) => {
-                    eprintln!("vge-bridge: warning: SCHED_FIFO refused ({e}); running with normal scheduling")
+                    note!("vge-bridge: warning: SCHED_FIFO refused ({e}); running with normal scheduling")
                 }
             }
         }
         match outcome.pinned {
-            Some(Ok(cpu)) => eprintln!("vge-bridge: pinned to CPU {cpu}"),
-            Some(Err(e)) => eprintln!("vge-bridge: warning: pinning refused ({e})"),
+            Some(Ok(cpu)) => note!("vge-bridge: pinned to CPU {cpu}"),
+            Some(Err(e)) => note!("vge-bridge: warning: pinning refused ({e})"),
             None => {}
         }
     }
@@ -129,8 +165,14 @@ enum Command {
     /// Each period: read the hand's state, build the observation exactly as the simulator
     /// does, run the policy on vge-runtime, clamp the change and the joint limits, send the
     /// targets. Stops after --duration, on Ctrl-C (hold, then disable), when the hand falls
-    /// silent (watchdog) or when a node reports a fault. Prints rate, jitter, deadline
-    /// misses and frame counts, and the object's rotation with the sim backend.
+    /// silent (watchdog) or when a node reports a fault or restarts. Prints rate, jitter,
+    /// deadline misses and frame counts, and the object's rotation with the sim backend.
+    ///
+    /// Exit status: 0 after --duration, --steps or Ctrl-C; after a safety halt (hold, then disable) one
+    /// per stop reason: 10 watchdog, 11 node_fault, 12 heartbeat_lost, 13 node_restarted, 14
+    /// implausible_state, 15 policy_failure, 16 bus_off, 17 bus_overload, 18 tx_failure; 1 when
+    /// it could not run (a bad file, no answer from the hand at start-up, a transport error);
+    /// 2 for a bad command line.
     Run {
         /// Policy file written by `vge export` or `vge train`.
         #[arg(long)]
@@ -179,7 +221,9 @@ enum Command {
     /// nodes send heartbeats at 10 Hz and report their enable state; an enabled finger that
     /// gets no command for --command-timeout-s holds and reports fault command_timeout.
     /// Stops when no frame arrived for --idle-timeout-s or on Ctrl-C, printing a summary.
-    /// Exit status 0, or 2 when a node faulted during the run.
+    /// Exit status 0, or 2 when a node faulted during the run. --restart-node reboots one
+    /// node mid-run, as a joint controller that resets: it sends its boot-up heartbeat and
+    /// counts its heartbeats from 0 again, disabled (the bridge halts: node_restarted).
     Emulate {
         #[arg(long, default_value = "vcan0")]
         iface: String,
@@ -201,12 +245,20 @@ enum Command {
         /// command_timeout (cleared by a disabled command).
         #[arg(long, default_value_t = 0.5)]
         command_timeout_s: f64,
+        /// Reboot this node (0 thumb .. 4 little) once it has applied
+        /// --restart-after-commands enabled commands.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(0..5))]
+        restart_node: Option<u8>,
+        /// The enabled commands the --restart-node node applies before it reboots.
+        #[arg(long, default_value_t = 20, requires = "restart_node")]
+        restart_after_commands: u64,
         /// Print one JSON line when done.
         #[arg(long)]
         json: bool,
     },
     /// Loop timing on this host: the control loop against emulated nodes over the
     /// in-process transport (no CAN, no simulator), so only the loop's own timing shows.
+    /// A measurement: it exits 0 however the loop stopped (the report names why).
     Bench {
         /// Policy file to run each period (default: hold, i.e. zero change).
         #[arg(long)]
@@ -238,7 +290,7 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("vge-bridge: {e:#}");
+            note!("vge-bridge: {e:#}");
             ExitCode::FAILURE
         }
     }
@@ -283,23 +335,47 @@ fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::
     let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
     anyhow::ensure!(rate_hz.is_finite() && rate_hz > 0.0, "--rate must be a positive number of Hz");
     if (rate_hz - f64::from(policy_hz)).abs() > 1e-3 {
-        eprintln!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
+        note!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
     }
     anyhow::ensure!(
         args.max_delta_rad.is_finite() && args.max_delta_rad > 0.0,
         "--max-delta-rad must be positive"
     );
+    let heartbeat_timeout =
+        positive_seconds("heartbeat-timeout-s", args.heartbeat_timeout_s, false)?.unwrap_or(Duration::MAX);
     Ok(LoopConfig {
         duration: positive_seconds("duration", args.duration, true)?,
+        max_steps: args.steps,
         watchdog_periods: args.watchdog_periods.max(1),
         max_delta_rad: args.max_delta_rad,
+        heartbeat_timeout,
         ..LoopConfig::new(rate_hz, limits)
     })
 }
 
-/// The file's bytes at an aligned address, so that a version-2 policy is used in place.
+/// The file's bytes at an aligned address, so that a version-2 policy is used in place. A file
+/// longer than any hand policy (its length from its metadata) is refused unread.
 fn read_policy(path: &Path) -> anyhow::Result<AlignedBytes> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading policy file {}", path.display()))?;
+    use std::io::Read;
+    use vge_runtime::policy::HAND_MAX_FILE_LEN;
+    let context = || format!("reading policy file {}", path.display());
+    let file = std::fs::File::open(path).with_context(context)?;
+    let len = file.metadata().with_context(context)?.len();
+    let too_long = |len: u64| {
+        anyhow::anyhow!(
+            "policy file {}: {len} bytes, longer than any hand policy (at most {HAND_MAX_FILE_LEN} \
+             bytes); not read",
+            path.display()
+        )
+    };
+    if len > HAND_MAX_FILE_LEN as u64 {
+        return Err(too_long(len));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(HAND_MAX_FILE_LEN as u64 + 1).read_to_end(&mut bytes).with_context(context)?;
+    if bytes.len() > HAND_MAX_FILE_LEN {
+        return Err(too_long(bytes.len() as u64));
+    }
     Ok(AlignedBytes::new(&bytes))
 }
 
@@ -309,15 +385,15 @@ fn print_report(
     cfg: &LoopConfig,
     r: &LoopReport,
     sim: Option<&SimHandSummary>,
-) {
+) -> anyhow::Result<()> {
     if json {
-        println!("{}", json_line(extra, cfg.rate_hz, r, sim));
-        return;
+        out!("{}", json_line(extra, cfg.rate_hz, r, sim));
+        return Ok(());
     }
     let detail = if r.stop_detail.is_empty() { String::new() } else { format!(": {}", r.stop_detail) };
-    println!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.steps);
-    println!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, cfg.rate_hz);
-    println!(
+    out!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.steps);
+    out!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, cfg.rate_hz);
+    out!(
         "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {} ({} periods skipped)",
         r.wake_jitter.p50_us,
         r.wake_jitter.p99_us,
@@ -325,12 +401,14 @@ fn print_report(
         r.deadline_misses,
         r.skipped_periods
     );
-    println!(
+    out!(
         "loop:    p50 {:.1} us, p99 {:.1} us, max {:.1} us",
-        r.loop_time.p50_us, r.loop_time.p99_us, r.loop_time.max_us
+        r.loop_time.p50_us,
+        r.loop_time.p99_us,
+        r.loop_time.max_us
     );
     let l = &r.link;
-    println!(
+    out!(
         "frames:  {} in, {} out on the bus ({} / {} messages); {} bad, {} stale, {} implausible, {} lost",
         l.frames_in,
         l.frames_out,
@@ -341,19 +419,23 @@ fn print_report(
         l.implausible_frames,
         l.lost_frames
     );
-    println!(
+    out!(
         "bus:     {} error frames ({} bus-off), {} frames not sent, {} overloaded periods",
         l.error_frames.total(),
         l.error_frames.bus_off,
         l.tx_dropped,
         l.overload_periods
     );
-    println!(
+    out!(
         "safety:  {} holds ({} policy errors), {} NaN holds, {} delta clamps, {} limit clamps",
-        r.holds, r.policy_errors, r.safety.non_finite_holds, r.safety.delta_clamps, r.safety.limit_clamps
+        r.holds,
+        r.policy_errors,
+        r.safety.non_finite_holds,
+        r.safety.delta_clamps,
+        r.safety.limit_clamps
     );
     if let Some(s) = sim {
-        println!(
+        out!(
             "object:  turned {:.3} rad about z in {} sim steps; return {:.3}; {:.2} fingertip contacts on average, {} contact switches{}",
             s.rotation_rad,
             s.steps,
@@ -363,6 +445,7 @@ fn print_report(
             if s.terminated { "; the episode terminated (drop or lost contacts)" } else { "" }
         );
     }
+    Ok(())
 }
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
@@ -406,18 +489,41 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
                     };
                     let backend = if fd { "can-fd" } else { "can" };
-                    print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None);
+                    print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None)?;
+                    Ok(exit_status(&report))
                 }
                 Backend::Sim => {
                     let (report, summary) =
                         run_against_sim(&mut runner, &cfg, &object, seed, record.as_deref(), &stop)?;
                     let extra = [("backend", json!("sim")), ("object", json!(object.to_string()))];
-                    print_report(loop_args.json, &extra, &cfg, &report, Some(&summary));
+                    print_report(loop_args.json, &extra, &cfg, &report, Some(&summary))?;
+                    Ok(exit_status(&report))
                 }
             }
-            Ok(ExitCode::SUCCESS)
         }
-        Command::Emulate { iface, model, fd, object, seed, idle_timeout_s, command_timeout_s, json } => {
+        Command::Emulate {
+            iface,
+            model,
+            fd,
+            object,
+            seed,
+            idle_timeout_s,
+            command_timeout_s,
+            restart_node,
+            restart_after_commands,
+            json,
+        } => {
+            let restart = match restart_node {
+                Some(node) => {
+                    anyhow::ensure!(
+                        restart_after_commands > 0,
+                        "--restart-after-commands must be at least 1"
+                    );
+                    let node = FingerId::new(node).with_context(|| format!("--restart-node {node}"))?;
+                    Some(RestartPlan { node, after_enabled_commands: restart_after_commands })
+                }
+                None => None,
+            };
             let idle = positive_seconds("idle-timeout-s", idle_timeout_s, false)?.unwrap_or(Duration::MAX);
             let command_timeout =
                 positive_seconds("command-timeout-s", command_timeout_s, false)?.unwrap_or(Duration::MAX);
@@ -427,11 +533,11 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let stop = stop_on_signal()?;
             anyhow::ensure!(!(fd && model == NodeModel::Lag), "--fd needs --model sim");
             let opening = || format!("opening CAN interface {iface}");
+            let limits = ServeLimits { max_commands: u64::MAX, idle_timeout: idle, command_timeout, restart };
             let summary = match model {
                 NodeModel::Lag => {
                     let mut transport =
                         SocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
-                    let limits = ServeLimits { max_commands: u64::MAX, idle_timeout: idle, command_timeout };
                     let stats = serve(&mut transport, &mut JointControllerEmulator::new(0.2), limits, &stop)?;
                     let bus = transport.bus_counts();
                     json!({
@@ -442,21 +548,22 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                         "ignored": stats.ignored,
                         "heartbeats_sent": stats.heartbeats_sent,
                         "command_timeouts": stats.command_timeouts,
+                        "restarts": stats.restarts,
                     })
                 }
-                NodeModel::Sim => emulate_sim(&iface, fd, &object, seed, idle, command_timeout, &stop)?,
+                NodeModel::Sim => emulate_sim(&iface, fd, &object, seed, limits, &stop)?,
             };
             let timeouts = summary["command_timeouts"].as_u64().unwrap_or(0);
             if timeouts > 0 {
-                eprintln!(
+                note!(
                     "vge-bridge: {timeouts} finger node(s) faulted with command_timeout: the bridge stopped sending \
                      commands while they were enabled; they held their positions"
                 );
             }
             if json {
-                println!("{summary}");
+                out!("{summary}");
             } else {
-                eprintln!("vge-bridge: emulator summary: {summary}");
+                note!("vge-bridge: emulator summary: {summary}");
             }
             Ok(if timeouts > 0 { ExitCode::from(EXIT_NODE_FAULT) } else { ExitCode::SUCCESS })
         }
@@ -464,8 +571,10 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             let loop_args = LoopArgs {
                 rate: Some(rate),
                 duration,
+                steps: None,
                 max_delta_rad: 0.05,
                 watchdog_periods: 50,
+                heartbeat_timeout_s: 0.5,
                 json,
                 realtime,
             };
@@ -480,6 +589,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     max_commands: u64::MAX,
                     idle_timeout: Duration::from_secs(1),
                     command_timeout: Duration::from_secs(1),
+                    restart: None,
                 };
                 serve(&mut end, &mut JointControllerEmulator::new(0.5), limits, &nodes_flag)
             });
@@ -511,10 +621,25 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 &cfg,
                 &report,
                 None,
-            );
+            )?;
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// `run`'s exit status: 0 for a normal end, the stop reason's own status for a safety halt
+/// (named on stderr too, whatever --json says).
+fn exit_status(report: &LoopReport) -> ExitCode {
+    let reason: StopReason = report.stop_reason;
+    if reason.is_safety_halt() {
+        note!(
+            "vge-bridge: safety halt ({}): {}; held, then disabled the fingers; exit status {}",
+            reason.as_str(),
+            report.stop_detail,
+            reason.exit_code()
+        );
+    }
+    ExitCode::from(reason.exit_code())
 }
 
 /// The bench's default policy: no change.
@@ -552,14 +677,17 @@ fn emulate_sim(
     fd: bool,
     object: &ObjectShape,
     seed: u64,
-    idle: Duration,
-    command_timeout: Duration,
+    limits: ServeLimits,
     stop: &AtomicBool,
 ) -> anyhow::Result<Value> {
     let mut config = EnvConfig::default();
     config.object.shape = *object;
-    let mut hand = SimHand::new(config, seed, command_timeout)?;
-    eprintln!(
+    let mut hand = SimHand::new(config, seed, limits.command_timeout)?;
+    let idle = limits.idle_timeout;
+    if let Some(plan) = limits.restart {
+        hand.nodes.plan_restart(plan);
+    }
+    note!(
         "vge-bridge: emulating the hand holding a {object} on {iface}{}",
         if fd { " (CAN FD)" } else { "" }
     );
@@ -581,6 +709,7 @@ fn emulate_sim(
         "bad_frames": stats.bad_frames,
         "heartbeats_sent": stats.heartbeats_sent,
         "command_timeouts": stats.command_timeouts,
+        "restarts": stats.restarts,
         "sim_steps": s.steps,
         "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
         "contact_switches": s.contact_switches,
@@ -595,8 +724,7 @@ fn emulate_sim(
     _: bool,
     _: &ObjectArg,
     _: u64,
-    _: Duration,
-    _: Duration,
+    _: ServeLimits,
     _: &AtomicBool,
 ) -> anyhow::Result<Value> {
     Err(no_sim("--model sim (the default)"))
@@ -646,7 +774,7 @@ fn run_against_sim<P: PolicyRunner>(
     let (summary, recorded) =
         nodes.join().map_err(|_| anyhow::anyhow!("the simulated hand's thread panicked"))??;
     if let (Some(rrd), Some(steps)) = (record, recorded) {
-        eprintln!(
+        note!(
             "vge-bridge: {steps} sim steps recorded in {}; open it with `rerun {}`",
             rrd.display(),
             rrd.display()

@@ -8,16 +8,28 @@
 //!   latches fault `command_timeout` (a fault frame, the status fault bit, heartbeat state
 //!   fault) and holds: it applies no targets until a disabled command (the host's start-up
 //!   query) clears the fault.
+//! - **boot-up:** a node's first heartbeat says state booting with counter 0 (its boot-up
+//!   message); its next ones count on from 1. A node restarted mid-run
+//!   ([`NodeSupervisor::restart_node`], or planned with [`RestartPlan`]) does the same:
+//!   disabled, its fault cleared, its counter from 0, as a joint controller that rebooted.
 
 use std::time::{Duration, Instant};
 
 use crate::heartbeat::HeartbeatClock;
 use crate::protocol::{
-    Fault, FaultCode, FingerId, Heartbeat, JointCommand, Message, NUM_FINGERS, NodeState, ProtocolError,
-    RawFrame, STATUS_ENABLED, STATUS_FAULT,
+    Fault, FaultCode, FingerId, HEARTBEAT_PERIOD_MS, Heartbeat, JointCommand, Message, NUM_FINGERS,
+    NodeState, ProtocolError, RawFrame, STATUS_ENABLED, STATUS_FAULT,
 };
 
 const FINGERS: usize = NUM_FINGERS as usize;
+
+/// A node restart to emulate: `node` reboots right after it applied its
+/// `after_enabled_commands`-th enabled command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RestartPlan {
+    pub node: FingerId,
+    pub after_enabled_commands: u64,
+}
 
 /// The protocol duties of the five finger nodes.
 #[derive(Debug, Clone)]
@@ -27,14 +39,23 @@ pub struct NodeSupervisor {
     fault: [Option<FaultCode>; FINGERS],
     last_command: [Option<Instant>; FINGERS],
     last_seq: [u8; FINGERS],
+    /// The heartbeat schedule; each node counts its own beats.
     heartbeats: HeartbeatClock,
+    counters: [u8; FINGERS],
+    /// Nodes whose boot-up heartbeat is due at the next poll.
+    booting: [bool; FINGERS],
+    enabled_commands: [u64; FINGERS],
+    restart_plan: Option<RestartPlan>,
     /// Command-timeout faults raised so far (one per finger and occurrence).
     pub command_timeouts: u64,
     pub heartbeats_sent: u64,
+    /// Node restarts emulated so far.
+    pub restarts: u64,
 }
 
 impl NodeSupervisor {
-    /// Nodes that are booted, disabled, with the first heartbeat due at `now`.
+    /// Nodes that boot at `now`: disabled, their boot-up heartbeats due at once, the regular
+    /// ones a period later.
     pub fn new(command_timeout: Duration, now: Instant) -> Self {
         Self {
             command_timeout,
@@ -42,10 +63,32 @@ impl NodeSupervisor {
             fault: [None; FINGERS],
             last_command: [None; FINGERS],
             last_seq: [0; FINGERS],
-            heartbeats: HeartbeatClock::new(now),
+            heartbeats: HeartbeatClock::new(now + Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS))),
+            counters: [0; FINGERS],
+            booting: [true; FINGERS],
+            enabled_commands: [0; FINGERS],
+            restart_plan: None,
             command_timeouts: 0,
             heartbeats_sent: 0,
+            restarts: 0,
         }
+    }
+
+    /// Restarts `plan.node` once it has applied `plan.after_enabled_commands` enabled commands.
+    pub fn plan_restart(&mut self, plan: RestartPlan) {
+        self.restart_plan = Some(plan);
+    }
+
+    /// Reboots `finger`'s node: it forgets its enable state, fault and commands, and sends its
+    /// boot-up heartbeat at the next poll, counting from 0 again.
+    pub fn restart_node(&mut self, finger: FingerId) {
+        let f = usize::from(finger.index());
+        self.enabled[f] = false;
+        self.fault[f] = None;
+        self.last_command[f] = None;
+        self.counters[f] = 0;
+        self.booting[f] = true;
+        self.restarts += 1;
     }
 
     /// Takes in a command for its finger at `now`; returns whether the node applies its
@@ -64,6 +107,15 @@ impl NodeSupervisor {
             return false;
         }
         self.enabled[f] = true;
+        self.enabled_commands[f] += 1;
+        if let Some(plan) = self.restart_plan
+            && plan.node == cmd.finger
+            && plan.after_enabled_commands == self.enabled_commands[f]
+        {
+            // The command was applied; the node reboots right after.
+            self.restart_plan = None;
+            self.restart_node(cmd.finger);
+        }
         true
     }
 
@@ -105,24 +157,32 @@ impl NodeSupervisor {
                 frames.push(Message::Fault(fault).encode()?);
             }
         }
-        if let Some(counter) = self.heartbeats.tick(now) {
-            for finger in FingerId::all() {
-                let f = usize::from(finger.index());
-                let state = match (self.fault[f], self.enabled[f]) {
-                    (Some(_), _) => NodeState::Fault,
-                    (None, true) => NodeState::Enabled,
-                    (None, false) => NodeState::Ready,
-                };
-                let beat = Heartbeat { node: finger.index(), state, counter };
-                frames.push(Message::Heartbeat(beat).encode()?);
-                self.heartbeats_sent += 1;
+        let regular = self.heartbeats.tick(now).is_some();
+        for finger in FingerId::all() {
+            let f = usize::from(finger.index());
+            let state = match (self.booting[f], self.fault[f], self.enabled[f]) {
+                (true, _, _) => NodeState::Booting,
+                (false, Some(_), _) => NodeState::Fault,
+                (false, None, true) => NodeState::Enabled,
+                (false, None, false) => NodeState::Ready,
+            };
+            if !(regular || self.booting[f]) {
+                continue;
             }
+            self.booting[f] = false;
+            let beat = Heartbeat { node: finger.index(), state, counter: self.counters[f] };
+            frames.push(Message::Heartbeat(beat).encode()?);
+            self.counters[f] = self.counters[f].wrapping_add(1);
+            self.heartbeats_sent += 1;
         }
         Ok(frames)
     }
 
     /// How long until [`Self::poll`] has something to send, at most `cap` (a receive timeout).
     pub fn until_due(&self, now: Instant, cap: Duration) -> Duration {
+        if self.booting.iter().any(|&b| b) {
+            return Duration::ZERO;
+        }
         self.heartbeats.until_due(now, cap)
     }
 }
@@ -146,10 +206,13 @@ mod tests {
         let mut s = NodeSupervisor::new(Duration::from_millis(500), t0);
         let first = decode(&s.poll(t0).expect("frames"));
         assert_eq!(first.len(), 5);
-        assert!(matches!(
-            first[0],
-            Message::Heartbeat(Heartbeat { node: 0, state: NodeState::Ready, counter: 0 })
-        ));
+        assert!(
+            matches!(
+                first[0],
+                Message::Heartbeat(Heartbeat { node: 0, state: NodeState::Booting, counter: 0 })
+            ),
+            "the boot-up message"
+        );
         assert!(s.poll(t0 + Duration::from_millis(50)).expect("frames").is_empty(), "not due yet");
         assert!(s.on_command(&cmd(2, true, 1), t0 + Duration::from_millis(60)));
         let second = decode(&s.poll(t0 + Duration::from_millis(100)).expect("frames"));
@@ -157,10 +220,55 @@ mod tests {
             second[2],
             Message::Heartbeat(Heartbeat { state: NodeState::Enabled, counter: 1, .. })
         ));
-        assert!(matches!(second[1], Message::Heartbeat(Heartbeat { state: NodeState::Ready, .. })));
+        assert!(matches!(
+            second[1],
+            Message::Heartbeat(Heartbeat { state: NodeState::Ready, counter: 1, .. })
+        ));
         assert_eq!(s.status(FingerId::new(2).expect("finger")), STATUS_ENABLED);
         s.on_command(&cmd(2, false, 2), t0 + Duration::from_millis(110));
         assert_eq!(s.status(FingerId::new(2).expect("finger")), 0, "a disabled command disables");
+    }
+
+    #[test]
+    fn a_planned_restart_reboots_one_node_after_its_nth_enabled_command() {
+        let t0 = Instant::now();
+        let mut s = NodeSupervisor::new(Duration::from_millis(500), t0);
+        let node = FingerId::new(2).expect("finger");
+        s.plan_restart(RestartPlan { node, after_enabled_commands: 3 });
+        s.poll(t0).expect("boot-up messages");
+        let mut t = t0;
+        for seq in 1..=3 {
+            t += Duration::from_millis(100);
+            s.on_command(&cmd(1, true, seq), t);
+            assert!(s.on_command(&cmd(2, true, seq), t), "the third command is applied too");
+            assert_eq!(s.restarts, u64::from(seq == 3));
+            let beats = decode(&s.poll(t).expect("frames"));
+            if seq < 3 {
+                assert_eq!(s.status(node), STATUS_ENABLED);
+                assert!(matches!(beats[2], Message::Heartbeat(Heartbeat { state: NodeState::Enabled, .. })));
+            } else {
+                assert_eq!(s.status(node), 0, "the rebooted node is disabled");
+                // Node 2's boot-up message (counter from 0), the others' regular beats.
+                assert!(matches!(
+                    beats[2],
+                    Message::Heartbeat(Heartbeat { node: 2, state: NodeState::Booting, counter: 0 })
+                ));
+                assert!(matches!(
+                    beats[1],
+                    Message::Heartbeat(Heartbeat { node: 1, state: NodeState::Enabled, counter: 3 })
+                ));
+            }
+        }
+        // The next beat counts on from 1, ready; the plan does not fire again.
+        let beats = decode(&s.poll(t + Duration::from_millis(100)).expect("frames"));
+        assert!(matches!(
+            beats[2],
+            Message::Heartbeat(Heartbeat { state: NodeState::Ready, counter: 1, .. })
+        ));
+        s.on_command(&cmd(2, true, 4), t + Duration::from_millis(110));
+        s.on_command(&cmd(2, true, 5), t + Duration::from_millis(120));
+        s.on_command(&cmd(2, true, 6), t + Duration::from_millis(130));
+        assert_eq!(s.restarts, 1);
     }
 
     #[test]

@@ -46,6 +46,8 @@ pub struct ServeStats {
     /// Command-timeout faults the nodes raised.
     pub command_timeouts: u64,
     pub heartbeats_sent: u64,
+    /// Node restarts emulated (`hand.nodes.plan_restart`).
+    pub restarts: u64,
 }
 
 /// Answers the bridge on `transport` until `stop` is raised or nothing arrives for
@@ -86,6 +88,7 @@ pub fn serve<T: Transport>(
     }
     stats.command_timeouts = hand.nodes.command_timeouts;
     stats.heartbeats_sent = hand.nodes.heartbeats_sent;
+    stats.restarts = hand.nodes.restarts;
     Ok(stats)
 }
 

@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use vge_bridge::control_loop::{LoopConfig, PolicyRunner, StopReason, run};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
 use vge_bridge::hand_file;
-use vge_bridge::protocol::{FingerId, Heartbeat, JointPosition, Message, RawFrame};
+use vge_bridge::node_supervisor::RestartPlan;
+use vge_bridge::protocol::{FingerId, Heartbeat, JointPosition, Message, NodeState, RawFrame};
 use vge_bridge::transport::{BusCounts, ErrorClass, InProcessTransport, Received, Transport, TransportError};
 use vge_sim::kinematics::JointLimit;
 use vge_sim::observation::{OBS_DIM, OBS_Q_TARGET};
@@ -48,6 +49,7 @@ fn spawn_emulator<T: Transport + 'static>(
             max_commands,
             idle_timeout: Duration::from_millis(300),
             command_timeout: Duration::from_secs(1),
+            restart: None,
         };
         serve(&mut end, &mut emulator, limits, &AtomicBool::new(false)).expect("emulator runs")
     })
@@ -320,6 +322,50 @@ fn stale_frames_are_dropped_and_counted_and_a_short_burst_only_holds() {
         report.final_targets_rad.iter().all(|q| q.abs() < 1e-6),
         "the stale 0.4 rad never entered the state"
     );
+}
+
+#[test]
+fn a_node_that_restarts_mid_run_halts_the_loop_with_node_restarted() {
+    // Node 3 reboots after its 10th enabled command: its boot-up heartbeat (state booting,
+    // counter 0) goes out, then it counts from 1. The second time the boot-up is lost on the
+    // way, and its counter starting again gives it away.
+    for (boot_up_lost, sign) in
+        [(false, "boot-up heartbeat (state booting)"), (true, "heartbeat counter went from")]
+    {
+        let (mut bridge, nodes) = InProcessTransport::pair();
+        let mut boot_ups = 0;
+        let nodes = tampered(nodes, move |_, frame| match decode(&frame) {
+            Message::Heartbeat(h) if h.node == 3 && h.state == NodeState::Booting => {
+                boot_ups += 1;
+                // The first boot-up is the node's power-up, before the bridge took over.
+                if boot_up_lost && boot_ups > 1 { vec![] } else { vec![Received::Frame(frame)] }
+            }
+            _ => vec![Received::Frame(frame)],
+        });
+        let emulator = thread::spawn(move || {
+            let mut end = nodes;
+            let node = FingerId::new(3).expect("finger");
+            let limits = ServeLimits {
+                max_commands: u64::MAX,
+                idle_timeout: Duration::from_millis(300),
+                command_timeout: Duration::from_secs(1),
+                restart: Some(RestartPlan { node, after_enabled_commands: 10 }),
+            };
+            serve(&mut end, &mut JointControllerEmulator::new(1.0), limits, &AtomicBool::new(false))
+                .expect("emulator runs")
+        });
+        let cfg = config(20.0, 5.0);
+        let report = run(&mut bridge, &mut hold_policy(), &cfg, &AtomicBool::new(false)).expect("loop runs");
+        drop(bridge);
+        let stats = emulator.join().expect("emulator thread");
+        assert_eq!(stats.restarts, 1);
+        assert_eq!(report.stop_reason, StopReason::NodeRestarted, "{report:?}");
+        assert!(report.stop_detail.starts_with("node 3 (ring) restarted: "), "{}", report.stop_detail);
+        assert!(report.stop_detail.contains(sign), "{}", report.stop_detail);
+        // It halted once the restart was on the link: before the watchdog could have.
+        let limit = u64::from(cfg.watchdog_periods);
+        assert!((10..=10 + limit).contains(&report.steps), "{} steps", report.steps);
+    }
 }
 
 #[test]

@@ -18,7 +18,10 @@ trap 'rm -rf "$log"' EXIT
   >"$log/emulator.json" 2>"$log/emulator.err" &
 emulator=$!
 sleep 0.5 # the emulator grasps the cube (sim reset) before the first command
-"$bridge" run --policy "$policy" --backend can --iface "$iface" --duration "$duration"
+# A safety halt exits non-zero (its stop reason's status: docs/can-protocol.md): report what the
+# hand did all the same, then pass the status on.
+bridge_status=0
+"$bridge" run --policy "$policy" --backend can --iface "$iface" --duration "$duration" || bridge_status=$?
 if ! wait "$emulator"; then
   cat "$log/emulator.err" >&2
   exit 1
@@ -28,3 +31,7 @@ rotation=$(field rotation_rad)
 printf 'emulated hand on %s: the cube turned %s rad about z (%s turns), %s contact switches, dropped: %s, %s sim steps, %s bad frames\n' \
   "$iface" "$rotation" "$(awk -v r="$rotation" 'BEGIN { printf "%.2f", r / 6.283185 }')" \
   "$(field contact_switches)" "$(field terminated)" "$(field sim_steps)" "$(field bad_frames)"
+if [[ $bridge_status != 0 ]]; then
+  echo "bridge-demo: vge-bridge run ended with status $bridge_status (a safety halt: see its summary above)" >&2
+  exit "$bridge_status"
+fi

@@ -76,7 +76,8 @@ fn a_policy_that_overflows_inside_is_refused_by_eval_and_halts_the_bridge() {
         .output()
         .expect("vge-bridge runs");
     let report = String::from_utf8_lossy(&run.stdout);
-    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    // A safety halt: the summary, and policy_failure's exit status (docs/can-protocol.md).
+    assert_eq!(run.status.code(), Some(15), "{}", String::from_utf8_lossy(&run.stderr));
     let json: serde_json::Value = serde_json::from_str(report.trim()).expect("one JSON line");
     assert_eq!(json["stop_reason"], "policy_failure", "{report}");
     assert!(json["stop_detail"].as_str().is_some_and(|d| d.contains("layer 0")), "{report}");

@@ -1,5 +1,8 @@
 //! `vge`: train, evaluate, export and inspect finger-gaiting policies.
 
+mod closed_output;
+
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -16,6 +19,7 @@ use vge_trainer::{bench_update, policy_export};
 /// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
 #[derive(Debug, Parser)]
 #[command(version, about, long_about = None)]
+#[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0.")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -567,6 +571,7 @@ pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
 }
 
 fn main() -> ExitCode {
+    closed_output::end_quietly_when_closed();
     // Before libtorch allocates anything; a refusal only costs speed (heap.rs).
     if !vge_trainer::heap::keep_freed_memory() {
         eprintln!("vge: note: glibc heap settings not applied; updates may run slower");
@@ -574,7 +579,8 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("vge: {e:#}");
+            // Not eprintln!: with stderr closed the failure must still exit 1, not 0.
+            let _ = writeln!(std::io::stderr(), "vge: {e:#}");
             ExitCode::FAILURE
         }
     }

@@ -57,6 +57,27 @@ pub const fn storage_len(dims: &[usize]) -> usize {
     total.saturating_add(obs.saturating_mul(2)).saturating_add(act.saturating_mul(2))
 }
 
+/// Bytes a policy file may hold besides its parameter arrays: its names and provenance
+/// strings, and the header, trailer, varints and padding around its fields. Generous (the
+/// hand's names take well under 1 KiB); it bounds [`max_file_len`].
+pub const MAX_TEXT_LEN: usize = 1 << 20;
+
+/// The longest policy file a `Policy<MAX_LAYERS, MAX_WIDTH>` can load: every layer
+/// `max_width` square with its bias (and `i8` row scales), the observation and action vectors
+/// `max_width` long, all as `f32` (the widest weight type) at [`TENSOR_ALIGN`] padding, plus
+/// [`MAX_TEXT_LEN`]. File readers compare a file's length with it before reading it, so that
+/// a huge file (a 2 GB sparse file, say) is refused without reading or allocating it.
+/// Saturates on overflow.
+pub const fn max_file_len(max_layers: usize, max_width: usize) -> usize {
+    let per_layer = max_width.saturating_mul(max_width).saturating_add(max_width.saturating_mul(2));
+    let floats = max_layers.saturating_mul(per_layer).saturating_add(max_width.saturating_mul(4));
+    let arrays = max_layers.saturating_mul(3).saturating_add(4);
+    floats.saturating_mul(4).saturating_add(arrays.saturating_mul(TENSOR_ALIGN)).saturating_add(MAX_TEXT_LEN)
+}
+
+/// [`max_file_len`] of a [`HandPolicy`] (about 2 MiB).
+pub const HAND_MAX_FILE_LEN: usize = max_file_len(HAND_MAX_LAYERS, HAND_MAX_WIDTH);
+
 /// Who made the policy, from what.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Provenance<'a> {

@@ -1,0 +1,188 @@
+//! `vge` treats a closed stdout or stderr as the end of its output: no panic, exit status 0,
+//! as `vge inspect policies/cube.vgep | head -1` needs under `set -o pipefail`.
+//!
+//! Each printing subcommand runs with its stdout (or stderr) a pipe whose reader was closed
+//! before it started, so its first write meets EPIPE every time; the same command with the
+//! pipe open shows it does print there (a command that printed nothing would pass vacuously).
+//! The episode counts are tiny: this is about the output, not the work.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+const POLICY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
+/// Runs per command with the reader gone: a race between the reader's exit and the writes
+/// cannot hide (the reader is closed before the start), and runs that spawn threads vary.
+const TRIES: usize = 2;
+
+fn vge() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_vge"))
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stream {
+    Stdout,
+    Stderr,
+}
+
+/// Runs `vge args` with `closed` a pipe without a reader and the other stream captured;
+/// returns the exit status and what the other stream got.
+fn run_closed(args: &[String], closed: Stream) -> (Option<i32>, String) {
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let mut cmd = vge();
+    cmd.args(args).stdin(Stdio::null());
+    match closed {
+        Stream::Stdout => cmd.stdout(writer).stderr(Stdio::piped()),
+        Stream::Stderr => cmd.stderr(writer).stdout(Stdio::piped()),
+    };
+    let mut child = cmd.spawn().expect("vge starts");
+    drop(cmd); // and with it this process's copy of the writer
+    let mut other = String::new();
+    let pipe: Option<&mut dyn Read> = match closed {
+        Stream::Stdout => child.stderr.as_mut().map(|p| p as &mut dyn Read),
+        Stream::Stderr => child.stdout.as_mut().map(|p| p as &mut dyn Read),
+    };
+    pipe.expect("captured").read_to_string(&mut other).expect("read the other stream");
+    let status = child.wait().expect("vge exits");
+    (status.code(), other)
+}
+
+/// `vge args` with both streams open: its status and (stdout, stderr).
+fn run_open(args: &[String]) -> (Option<i32>, String, String) {
+    let out = vge().args(args).stdin(Stdio::null()).output().expect("vge runs");
+    let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+    (out.status.code(), text(&out.stdout), text(&out.stderr))
+}
+
+/// Asserts that `args` prints on `closed` when it is open, and exits 0 without a panic when
+/// that stream's reader is gone.
+fn ends_quietly(args: &[&str], closed: Stream) {
+    let args: Vec<String> = args.iter().map(|s| (*s).to_owned()).collect();
+    let (code, stdout, stderr) = run_open(&args);
+    assert_eq!(code, Some(0), "vge {args:?} fails with its output open: {stderr}");
+    let printed = if closed == Stream::Stdout { &stdout } else { &stderr };
+    assert!(!printed.is_empty(), "vge {args:?} prints nothing on {closed:?}: the test would be vacuous");
+    for _ in 0..TRIES {
+        closed_ends_quietly(&args, closed);
+    }
+}
+
+/// One run of `args` with `closed`'s reader gone: exit 0, no panic.
+fn closed_ends_quietly(args: &[String], closed: Stream) {
+    let (code, other) = run_closed(args, closed);
+    assert!(!other.contains("panicked"), "vge {args:?} with {closed:?} closed panicked: {other}");
+    assert_eq!(code, Some(0), "vge {args:?} with {closed:?} closed: {other}");
+}
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("vge-closed-pipe-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        Self(dir)
+    }
+    fn path(&self, file: &str) -> String {
+        self.0.join(file).to_str().expect("utf-8 temp path").to_owned()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The subcommands `vge help` lists (and, for `bench`, its own), so that a new one is covered
+/// at least for its --help.
+fn subcommands(prefix: &[&str]) -> Vec<String> {
+    let mut args: Vec<&str> = prefix.to_vec();
+    args.push("--help");
+    let out = vge().args(&args).output().expect("vge --help");
+    let help = String::from_utf8_lossy(&out.stdout).into_owned();
+    help.lines()
+        .skip_while(|l| !l.starts_with("Commands:"))
+        .skip(1)
+        .take_while(|l| l.starts_with("  "))
+        // A command's line; a wrapped description would be indented further.
+        .filter(|l| !l.starts_with("   "))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|name| *name != "help")
+        .map(str::to_owned)
+        .collect()
+}
+
+#[test]
+fn help_and_version_of_every_subcommand_end_quietly_on_a_closed_stdout() {
+    ends_quietly(&["--help"], Stream::Stdout);
+    ends_quietly(&["--version"], Stream::Stdout);
+    let top = subcommands(&[]);
+    assert!(top.iter().any(|c| c == "inspect") && top.iter().any(|c| c == "bench"), "{top:?}");
+    // Help is printed by clap before anything runs (and `subcommands` read it): one closed run
+    // each.
+    for command in &top {
+        closed_ends_quietly(&[command.clone(), "--help".to_owned()], Stream::Stdout);
+    }
+    let bench = subcommands(&["bench"]);
+    assert!(bench.iter().any(|c| c == "runtime"), "{bench:?}");
+    for command in &bench {
+        closed_ends_quietly(&["bench".to_owned(), command.clone(), "--help".to_owned()], Stream::Stdout);
+    }
+}
+
+#[test]
+fn inspect_piped_into_head_succeeds_under_pipefail() {
+    ends_quietly(&["inspect", POLICY], Stream::Stdout);
+    // The demo's own pipeline, as a shell runs it: `head` exits after its line, whenever the
+    // writer gets to its next one.
+    let script = format!("set -o pipefail; '{}' inspect '{POLICY}' | head -1", env!("CARGO_BIN_EXE_vge"));
+    for _ in 0..10 {
+        let out = Command::new("bash").args(["-c", &script]).output().expect("bash runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success() && !stderr.contains("panicked"), "{:?}: {stderr}", out.status);
+        assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 1);
+    }
+}
+
+#[test]
+fn reports_of_eval_controller_and_export_end_quietly_on_a_closed_stdout() {
+    let tiny_eval = ["eval", "--policy", POLICY, "--episodes", "1", "--episode-s", "0.1"];
+    ends_quietly(&tiny_eval, Stream::Stdout);
+    ends_quietly(&[&tiny_eval[..], &["--json"]].concat(), Stream::Stdout);
+    let tiny_controller = ["controller", "--kind", "fg", "--episodes", "1", "--episode-s", "0.1"];
+    ends_quietly(&tiny_controller, Stream::Stdout);
+    ends_quietly(&[&tiny_controller[..], &["--json"]].concat(), Stream::Stdout);
+    let dir = TempDir::new("export");
+    ends_quietly(&["export", "--init", "--out", &dir.path("init.vgep")], Stream::Stdout);
+}
+
+#[test]
+fn benches_end_quietly_on_a_closed_stdout() {
+    for args in [
+        &["bench", "runtime", "--iters", "10"][..],
+        &["bench", "runtime", "--iters", "10", "--json"],
+        &["bench", "sim", "--steps", "5", "--worlds", "1", "--threads", "1"],
+        &["bench", "update", "--updates", "1", "--batch", "8", "--json"],
+    ] {
+        ends_quietly(args, Stream::Stdout);
+    }
+}
+
+#[test]
+fn notes_on_a_closed_stderr_end_quietly_and_an_error_still_fails() {
+    let dir = TempDir::new("stderr");
+    // `--plot` names the gait diagram it wrote on stderr.
+    let png = dir.path("gait.png");
+    ends_quietly(
+        &["eval", "--policy", POLICY, "--episodes", "1", "--episode-s", "0.1", "--plot", &png],
+        Stream::Stderr,
+    );
+    assert!(Path::new(&png).exists(), "the diagram was written before the note");
+    // An error whose message cannot be written is still an error.
+    let missing = dir.path("missing.vgep");
+    for _ in 0..TRIES {
+        let (code, _) = run_closed(&["inspect".to_owned(), missing.clone()], Stream::Stderr);
+        assert_eq!(code, Some(1), "a failure with stderr closed still exits 1");
+    }
+}
