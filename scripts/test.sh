@@ -23,18 +23,20 @@ step "system packages"
 # qemu-system-arm: runs the Cortex-M4F firmware (mps2-an386) in the export tests.
 scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm
 
-step "python tools (cantools, tensorboard, rerun-sdk, mujoco, in .deps/py)"
+step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, in .deps/py)"
 # export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
 # imported actors) in onnxruntime.
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
 # event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
 # the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py); MuJoCo steps the
-# model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs).
-if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, onnx, onnxruntime; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
+# model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs). rliable computes the
+# aggregates of vge_trainer::stats for comparison (trainer/tests/stats_vs_rliable.rs; its arch 7
+# needs pandas < 3).
+if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, rliable.library, onnx, onnxruntime; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 onnx onnxruntime
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 rliable "pandas<3" onnx onnxruntime
 fi
-.deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__)'
+.deps/py/bin/python -c 'import importlib.metadata, cantools, tensorboard, rerun, mujoco, rliable.library; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__, "rliable", importlib.metadata.version("rliable"))'
 
 step "rust components and targets"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done

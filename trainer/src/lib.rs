@@ -5,6 +5,7 @@
 pub mod behaviour;
 pub mod bench_update;
 pub mod checkpoint;
+pub mod compare;
 pub mod config;
 pub mod eval;
 pub mod gait_diagram;
@@ -17,6 +18,8 @@ pub mod policy_export;
 pub mod replay;
 pub mod robustness;
 pub mod sac;
+pub mod score;
+pub mod stats;
 pub mod sweep;
 pub mod table1;
 pub mod tensorboard;

@@ -134,6 +134,81 @@ enum Command {
         #[arg(long, value_name = "DIR")]
         table1: Option<PathBuf>,
     },
+    /// Score finished runs on many held-out episodes and write DIR/score.json (training
+    /// writes it at its end too): the run's selected policy (its own model selection on
+    /// validation grasps, policy-best.vgep), its final policy (policy.vgep) and, where the
+    /// last 3 periodic snapshots are kept, their mean, all on the same episodes.
+    ///
+    /// The episodes: --episodes (default 100) of the run's success test (30 s, grasps
+    /// randomised by 0.02 rad in every stored config; no training disturbances) from env
+    /// seeds --seed + k, the same for every run and apart from the validation and test
+    /// episodes training drew. An episode succeeds when the object turns >= 2 pi about z
+    /// without a drop. score.json: {"episodes", "seed", "selected", "final",
+    /// "last_snapshots"}, each policy's success_rate, mean_return, drop_rate,
+    /// mean_rotation_rad, its file, step and CRC-32 (docs/scoring.md).
+    ///
+    /// A run already scored with the same episodes, seed, definition and policy files is
+    /// skipped (--force scores it again). An unfinished run (no final-eval.json) is refused
+    /// and nothing is written; a missing, damaged or other-layout policy file fails naming
+    /// the file. Runs are scored one after another, their episodes side by side on
+    /// --threads threads (default: RAYON_NUM_THREADS, else all cores).
+    ///
+    /// Examples:
+    ///   vge score docs/results/table1/cube-fg-fge/seed-*
+    ///   vge score --threads 1 --episodes 200 runs/fg/seed-0
+    #[command(verbatim_doc_comment)]
+    Score {
+        /// Finished run folders (each with config.toml, final-eval.json, policy.vgep).
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Held-out episodes per policy.
+        #[arg(long, default_value_t = vge_trainer::score::DEFAULT_EPISODES)]
+        episodes: usize,
+        /// Env seed of the first held-out episode (episode k: seed + k).
+        #[arg(long, default_value_t = vge_trainer::score::HELD_OUT_SEED)]
+        seed: u64,
+        /// Score again runs whose score.json already holds this score.
+        #[arg(long)]
+        force: bool,
+        /// Threads the episodes run on (default: RAYON_NUM_THREADS, else all cores).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+        threads: Option<u32>,
+    },
+    /// Compare groups of scored runs the way the field reports them (rliable's statistics):
+    /// per group the IQM and mean of the runs' held-out success (score.json) with 95%
+    /// stratified bootstrap intervals, the probability that a run of one group beats a run
+    /// of another with its interval, performance profiles and IQM learning curves.
+    ///
+    /// Each group is NAME=DIR,DIR,... (run folders, or folders with runs below them). Every
+    /// run must have its score.json (`vge score`). Writes OUT/compare.csv (group, policy,
+    /// runs, iqm, iqm_ci_low, iqm_ci_high, mean, mean_ci_low, mean_ci_high; for the
+    /// selected, final and last-snapshot policies), OUT/compare.md, OUT/improvement.csv
+    /// (a, b, prob_improvement, ci_low, ci_high; selected policy), OUT/aggregates.png,
+    /// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
+    /// env steps, with 95% bands). Definitions: docs/scoring.md.
+    ///
+    /// Example:
+    ///   vge compare fge=docs/results/table1/cube-fg-fge vge=docs/results/cube-fg-vge-seeds
+    ///       --out cmp/ --pairs vge:fge
+    #[command(verbatim_doc_comment)]
+    Compare {
+        /// Groups: NAME=DIR,DIR,...
+        #[arg(required = true, value_parser = vge_trainer::compare::parse_group)]
+        groups: Vec<vge_trainer::compare::GroupSpec>,
+        /// Output folder (created).
+        #[arg(long)]
+        out: PathBuf,
+        /// Pairs A:B whose probability of improvement P(A > B) to report (default: every
+        /// ordered pair of groups).
+        #[arg(long, value_delimiter = ',', value_parser = vge_trainer::compare::parse_pair)]
+        pairs: Vec<(String, String)>,
+        /// Seed of the bootstrap resampling.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Bootstrap resamples per interval (at least 2000).
+        #[arg(long, default_value_t = vge_trainer::stats::RESAMPLES)]
+        resamples: usize,
+    },
     /// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
     /// return, rotation, contact switches, drops and success rate.
     ///
@@ -604,7 +679,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sweep(args) => sweep(args),
         Command::Plot { runs, table1: Some(dir), .. } => {
             let written = vge_trainer::table1::write(&runs, &dir)?;
-            print!("{}", vge_trainer::table1::to_markdown(&written.rows));
+            print!("{}", vge_trainer::table1::to_markdown_with(&written.rows, &written.improvements));
             for d in &written.skipped {
                 eprintln!("not in Table I (not the cube alone, or no controller): {}", d.display());
             }
@@ -627,6 +702,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 std::fs::write(&path, vge_trainer::plot::success_csv(&curves))
                     .with_context(|| format!("writing {}", path.display()))?;
                 eprintln!("wrote {}", path.display());
+            }
+            Ok(())
+        }
+        Command::Score { runs, episodes, seed, force, threads } => {
+            score(&runs, episodes, seed, force, threads)
+        }
+        Command::Compare { groups, out, pairs, seed, resamples } => {
+            let bootstrap = vge_trainer::stats::Bootstrap { resamples, ..Default::default() };
+            let pairs = (!pairs.is_empty()).then_some(pairs.as_slice());
+            let written = vge_trainer::compare::write(&groups, pairs, &out, seed, &bootstrap)?;
+            print!("{}", std::fs::read_to_string(out.join("compare.md")).unwrap_or_default());
+            for f in &written.files {
+                eprintln!("wrote {}", f.display());
             }
             Ok(())
         }
@@ -796,7 +884,13 @@ fn per_object_path(path: &Path, object: ObjectShape) -> PathBuf {
 
 /// `vge score`: every run in turn, its episodes on `threads` threads, a progress line per
 /// batch of episodes.
-fn score(runs: &[PathBuf], episodes: usize, seed: u64, force: bool, threads: Option<u32>) -> anyhow::Result<()> {
+fn score(
+    runs: &[PathBuf],
+    episodes: usize,
+    seed: u64,
+    force: bool,
+    threads: Option<u32>,
+) -> anyhow::Result<()> {
     use vge_trainer::score::{ScoreOptions, ScoreOutcome, score_run};
     let options = ScoreOptions { episodes, seed, force };
     let mut pool = rayon::ThreadPoolBuilder::new();
@@ -832,8 +926,10 @@ fn score(runs: &[PathBuf], episodes: usize, seed: u64, force: bool, threads: Opt
                     ScoreOutcome::Scored(s) => ("scored", s),
                     ScoreOutcome::Skipped(s) => ("already scored, skipped", s),
                 };
-                let selected = s.selected.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
-                let last = s.last_snapshots.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                let selected =
+                    s.selected.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                let last =
+                    s.last_snapshots.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
                 println!(
                     "{}: {verb}: success on {} held-out episodes: selected {selected}, final {:.2}, last snapshots {last} ({:.0} s)",
                     dir.display(),

@@ -72,6 +72,9 @@ pub struct RunCurves {
     /// Model selection (`best-eval.json`): the snapshot with the best periodic evaluation and
     /// its success rate on held-out test grasps; None for runs without snapshots.
     pub selected: Option<Selected>,
+    /// The run's score on many held-out episodes (`score.json`, [`crate::score`]); None
+    /// until `vge score` (or the end of training) wrote it.
+    pub score: Option<crate::score::Score>,
 }
 
 /// The fields of `best-eval.json` that the plot reads.
@@ -195,6 +198,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
         wall_s: final_eval.as_ref().map(|f| f.wall_s),
         selected: read_json(&dir.join("best-eval.json"))?,
+        score: read_json(&dir.join(crate::score::SCORE_FILE))?,
     })
 }
 
@@ -236,11 +240,11 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>, P
 
 /// One point of a group's curve: step, mean, min and max over its runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct SpreadPoint {
-    step: f64,
-    mean: f64,
-    min: f64,
-    max: f64,
+pub(crate) struct SpreadPoint {
+    pub(crate) step: f64,
+    pub(crate) mean: f64,
+    pub(crate) min: f64,
+    pub(crate) max: f64,
 }
 
 /// `ys` at `x`, linearly interpolated between the logged steps `xs` (clamped at the ends).
@@ -260,6 +264,20 @@ fn interpolate(xs: &[f64], ys: &[f64], x: f64) -> f64 {
 /// run that ended earliest (runs may log at different intervals: the others are
 /// interpolated).
 fn spread(runs: &[&RunCurves], series: Series) -> Vec<SpreadPoint> {
+    on_common_grid(runs, series)
+        .into_iter()
+        .map(|(x, values)| {
+            let mean = values.iter().sum::<f64>() / values.len() as f64;
+            let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            SpreadPoint { step: x, mean, min, max }
+        })
+        .collect()
+}
+
+/// Every run's value of `series` at the logged steps of the run that ended earliest (the
+/// others interpolated), runs without the series left out: (step, one value per run).
+pub(crate) fn on_common_grid(runs: &[&RunCurves], series: Series) -> Vec<(f64, Vec<f64>)> {
     let usable: Vec<(&[f64], &[f64])> =
         runs.iter().map(|r| series(r)).filter(|(xs, ys)| !xs.is_empty() && !ys.is_empty()).collect();
     let Some(grid) =
@@ -267,13 +285,26 @@ fn spread(runs: &[&RunCurves], series: Series) -> Vec<SpreadPoint> {
     else {
         return Vec::new();
     };
-    grid.iter()
-        .map(|&x| {
-            let values: Vec<f64> = usable.iter().map(|(xs, ys)| interpolate(xs, ys, x)).collect();
-            let mean = values.iter().sum::<f64>() / values.len() as f64;
-            let min = values.iter().copied().fold(f64::INFINITY, f64::min);
-            let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            SpreadPoint { step: x, mean, min, max }
+    grid.iter().map(|&x| (x, usable.iter().map(|(xs, ys)| interpolate(xs, ys, x)).collect())).collect()
+}
+
+/// The IQM over runs of `series` at each step of [`on_common_grid`], as a line over its
+/// stratified bootstrap band ([`crate::stats`]).
+pub(crate) fn iqm_curve<R: rand::Rng + ?Sized>(
+    runs: &[&RunCurves],
+    series: Series,
+    bootstrap: &crate::stats::Bootstrap,
+    rng: &mut R,
+) -> Result<Vec<SpreadPoint>, PlotError> {
+    on_common_grid(runs, series)
+        .into_iter()
+        .map(|(x, values)| {
+            let scores =
+                crate::stats::Scores::one_task(&values).map_err(|e| PlotError::Draw(e.to_string()))?;
+            let e = bootstrap
+                .estimate(&scores, crate::stats::Scores::iqm, rng)
+                .map_err(|e| PlotError::Draw(e.to_string()))?;
+            Ok(SpreadPoint { step: x, mean: e.point, min: e.ci_low, max: e.ci_high })
         })
         .collect()
 }
@@ -305,7 +336,19 @@ pub(crate) type PanelSpec = (&'static str, Series, Option<Series>);
 
 /// A group's curve in one panel: the experiment, its points, and whether it is the panel's
 /// second (dashed) series.
-type Curve<'a> = (&'a str, Vec<SpreadPoint>, bool);
+pub(crate) type Curve<'a> = (&'a str, Vec<SpreadPoint>, bool);
+
+/// What a panel's x axis shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum XAxis {
+    /// Env steps (labelled in thousands or millions).
+    EnvSteps,
+    /// A score threshold tau in [0, 1] (performance profiles).
+    Threshold,
+}
+
+/// One panel of [`draw_panels`]: its title, x axis and curves.
+pub(crate) type Panel<'a> = (&'a str, XAxis, Vec<Curve<'a>>);
 
 type Chart<'a, 'b> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
@@ -350,22 +393,40 @@ pub(crate) fn draw_figure(
     palette: &[&str],
     out: &Path,
 ) -> Result<(), PlotError> {
+    let panels: Vec<Panel> = specs
+        .iter()
+        .map(|&(title, series, second)| {
+            let mut curves: Vec<Curve> =
+                groups.iter().map(|(name, rs)| (*name, spread(rs, series), false)).collect();
+            if let Some(second) = second {
+                curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
+            }
+            (title, XAxis::EnvSteps, curves)
+        })
+        .collect();
+    draw_panels(&panels, groups, caption, palette, out)
+}
+
+/// One row of `panels`, each with its groups' lines over their bands, into a PNG at `out`
+/// ([`draw_figure`]'s layout and colours; `groups` gives the legend's run counts).
+pub(crate) fn draw_panels(
+    panels: &[Panel],
+    groups: &Groups,
+    caption: &str,
+    palette: &[&str],
+    out: &Path,
+) -> Result<(), PlotError> {
     load_font()?;
-    let width = 500 * specs.len().max(1) as u32;
+    let width = 500 * panels.len().max(1) as u32;
     let height = if caption.is_empty() { 450 } else { 490 };
     let mut root = BitMapBackend::new(out, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
     if !caption.is_empty() {
         root = root.titled(caption, ("sans-serif", 20)).map_err(draw_err)?;
     }
-    let panels = root.split_evenly((1, specs.len().max(1)));
-    for (panel, &(title, series, second)) in panels.iter().zip(specs) {
-        let mut curves: Vec<Curve> =
-            groups.iter().map(|(name, rs)| (*name, spread(rs, series), false)).collect();
-        if let Some(second) = second {
-            curves.extend(groups.iter().map(|(name, rs)| (*name, spread(rs, second), true)));
-        }
-        draw_panel(panel, title, &curves, groups, palette)?;
+    let areas = root.split_evenly((1, panels.len().max(1)));
+    for (area, (title, x_axis, curves)) in areas.iter().zip(panels) {
+        draw_panel(area, title, *x_axis, curves, groups, palette)?;
     }
     root.present().map_err(draw_err)
 }
@@ -375,6 +436,7 @@ pub(crate) fn draw_figure(
 fn draw_panel(
     panel: &DrawingArea<BitMapBackend, Shift>,
     title: &str,
+    x_axis: XAxis,
     curves: &[Curve],
     groups: &Groups,
     palette: &[&str],
@@ -395,13 +457,12 @@ fn draw_panel(
     // Steps in thousands or millions: full numbers run into each other on the axis.
     let steps_label =
         |x: &f64| if x_max >= 2e6 { format!("{:.1}M", x / 1e6) } else { format!("{:.0}k", x / 1e3) };
-    chart
-        .configure_mesh()
-        .x_desc("env steps")
-        .x_labels(6)
-        .x_label_formatter(&steps_label)
-        .draw()
-        .map_err(draw_err)?;
+    let threshold_label = |x: &f64| format!("{x:.1}");
+    let (x_desc, x_label): (&str, &dyn Fn(&f64) -> String) = match x_axis {
+        XAxis::EnvSteps => ("env steps", &steps_label),
+        XAxis::Threshold => ("success rate threshold tau", &threshold_label),
+    };
+    chart.configure_mesh().x_desc(x_desc).x_labels(6).x_label_formatter(x_label).draw().map_err(draw_err)?;
     for (name, c, dashed) in curves {
         let place = palette.iter().position(|p| p == name);
         let place = place.or_else(|| groups.keys().position(|k| k == name)).unwrap_or(0);
@@ -425,6 +486,76 @@ fn draw_panel(
         .border_style(BLACK)
         .draw()
         .map_err(draw_err)
+}
+
+/// One group's row of an interval figure: its name, runs, and one estimate per panel.
+pub(crate) type IntervalRow<'a> = (&'a str, usize, Vec<crate::stats::Estimate>);
+
+/// Point estimates with their confidence intervals, one panel per statistic (`titles`), one
+/// row per group, like rliable's interval plots, into a PNG at `out`; the x axis spans
+/// `x_range` (scores).
+pub(crate) fn draw_intervals(
+    rows: &[IntervalRow],
+    titles: &[&str],
+    x_range: (f64, f64),
+    caption: &str,
+    palette: &[&str],
+    out: &Path,
+) -> Result<(), PlotError> {
+    load_font()?;
+    let n = rows.len().max(1);
+    let width = 450 * titles.len().max(1) as u32;
+    let height = 120 + 45 * n as u32;
+    let mut root = BitMapBackend::new(out, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+    if !caption.is_empty() {
+        root = root.titled(caption, ("sans-serif", 18)).map_err(draw_err)?;
+    }
+    let names: Vec<String> = rows.iter().map(|(name, runs, _)| runs_label(name, *runs)).collect();
+    let label = |y: &f64| {
+        let i = y.round();
+        if (y - i).abs() < 1e-6 && i >= 0.0 {
+            names.get(i as usize).cloned().unwrap_or_default()
+        } else {
+            String::new()
+        }
+    };
+    let areas = root.split_evenly((1, titles.len().max(1)));
+    for (k, (area, title)) in areas.iter().zip(titles).enumerate() {
+        let mut chart = ChartBuilder::on(area)
+            .caption(*title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(if k == 0 { 170 } else { 10 })
+            .build_cartesian_2d(x_range.0..x_range.1, -0.5..(n as f64 - 0.5))
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .y_labels(n)
+            .y_label_formatter(&|y| if k == 0 { label(y) } else { String::new() })
+            .disable_y_mesh()
+            .draw()
+            .map_err(draw_err)?;
+        for (i, (name, _, estimates)) in rows.iter().enumerate() {
+            let Some(e) = estimates.get(k) else { continue };
+            let place = palette.iter().position(|p| p == name).unwrap_or(i);
+            let color = Palette99::pick(place).to_rgba();
+            let y = i as f64;
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(e.ci_low, y - 0.3), (e.ci_high, y + 0.3)],
+                    color.mix(0.45).filled(),
+                )))
+                .map_err(draw_err)?;
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(e.point, y - 0.35), (e.point, y + 0.35)],
+                    BLACK.stroke_width(2),
+                )))
+                .map_err(draw_err)?;
+        }
+    }
+    root.present().map_err(draw_err)
 }
 
 /// A legend entry: the group and how many runs it averages.
@@ -588,7 +719,7 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
                 .iter()
                 .map(|(name, rs)| (*name, spread(rs, |r| (&r.eval_step, &r.eval_success)), false))
                 .collect();
-            draw_panel(panel, &format!("the {object}: success"), &drawn, &groups, &palette)?;
+            draw_panel(panel, &format!("the {object}: success"), XAxis::EnvSteps, &drawn, &groups, &palette)?;
         }
         root.present().map_err(draw_err)?;
     }

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 
 use crate::config::Method;
 use crate::controllers::ControllerKind;
-use crate::plot::{Groups, PanelSpec, PlotError, RunCurves, draw_figure, read_run};
+use crate::plot::{Groups, PlotError, RunCurves, read_run};
 
 /// Controllers in the table's order (the paper's: FG, then CS; IGM last).
 pub const CONTROLLERS: [ControllerKind; 3] = [ControllerKind::Fg, ControllerKind::Cs, ControllerKind::Igm];
@@ -79,7 +79,31 @@ pub struct Row {
     /// and how many have one (table1.md only): the verdicts if each run shipped the snapshot
     /// its own periodic tests picked, scored on held-out grasps, instead of its final policy.
     pub selection_learned: (usize, usize),
+    /// Finished runs with a score of their selected policy (`score.json`, [`crate::score`]).
+    pub scored: usize,
+    /// IQM and mean over those runs of the selected policy's success on the held-out
+    /// episodes, with 95% stratified bootstrap intervals ([`crate::stats`]); None where no
+    /// run of the cell is scored.
+    pub selected_success: Option<crate::stats::Aggregates>,
 }
+
+/// Seed of the bootstrap of every interval of the table (each cell's generator also takes
+/// its name: [`crate::compare::rng_for`]).
+pub const BOOTSTRAP_SEED: u64 = 0;
+
+/// The label a cell's intervals are drawn under, and its name in `improvement.csv`.
+#[must_use]
+pub fn cell_label(controller: ControllerKind, method: &str) -> String {
+    format!("{}/{method}", controller.name())
+}
+
+/// The pairs of `improvement.csv` (FG cells): P(a run of A beats a run of B).
+pub const IMPROVEMENT_PAIRS: [(ControllerKind, &str, &str); 4] = [
+    (ControllerKind::Fg, "vge", "rl"),
+    (ControllerKind::Fg, "fge", "rl"),
+    (ControllerKind::Fg, "vge", "fge"),
+    (ControllerKind::Fg, "vge-bc", "vge"),
+];
 
 /// Periodic tests a seed's [`late_success`] averages.
 pub const LATE_TESTS: usize = 3;
@@ -183,8 +207,10 @@ fn std_dev(values: &[f64]) -> Option<f64> {
 
 /// The table's rows: one per (controller, method) with runs, in [`CONTROLLERS`] and
 /// [`Method::ALL`] order, each controller followed by its controller-alone row if given.
-#[must_use]
-pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) -> Vec<Row> {
+pub fn rows(
+    runs: &[RunCurves],
+    alone: &BTreeMap<ControllerKind, AloneFigures>,
+) -> Result<Vec<Row>, PlotError> {
     let mut rows = Vec::new();
     for controller in CONTROLLERS {
         for method in Method::ALL {
@@ -203,6 +229,15 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
             let mut per_seed: Vec<(u64, f64)> =
                 finished.iter().filter_map(|r| r.final_success.map(|s| (r.seed, s))).collect();
             per_seed.sort_by_key(|&(seed, _)| seed);
+            let selected = crate::compare::success_rates(&finished, crate::compare::Judged::Selected);
+            let label = format!("{} selected", cell_label(controller, method.name()));
+            let selected_success = crate::compare::aggregates(
+                &selected,
+                &crate::stats::Bootstrap::default(),
+                BOOTSTRAP_SEED,
+                &label,
+            )
+            .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
             rows.push(Row {
                 controller,
                 method: method.name().to_owned(),
@@ -228,6 +263,8 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                     finished.iter().filter(|r| r.selected.is_some_and(|s| s.learned())).count(),
                     finished.iter().filter(|r| r.selected.is_some()).count(),
                 ),
+                scored: selected.len(),
+                selected_success,
             });
         }
         if let Some(&(success_rate, mean_return, switches)) = alone.get(&controller) {
@@ -247,26 +284,43 @@ pub fn rows(runs: &[RunCurves], alone: &BTreeMap<ControllerKind, AloneFigures>) 
                 passed_then_fell: 0,
                 per_seed: Vec::new(),
                 selection_learned: (0, 0),
+                scored: 0,
+                selected_success: None,
             });
         }
     }
-    rows
+    Ok(rows)
 }
 
 /// `table1.csv`: `controller,method,seeds,learned,success_rate_mean,return_mean,return_std,
-/// env_steps` (return_std empty below two seeds; `seeds` and `learned` empty for the
-/// controller alone; the figures empty for a cell with no finished run).
+/// env_steps,scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high` (return_std
+/// empty below two seeds; `seeds` and `learned` empty for the controller alone; the figures
+/// empty for a cell with no finished run; `scored` counts the finished runs with a score
+/// of their selected policy, and the IQM and mean with their 95% intervals are of those
+/// runs' held-out success, empty where none is scored).
 #[must_use]
 pub fn to_csv(rows: &[Row]) -> String {
-    let mut text =
-        String::from("controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps\n");
+    let mut text = String::from(
+        "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps,\
+         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high\n",
+    );
     for r in rows {
         let alone = r.method == CONTROLLER_ALONE;
         let count = |n: usize| if alone { String::new() } else { n.to_string() };
         // A cell whose runs are all still running has no figures yet (not zeros).
         let figure = |text: String| if !alone && r.seeds == 0 { String::new() } else { text };
+        let aggregates = r.selected_success.map_or_else(
+            || ",,,,,".to_owned(),
+            |a| {
+                let (i, m) = (a.iqm, a.mean);
+                format!(
+                    "{:.4},{:.4},{:.4},{:.4},{:.4},{:.4}",
+                    i.point, i.ci_low, i.ci_high, m.point, m.ci_low, m.ci_high
+                )
+            },
+        );
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{aggregates}\n",
             r.controller.name(),
             r.method,
             count(r.seeds),
@@ -275,7 +329,23 @@ pub fn to_csv(rows: &[Row]) -> String {
             figure(format!("{:.2}", r.return_mean)),
             r.return_std.map_or_else(String::new, |s| format!("{s:.2}")),
             if alone { String::new() } else { figure(r.env_steps.to_string()) },
+            count(r.scored),
         ));
+    }
+    text
+}
+
+/// `table1.md`: [`to_markdown`], then the probability of improvement between cells.
+#[must_use]
+pub fn to_markdown_with(rows: &[Row], improvements: &[crate::compare::Improvement]) -> String {
+    let mut text = to_markdown(rows);
+    if !improvements.is_empty() {
+        text.push_str(
+            "\nProbability of improvement (FG controller; selected policy's held-out success, \
+             `improvement.csv`): the probability that a run of A scores above a run of B (ties half), \
+             with its 95% stratified bootstrap interval.\n\n",
+        );
+        text.push_str(&crate::compare::improvement_markdown(improvements));
     }
     text
 }
@@ -284,7 +354,7 @@ pub fn to_csv(rows: &[Row]) -> String {
 #[must_use]
 pub fn to_markdown(rows: &[Row]) -> String {
     let mut text = String::from(
-        "| controller | method | seeds learned (ours) | final success per seed (seed: rate) | learned by the run's selection | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| controller | method | seeds learned (ours) | final success per seed (seed: rate) | learned by the run's selection | selected policy's held-out success, IQM [95% CI] | its mean [95% CI] | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let paper = paper_learned_share(r.controller, &r.method)
@@ -320,7 +390,7 @@ pub fn to_markdown(rows: &[Row]) -> String {
         if r.method != CONTROLLER_ALONE && r.seeds == 0 {
             // All of the cell's runs are still running: no figures yet.
             text.push_str(&format!(
-                "| {} | {} | {learned} | - | - | {paper} | - | - | - | - | - |\n",
+                "| {} | {} | {learned} | - | - | - | - | {paper} | - | - | - | - | - |\n",
                 r.controller.name().to_uppercase(),
                 r.method
             ));
@@ -333,8 +403,22 @@ pub fn to_markdown(rows: &[Row]) -> String {
         let steps = if r.method == CONTROLLER_ALONE { "-".to_owned() } else { r.env_steps.to_string() };
         let switches = r.contact_switches_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.1}"));
         let late = r.late_success_mean.map_or_else(|| "-".to_owned(), |s| format!("{s:.2}"));
+        let (iqm, mean) = match r.selected_success {
+            Some(a) => {
+                let of = if a.runs < r.seeds {
+                    format!(" ({} of {} runs)", a.runs, r.seeds)
+                } else {
+                    String::new()
+                };
+                (
+                    format!("{}{of}", crate::compare::with_interval(&a.iqm)),
+                    crate::compare::with_interval(&a.mean),
+                )
+            }
+            None => ("-".to_owned(), "-".to_owned()),
+        };
         text.push_str(&format!(
-            "| {} | {} | {learned} | {per_seed} | {selection} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
+            "| {} | {} | {learned} | {per_seed} | {selection} | {iqm} | {mean} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
             r.controller.name().to_uppercase(),
             r.method,
             r.success_rate_mean,
@@ -347,6 +431,14 @@ pub fn to_markdown(rows: &[Row]) -> String {
              hundred updates apart (docs/results/polyak-actor/); seeds are learned or not by the \
              final test alone.\n"
         ));
+    }
+    if rows.iter().any(|r| r.selected_success.is_some()) {
+        text.push_str(
+            "\nSelected policy's held-out success: each run's selected snapshot scored on its held-out \
+             episodes (`score.json`: 100 randomised 30 s episodes apart from those training selected on; \
+             docs/scoring.md); per cell the interquartile mean (IQM) and the mean over its runs, each with \
+             a 95% stratified bootstrap interval.\n",
+        );
     }
     if rows.iter().any(|r| r.selection_learned.1 > 0) {
         text.push_str(
@@ -398,6 +490,35 @@ pub struct Written {
     pub files: Vec<PathBuf>,
     /// Runs found that are not a cell of the table (no controller, or not the cube alone).
     pub skipped: Vec<PathBuf>,
+    /// [`IMPROVEMENT_PAIRS`] whose cells both have scored runs.
+    pub improvements: Vec<crate::compare::Improvement>,
+}
+
+/// P(A > B) for the pairs of [`IMPROVEMENT_PAIRS`] whose cells both have scored runs.
+fn improvements(runs: &[RunCurves]) -> Result<Vec<crate::compare::Improvement>, PlotError> {
+    use crate::compare::{Improvement, Judged, success_rates};
+    let cell = |controller: ControllerKind, method: &str| -> Vec<f64> {
+        let finished: Vec<&RunCurves> = runs
+            .iter()
+            .filter(|r| {
+                r.controller == Some(controller) && r.method.name() == method && r.env_steps.is_some()
+            })
+            .collect();
+        success_rates(&finished, Judged::Selected)
+    };
+    let mut found = Vec::new();
+    for (controller, method_a, method_b) in IMPROVEMENT_PAIRS {
+        let (x, y) = (cell(controller, method_a), cell(controller, method_b));
+        let (a, b) = (cell_label(controller, method_a), cell_label(controller, method_b));
+        let label = format!("{a} > {b}");
+        let estimate =
+            crate::compare::improvement(&x, &y, &crate::stats::Bootstrap::default(), BOOTSTRAP_SEED, &label)
+                .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
+        if let Some(estimate) = estimate {
+            found.push(Improvement { a, b, estimate });
+        }
+    }
+    Ok(found)
 }
 
 /// Whether a run belongs in the table: the cube alone, with a controller named.
@@ -417,19 +538,22 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
         dirs.iter().map(|d| read_run(d)).collect::<Result<Vec<_>, _>>()?.into_iter().partition(in_table);
     let skipped = others.into_iter().map(|r| r.dir).collect();
     let alone = read_controllers_alone(out)?;
-    let rows = rows(&runs, &alone);
+    let rows = rows(&runs, &alone)?;
+    let improvements = improvements(&runs)?;
     std::fs::create_dir_all(out).map_err(|source| PlotError::Io { path: out.to_owned(), source })?;
     let mut files = Vec::new();
-    for (name, text) in [("table1.csv", to_csv(&rows)), ("table1.md", to_markdown(&rows))] {
+    let mut texts =
+        vec![("table1.csv", to_csv(&rows)), ("table1.md", to_markdown_with(&rows, &improvements))];
+    // Only once runs are scored: a table without scores has no improvements to give.
+    if !improvements.is_empty() {
+        texts.push(("improvement.csv", crate::compare::improvement_csv(&improvements)));
+    }
+    for (name, text) in texts {
         let path = out.join(name);
         std::fs::write(&path, text).map_err(|source| PlotError::Io { path: path.clone(), source })?;
         files.push(path);
     }
-    // The learner's own performance: the periodic success test of the exported policy.
-    let specs: [PanelSpec; 2] = [
-        ("success rate (success test)", |r| (&r.eval_step, &r.eval_success), None),
-        ("evaluation return", |r| (&r.eval_step, &r.eval_return), None),
-    ];
+    let bootstrap = crate::stats::Bootstrap::default();
     for controller in CURVE_FIGURES {
         let mut groups: Groups = BTreeMap::new();
         for r in runs.iter().filter(|r| r.controller == Some(controller)) {
@@ -440,14 +564,41 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
         }
         let path = out.join(format!("curves-{}.png", controller.name()));
         let caption = format!(
-            "{} controller, cube: success test every {} env steps, mean and min-max over seeds",
+            "{} controller, cube: success test every {} env steps, IQM over seeds with its 95% bootstrap band",
             controller.name().to_uppercase(),
             eval_interval(&groups)
         );
-        draw_figure(&groups, &specs, &caption, &Method::ALL.map(Method::name), &path)?;
+        let palette = Method::ALL.map(Method::name);
+        crate::compare::draw_iqm_curves(&groups, &bootstrap, BOOTSTRAP_SEED, &caption, &palette, &path)?;
         files.push(path);
+        // Performance profiles of the selected policies' held-out success, once any is scored.
+        let finished: Groups = groups
+            .iter()
+            .map(|(name, rs)| (*name, rs.iter().copied().filter(|r| r.env_steps.is_some()).collect()))
+            .collect();
+        if finished.values().flatten().any(|r| r.score.is_some()) {
+            let path = out.join(format!("profiles-{}.png", controller.name()));
+            let caption = format!(
+                "{} controller, cube: runs whose selected policy succeeds in more than tau of the held-out episodes",
+                controller.name().to_uppercase()
+            );
+            crate::compare::draw_profiles(
+                &finished,
+                crate::compare::Judged::Selected,
+                &bootstrap,
+                BOOTSTRAP_SEED,
+                &caption,
+                &palette,
+                &path,
+            )
+            .map_err(|e| match e {
+                crate::compare::CompareError::Plot(e) => e,
+                other => PlotError::Draw(other.to_string()),
+            })?;
+            files.push(path);
+        }
     }
-    Ok(Written { rows, files, skipped })
+    Ok(Written { rows, files, skipped, improvements })
 }
 
 /// The step between periodic evaluations of the first run with two (for the caption).

@@ -99,6 +99,8 @@ pub enum TrainError {
     Behaviour(#[from] BehaviourError),
     #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
     NonFiniteAction { step: u64, env: usize, value: f32 },
+    #[error(transparent)]
+    Score(#[from] crate::score::ScoreError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
@@ -458,6 +460,9 @@ impl<'a> Trainer<'a> {
             let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
             let path =
                 evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, cost, evaluated)?;
+            // The run's score on held-out episodes (`score.json`, crate::score), now that every
+            // policy it scores is written.
+            crate::score::score_run(self.folder.dir(), &crate::score::ScoreOptions::default(), &mut |_| {})?;
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)
         };
