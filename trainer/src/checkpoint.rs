@@ -8,8 +8,9 @@
 //! length in bytes and CRC-32 (IEEE, `"0x%08x"`).
 //!
 //! [`save`] writes everything into `DIR/checkpoint.tmp/`, each file's CRC computed as it is
-//! written (the replay buffer, `state.toml`) or read back right after libtorch has written it
-//! (the `.ot` files), then the manifest, last. It then swaps the folders: `checkpoint/` to
+//! written (libtorch serialises the `.ot` files into memory and this module writes them, so
+//! that a full disk is an error naming the file, not an abort), each file synced, then the
+//! manifest, last. It then swaps the folders: `checkpoint/` to
 //! `checkpoint.old/`, `checkpoint.tmp/` to `checkpoint/`, and deletes `checkpoint.old/`. A
 //! kill at any moment leaves one whole checkpoint: `checkpoint/`, or, between the two
 //! renames, `checkpoint.old/`.
@@ -30,6 +31,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::atomic_file::sync_dir;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::{ACTOR_FILE, CRITIC_FILE, OPTIM_FILE, Sac, TARGET_ACTOR_FILE, TARGET_FILE};
 
@@ -170,7 +172,8 @@ impl<W: Write> Write for CrcWriter<W> {
 /// Buffer size for writing and hashing checkpoint files.
 const IO_BUF: usize = 1 << 20;
 
-/// Writes `dir/name` with `fill`, and its manifest entry from the bytes as they were written.
+/// Writes `dir/name` with `fill`, synced to disk, and its manifest entry from the bytes as
+/// they were written.
 fn write_file(
     dir: &Path,
     name: &str,
@@ -182,7 +185,9 @@ fn write_file(
     let mut w =
         CrcWriter { inner: BufWriter::with_capacity(IO_BUF, file), crc: crc32fast::Hasher::new(), bytes: 0 };
     fill(&mut w).map_err(err)?;
-    w.inner.into_inner().map_err(|e| err(e.into_error()))?;
+    let file = w.inner.into_inner().map_err(|e| err(e.into_error()))?;
+    // The folder is renamed into place next: its files must be on disk before that.
+    file.sync_all().map_err(err)?;
     Ok(FileEntry::new(name, w.bytes, w.crc.finalize()))
 }
 
@@ -207,7 +212,9 @@ pub fn crc_of_file(path: &Path) -> std::io::Result<(u64, u32)> {
 
 /// Saves a checkpoint into `out_dir/checkpoint/`: the networks and optimiser state of `sac`,
 /// `replay` when given, `state_toml` as `state.toml`, and the manifest (module docs). The
-/// previous checkpoint stays whole until the new one is complete.
+/// previous checkpoint stays whole until the new one is complete; a write that fails (a full
+/// disk) is an error naming the file and the OS's error, and removes the incomplete
+/// `checkpoint.tmp/` so that the space it took is free again.
 pub fn save(
     out_dir: &Path,
     sac: &Sac,
@@ -215,35 +222,60 @@ pub fn save(
     state_toml: &str,
 ) -> Result<(), CheckpointError> {
     let tmp = out_dir.join(TMP_DIR);
-    let dir = out_dir.join(DIR);
-    let old = out_dir.join(OLD_DIR);
+    let written = write_tmp(&tmp, sac, replay, state_toml);
+    if written.is_err() {
+        // Best effort: the error that matters is the write's.
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    written?;
+    swap_into_place(out_dir)
+}
+
+/// Writes the whole checkpoint into `tmp` (replacing what a killed save left there).
+fn write_tmp(
+    tmp: &Path,
+    sac: &Sac,
+    replay: Option<&ReplayBuffer>,
+    state_toml: &str,
+) -> Result<(), CheckpointError> {
     let write_err = |path: &Path| {
         let path = path.to_owned();
         move |source| CheckpointError::Write { path, source }
     };
     if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(write_err(&tmp))?;
+        std::fs::remove_dir_all(tmp).map_err(write_err(tmp))?;
     }
-    std::fs::create_dir_all(&tmp).map_err(write_err(&tmp))?;
-    sac.save(&tmp).map_err(|source| CheckpointError::SaveNetworks { dir: tmp.clone(), source })?;
+    std::fs::create_dir_all(tmp).map_err(write_err(tmp))?;
+    // Serialised in memory and written here, so that a full disk is the OS's error on a named
+    // file, not a libtorch abort ([`Sac::save_to_memory`]).
+    let networks = sac
+        .save_to_memory()
+        .map_err(|source| CheckpointError::SaveNetworks { dir: tmp.to_owned(), source })?;
     let mut files = Vec::new();
-    for name in sac.checkpoint_files() {
-        let path = tmp.join(name);
-        let (bytes, crc) =
-            crc_of_file(&path).map_err(|source| CheckpointError::Read { path: path.clone(), source })?;
-        files.push(FileEntry::new(name, bytes, crc));
+    for (name, bytes) in &networks {
+        files.push(write_file(tmp, name, |w| w.write_all(bytes))?);
     }
+    drop(networks);
     if let Some(replay) = replay {
-        files.push(write_file(&tmp, REPLAY_FILE, |w| replay.write_to(w))?);
+        files.push(write_file(tmp, REPLAY_FILE, |w| replay.write_to(w))?);
     }
-    files.push(write_file(&tmp, STATE_FILE, |w| w.write_all(state_toml.as_bytes()))?);
+    files.push(write_file(tmp, STATE_FILE, |w| w.write_all(state_toml.as_bytes()))?);
     let manifest =
         Manifest { format: MANIFEST_FORMAT, vge_version: env!("CARGO_PKG_VERSION").to_owned(), files };
-    let mut text = serde_json::to_string_pretty(&manifest).map_err(|e| write_err(&tmp)(e.into()))?;
+    let mut text = serde_json::to_string_pretty(&manifest).map_err(|e| write_err(tmp)(e.into()))?;
     text.push('\n');
-    let path = tmp.join(MANIFEST);
-    std::fs::write(&path, text).map_err(write_err(&path))?;
+    write_file(tmp, MANIFEST, |w| w.write_all(text.as_bytes()))?;
+    sync_dir(tmp).map_err(write_err(tmp))
+}
 
+/// Swaps the whole `checkpoint.tmp/` in: `checkpoint/` to `checkpoint.old/`, `checkpoint.tmp/`
+/// to `checkpoint/`, the run folder synced (the renames on disk), `checkpoint.old/` deleted.
+fn swap_into_place(out_dir: &Path) -> Result<(), CheckpointError> {
+    let (tmp, dir, old) = (out_dir.join(TMP_DIR), out_dir.join(DIR), out_dir.join(OLD_DIR));
+    let write_err = |path: &Path| {
+        let path = path.to_owned();
+        move |source| CheckpointError::Write { path, source }
+    };
     if dir.exists() {
         // A checkpoint.old/ beside a whole checkpoint/ is a save killed after its second rename.
         if old.exists() {
@@ -254,6 +286,8 @@ pub fn save(
     // Without checkpoint/, checkpoint.old/ is the whole one (a save killed between its
     // renames, then resumed from it): it stays until the new one is in place.
     std::fs::rename(&tmp, &dir).map_err(write_err(&tmp))?;
+    // The new checkpoint's rename must be on disk before the old one is deleted.
+    sync_dir(out_dir).map_err(write_err(out_dir))?;
     if old.exists() {
         std::fs::remove_dir_all(&old).map_err(write_err(&old))?;
     }

@@ -567,6 +567,43 @@ impl Default for Config {
     }
 }
 
+/// The most memory a run may hold by [`Config::memory_estimate`], whatever the machine: 1 TiB.
+/// Beyond it a size is a typo (`sac.buffer_size = 1000000000000` asks for 656 TB).
+pub const MAX_RUN_BYTES: u64 = 1 << 40;
+
+/// One env of the training vector with its controller, generator and bookkeeping, besides its
+/// episode's rewards: a generous bound on the measured growth of `vge train`'s resident memory
+/// per env.
+const ENV_BYTES: u64 = 4 << 20;
+
+/// One evaluation episode's outcome as an evaluation keeps it.
+const EVAL_EPISODE_BYTES: u64 = 256;
+
+/// `bytes` in decimal units, 3 significant digits (`656 MB`, `1.10 TB`).
+fn bytes_text(bytes: u64) -> String {
+    let units = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut x = bytes as f64;
+    let mut unit = 0;
+    while x >= 1000.0 && unit + 1 < units.len() {
+        x /= 1000.0;
+        unit += 1;
+    }
+    match x {
+        _ if unit == 0 => format!("{bytes} B"),
+        x if x >= 100.0 => format!("{x:.0} {}", units[unit]),
+        x if x >= 10.0 => format!("{x:.1} {}", units[unit]),
+        x => format!("{x:.2} {}", units[unit]),
+    }
+}
+
+/// `MemTotal` of `/proc/meminfo`, in bytes (None where it cannot be read: not Linux).
+fn machine_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.trim_start_matches("MemTotal:").trim().trim_end_matches("kB").trim().parse().ok()?;
+    kib.checked_mul(1024)
+}
+
 fn invalid(msg: impl Into<String>) -> ConfigError {
     ConfigError::Invalid(msg.into())
 }
@@ -641,9 +678,12 @@ impl Config {
         }
     }
 
-    /// Checks every field; the message names the key. Sections are checked in file order
-    /// (the top-level keys, then env, sac, td3, vge, fge, bc, run), each by its own validator.
+    /// Checks every field; the message names the key. Every float first (finite, whatever the
+    /// field), then the sections in file order (the top-level keys, then env, sac, td3, vge,
+    /// fge, bc, run), each by its own validator, and last the memory the sizes add up to
+    /// ([`Self::memory_estimate`], at most [`MAX_RUN_BYTES`]).
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_finite()?;
         self.validate_top_level()?;
         self.env.validate()?;
         self.sac.validate()?;
@@ -666,7 +706,100 @@ impl Config {
         self.vge.validate()?;
         self.fge.validate()?;
         self.bc.validate()?;
-        self.run.validate()
+        self.run.validate()?;
+        self.validate_sizes()
+    }
+
+    /// Refuses a NaN or infinite float anywhere in the config, naming its key. The floats are
+    /// found in the config's TOML form, not listed here, so that every float field (one added
+    /// later too) is covered.
+    fn validate_finite(&self) -> Result<(), ConfigError> {
+        fn first_non_finite(key: String, value: &toml::Value) -> Option<(String, f64)> {
+            match value {
+                toml::Value::Float(x) if !x.is_finite() => Some((key, *x)),
+                toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
+                    first_non_finite(if key.is_empty() { k.clone() } else { format!("{key}.{k}") }, v)
+                }),
+                toml::Value::Array(a) => {
+                    a.iter().enumerate().find_map(|(i, v)| first_non_finite(format!("{key}[{i}]"), v))
+                }
+                _ => None,
+            }
+        }
+        let value = toml::Value::try_from(self).map_err(|e| invalid(format!("cannot serialise: {e}")))?;
+        match first_non_finite(String::new(), &value) {
+            Some((key, x)) => Err(invalid(format!("{key} must be a finite number, got {x}"))),
+            None => Ok(()),
+        }
+    }
+
+    /// The largest allocations of a training run of this config, each estimated from the
+    /// sizes that set it: (the keys, bytes). What [`Self::validate`] and
+    /// [`Self::check_fits_memory`] bound before anything is allocated.
+    pub fn memory_estimate(&self) -> Vec<(&'static str, u64)> {
+        let (obs, act) = (vge_sim::OBS_DIM as u64, vge_sim::NUM_JOINTS as u64);
+        // A transition: obs, next obs, action, BC action, and 4 scalars, as f32.
+        let replay = (self.sac.buffer_size as u64).saturating_mul((2 * obs + 2 * act + 4) * 4);
+        // Each env, and its episode's rewards (kept for the Monte-Carlo returns).
+        let per_env = ENV_BYTES.saturating_add((self.env.episode_length as u64).saturating_mul(4));
+        let envs = (self.num_envs as u64).saturating_mul(per_env);
+        // The actor and twin critics with their targets, Adam's moments and gradients (about
+        // 12 copies of the parameters), and a minibatch's activations through them (about 24
+        // f32 per unit and row: forward and backward passes of five networks).
+        let widths: Vec<u64> = std::iter::once(obs + act)
+            .chain(self.sac.hidden.iter().map(|&h| h.max(0) as u64))
+            .chain(std::iter::once(act))
+            .collect();
+        let params = widths.windows(2).fold(0u64, |sum, w| sum.saturating_add(w[0].saturating_mul(w[1])));
+        let units = widths.iter().fold(0u64, |sum, &w| sum.saturating_add(w));
+        let nets = params
+            .saturating_mul(12 * 4)
+            .saturating_add((self.sac.batch as u64).saturating_mul(units).saturating_mul(24 * 4));
+        let eval = (self.run.eval_episodes as u64).saturating_mul(EVAL_EPISODE_BYTES);
+        vec![
+            ("sac.buffer_size", replay),
+            ("num_envs, env.episode_length", envs),
+            ("sac.hidden, sac.batch", nets),
+            ("run.eval_episodes", eval),
+        ]
+    }
+
+    /// [`Self::memory_estimate`] as one sentence: the total and its parts.
+    fn memory_text(&self) -> (u64, String) {
+        let parts = self.memory_estimate();
+        let total = parts.iter().fold(0u64, |sum, (_, b)| sum.saturating_add(*b));
+        let shown: Vec<String> = parts.iter().map(|(k, b)| format!("{k}: {}", bytes_text(*b))).collect();
+        (total, format!("about {} ({})", bytes_text(total), shown.join(", ")))
+    }
+
+    /// The sizes against [`MAX_RUN_BYTES`], independent of the machine the config is read on
+    /// (a login node checks what a cluster's nodes will run).
+    fn validate_sizes(&self) -> Result<(), ConfigError> {
+        let (total, text) = self.memory_text();
+        if total > MAX_RUN_BYTES {
+            return Err(invalid(format!(
+                "this run would hold {text}, more than the {} vge allows a run: a size is wrong",
+                bytes_text(MAX_RUN_BYTES)
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuses a run whose [`Self::memory_estimate`] exceeds this machine's memory (`MemTotal`
+    /// of `/proc/meminfo`), before anything is allocated: an allocation it cannot hold aborts
+    /// the process. Where `/proc/meminfo` cannot be read, [`Self::validate`]'s fixed bound is
+    /// all there is.
+    pub fn check_fits_memory(&self) -> Result<(), ConfigError> {
+        let Some(machine) = machine_memory_bytes() else { return Ok(()) };
+        let (total, text) = self.memory_text();
+        if total > machine {
+            return Err(invalid(format!(
+                "this run would hold {text}, more than this machine's {} of memory (MemTotal in \
+                 /proc/meminfo): lower the sizes",
+                bytes_text(machine)
+            )));
+        }
+        Ok(())
     }
 
     /// The keys outside any section.
@@ -864,6 +997,9 @@ impl RunSection {
     fn validate(&self) -> Result<(), ConfigError> {
         if self.log_interval == 0 {
             return Err(invalid("run.log_interval must be at least 1"));
+        }
+        if self.eval_episode_s <= 0.0 {
+            return Err(invalid(format!("run.eval_episode_s must be > 0, got {}", self.eval_episode_s)));
         }
         Ok(())
     }

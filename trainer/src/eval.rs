@@ -413,7 +413,20 @@ pub fn eval_policy_file(
     episodes: usize,
     seed: u64,
 ) -> Result<EvalReport, EvalError> {
-    let bytes =
-        std::fs::read(path).map_err(|source| EvalError::Io { path: path.display().to_string(), source })?;
-    eval_policy_bytes(&bytes, env, episodes, seed)
+    eval_policy_bytes(&read_policy_file(path)?, env, episodes, seed)
+}
+
+/// The longest policy file an evaluation loads ([`vge_runtime::policy::max_file_len`] of
+/// [`EVAL_MAX_LAYERS`] and [`EVAL_MAX_WIDTH`]).
+pub const EVAL_MAX_FILE_LEN: usize = vge_runtime::policy::max_file_len(EVAL_MAX_LAYERS, EVAL_MAX_WIDTH);
+
+/// The bytes of the policy file at `path`; a file longer than [`EVAL_MAX_FILE_LEN`] (its
+/// length from its metadata) is refused unread.
+pub fn read_policy_file(path: &Path) -> Result<Vec<u8>, EvalError> {
+    vge_export::read_policy_bytes(path, EVAL_MAX_FILE_LEN).map_err(|e| match e {
+        vge_export::ExportError::Io { path, source } => {
+            EvalError::Io { path: path.display().to_string(), source }
+        }
+        other => EvalError::Policy(other.to_string()),
+    })
 }

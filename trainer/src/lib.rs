@@ -2,6 +2,7 @@
 //! ([`behaviour`]) for finger-gaiting, the training loop ([`train`]), the success test
 //! ([`eval`]), and the `vge` command.
 
+pub mod atomic_file;
 pub mod behaviour;
 pub mod bench_update;
 pub mod checkpoint;
@@ -17,6 +18,7 @@ pub mod plot;
 pub mod policy_export;
 pub mod replay;
 pub mod robustness;
+pub mod run_lock;
 pub mod sac;
 pub mod score;
 pub mod stats;

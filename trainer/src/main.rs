@@ -812,7 +812,7 @@ fn eval_objects(
     plot: Option<&Path>,
     json: bool,
 ) -> anyhow::Result<()> {
-    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let bytes = vge_trainer::eval::read_policy_file(policy)?;
     let report = vge_trainer::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
     if let Some(png) = plot {
@@ -987,7 +987,7 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
 
 /// `vge eval --plot`: the gait diagram of the episode with seed `seed`.
 fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> anyhow::Result<()> {
-    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let bytes = vge_trainer::eval::read_policy_file(policy)?;
     let trace = vge_trainer::eval::trace_policy_bytes(&bytes, env, seed)
         .with_context(|| format!("tracing {}", policy.display()))?;
     let o = &trace.outcome;
@@ -1009,7 +1009,7 @@ fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> a
 /// `vge eval --record`: the episode with seed `seed` written to the Rerun file `rrd`.
 #[cfg(feature = "rerun")]
 fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, rrd: &Path) -> anyhow::Result<()> {
-    let bytes = std::fs::read(policy).with_context(|| format!("reading {}", policy.display()))?;
+    let bytes = vge_trainer::eval::read_policy_file(policy)?;
     let outcome = vge_trainer::eval::record_policy_bytes(&bytes, env, seed, rrd)
         .with_context(|| format!("recording {} into {}", policy.display(), rrd.display()))?;
     eprintln!(
@@ -1072,8 +1072,7 @@ fn robustness(args: RobustnessArgs) -> anyhow::Result<()> {
     anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
     anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
     anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
-    let bytes =
-        std::fs::read(&policy).with_context(|| format!("reading policy file {}", policy.display()))?;
+    let bytes = vge_trainer::eval::read_policy_file(&policy)?;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let mut base = EnvConfig::default();
     base.object.shape = object;
@@ -1643,15 +1642,8 @@ fn train_target(
             config.validate()?;
             (config, dir, true)
         }
-        (None, Some(path), Some(out)) => {
-            if out.join("checkpoint").exists() {
-                bail!(
-                    "{} already holds a run: continue it with --resume {0} or choose another --out",
-                    out.display()
-                );
-            }
-            (cfg::load_config(&path, overrides)?, out, false)
-        }
+        // A folder holding a run, or being written, is refused by `train` (naming what it found).
+        (None, Some(path), Some(out)) => (cfg::load_config(&path, overrides)?, out, false),
         _ => bail!("give --config and --out, or --resume DIR"),
     })
 }

@@ -266,19 +266,28 @@ impl ReplayBuffer {
         Ok(())
     }
 
-    /// Reads a buffer written by [`Self::save`]; its shape must match this one's.
+    /// Reads a buffer written by [`Self::save`]; its shape must match this one's. The file's
+    /// length is checked against its header before its data is read, and the data is read
+    /// in chunks straight into the buffer (a second copy of a 1M-transition buffer would be
+    /// another 650 MB).
     pub fn load(&mut self, path: &Path) -> Result<(), ReplayError> {
         let shown = path.display().to_string();
         let io = |source| ReplayError::Io { path: shown.clone(), source };
         let fmt = |message: String| ReplayError::Format { path: shown.clone(), message };
-        let mut bytes = Vec::new();
-        std::fs::File::open(path).map_err(io)?.read_to_end(&mut bytes).map_err(io)?;
-        if bytes.len() < 48 || &bytes[..8] != MAGIC {
+        let file = std::fs::File::open(path).map_err(io)?;
+        let file_len = file.metadata().map_err(io)?.len();
+        let mut r = std::io::BufReader::with_capacity(1 << 20, file);
+        let mut header = [0u8; 48];
+        if file_len < 48 {
+            return Err(fmt("not a replay buffer file".to_owned()));
+        }
+        r.read_exact(&mut header).map_err(io)?;
+        if &header[..8] != MAGIC {
             return Err(fmt("not a replay buffer file".to_owned()));
         }
         let word = |k: usize| {
             let mut b = [0u8; 8];
-            b.copy_from_slice(&bytes[8 + 8 * k..16 + 8 * k]);
+            b.copy_from_slice(&header[8 + 8 * k..16 + 8 * k]);
             u64::from_le_bytes(b) as usize
         };
         let (o, a, cap, len, next) = (word(0), word(1), word(2), word(3), word(4));
@@ -288,11 +297,11 @@ impl ReplayBuffer {
                 self.obs_dim, self.act_dim, self.capacity
             )));
         }
-        let expected = 48 + len * (2 * o + 2 * a + 4) * 4;
-        if bytes.len() != expected {
-            return Err(fmt(format!("{} bytes, expected {expected}", bytes.len())));
+        let expected = 48 + (len as u64) * ((2 * o + 2 * a + 4) * 4) as u64;
+        if file_len != expected {
+            return Err(fmt(format!("{file_len} bytes, expected {expected}")));
         }
-        let mut at = 48;
+        let mut bytes = vec![0u8; 1 << 16];
         for (v, cols) in [
             (&mut self.obs, o),
             (&mut self.action, a),
@@ -303,11 +312,12 @@ impl ReplayBuffer {
             (&mut self.bc_action, a),
             (&mut self.bc_mask, 1),
         ] {
-            for x in &mut v[..len * cols] {
-                let mut b = [0u8; 4];
-                b.copy_from_slice(&bytes[at..at + 4]);
-                *x = f32::from_le_bytes(b);
-                at += 4;
+            for chunk in v[..len * cols].chunks_mut(1 << 14) {
+                let raw = &mut bytes[..4 * chunk.len()];
+                r.read_exact(raw).map_err(io)?;
+                for (x, b) in chunk.iter_mut().zip(raw.chunks_exact(4)) {
+                    *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                }
             }
         }
         self.len = len;

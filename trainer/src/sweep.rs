@@ -3,8 +3,10 @@
 //! The seeds run in one of three ways: in the calling process one after the other (the
 //! `vge` binary does that itself), as child processes of the `vge` binary side by side
 //! ([`run_parallel`]), or as a Slurm array job with one task per seed ([`write_sbatch`],
-//! [`submit`]). All three skip a seed whose folder holds `policy.vgep` and resume one whose
-//! folder holds a checkpoint, so running the same sweep again continues it.
+//! [`submit`]). All three skip a seed whose run finished ([`check_finished`]: its
+//! `policy.vgep` and `final-eval.json` read back whole) and resume one whose folder holds a
+//! checkpoint, so running the same sweep again continues it. A folder with signs of a run
+//! but neither is left alone: `vge train` refuses it with what it found.
 
 use std::collections::VecDeque;
 use std::ffi::OsString;
@@ -55,22 +57,41 @@ pub struct Sweep {
 /// Where a seed's run directory stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SeedState {
-    /// `policy.vgep` is there: nothing to do.
+    /// The run finished ([`check_finished`]): nothing to do.
     Done,
-    /// A checkpoint and no policy: continue with `--resume`.
+    /// A checkpoint and no finished run: continue with `--resume` (which, from the final
+    /// checkpoint, writes the final files again).
     Interrupted,
-    /// Nothing yet: start from the config.
+    /// No checkpoint: start from the config (refused by `vge train`, naming what it found,
+    /// where the folder holds signs of a run).
     New,
 }
 
 pub fn seed_state(dir: &Path) -> SeedState {
-    if dir.join("policy.vgep").exists() {
+    if check_finished(dir).is_ok() {
         SeedState::Done
-    } else if dir.join("checkpoint").exists() || dir.join("checkpoint.old").exists() {
+    } else if crate::checkpoint::resume_dir(dir).is_some() {
         // checkpoint.old alone: killed between the two renames of a checkpoint save.
         SeedState::Interrupted
     } else {
         SeedState::New
+    }
+}
+
+/// Whether the run in `dir` finished: `policy.vgep` parses and its CRC holds, and
+/// `final-eval.json` (written after it, and last of all) parses. Err: what is missing or
+/// wrong, naming the file.
+pub fn check_finished(dir: &Path) -> Result<(), String> {
+    let policy = dir.join("policy.vgep");
+    vge_export::PolicyFile::read(&policy).map_err(|e| match &e {
+        vge_export::ExportError::Io { source, .. } => format!("{e}: {source}"),
+        _ => format!("{}: {e}", policy.display()),
+    })?;
+    let path = dir.join("final-eval.json");
+    match crate::plot::read_final_eval(dir) {
+        Ok(Some(_)) => Ok(()),
+        Ok(None) => Err(format!("{} is missing", path.display())),
+        Err(e) => Err(e.to_string()),
     }
 }
 
@@ -270,7 +291,7 @@ fn reap(running: &mut Vec<Job>, sweep: &Sweep) -> Vec<(u64, Outcome)> {
 
 /// A child that exited with success either finished or was stopped with a checkpoint.
 fn finished(dir: &Path) -> Outcome {
-    if dir.join("policy.vgep").exists() { Outcome::Done } else { Outcome::Stopped(checkpoint_step(dir)) }
+    if check_finished(dir).is_ok() { Outcome::Done } else { Outcome::Stopped(checkpoint_step(dir)) }
 }
 
 /// `seed 3: 120000/1000000 steps, 85 steps/s, return 12.3, success 30% at 100000`, from the
@@ -512,7 +533,11 @@ pub fn sbatch_script(
     line("export RAYON_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}".into());
     // srun's own --cpus-per-task: a step does not inherit the batch's (Slurm >= 22.05).
     let srun = "srun --ntasks=1 --cpus-per-task=\"${SLURM_CPUS_PER_TASK:-1}\"";
-    line("if [[ -f $run/policy.vgep ]]; then".into());
+    // Finished: final-eval.json is written last and whole (renamed into place), and the
+    // policy reads back whole ([`check_finished`]).
+    line(format!(
+        "if [[ -s $run/final-eval.json ]] && {vge} inspect \"$run/policy.vgep\" >/dev/null 2>&1; then"
+    ));
     line("  echo \"seed $seed: done already\"".into());
     line("elif [[ -d $run/checkpoint || -d $run/checkpoint.old ]]; then".into());
     line(format!("  exec {srun} {vge} train --resume \"$run\" --seed \"$seed\" {args}"));
@@ -546,7 +571,7 @@ pub fn write_sbatch(vge: &Path, sweep: &Sweep, slurm: &Slurm) -> Result<(PathBuf
     // Every seed done: an array of no tasks is no job, and the last script stays as it was.
     if !seeds.is_empty() {
         let text = sbatch_script(vge, &dir, &name, &seeds, sweep, slurm);
-        std::fs::write(&path, text).map_err(io_err(&path))?;
+        crate::atomic_file::write(&path, text.as_bytes()).map_err(io_err(&path))?;
     }
     Ok((path, seeds))
 }
@@ -556,7 +581,7 @@ fn copy_config(from: &Path, to: &Path) -> Result<(), SweepError> {
     match std::fs::read(to) {
         Ok(existing) if existing == text => Ok(()),
         Ok(_) => Err(SweepError::OtherConfig(to.display().to_string())),
-        Err(_) => std::fs::write(to, text).map_err(io_err(to)),
+        Err(_) => crate::atomic_file::write(to, &text).map_err(io_err(to)),
     }
 }
 

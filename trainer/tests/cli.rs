@@ -200,8 +200,15 @@ fn sbatch_dry_run(config: &Path, dir: &Path) -> Output {
 fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
     let root = common::temp_dir("sweep-sbatch");
     let dir = root.join("sweep");
+    // Seed 1 finished: a policy that reads back whole, and its final-eval.json.
     std::fs::create_dir_all(dir.join("seed-1")).expect("dir");
-    std::fs::write(dir.join("seed-1/policy.vgep"), "done").expect("write");
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("../policies/cube.vgep");
+    std::fs::copy(&shipped, dir.join("seed-1/policy.vgep")).expect("copy");
+    std::fs::write(
+        dir.join("seed-1/final-eval.json"),
+        r#"{"success_rate": 1.0, "env_steps": 1, "wall_s": 1.0}"#,
+    )
+    .expect("write");
     std::fs::create_dir_all(dir.join("seed-2/checkpoint")).expect("dir");
     let config = common::config("cube-fg-vge.toml");
     let run = sbatch_dry_run(&config, &dir);

@@ -430,13 +430,32 @@ impl Sac {
 
     /// Saves networks, optimiser states, α and the update counter under `dir`
     /// ([`Self::checkpoint_files`]: `actor.ot`, `critic.ot`, `target.ot`, `target_actor.ot`
-    /// for TD3, `optim.ot`).
+    /// for TD3, `optim.ot`), as [`Self::save_to_memory`] serialises them.
     pub fn save(&self, dir: &Path) -> Result<(), tch::TchError> {
-        self.actor_vs.save(dir.join(ACTOR_FILE))?;
-        self.critic_vs.save(dir.join(CRITIC_FILE))?;
-        self.target_vs.save(dir.join(TARGET_FILE))?;
+        for (name, bytes) in self.save_to_memory()? {
+            std::fs::write(dir.join(name), bytes)?;
+        }
+        Ok(())
+    }
+
+    /// What [`Self::save`] writes, serialised in memory: (file name, bytes) in
+    /// [`Self::checkpoint_files`] order. libtorch then writes no file itself: writing one,
+    /// it aborts the process on a full disk (a C++ exception through the FFI) instead of
+    /// returning the OS's error.
+    pub fn save_to_memory(&self) -> Result<Vec<(&'static str, Vec<u8>)>, tch::TchError> {
+        let mut files = Vec::new();
+        let mut stores = vec![
+            (ACTOR_FILE, &self.actor_vs),
+            (CRITIC_FILE, &self.critic_vs),
+            (TARGET_FILE, &self.target_vs),
+        ];
         if let Some(target) = &self.target_actor {
-            target.vs.save(dir.join(TARGET_ACTOR_FILE))?;
+            stores.push((TARGET_ACTOR_FILE, &target.vs));
+        }
+        for (name, vs) in stores {
+            let mut bytes = Vec::new();
+            vs.save_to_stream(&mut bytes)?;
+            files.push((name, bytes));
         }
         let mut named = self.actor_opt.state("actor_opt");
         named.extend(self.critic_opt.state("critic_opt"));
@@ -446,7 +465,10 @@ impl Sac {
             named.push(("log_alpha".to_owned(), log_alpha.detach()));
             named.extend(opt.state("alpha_opt"));
         }
-        Tensor::save_multi(&named, dir.join(OPTIM_FILE))
+        let mut bytes = Vec::new();
+        Tensor::save_multi_to_stream(&named, &mut bytes)?;
+        files.push((OPTIM_FILE, bytes));
+        Ok(files)
     }
 
     /// Restores the networks [`Self::save`] wrote (actor, critics, targets, with the

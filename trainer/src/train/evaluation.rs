@@ -204,17 +204,17 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     };
     let Some(best) = best_eval_row(&rows) else { return Ok(()) };
     let snapshot = snapshot_path(out_dir, best.step);
-    let bytes = match std::fs::read(&snapshot) {
+    let bytes = match crate::eval::read_policy_file(&snapshot) {
         Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+        Err(crate::eval::EvalError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
             eprintln!("model selection skipped: {} is missing", snapshot.display());
             return Ok(());
         }
-        Err(e) => return Err(io_err(&snapshot)(e)),
+        Err(e) => return Err(e.into()),
     };
     let r = evaluate_policy(config, &bytes, EpisodeSet::Test)?;
     let path = out_dir.join("policy-best.vgep");
-    std::fs::write(&path, &bytes).map_err(io_err(&path))?;
+    crate::atomic_file::write(&path, &bytes).map_err(io_err(&path))?;
     let per_object = per_object_figures(&r);
     let learned = learned(&r);
     let r = &r.overall;
@@ -235,7 +235,7 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), TrainErro
     };
     let path = out_dir.join("best-eval.json");
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
-    std::fs::write(&path, text + "\n").map_err(io_err(&path))
+    crate::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
 }
 
 const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
@@ -338,7 +338,7 @@ fn write_final_eval(
         per_episode: &r.per_episode,
     };
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
-    std::fs::write(&path, text + "\n").map_err(io_err(&path))
+    crate::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
 }
 
 /// A finished run's final policy scored again by the success test of this vge (the same
@@ -378,8 +378,10 @@ pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, TrainErro
             });
         }
     };
+    // --write replaces a file of the run: as its one writer.
+    let _lock = if write { Some(crate::run_lock::RunLock::acquire(dir)?) } else { None };
     let policy = dir.join("policy.vgep");
-    let bytes = std::fs::read(&policy).map_err(io_err(&policy))?;
+    let bytes = crate::eval::read_policy_file(&policy)?;
     let report = evaluate_policy(&config, &bytes, EpisodeSet::Validation)?;
     if let Some((env_steps, cost)) = kept {
         write_final_eval(dir, &config, &report, env_steps, cost)?;
@@ -408,11 +410,12 @@ pub(super) fn periodic(
     let dir = out_dir.join(SNAPSHOT_DIR);
     std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
     let path = snapshot_path(out_dir, step);
-    std::fs::write(&path, bytes).map_err(io_err(&path))?;
+    crate::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
     Ok(report)
 }
 
-/// The end of a run: `policy.vgep`, its evaluation (`final-eval.json`) and model selection.
+/// The end of a run: `policy.vgep`, model selection and, last, the policy's evaluation
+/// (`final-eval.json`).
 /// `evaluated` is the validation report of these very `bytes` when a periodic evaluation
 /// already ran them at this step (the evaluation is deterministic: the same episodes again
 /// would give the same report).
@@ -425,13 +428,14 @@ pub(super) fn finish(
     evaluated: Option<ObjectsReport>,
 ) -> Result<PathBuf, TrainError> {
     let path = out_dir.join("policy.vgep");
-    std::fs::write(&path, bytes).map_err(io_err(&path))?;
+    crate::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
     let report = match evaluated {
         Some(report) => report,
         None => evaluate_policy(config, bytes, EpisodeSet::Validation)?,
     };
-    write_final_eval(out_dir, config, &report, step, cost)?;
     select_best_snapshot(out_dir, config)?;
+    // Last: a run is finished once its final-eval.json is in place (`crate::sweep::check_finished`).
+    write_final_eval(out_dir, config, &report, step, cost)?;
     Ok(path)
 }
 

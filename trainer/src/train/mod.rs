@@ -10,6 +10,8 @@
 //! and CPU time across sessions).
 //!
 //! Output directory:
+//! - `vge.lock`: held by the one process writing the folder, with its pid
+//!   ([`crate::run_lock`]);
 //! - `config.toml`: the effective configuration;
 //! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
 //! - `tensorboard/`: the metrics rows as TensorBoard scalars (`train/<column>`), one event
@@ -22,7 +24,9 @@
 //!   a resume verifies every file against the manifest first: a damaged, truncated or
 //!   unverifiable checkpoint is refused with the file's name, never resumed
 //!   ([`crate::checkpoint`]);
-//! - `policy.vgep`: the exported actor at the end;
+//! - `policy.vgep`: the exported actor at the end, and `final-eval.json` its evaluation,
+//!   written last: a run is finished when both read back whole
+//!   ([`crate::sweep::check_finished`]);
 //! - `snapshots/policy-<step>.vgep`: the actor exported at each periodic evaluation;
 //! - `policy-best.vgep`, `best-eval.json`: model selection, reported apart from the final
 //!   policy. The snapshot with the best periodic evaluation (success, then return; a run on
@@ -69,6 +73,7 @@ use clock::{RunClock, RunCost};
 use collector::Collector;
 pub use evaluation::{Rescored, export_actor, rescore_final_eval};
 use run_folder::RunFolder;
+pub use run_folder::{RUN_FILES, check_no_run};
 use state::{Counters, TrainState};
 
 #[derive(Debug, Error)]
@@ -95,6 +100,10 @@ pub enum TrainError {
     NotFinished { path: String, what: String },
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    #[error("{dir} already holds a run (found {found}): {advice}")]
+    RunExists { dir: String, found: String, advice: String },
+    #[error(transparent)]
+    Lock(#[from] crate::run_lock::LockError),
     #[error("behaviour policy: {0}")]
     Behaviour(#[from] BehaviourError),
     #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
@@ -202,34 +211,62 @@ pub fn train(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<TrainSummary, TrainError> {
     let mut t = Trainer::new(config, out_dir, resume)?;
-    // Uniform random actions fill the warm-up, unless the run starts from trained networks.
-    let random_steps = if config.init_from.is_some() { 0 } else { config.sac.warmup };
-    let mut stopped = false;
-    while t.c.step < config.total_steps {
-        if stop.load(Ordering::SeqCst) {
-            stopped = true;
-            break;
+    match t.run(stop, progress) {
+        Ok(stopped) => t.finish(stopped),
+        Err(e) => {
+            t.abandon_if_unsaved();
+            Err(e)
         }
-        t.collector.set_progress(t.c.step);
-        let learner = t.collector.learner_actions(&t.sac, t.c.step, random_steps, &mut t.rng)?;
-        t.lap(Phase::Learner);
-        let stats_before = t.behaviour.stats;
-        let decisions =
-            t.collector.behaviour_actions(&mut t.behaviour, &t.sac, t.c.step, &learner, &mut t.rng)?;
-        t.lap(Phase::Behaviour);
-        let (replay, window) = (&mut t.replay, &mut t.c.window);
-        let finished =
-            t.collector.step(&decisions, replay, window, config.sac.gamma, &mut t.behaviour, &mut t.rng)?;
-        t.c.episodes += finished;
-        t.c.window.add_behaviour(&stats_before, &t.behaviour.stats);
-        let prev_step = t.c.step;
-        t.c.step += t.collector.len() as u64;
-        t.lap(Phase::Sim);
-        t.update()?;
-        t.lap(Phase::Update);
-        t.periodic(prev_step, progress)?;
     }
-    t.finish(stopped)
+}
+
+impl Trainer<'_> {
+    /// The training loop to `total_steps` or a stop; whether the stop flag ended it.
+    fn run(&mut self, stop: &AtomicBool, progress: &mut dyn FnMut(&Progress)) -> Result<bool, TrainError> {
+        let t = self;
+        let config = t.config;
+        // Uniform random actions fill the warm-up, unless the run starts from trained networks.
+        let random_steps = if config.init_from.is_some() { 0 } else { config.sac.warmup };
+        while t.c.step < config.total_steps {
+            if stop.load(Ordering::SeqCst) {
+                return Ok(true);
+            }
+            t.collector.set_progress(t.c.step);
+            let learner = t.collector.learner_actions(&t.sac, t.c.step, random_steps, &mut t.rng)?;
+            t.lap(Phase::Learner);
+            let stats_before = t.behaviour.stats;
+            let decisions =
+                t.collector.behaviour_actions(&mut t.behaviour, &t.sac, t.c.step, &learner, &mut t.rng)?;
+            t.lap(Phase::Behaviour);
+            let (replay, window) = (&mut t.replay, &mut t.c.window);
+            let finished = t.collector.step(
+                &decisions,
+                replay,
+                window,
+                config.sac.gamma,
+                &mut t.behaviour,
+                &mut t.rng,
+            )?;
+            t.c.episodes += finished;
+            t.c.window.add_behaviour(&stats_before, &t.behaviour.stats);
+            let prev_step = t.c.step;
+            t.c.step += t.collector.len() as u64;
+            t.lap(Phase::Sim);
+            t.update()?;
+            t.lap(Phase::Update);
+            t.periodic(prev_step, progress)?;
+        }
+        Ok(false)
+    }
+
+    /// After an error: a new run without a checkpoint yet has nothing to resume, and what it
+    /// wrote would refuse a new start in its folder, so it is removed (the folder is left as
+    /// the run found it). A run with a checkpoint keeps everything: it resumes.
+    fn abandon_if_unsaved(&self) {
+        if !self.resumed && self.checkpointed_at.is_none() {
+            run_folder::remove_run_files(self.folder.dir());
+        }
+    }
 }
 
 /// Loads the networks of the run folder `source` into `sac` ([`Config::init_from`]), after
@@ -286,6 +323,8 @@ struct Trainer<'a> {
     session_first_step: u64,
     /// The step of the last checkpoint written or resumed from.
     checkpointed_at: Option<u64>,
+    /// This session resumed the run (else it started it).
+    resumed: bool,
     times: PhaseTimes,
     clock: Instant,
     /// This session's latest periodic evaluation (step, report).
@@ -296,6 +335,22 @@ impl<'a> Trainer<'a> {
     /// A fresh run, or the run in `out_dir` resumed from its checkpoint; envs reset.
     fn new(config: &'a Config, out_dir: &Path, resume: bool) -> Result<Self, TrainError> {
         config.validate()?;
+        // Before anything is allocated: what the run needs must fit this machine.
+        config.check_fits_memory()?;
+        // One writer per folder: a resume reads the checkpoint under the folder's lock, and a
+        // new run takes it before looking for signs of a run there (a folder being written
+        // is refused naming its writer, not as a run to resume).
+        let lock = if out_dir.is_dir() {
+            let lock = crate::run_lock::RunLock::acquire(out_dir)?;
+            if !resume {
+                run_folder::check_no_run(out_dir)?;
+            }
+            Some(lock)
+        } else if resume {
+            return Err(CheckpointError::NoCheckpoint { out_dir: out_dir.to_owned() }.into());
+        } else {
+            None
+        };
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
         }
@@ -317,9 +372,28 @@ impl<'a> Trainer<'a> {
         }
         // Only now: a run refused above (a bad init_from, say) leaves no folder behind.
         std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
-        let folder = RunFolder::open(out_dir, config, c.step, resume)?;
-        collector.set_progress(c.step);
-        collector.reset_all(&mut behaviour, &mut rng)?;
+        let lock = match lock {
+            Some(lock) => lock,
+            None => {
+                let lock = crate::run_lock::RunLock::acquire(out_dir)?;
+                run_folder::check_no_run(out_dir)?;
+                lock
+            }
+        };
+        let opened = RunFolder::open(out_dir, config, c.step, resume, lock).and_then(|folder| {
+            collector.set_progress(c.step);
+            collector.reset_all(&mut behaviour, &mut rng)?;
+            Ok(folder)
+        });
+        let folder = match opened {
+            Ok(folder) => folder,
+            Err(e) => {
+                if !resume {
+                    run_folder::remove_run_files(out_dir);
+                }
+                return Err(e);
+            }
+        };
         let now = Instant::now();
         Ok(Self {
             config,
@@ -330,6 +404,7 @@ impl<'a> Trainer<'a> {
             rng,
             session_first_step: c.step,
             checkpointed_at: resume.then_some(c.step),
+            resumed: resume,
             c,
             folder,
             config_hash: config.hash_hex(),
@@ -447,8 +522,11 @@ impl<'a> Trainer<'a> {
     fn finish(mut self, stopped: bool) -> Result<TrainSummary, TrainError> {
         // A checkpoint taken at this very step holds the state before the env resets that
         // followed it: keep it, so that a resume redoes those resets exactly.
-        if self.checkpointed_at != Some(self.c.step) {
-            self.checkpoint()?;
+        if self.checkpointed_at != Some(self.c.step)
+            && let Err(e) = self.checkpoint()
+        {
+            self.abandon_if_unsaved();
+            return Err(e);
         }
         let policy = if stopped {
             None

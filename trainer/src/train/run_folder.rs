@@ -1,57 +1,131 @@
 //! A run's folder: the effective config, `metrics.csv` and the TensorBoard events written as
 //! training goes, and the checkpoint (module docs of [`super`] list every file).
+//!
+//! One process writes a folder at a time ([`RunLock`], held as long as the [`RunFolder`]).
+//! Every file is written whole or not at all ([`crate::atomic_file`]) but the ones that grow
+//! row by row: `metrics.csv` and `eval.csv` get rows appended (a row cut short by a kill is
+//! past the checkpoint), and a resume checks each of them whole (a header, complete rows)
+//! before it appends, rewriting it atomically to the rows up to its checkpoint. A folder
+//! holding any sign of a run ([`RUN_FILES`]) is never taken for a new run.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 
 use super::metrics::{METRICS_HEADER, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
+use crate::atomic_file;
 use crate::checkpoint;
 use crate::config::Config;
 use crate::replay::ReplayBuffer;
+use crate::run_lock::RunLock;
 use crate::sac::Sac;
 use crate::tensorboard::EventWriter;
+
+/// What a run writes into its folder from its first moments on, the checkpoint's folders
+/// included: a folder holding any of them holds a run, which `vge train --config` must not
+/// start over.
+pub const RUN_FILES: [&str; 10] = [
+    "config.toml",
+    "metrics.csv",
+    "eval.csv",
+    "tensorboard",
+    checkpoint::DIR,
+    checkpoint::OLD_DIR,
+    checkpoint::TMP_DIR,
+    "snapshots",
+    "policy.vgep",
+    "final-eval.json",
+];
+
+/// Refuses `dir` for a new run when it holds any of [`RUN_FILES`], naming those found.
+pub fn check_no_run(dir: &Path) -> Result<(), TrainError> {
+    let found: Vec<&str> =
+        RUN_FILES.iter().copied().filter(|name| dir.join(name).symlink_metadata().is_ok()).collect();
+    if found.is_empty() {
+        return Ok(());
+    }
+    let resumable = checkpoint::resume_dir(dir).is_some();
+    Err(TrainError::RunExists {
+        dir: dir.display().to_string(),
+        found: found.join(", "),
+        advice: if resumable {
+            format!("continue it with `vge train --resume {}`, or choose another --out", dir.display())
+        } else {
+            "it has no checkpoint to resume from (stopped before its first): delete the folder to \
+             start over, or choose another --out"
+                .to_owned()
+        },
+    })
+}
+
+/// Removes every one of [`RUN_FILES`] from `dir`: what a new run wrote before it failed
+/// without a checkpoint (it holds nothing to resume, and would refuse a new start there).
+/// Best effort: the run's error is what the caller reports.
+pub(super) fn remove_run_files(dir: &Path) {
+    for name in RUN_FILES {
+        let path = dir.join(name);
+        let _ = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
+    }
+}
 
 pub(super) struct RunFolder {
     dir: PathBuf,
     metrics_path: PathBuf,
     metrics: csv::Writer<File>,
     events: EventWriter,
+    _lock: RunLock,
 }
 
 impl RunFolder {
-    /// Opens `dir` for a session that starts at `step`: a fresh run writes `config.toml` and
-    /// the metrics header; a resumed one (`resumed`) drops the rows past its checkpoint, and
-    /// writes `config.toml` again if this session's config differs (a run extended with
-    /// `--steps`), so that the folder says what the run finished under.
-    pub fn open(dir: &Path, config: &Config, step: u64, resumed: bool) -> Result<Self, TrainError> {
+    /// Opens `dir` for a session that starts at `step`, holding its `lock`: a fresh run writes
+    /// `config.toml` and the metrics header; a resumed one (`resumed`) checks its metrics and
+    /// evaluation rows and drops those past its checkpoint, and writes `config.toml` again if
+    /// this session's config differs (a run extended with `--steps`), so that the folder says
+    /// what the run finished under.
+    pub fn open(
+        dir: &Path,
+        config: &Config,
+        step: u64,
+        resumed: bool,
+        lock: RunLock,
+    ) -> Result<Self, TrainError> {
         let metrics_path = dir.join("metrics.csv");
         let config_path = dir.join("config.toml");
         let effective = config.to_toml_string()?;
         if resumed {
-            truncate_csv(&metrics_path, step)?;
-            truncate_csv(&dir.join("eval.csv"), step)?;
+            if !resume_csv(&metrics_path, step)? {
+                atomic_file::write(&metrics_path, format!("{METRICS_HEADER}\n").as_bytes())
+                    .map_err(io_err(&metrics_path))?;
+            }
+            let eval_path = dir.join("eval.csv");
+            if !resume_csv(&eval_path, step)? && eval_path.exists() {
+                // Rows are appended to it with its header when the file is new.
+                std::fs::remove_file(&eval_path).map_err(io_err(&eval_path))?;
+            }
             let stored = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
             if stored != effective {
-                std::fs::write(&config_path, &effective).map_err(io_err(&config_path))?;
+                atomic_file::write(&config_path, effective.as_bytes()).map_err(io_err(&config_path))?;
             }
         } else {
-            std::fs::write(&config_path, &effective).map_err(io_err(&config_path))?;
-            std::fs::write(&metrics_path, format!("{METRICS_HEADER}\n")).map_err(io_err(&metrics_path))?;
+            atomic_file::write(&config_path, effective.as_bytes()).map_err(io_err(&config_path))?;
+            atomic_file::write(&metrics_path, format!("{METRICS_HEADER}\n").as_bytes())
+                .map_err(io_err(&metrics_path))?;
         }
-        // A new event file per session; a resumed one starts with a session-start marker so
-        // that TensorBoard drops the interrupted session's points past the checkpoint.
+        // A new event file per session (named by its first step and its process: two resumes
+        // from one checkpoint may start within a second); a resumed one starts with a
+        // session-start marker so that TensorBoard drops the interrupted session's points
+        // past the checkpoint.
         let tb_dir = dir.join("tensorboard");
-        let mut events = EventWriter::create(&tb_dir, &format!(".s{step}")).map_err(io_err(&tb_dir))?;
+        let suffix = format!(".s{step}.p{}", std::process::id());
+        let mut events = EventWriter::create(&tb_dir, &suffix).map_err(io_err(&tb_dir))?;
         if resumed {
             events.session_start(step).map_err(io_err(events.path()))?;
         }
         let file =
             File::options().append(true).create(true).open(&metrics_path).map_err(io_err(&metrics_path))?;
         let metrics = csv::WriterBuilder::new().has_headers(false).from_writer(file);
-        Ok(Self { dir: dir.to_owned(), metrics_path, metrics, events })
+        Ok(Self { dir: dir.to_owned(), metrics_path, metrics, events, _lock: lock })
     }
 
     pub fn dir(&self) -> &Path {
@@ -71,8 +145,17 @@ impl RunFolder {
     }
 
     /// Saves a checkpoint ([`crate::checkpoint::save`]) of `sac`, `state` and, when
-    /// `state.has_replay`, `replay`.
+    /// `state.has_replay`, `replay`. The rows logged up to it are synced to disk first: a
+    /// resume from it keeps them.
     pub fn checkpoint(&self, sac: &Sac, replay: &ReplayBuffer, state: &TrainState) -> Result<(), TrainError> {
+        let path = &self.metrics_path;
+        self.metrics.get_ref().sync_data().map_err(io_err(path))?;
+        let eval = self.dir.join("eval.csv");
+        match File::options().append(true).open(&eval) {
+            Ok(file) => file.sync_data().map_err(io_err(&eval))?,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io_err(&eval)(e)),
+        }
         let text =
             toml::to_string(state).map_err(|e| TrainError::Resume(format!("serialising state: {e}")))?;
         Ok(checkpoint::save(&self.dir, sac, state.has_replay.then_some(replay), &text)?)
@@ -94,21 +177,50 @@ pub(super) fn load_checkpoint(
     Ok(state)
 }
 
-/// Keeps the header and the rows whose first field (step) is <= `step`.
-fn truncate_csv(path: &Path, step: u64) -> Result<(), TrainError> {
-    if !path.exists() {
-        return Ok(());
+/// Checks the CSV file `path` (`metrics.csv`, `eval.csv`) of a run resumed at `step` before
+/// rows are appended to it, and keeps its header and the rows up to `step`, rewritten
+/// atomically when that drops any. A row cut short by a kill (no newline) is past the
+/// checkpoint (rows up to it were synced before it was saved) and is dropped. A first line
+/// that is not a header, or a row whose step is not a number, is refused with the file's name:
+/// appended to, it would not read as a table. Returns false when the file holds no complete
+/// line (missing, or a header cut short): it holds no row, and a new one must be started.
+fn resume_csv(path: &Path, step: u64) -> Result<bool, TrainError> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(io_err(path)(e)),
+    };
+    if !text.contains('\n') {
+        if step > 0 && text.is_empty() {
+            // Emptied by a vge before this one, killed while rewriting it: the rows are gone.
+            eprintln!("vge: note: {} was empty; it starts again at step {step}", path.display());
+        }
+        return Ok(false);
     }
-    let file = File::open(path).map_err(io_err(path))?;
-    let mut kept = String::new();
-    for (k, line) in BufReader::new(file).lines().enumerate() {
-        let line = line.map_err(io_err(path))?;
-        let keep =
-            k == 0 || line.split(',').next().and_then(|s| s.parse::<u64>().ok()).is_some_and(|s| s <= step);
-        if keep {
-            kept.push_str(&line);
-            kept.push('\n');
+    let bad = |what: String| {
+        TrainError::Resume(format!(
+            "{}: {what}; restore the file, or delete it to resume with a new one (the rows it held \
+             are then lost)",
+            path.display()
+        ))
+    };
+    let mut lines = text.split_inclusive('\n');
+    let header = lines.next().unwrap_or("");
+    if !header.starts_with("step,") {
+        return Err(bad(format!("its first line is not a header starting `step,`: `{}`", header.trim_end())));
+    }
+    let mut kept = String::from(header);
+    for (k, line) in lines.enumerate() {
+        let Some(row) = line.strip_suffix('\n') else { break };
+        let row_step = row.split(',').next().and_then(|s| s.trim().parse::<u64>().ok());
+        match row_step {
+            Some(s) if s <= step => kept.push_str(line),
+            Some(_) => {}
+            None => return Err(bad(format!("row {} does not start with a step: `{row}`", k + 2))),
         }
     }
-    std::fs::write(path, kept).map_err(io_err(path))
+    if kept != text {
+        atomic_file::write(path, kept.as_bytes()).map_err(io_err(path))?;
+    }
+    Ok(true)
 }
