@@ -193,7 +193,11 @@ fn build(dir: &Path, name: &str, args: &[&str]) -> PathBuf {
 fn torch_layout_mlp_imports_and_matches_onnxruntime() {
     let dir = scratch("torch");
     let hand = hand();
-    for (name, extra) in [("gemm.onnx", &[][..]), ("matmul.onnx", &["--matmul"][..])] {
+    // Gemm as torch's TorchScript exporter writes Linear, MatMul + Add as its dynamo exporter
+    // does, and the log_std head it writes beside SB3's mean (only an Expand's shape).
+    let variants =
+        [("gemm.onnx", &[][..]), ("matmul.onnx", &["--matmul"][..]), ("sb3.onnx", &["--sb3-head"][..])];
+    for (name, extra) in variants {
         let model = build(&dir, name, &[&["--seed", "5"][..], extra].concat());
         let bytes = std::fs::read(&model).unwrap();
         // Tanh's [-1, 1] without a Mul: the importer wants to be told what that output means.

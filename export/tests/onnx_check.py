@@ -47,7 +47,11 @@ def run(path, obs_path, out_path):
     (inp,) = session.get_inputs()
     width = inp.shape[-1]
     obs = np.fromfile(obs_path, dtype="<f4").reshape(-1, width)
-    (actions,) = session.run(None, {inp.name: obs})
+    if inp.shape[0] == 1:
+        # A batch fixed at 1 (torch.onnx.export without dynamic_axes, as SB3's docs export).
+        actions = np.concatenate([session.run(None, {inp.name: obs[k:k + 1]})[0] for k in range(len(obs))])
+    else:
+        (actions,) = session.run(None, {inp.name: obs})
     np.asarray(actions, dtype="<f4").tofile(out_path)
     print(f"onnxruntime {onnxruntime.__version__}: {obs.shape[0]} observations -> actions {actions.shape}")
 
@@ -60,7 +64,7 @@ def linear(rng, n_in, n_out):
     return w, b
 
 
-def build(out, obs_dim, act_dim, hidden, seed, variant, matmul, weights_npz):
+def build(out, obs_dim, act_dim, hidden, seed, variant, matmul, weights_npz, sb3_head):
     rng = np.random.default_rng(seed)
     dims = [obs_dim] + hidden + [act_dim]
     names = [f"latent_pi.{2 * k}" for k in range(len(hidden))] + ["mu"]
@@ -102,6 +106,29 @@ def build(out, obs_dim, act_dim, hidden, seed, variant, matmul, weights_npz):
             act_name = f"/latent_pi/latent_pi.{2 * k + 1}/{act}"
             nodes.append(helper.make_node(act, [x], [f"{act_name}_output_0"], name=act_name))
             x = f"{act_name}_output_0"
+    if sb3_head:
+        # What torch.onnx.export really writes for SB3's SAC actor: the log_std head, used only
+        # for the shape of an Expand in front of the Tanh (sb3_actor.py in
+        # docs/results/onnx-import exported it so).
+        w, b = linear(rng, hidden[-1], act_dim)
+        inits += [numpy_helper.from_array(w, "log_std.weight"), numpy_helper.from_array(b, "log_std.bias"),
+                  numpy_helper.from_array(np.array(-20, np.float32), "min"),
+                  numpy_helper.from_array(np.array(2, np.float32), "max"),
+                  numpy_helper.from_array(np.array(0, np.float32), "zero")]
+        latent = nodes[-2].output[0]
+        nodes += [
+            helper.make_node("Gemm", [latent, "log_std.weight", "log_std.bias"], ["ls"], name="/log_std/Gemm", transB=1),
+            helper.make_node("Clip", ["ls", "min", "max"], ["ls_c"], name="/Clip"),
+            helper.make_node("Exp", ["ls_c"], ["std"], name="/Exp"),
+            helper.make_node("Mul", ["zero", "std"], ["std0"], name="/Mul"),
+            helper.make_node("Shape", [x], ["mu_shape"], name="/Shape"),
+            helper.make_node("ConstantOfShape", ["mu_shape"], ["zeros"], name="/ConstantOfShape"),
+            helper.make_node("Add", ["zeros", x], ["a0"], name="/Add"),
+            helper.make_node("Add", ["a0", "std0"], ["a1"], name="/Add_1"),
+            helper.make_node("Shape", ["a1"], ["a1_shape"], name="/Shape_1"),
+            helper.make_node("Expand", [x, "a1_shape"], ["expanded"], name="/Expand"),
+        ]
+        x = "expanded"
     nodes.append(helper.make_node("Tanh", [x], ["output"], name="/Tanh"))
 
     graph = helper.make_graph(
@@ -135,6 +162,7 @@ def main():
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--variant", choices=["ok", "unsupported", "elu", "nan"], default="ok")
     b.add_argument("--matmul", action="store_true")
+    b.add_argument("--sb3-head", action="store_true", help="add the log_std head torch writes for SB3's actor")
     b.add_argument("--weights", help="npz of fitted w0, b0, w1, b1, ... instead of random ones")
     a = p.parse_args()
     if a.cmd == "check":
@@ -143,7 +171,7 @@ def main():
         run(a.model, a.obs, a.out)
     else:
         hidden = [int(h) for h in a.hidden.split(",") if h]
-        build(a.out, a.obs, a.act, hidden, a.seed, a.variant, a.matmul, a.weights)
+        build(a.out, a.obs, a.act, hidden, a.seed, a.variant, a.matmul, a.weights, a.sb3_head)
     return 0
 
 

@@ -9,9 +9,12 @@
 //!                                            cannot bind, e.g. [-1, 1] after a final Tanh)
 //! ```
 //!
-//! with `Identity`, `Flatten` (axis 1) and `Cast` to float32 anywhere as no-ops (torch's
-//! exporter writes `Flatten` for Stable-Baselines3's feature extractor). Every weight must be
-//! a constant (an initializer or a `Constant` node), float32, finite.
+//! with `Identity`, `Flatten` (axis 1), `Cast` to float32 and `Expand` to a computed value's
+//! `Shape` anywhere as no-ops (torch's exporter writes `Flatten` for Stable-Baselines3's
+//! feature extractor, and the Expand in front of its actor's Tanh). Nodes the action's values
+//! do not depend on (dead ones, or SB3's log_std head, which only gives that Expand its shape)
+//! are left out and listed. Every weight must be a constant (an initializer or a `Constant`
+//! node), float32, finite.
 
 use std::collections::HashMap;
 
@@ -246,6 +249,8 @@ struct Walk<'a> {
     graph: &'a GraphProto,
     target: &'a ImportTarget,
     consts: HashMap<&'a str, Const<'a>>,
+    /// The node writing each value.
+    producers: HashMap<&'a str, &'a NodeProto>,
     stage: Stage,
     mean: Option<Vec<f32>>,
     std: Option<Vec<f32>>,
@@ -301,10 +306,13 @@ impl<'a> Walk<'a> {
                 consts.insert(out.as_str(), Const::Node(n));
             }
         }
+        let producers =
+            graph.node.iter().flat_map(|n| n.output.iter().map(move |o| (o.as_str(), n))).collect();
         Self {
             graph,
             target,
             consts,
+            producers,
             stage: Stage::Normalise,
             mean: None,
             std: None,
@@ -339,8 +347,25 @@ impl<'a> Walk<'a> {
         };
 
         // Non-Constant nodes reading each value.
+        let live = live_nodes(g, &output.name);
+        let left_out: Vec<String> = g
+            .node
+            .iter()
+            .enumerate()
+            .filter(|(i, n)| n.op_type != "Constant" && !live.get(*i).copied().unwrap_or(false))
+            .map(|(i, n)| format!("{} ({})", label(i, n), n.op_type))
+            .collect();
+        if !left_out.is_empty() {
+            notes.push(format!(
+                "{} nodes that the action's values do not depend on (dead, or only the shape an Expand \
+                 takes, as torch writes SB3's log_std head) were left out: {}",
+                left_out.len(),
+                left_out.join(", ")
+            ));
+        }
         let mut readers: HashMap<&str, Vec<usize>> = HashMap::new();
-        for (i, n) in g.node.iter().enumerate().filter(|(_, n)| n.op_type != "Constant") {
+        let is_live = |i: &usize| live.get(*i).copied().unwrap_or(false);
+        for (i, n) in g.node.iter().enumerate().filter(|(i, n)| n.op_type != "Constant" && is_live(i)) {
             for name in n.input.iter().filter(|s| !s.is_empty()) {
                 readers.entry(name.as_str()).or_default().push(i);
             }
@@ -379,7 +404,7 @@ impl<'a> Walk<'a> {
             )));
         }
         for (i, n) in g.node.iter().enumerate() {
-            if n.op_type != "Constant" && !visited.get(i).copied().unwrap_or(false) {
+            if n.op_type != "Constant" && is_live(&i) && !visited.get(i).copied().unwrap_or(false) {
                 return Err(refusal(
                     i,
                     n,
@@ -446,6 +471,21 @@ impl<'a> Walk<'a> {
         let first_is_cur = node.input.first().is_some_and(|s| s == cur);
         match op {
             "Identity" => {}
+            "Expand" => {
+                // torch writes SB3's squashed mode as Expand(mean, Shape(mean + 0 * std)): to the
+                // shape of a value computed from the same batch, a no-op; the output's declared
+                // width is checked after the walk.
+                let to_shape = node.input.get(1).and_then(|s| self.producers.get(s.as_str()));
+                if to_shape.is_none_or(|p| p.op_type != "Shape") {
+                    return Err(refuse(
+                        "expands to a shape that is not the Shape of a computed value".to_owned(),
+                    ));
+                }
+                notes.push(format!(
+                    "node `{}`: Expand to a computed value's shape taken as a no-op",
+                    label(i, node)
+                ));
+            }
             "Flatten" => {
                 let axis = attr_i(node, "axis").unwrap_or(1);
                 if axis != 1 {
@@ -821,6 +861,26 @@ impl<'a> Walk<'a> {
         ));
         Ok(())
     }
+}
+
+/// Which nodes the values of `output` depend on: backwards from it through every input,
+/// except an Expand's shape and a Shape's input (a Shape reads only its input's shape).
+fn live_nodes(g: &GraphProto, output: &str) -> Vec<bool> {
+    let producer: HashMap<&str, usize> =
+        g.node.iter().enumerate().flat_map(|(i, n)| n.output.iter().map(move |o| (o.as_str(), i))).collect();
+    let mut live = vec![false; g.node.len()];
+    let mut stack = vec![output];
+    while let Some(v) = stack.pop() {
+        let Some(&i) = producer.get(v) else { continue };
+        let (Some(n), Some(seen)) = (g.node.get(i), live.get_mut(i)) else { continue };
+        if *seen || n.op_type == "Shape" {
+            continue;
+        }
+        *seen = true;
+        let inputs = if n.op_type == "Expand" { &n.input[..n.input.len().min(1)] } else { &n.input[..] };
+        stack.extend(inputs.iter().filter(|s| !s.is_empty()).map(String::as_str));
+    }
+    live
 }
 
 /// A `Constant` node's float value.
