@@ -1,19 +1,17 @@
-//! `vge-bridge run --backend sim --record F.rrd` (this crate turns on vge-bridge's `rerun`
-//! feature): the simulated episode read back by Rerun's own Python SDK
+//! `vge-bridge run --backend sim --record F.rrd` (a test of the `rerun` feature, built on its
+//! own: `cargo test --release -p vge-bridge --features rerun --test recording`, as
+//! scripts/test.sh does, so the Rerun SDK stays out of the workspace's main test build): the
+//! simulated episode read back by Rerun's own Python SDK
 //! (sim/tests/rrd_summary.py, rerun-sdk 0.36.3 in .deps/py) holds one frame per sim step the
 //! bridge reports; `--record` over CAN is refused before touching the bus.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-/// A workspace binary next to this test's executable (target/<profile>/deps/..).
-fn workspace_bin(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    let dir = exe.parent().and_then(|deps| deps.parent()).expect("target/<profile>/deps");
-    dir.join(name)
-}
+/// The bridge binary built with this test's features (`rerun` among them).
+const BRIDGE: &str = env!("CARGO_BIN_EXE_vge-bridge");
 
-#[path = "../support/python.rs"]
+#[path = "../../tests/support/python.rs"]
 mod python_env;
 use python_env::python;
 
@@ -23,7 +21,7 @@ fn bridge_run_records_the_simulated_episode_and_refuses_to_over_can() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let rrd = dir.join("bridge.rrd");
     let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
-    let run = Command::new(workspace_bin("vge-bridge"))
+    let run = Command::new(BRIDGE)
         .args(["run", "--backend", "sim", "--duration", "2", "--json", "--policy", policy, "--record"])
         .arg(&rrd)
         .output()
@@ -69,7 +67,7 @@ fn bridge_run_records_the_simulated_episode_and_refuses_to_over_can() {
     let reported = report["rotation_rad"].as_f64().expect("rotation_rad");
     assert!((rotation - reported).abs() < 1e-3, "recorded {rotation} rad, reported {reported} rad");
 
-    let can = Command::new(workspace_bin("vge-bridge"))
+    let can = Command::new(BRIDGE)
         .args(["run", "--backend", "can", "--iface", "vge-none0", "--policy", policy, "--record"])
         .arg(dir.join("can.rrd"))
         .output()
