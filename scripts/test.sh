@@ -3,16 +3,35 @@
 #
 # On first use it installs what it needs (Debian packages, the thumbv7em rustup target,
 # libtorch from PyPI wheels); later runs find them in place and go straight to the checks:
-#   formatting, clippy (-D warnings), the dependency rules (no libtorch in the bridge or the
-#   controllers, no rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F,
-#   the workspace tests in release, the hardware-in-the-loop tests on vcan0, and
-#   `vge sweep --slurm` on a one-node Slurm cluster started on localhost.
+#   formatting, the dependency rules (no libtorch in the bridge or the controllers, no
+#   rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F, the
+#   workspace tests in release with clippy (-D warnings) on every target as it compiles, the
+#   Rerun recording feature in its own build, the hardware-in-the-loop tests on vcan0, and
+#   `vge sweep --slurm` on a one-node Slurm cluster started on localhost. It ends with each
+#   step's time.
 set -euo pipefail
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 
 t0=$SECONDS
-step() { printf '\n==> %s  [%ds]\n' "$*" $((SECONDS - t0)); }
+# Each step's name and start time; the breakdown is printed at the end, and on failure too.
+step_names=() step_starts=()
+step() {
+  step_names+=("$*") step_starts+=($((SECONDS - t0)))
+  printf '\n==> %s  [%ds]\n' "$*" $((SECONDS - t0))
+}
+breakdown() {
+  local rc=$? end=$((SECONDS - t0)) i next
+  # A step that failed leaves no background build behind.
+  if [[ -n ${rerun_build:-} ]]; then pkill -P "$rerun_build" 2>/dev/null || true; kill "$rerun_build" 2>/dev/null || true; fi
+  printf '\n==> step times (s), %s\n' "$([[ $rc == 0 ]] && echo "all passed" || echo "FAILED (exit $rc) in the last step")"
+  for i in "${!step_names[@]}"; do
+    next=${step_starts[i + 1]:-$end}
+    printf '%6d  %s\n' $((next - step_starts[i])) "${step_names[i]}"
+  done
+  printf '%6d  total\n' "$end"
+}
+trap breakdown EXIT
 
 # torch-sys treats these as set whatever their value; they would send it to another libtorch.
 unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
@@ -29,12 +48,12 @@ step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, in .deps/
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
 # event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
 # the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py); MuJoCo steps the
-# model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs). rliable computes the
-# aggregates of vge_trainer::stats for comparison (trainer/tests/stats_vs_rliable.rs; its arch 7
-# needs pandas < 3).
-if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, rliable.library, onnx, onnxruntime; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
+# model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs); rliable computes the
+# aggregates of vge_trainer::stats for comparison (trainer/tests/stats_vs_rliable.rs; its arch
+# 7 needs pandas < 3).
+if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, rliable.library, onnx, onnxruntime, maturin, gymnasium, pytest; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 rliable "pandas<3" onnx onnxruntime
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 rliable "pandas<3" onnx onnxruntime maturin gymnasium pytest
 fi
 .deps/py/bin/python -c 'import importlib.metadata, cantools, tensorboard, rerun, mujoco, rliable.library; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__, "rliable", importlib.metadata.version("rliable"))'
 
@@ -50,9 +69,14 @@ echo "LIBTORCH -> $(readlink .deps/libtorch)"
 step "cargo fmt --check"
 cargo fmt --all --check
 
-step "cargo clippy --workspace --all-targets -- -D warnings"
-# --release shares build-script outputs (torch-sys' C++) with the test build below.
-cargo clippy --release --workspace --all-targets -- -D warnings
+# Clippy lints (-D warnings) every workspace crate while it is compiled for the tests, instead
+# of in a separate `cargo clippy` pass that would compile everything a second time: this is
+# what `cargo clippy` itself does (clippy-driver as the workspace's rustc wrapper), with the
+# test build as the compile. Dependencies are built once, by plain rustc. Exported so that
+# scripts/hil.sh reuses the same build.
+RUSTC_WORKSPACE_WRAPPER="$(rustc --print sysroot)/bin/clippy-driver"
+export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
+[[ -x $RUSTC_WORKSPACE_WRAPPER ]] || { echo "clippy-driver not found at $RUSTC_WORKSPACE_WRAPPER"; exit 1; }
 
 step "dependency rule: vge-controllers and vge-bridge never link libtorch"
 for crate in vge-controllers vge-bridge; do
@@ -74,8 +98,8 @@ for dep in rapier3d rayon rerun; do
     echo "vge-bridge without its sim feature depends on $dep:"; cargo tree "${can_only[@]}" -e normal -i "$dep"; exit 1
   fi
 done
-cargo clippy --release "${can_only[@]}" --all-targets -- -D warnings
-cargo build --release "${can_only[@]}"
+# Every target built (and linted, through the wrapper above); the binary is the CAN-only one.
+cargo test --release "${can_only[@]}" --no-run
 ls -l target/release/vge-bridge
 # Its command line: hand files, and a clear refusal of the simulator it does not have.
 cargo test --release "${can_only[@]}" --test cli
@@ -85,8 +109,42 @@ cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
 cargo build --release -p vge-bridge --lib --no-default-features --target thumbv7em-none-eabihf
 ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib target/thumbv7em-none-eabihf/release/libvge_bridge.rlib
 
-step "cargo test --workspace (release)"
+step "cargo test --workspace (release; clippy -D warnings on every target as it builds)"
+# --no-run first builds (and lints) every target, examples included, as `cargo clippy
+# --workspace --all-targets` would: the workspace has no benches.
+cargo test --release --workspace --no-run
 cargo test --release --workspace
+
+step "Python package (python/: pyo3 + numpy, built by maturin; pytest python/tests)"
+# A workspace of its own (python/Cargo.toml, target dir python/target) linking vge-sim,
+# vge-controllers and vge-runtime, never libtorch.
+tree=$(cargo tree --manifest-path python/Cargo.toml --workspace -e normal,build --prefix none)
+if grep -q '^torch-sys ' <<<"$tree"; then
+  echo "python/ depends on torch-sys:"; cargo tree --manifest-path python/Cargo.toml --workspace -i torch-sys; exit 1
+fi
+echo "python/: $(wc -l <<<"$tree") dependency lines, no torch-sys"
+# The whole python workspace in one build (one feature resolution, so the dependencies are
+# built once; linted through the clippy wrapper above): the reference binary the tests compare
+# with and the [env] keys' unit tests. Then the package, built by pip through maturin in the
+# same target dir and installed into .deps/py.
+export PYO3_PYTHON=$repo/.deps/py/bin/python
+cargo build --release --manifest-path python/Cargo.toml --workspace
+cargo test --release --manifest-path python/Cargo.toml --workspace
+PATH="$repo/.deps/py/bin:$PATH" .deps/py/bin/python -m pip install --quiet --disable-pip-version-check \
+  --no-build-isolation --no-deps --force-reinstall ./python
+ls -l python/target/wheels/
+.deps/py/bin/python -m pytest -q python/tests
+
+# The Rerun SDK (and its Arrow and gRPC stack) is a large build that only `--record` needs, so
+# the workspace's main test build leaves it out, and the two crates that record are built with
+# it in a target dir of their own, in the background at low priority while the HIL and Slurm
+# steps (which mostly wait on a guest and on timers) run; its test runs after them.
+rerun=(-p vge-sim -p vge-bridge --features vge-sim/rerun,vge-bridge/rerun --test recording)
+rerun_target=$repo/target/rerun
+mkdir -p "$rerun_target"
+CARGO_TARGET_DIR=$rerun_target nice -n 19 cargo test --release "${rerun[@]}" --no-run \
+  >"$rerun_target/build.log" 2>&1 &
+rerun_build=$!
 
 step "HIL runner passes the guest's exit status back"
 set +e; scripts/canvm/run.sh /bin/sh -c 'exit 7'; rc=$?; set -e
@@ -101,4 +159,9 @@ step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
 # cluster, runs trainer/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
 scripts/slurm/test.sh
 
-step "all checks passed in $((SECONDS - t0)) s"
+step "Rerun recordings: the optional rerun feature, built in the background since the HIL step"
+if ! wait "$rerun_build"; then
+  tail -n 60 "$rerun_target/build.log"; echo "the rerun build failed (log: $rerun_target/build.log)"; exit 1
+fi
+CARGO_TARGET_DIR=$rerun_target cargo test --release "${rerun[@]}"
+
