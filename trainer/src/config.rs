@@ -841,6 +841,20 @@ impl EnvSection {
                  force on the object: set one",
             ));
         }
+        // The task variants, named here before the sim's own check sees them unnamed.
+        for (key, value, zero_ok) in [
+            ("env.object_mass_kg", self.object_mass_kg, false),
+            ("env.object_friction", self.object_friction, true),
+            ("env.motor_torque_cap_nm", self.motor_torque_cap_nm, false),
+            ("env.motor_stiffness_nm_per_rad", self.motor_stiffness_nm_per_rad, false),
+        ] {
+            if let Some(v) = value
+                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
+            {
+                let need = if zero_ok { ">= 0" } else { "> 0" };
+                return Err(invalid(format!("{key} must be a finite number {need}, got {v}")));
+            }
+        }
         for i in 0..self.objects.len() {
             self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
         }
@@ -973,20 +987,6 @@ impl BcSection {
     fn validate(&self) -> Result<(), ConfigError> {
         if !(self.beta_start.is_finite() && self.beta_start >= 0.0) {
             return Err(invalid(format!("bc.beta_start must be >= 0, got {}", self.beta_start)));
-        }
-        // The task variants, named here before the sim's own check sees them unnamed.
-        for (key, value, zero_ok) in [
-            ("env.object_mass_kg", self.object_mass_kg, false),
-            ("env.object_friction", self.object_friction, true),
-            ("env.motor_torque_cap_nm", self.motor_torque_cap_nm, false),
-            ("env.motor_stiffness_nm_per_rad", self.motor_stiffness_nm_per_rad, false),
-        ] {
-            if let Some(v) = value
-                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
-            {
-                let need = if zero_ok { ">= 0" } else { "> 0" };
-                return Err(invalid(format!("{key} must be a finite number {need}, got {v}")));
-            }
         }
         Ok(())
     }

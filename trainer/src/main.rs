@@ -238,7 +238,23 @@ enum Command {
     /// The file carries the actor's layers, the hand's observation and action layouts, the
     /// action scaling and control rate of the default env, and provenance. Load it with
     /// `vge-runtime` (no_std) or run it with `vge-bridge`.
+    ///
+    /// `--format onnx` writes the same policy as one ONNX graph (opset 17) from the raw
+    /// observation to the action instead (docs/onnx.md): normalisation, layers, tanh, action
+    /// scale, with the layouts, control rate and provenance in its metadata_props.
     Export(ExportArgs),
+    /// Import an MLP actor from an ONNX file (e.g. a Stable-Baselines3 actor exported with
+    /// torch.onnx.export) as a policy file for the hand, for `vge eval`, `vge-bridge` and the
+    /// firmware.
+    ///
+    /// Accepts Gemm or MatMul + Add layers with Relu or Tanh, Sub/Div normalisation in front,
+    /// Mul/Add scaling behind (docs/onnx.md). Refuses anything else, naming the node, its op
+    /// and why (an unsupported op, a width that is not the hand's 65 observations or 15
+    /// actions, a layer wider than the runtime holds, a non-finite weight), and writes
+    /// nothing then.
+    ///
+    /// Example: vge import --onnx sac_actor.onnx --out sac.vgep --action-scale hand
+    Import(ImportArgs),
     /// Check a policy file and print what it holds: format version, dimensions, layers,
     /// parameter count, provenance, checksum status. Exits non-zero if it is not valid.
     Inspect {
@@ -328,23 +344,7 @@ struct RobustnessArgs {
     /// Only these axes, comma-separated (joint_noise_rad, normal_error_frac, position_error_m,
     /// perturbation_force_n, perturbation_magnitude_n), e.g. to screen snapshots on the pushes
     /// alone; all five when left out.
-    ///
-    /// `--format onnx` writes the same policy as one ONNX graph (opset 17) from the raw
-    /// observation to the action instead (docs/onnx.md): normalisation, layers, tanh, action
-    /// scale, with the layouts, control rate and provenance in its metadata_props.
     #[arg(long, value_delimiter = ',', value_parser = parse_robustness_axis)]
-    /// Import an MLP actor from an ONNX file (e.g. a Stable-Baselines3 actor exported with
-    /// torch.onnx.export) as a policy file for the hand, for `vge eval`, `vge-bridge` and the
-    /// firmware.
-    ///
-    /// Accepts Gemm or MatMul + Add layers with Relu or Tanh, Sub/Div normalisation in front,
-    /// Mul/Add scaling behind (docs/onnx.md). Refuses anything else, naming the node, its op
-    /// and why (an unsupported op, a width that is not the hand's 65 observations or 15
-    /// actions, a layer wider than the runtime holds, a non-finite weight), and writes
-    /// nothing then.
-    ///
-    /// Example: vge import --onnx sac_actor.onnx --out sac.vgep --action-scale hand
-    Import(ImportArgs),
     axes: Vec<vge_trainer::robustness::Axis>,
     /// The same episodes (seeds, grasps) run at every level.
     #[command(flatten)]
@@ -496,6 +496,45 @@ struct ExportArgs {
     out: PathBuf,
 }
 
+/// `vge export --format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ExportFormat {
+    /// A vge policy file (docs/policy-format.md).
+    Vgep,
+    /// An ONNX model (docs/onnx.md).
+    Onnx,
+}
+
+#[derive(Debug, Args)]
+struct ImportArgs {
+    /// The ONNX model of the actor.
+    #[arg(long, value_name = "F.onnx")]
+    onnx: PathBuf,
+    /// Where to write the policy file.
+    #[arg(long, value_name = "P.vgep")]
+    out: PathBuf,
+    /// Observation mean subtracted before the actor (a text file of 65 numbers separated by
+    /// whitespace or commas, e.g. np.savetxt of a VecNormalize's obs_rms.mean), for actors
+    /// whose graph does not normalise.
+    #[arg(long, value_name = "FILE")]
+    obs_mean: Option<PathBuf>,
+    /// Observation std divided by (65 numbers, e.g. np.sqrt(obs_rms.var + epsilon)).
+    #[arg(long, value_name = "FILE")]
+    obs_std: Option<PathBuf>,
+    /// Clamp the normalised observation to [-C, C] (a VecNormalize's clip_obs).
+    #[arg(long, value_name = "C")]
+    obs_clip: Option<f32>,
+    /// The observation layout the actor was trained on, `name:start..end,...`; refused
+    /// unless it is the hand's.
+    #[arg(long)]
+    obs_layout: Option<String>,
+    /// What the graph's output is: `graph` (already the action: rad per control step),
+    /// `hand` (Stable-Baselines3's normalised action in [-1, 1]: times the hand's largest
+    /// joint-target step) or a factor. Needed when the graph has no Mul after its last layer.
+    #[arg(long, value_name = "graph|hand|FACTOR")]
+    action_scale: Option<String>,
+}
+
 #[derive(Debug, Subcommand)]
 enum Bench {
     /// Full SAC updates per second: batch 256, 256x256 actor and twin critics, obs 65,
@@ -594,45 +633,6 @@ enum Bench {
         /// Rollout episodes per controller (10 s each).
         #[arg(long, default_value_t = 2)]
         episodes: usize,
-/// `vge export --format`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-enum ExportFormat {
-    /// A vge policy file (docs/policy-format.md).
-    Vgep,
-    /// An ONNX model (docs/onnx.md).
-    Onnx,
-}
-
-#[derive(Debug, Args)]
-struct ImportArgs {
-    /// The ONNX model of the actor.
-    #[arg(long, value_name = "F.onnx")]
-    onnx: PathBuf,
-    /// Where to write the policy file.
-    #[arg(long, value_name = "P.vgep")]
-    out: PathBuf,
-    /// Observation mean subtracted before the actor (a text file of 65 numbers separated by
-    /// whitespace or commas, e.g. np.savetxt of a VecNormalize's obs_rms.mean), for actors
-    /// whose graph does not normalise.
-    #[arg(long, value_name = "FILE")]
-    obs_mean: Option<PathBuf>,
-    /// Observation std divided by (65 numbers, e.g. np.sqrt(obs_rms.var + epsilon)).
-    #[arg(long, value_name = "FILE")]
-    obs_std: Option<PathBuf>,
-    /// Clamp the normalised observation to [-C, C] (a VecNormalize's clip_obs).
-    #[arg(long, value_name = "C")]
-    obs_clip: Option<f32>,
-    /// The observation layout the actor was trained on, `name:start..end,...`; refused
-    /// unless it is the hand's.
-    #[arg(long)]
-    obs_layout: Option<String>,
-    /// What the graph's output is: `graph` (already the action: rad per control step),
-    /// `hand` (Stable-Baselines3's normalised action in [-1, 1]: times the hand's largest
-    /// joint-target step) or a factor. Needed when the graph has no Mul after its last layer.
-    #[arg(long, value_name = "graph|hand|FACTOR")]
-    action_scale: Option<String>,
-}
-
     },
 }
 
@@ -664,6 +664,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Export(args) => export(args),
+        Command::Import(args) => import_onnx(args),
         Command::Inspect { file } => {
             let report = vge_export::inspect::report_file(&file)
                 .with_context(|| format!("reading policy file {}", file.display()))?;
@@ -790,7 +791,6 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     }
     let report = vge_trainer::eval::eval_policy_file(&policy, &env, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
-        Command::Import(args) => import_onnx(args),
     if let Some(png) = &plot {
         draw_gait_diagram(&policy, &env, seed, png)?;
     }
@@ -1125,7 +1125,8 @@ fn controller(args: ControllerArgs) -> anyhow::Result<()> {
         let env = vge_trainer::eval::without_training_disturbances(&config.env.env_config(0));
         options.cs = config.cs_config(&env);
         options.env = env;
-        (default_episode_s, default_grasp_noise_rad) = (config.run.eval_episode_s, config.run.eval_grasp_noise_rad);
+        (default_episode_s, default_grasp_noise_rad) =
+            (config.run.eval_episode_s, config.run.eval_grasp_noise_rad);
     }
     let episode_s = episode_s.unwrap_or(default_episode_s);
     let grasp_noise_rad = grasp_noise_rad.unwrap_or(default_grasp_noise_rad);
@@ -1212,8 +1213,119 @@ fn export(args: ExportArgs) -> anyhow::Result<()> {
             .encode(weights)?,
         None => export_actor(&args, weights)?,
     };
+    if args.format == ExportFormat::Onnx {
+        return export_onnx(&args, &bytes);
+    }
     std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
     println!("wrote {} ({} bytes, {weights} weights, format version 2)", args.out.display(), bytes.len());
+    Ok(())
+}
+
+/// `vge export --format onnx`: the policy file `vgep` as an ONNX model.
+fn export_onnx(args: &ExportArgs, vgep: &[u8]) -> anyhow::Result<()> {
+    // A stored i8 file re-encoded as f32 above would export the weights it stands for, not
+    // the quantised forward the runtime runs: refused like `--weights i8`.
+    if let Some(path) = &args.policy
+        && vge_export::inspect::report_file(path)?.weight_type == vge_export::WeightType::I8
+    {
+        bail!("{}: {}", path.display(), vge_export::onnx::OnnxError::Quantised);
+    }
+    let bytes = vge_export::onnx::policy_bytes_to_onnx(vgep)?;
+    std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
+    let policy = vge_export::PolicyFile::from_bytes(vgep)?;
+    println!(
+        "wrote {} ({} bytes, ONNX opset {}: obs [batch, {}] -> action [batch, {}], {} layers)",
+        args.out.display(),
+        bytes.len(),
+        vge_export::onnx::OPSET_VERSION,
+        policy.obs_dim,
+        policy.act_dim,
+        policy.layers.len()
+    );
+    Ok(())
+}
+
+/// `vge import`: an ONNX MLP actor as a policy file for the default env's hand.
+fn import_onnx(args: ImportArgs) -> anyhow::Result<()> {
+    use vge_export::onnx::{ActionScale, ImportOptions, ImportTarget};
+    let env = EnvConfig::default();
+    let unknown = Provenance { vge_version: String::new(), config_hash: String::new(), seed: 0, steps: 0 };
+    let hand = policy_export::hand_policy_meta(&env, unknown);
+    let target = ImportTarget {
+        obs_layout: hand.obs_layout,
+        action_names: hand.action_names,
+        control_hz: env.control_hz,
+        max_layers: vge_runtime::policy::HAND_MAX_LAYERS,
+        max_width: vge_runtime::policy::HAND_MAX_WIDTH,
+    };
+    let numbers = |path: &Option<PathBuf>| -> anyhow::Result<Option<Vec<f32>>> {
+        let Some(path) = path else { return Ok(None) };
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let values = text
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|t| !t.is_empty())
+            .map(|t| t.parse::<f32>().with_context(|| format!("{}: `{t}` is not a number", path.display())))
+            .collect::<anyhow::Result<Vec<f32>>>()?;
+        Ok(Some(values))
+    };
+    let obs_dim = target.obs_dim();
+    let (mean, std) = (numbers(&args.obs_mean)?, numbers(&args.obs_std)?);
+    let given = mean.is_some() || std.is_some() || args.obs_clip.is_some();
+    let obs_norm = given.then(|| vge_export::ObsNorm {
+        mean: mean.unwrap_or(vec![0.0; obs_dim]),
+        std: std.unwrap_or(vec![1.0; obs_dim]),
+        clip: args.obs_clip,
+    });
+    let obs_layout = args
+        .obs_layout
+        .as_deref()
+        .map(|text| {
+            text.split(',')
+                .map(|slice| {
+                    let parsed = slice.trim().rsplit_once(':').and_then(|(name, range)| {
+                        let (a, b) = range.split_once("..")?;
+                        Some(vge_export::ObsSlice::new(name, a.parse().ok()?..b.parse().ok()?))
+                    });
+                    parsed.with_context(|| format!("--obs-layout: `{slice}` is not name:start..end"))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()
+        })
+        .transpose()?;
+    let action_scale = match args.action_scale.as_deref() {
+        None => None,
+        Some("graph") => Some(ActionScale::Graph),
+        Some("hand") => Some(ActionScale::Times(env.max_action_rad)),
+        Some(f) => Some(ActionScale::Times(
+            f.parse().with_context(|| format!("--action-scale `{f}`: not graph, hand or a number"))?,
+        )),
+    };
+    let options = ImportOptions {
+        obs_norm,
+        obs_layout,
+        action_scale,
+        source: args.onnx.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+    };
+    let imported = vge_export::onnx::import_file(&args.onnx, &args.out, &target, &options)
+        .with_context(|| format!("importing {}", args.onnx.display()))?;
+    for note in &imported.notes {
+        println!("note: {note}");
+    }
+    let p = &imported.policy;
+    let activation = |code: u8| ["identity", "relu", "tanh"].get(usize::from(code)).copied().unwrap_or("?");
+    let layers = p
+        .layers
+        .iter()
+        .map(|l| format!("{} {}", l.out_dim, activation(l.activation)))
+        .collect::<Vec<_>>()
+        .join(" -> ");
+    let scale = p.action_scale.iter().fold(0.0f32, |m, s| m.max(s.abs()));
+    println!(
+        "wrote {}: {} -> {layers}, action scale up to {scale} (rad per step), {} Hz; run it with \
+         `vge eval --policy {0}` or `vge-bridge run --policy {0}`",
+        args.out.display(),
+        p.obs_dim,
+        p.control_hz
+    );
     Ok(())
 }
 
@@ -1479,122 +1591,11 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_trainer::sweep::Sweep, jobs: u32
 
 /// Writes DIR/sweep.sbatch and, unless --dry-run, submits it.
 fn sweep_slurm(args: &SweepArgs, sweep: &vge_trainer::sweep::Sweep) -> anyhow::Result<()> {
-    if args.format == ExportFormat::Onnx {
-        return export_onnx(&args, &bytes);
-    }
     use vge_trainer::sweep::{Slurm, array_spec, on_path, submit, write_sbatch};
     // Before any file is written: a login node without Slurm is the likely mistake.
     if !args.dry_run && !on_path("sbatch") {
         bail!(vge_trainer::sweep::SweepError::NoSbatch);
     }
-/// `vge export --format onnx`: the policy file `vgep` as an ONNX model.
-fn export_onnx(args: &ExportArgs, vgep: &[u8]) -> anyhow::Result<()> {
-    // A stored i8 file re-encoded as f32 above would export the weights it stands for, not
-    // the quantised forward the runtime runs: refused like `--weights i8`.
-    if let Some(path) = &args.policy
-        && vge_export::inspect::report_file(path)?.weight_type == vge_export::WeightType::I8
-    {
-        bail!("{}: {}", path.display(), vge_export::onnx::OnnxError::Quantised);
-    }
-    let bytes = vge_export::onnx::policy_bytes_to_onnx(vgep)?;
-    std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
-    let policy = vge_export::PolicyFile::from_bytes(vgep)?;
-    println!(
-        "wrote {} ({} bytes, ONNX opset {}: obs [batch, {}] -> action [batch, {}], {} layers)",
-        args.out.display(),
-        bytes.len(),
-        vge_export::onnx::OPSET_VERSION,
-        policy.obs_dim,
-        policy.act_dim,
-        policy.layers.len()
-    );
-    Ok(())
-}
-
-/// `vge import`: an ONNX MLP actor as a policy file for the default env's hand.
-fn import_onnx(args: ImportArgs) -> anyhow::Result<()> {
-    use vge_export::onnx::{ActionScale, ImportOptions, ImportTarget};
-    let env = EnvConfig::default();
-    let unknown = Provenance { vge_version: String::new(), config_hash: String::new(), seed: 0, steps: 0 };
-    let hand = policy_export::hand_policy_meta(&env, unknown);
-    let target = ImportTarget {
-        obs_layout: hand.obs_layout,
-        action_names: hand.action_names,
-        control_hz: env.control_hz,
-        max_layers: vge_runtime::policy::HAND_MAX_LAYERS,
-        max_width: vge_runtime::policy::HAND_MAX_WIDTH,
-    };
-    let numbers = |path: &Option<PathBuf>| -> anyhow::Result<Option<Vec<f32>>> {
-        let Some(path) = path else { return Ok(None) };
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let values = text
-            .split(|c: char| c.is_whitespace() || c == ',')
-            .filter(|t| !t.is_empty())
-            .map(|t| t.parse::<f32>().with_context(|| format!("{}: `{t}` is not a number", path.display())))
-            .collect::<anyhow::Result<Vec<f32>>>()?;
-        Ok(Some(values))
-    };
-    let obs_dim = target.obs_dim();
-    let (mean, std) = (numbers(&args.obs_mean)?, numbers(&args.obs_std)?);
-    let given = mean.is_some() || std.is_some() || args.obs_clip.is_some();
-    let obs_norm = given.then(|| vge_export::ObsNorm {
-        mean: mean.unwrap_or(vec![0.0; obs_dim]),
-        std: std.unwrap_or(vec![1.0; obs_dim]),
-        clip: args.obs_clip,
-    });
-    let obs_layout = args
-        .obs_layout
-        .as_deref()
-        .map(|text| {
-            text.split(',')
-                .map(|slice| {
-                    let parsed = slice.trim().rsplit_once(':').and_then(|(name, range)| {
-                        let (a, b) = range.split_once("..")?;
-                        Some(vge_export::ObsSlice::new(name, a.parse().ok()?..b.parse().ok()?))
-                    });
-                    parsed.with_context(|| format!("--obs-layout: `{slice}` is not name:start..end"))
-                })
-                .collect::<anyhow::Result<Vec<_>>>()
-        })
-        .transpose()?;
-    let action_scale = match args.action_scale.as_deref() {
-        None => None,
-        Some("graph") => Some(ActionScale::Graph),
-        Some("hand") => Some(ActionScale::Times(env.max_action_rad)),
-        Some(f) => Some(ActionScale::Times(
-            f.parse().with_context(|| format!("--action-scale `{f}`: not graph, hand or a number"))?,
-        )),
-    };
-    let options = ImportOptions {
-        obs_norm,
-        obs_layout,
-        action_scale,
-        source: args.onnx.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
-    };
-    let imported = vge_export::onnx::import_file(&args.onnx, &args.out, &target, &options)
-        .with_context(|| format!("importing {}", args.onnx.display()))?;
-    for note in &imported.notes {
-        println!("note: {note}");
-    }
-    let p = &imported.policy;
-    let activation = |code: u8| ["identity", "relu", "tanh"].get(usize::from(code)).copied().unwrap_or("?");
-    let layers = p
-        .layers
-        .iter()
-        .map(|l| format!("{} {}", l.out_dim, activation(l.activation)))
-        .collect::<Vec<_>>()
-        .join(" -> ");
-    let scale = p.action_scale.iter().fold(0.0f32, |m, s| m.max(s.abs()));
-    println!(
-        "wrote {}: {} -> {layers}, action scale up to {scale} (rad per step), {} Hz; run it with \
-         `vge eval --policy {0}` or `vge-bridge run --policy {0}`",
-        args.out.display(),
-        p.obs_dim,
-        p.control_hz
-    );
-    Ok(())
-}
-
     vge_trainer::config::load_config(&sweep.config, &sweep.overrides)?;
     let slurm = Slurm {
         partition: args.partition.clone(),
