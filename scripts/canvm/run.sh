@@ -2,34 +2,47 @@
 # Run one program where a virtual CAN interface (vcan0) is up, passing its exit status back.
 #
 #   scripts/canvm/run.sh PROGRAM [ARGS...]
+#   scripts/canvm/run.sh --which      # prints the backend auto picks here: host, qemu-kvm, uml, qemu-tcg
 #
 # vge's hardware-in-the-loop tests talk SocketCAN on vcan0. Many kernels have no CAN at all
 # (this project's CI machines, WSL2's stock kernel, many containers), so this runner picks a
 # backend:
 #   host  vcan0 already exists, or `ip link add dev vcan0 type vcan` works: run directly.
+#   qemu  qemu-system-x86_64 boots Debian's stock kernel with a busybox initramfs and the
+#         host's / over virtio-9p, under KVM where hardware KVM (VMX/SVM) is usable: a real
+#         kernel on real cores, far fewer stalls than UML. Else TCG (software emulation).
 #   uml   Debian's user-mode-linux (kernel 6.1 with CAN modules) boots with the host's / as
-#         its root (hostfs), creates vcan0 and runs PROGRAM in place. ~3-4 s per run.
-#   qemu  qemu-system-x86_64 (KVM when real VMX/SVM KVM exists, else TCG) boots Debian's
-#         stock kernel with a busybox initramfs and the host's / over virtio-9p. ~5-12 s.
-# VGE_CAN_BACKEND=auto|host|uml|qemu chooses (auto: host, then uml, then qemu).
+#         its root (hostfs), creates vcan0 and runs PROGRAM in place. ~3-4 s per run. Every
+#         guest syscall is a ptrace round trip through the host, so a loaded host stalls it.
+# VGE_CAN_BACKEND=auto|host|uml|qemu chooses (auto: host, then qemu under KVM if a probe
+# boot succeeds here (cached), then uml, then qemu under TCG).
+# KVM-PVM (/sys/module/kvm_pvm: software nested virtualisation, as on Firecracker VMs) is not
+# hardware KVM: it runs only kernels built as PVM guests, and Debian's stock kernel hangs at
+# boot there, so it counts as no KVM.
 # The guest gets the caller's environment and working directory; PROGRAM's stdout/stderr
 # come out here. Exit status: PROGRAM's; 124 if the guest timed out; 125 if the guest failed
 # before PROGRAM reported a status. Used as a cargo runner by scripts/hil.sh.
 #
 # Knobs: VGE_CAN_IFACES (default "vcan0"), VGE_CANVM_TIMEOUT (s, default 600),
 # VGE_CANVM_MEM (MiB, default 1024), VGE_CANVM_VERBOSE=1 (guest console on failure and
-# success), VGE_CACHE (default ~/.cache/vge: shim, qemu kernel and initramfs).
+# success), VGE_CACHE (default ~/.cache/vge: shim, qemu kernel and initramfs, KVM probe),
+# VGE_CANVM_ACCEL=kvm|tcg (qemu's accelerator; default: kvm where hardware KVM is usable).
 set -uo pipefail
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 fail() { echo "canvm: $*" >&2; exit 125; }
 note() { echo "canvm: $*" >&2; }
 
-[[ $# -ge 1 ]] || fail "usage: $0 PROGRAM [ARGS...]"
-prog=$1; shift
-if [[ $prog != */* ]]; then prog=$(command -v -- "$prog") || fail "not found: $prog"; fi
-prog=$(readlink -f -- "$prog")
-[[ -f $prog && -x $prog ]] || fail "not an executable file: $prog"
+[[ $# -ge 1 ]] || fail "usage: $0 PROGRAM [ARGS...] | --which"
+which_only=0
+if [[ $1 == --which ]]; then
+  which_only=1
+else
+  prog=$1; shift
+  if [[ $prog != */* ]]; then prog=$(command -v -- "$prog") || fail "not found: $prog"; fi
+  prog=$(readlink -f -- "$prog")
+  [[ -f $prog && -x $prog ]] || fail "not an executable file: $prog"
+fi
 
 backend=${VGE_CAN_BACKEND:-auto}
 ifaces=${VGE_CAN_IFACES-vcan0}
@@ -48,16 +61,46 @@ host_has_ifaces() {
     ip link add dev "$i" type vcan 2>/dev/null && ip link set up "$i" 2>/dev/null || return 1
   done
 }
+# Hardware KVM: /dev/kvm writable and kvm_intel or kvm_amd loaded, not KVM-PVM (see above).
+hw_kvm() {
+  [[ -w /dev/kvm && ! -d /sys/module/kvm_pvm ]] && [[ -d /sys/module/kvm_intel || -d /sys/module/kvm_amd ]]
+}
+# Whether a qemu guest boots under KVM here: one probe boot running /bin/true, its outcome
+# cached per host kernel (a failed probe costs up to a minute once, not every run).
+kvm_boots() {
+  hw_kvm && command -v qemu-system-x86_64 >/dev/null || return 1
+  local mark=$cache/kvm-probe-$(uname -r)
+  if [[ ! -f $mark ]]; then
+    mkdir -p "$cache" || return 1
+    note "probing a qemu guest under KVM (once per host kernel)"
+    if VGE_CAN_BACKEND=qemu VGE_CANVM_ACCEL=kvm VGE_CANVM_TIMEOUT=60 "$here/run.sh" /bin/true >/dev/null 2>&1; then
+      echo ok > "$mark"
+    else
+      echo failed > "$mark"
+    fi
+  fi
+  [[ $(cat "$mark") == ok ]]
+}
 if [[ $backend == auto || $backend == host ]]; then
   if host_has_ifaces; then
+    if [[ $which_only == 1 ]]; then echo host; exit 0; fi
     note "backend=host ($ifaces up on this kernel)"
     exec "$prog" "$@"
   fi
   [[ $backend == host ]] && fail "VGE_CAN_BACKEND=host but this kernel cannot create vcan ($ifaces)"
-  if [[ -x $uml_kernel ]]; then backend=uml; else backend=qemu; fi
-  note "backend=$backend (this kernel has no vcan: 'ip link add type vcan' failed)"
+  if kvm_boots; then backend=qemu; export VGE_CANVM_ACCEL=kvm
+  elif [[ -x $uml_kernel ]]; then backend=uml
+  else backend=qemu
+  fi
+  [[ $which_only == 1 ]] || note "backend=$backend (this kernel has no vcan: 'ip link add type vcan' failed)"
 else
-  note "backend=$backend (VGE_CAN_BACKEND)"
+  [[ $which_only == 1 ]] || note "backend=$backend (VGE_CAN_BACKEND)"
+fi
+qemu_accel=${VGE_CANVM_ACCEL:-}
+if [[ -z $qemu_accel ]]; then if hw_kvm; then qemu_accel=kvm; else qemu_accel=tcg; fi; fi
+if [[ $which_only == 1 ]]; then
+  if [[ $backend == qemu ]]; then echo "qemu-$qemu_accel"; else echo "$backend"; fi
+  exit 0
 fi
 
 mkdir -p "$cache" || fail "cannot create $cache"
@@ -202,7 +245,7 @@ EOI
 run_qemu() {
   prepare_qemu
   local accel=(-accel tcg -cpu max -smp 1)   # 1 vCPU: 2 under TCG made CAN round trips slower
-  if [[ -w /dev/kvm && ! -d /sys/module/kvm_pvm ]] && [[ -d /sys/module/kvm_intel || -d /sys/module/kvm_amd ]]; then
+  if [[ $qemu_accel == kvm ]]; then
     accel=(-accel kvm -cpu host -smp 2)
   fi
   note "qemu: ${accel[*]}"

@@ -2,6 +2,17 @@
 //! They are `#[ignore]`d so that `cargo test --workspace` on a machine without CAN reports
 //! them as ignored instead of failing; `scripts/hil.sh` runs them (`--ignored`) where vcan0
 //! is up, booting a CAN-capable guest when this kernel has none.
+//!
+//! They assert what vge guarantees on any host: frames decoded, counters exact, halts and
+//! their stop reasons and exit statuses, the object held, and safety reactions within a
+//! number of control periods (or a time bound scaled by the speed the guest showed in that
+//! run). A guest's speed depends on its host: a user-mode-linux guest on a loaded machine
+//! stalls for hundreds of milliseconds at a time. So the timing figures (rate, jitter,
+//! deadline misses) are printed, not asserted (`vge-bridge bench` measures them on the host);
+//! runs whose outcome is not about timing give the watchdog, heartbeat and command timeouts
+//! seconds instead of fractions of one ([`TOLERANT`], [`TOLERANT_NODES`]); halting tests run
+//! the loop slower, so that a stall is few periods; and waits are for events on the bus
+//! ([`CommandCounter`]), not for wall-clock time.
 
 use std::thread;
 use std::time::{Duration, Instant};
@@ -56,13 +67,27 @@ fn joint_controller_emulator_answers_commands_over_vcan() {
     let server = thread::spawn(move || {
         let mut emulator = JointControllerEmulator::new(0.5);
         let mut transport = SocketCanTransport::open(&server_iface, Role::Nodes)?;
-        let limits =
-            ServeLimits { max_commands: expected, idle_timeout: READ_TIMEOUT, command_timeout: READ_TIMEOUT };
+        let limits = ServeLimits {
+            max_commands: expected,
+            idle_timeout: READ_TIMEOUT,
+            command_timeout: READ_TIMEOUT,
+            restart: None,
+        };
         serve(&mut transport, &mut emulator, limits, &std::sync::atomic::AtomicBool::new(false))
     });
     // The server must be listening before the first command: CAN does not queue for sockets
-    // opened later. Give it a moment, then check it answered every command.
-    thread::sleep(Duration::from_millis(200));
+    // opened later. Its nodes' boot-up heartbeats say it is.
+    let up = Instant::now();
+    loop {
+        assert!(up.elapsed() < Duration::from_secs(30), "the emulator sent no heartbeat in 30 s");
+        let Ok(frame) = client.read_frame() else { continue };
+        let Ok((id, data)) = standard_id_and_data(&frame) else { continue };
+        if let Ok(Message::Heartbeat(h)) = Message::decode(id, data)
+            && h.node < NUM_FINGERS
+        {
+            break;
+        }
+    }
 
     let target_rad = [0.3, 0.8, -0.4];
     let mut last = [None::<JointPosition>; NUM_FINGERS as usize];
@@ -232,6 +257,15 @@ fn frames_captured_on_vcan_decode_with_the_dbc() {
 
 // ---------------------------------------------------------------- bridge processes on vcan0
 
+/// Bridge settings for runs whose outcome is not about timing: the watchdog at 60 periods (3 s
+/// at 20 Hz) and the heartbeat timeout at 3 s, so that a guest stall (hundreds of ms on a
+/// loaded host) does not halt a run that tests something else.
+const TOLERANT: [&str; 4] = ["--watchdog-periods", "60", "--heartbeat-timeout-s", "3"];
+/// The nodes' side of [`TOLERANT`]: their command timeout at 3 s.
+const TOLERANT_NODES: [&str; 2] = ["--command-timeout-s", "3"];
+/// How long an emulator waits without a frame before it ends (after the bridge has gone).
+const EMULATOR_IDLE_S: f64 = 3.0;
+
 /// A workspace binary next to this test's executable (target/release/deps/..), built by
 /// scripts/hil.sh before the tests.
 fn workspace_bin(name: &str) -> std::path::PathBuf {
@@ -240,7 +274,7 @@ fn workspace_bin(name: &str) -> std::path::PathBuf {
     let bin = dir.join(name);
     assert!(
         bin.exists(),
-        "{} is missing: build it with `cargo build --release --workspace --bins`",
+        "{} is missing: build it with `cargo test --release --workspace --no-run` (scripts/hil.sh does)",
         bin.display()
     );
     bin
@@ -258,6 +292,25 @@ fn json_f64(line: &str, key: &str) -> f64 {
     json_field(line, key)
         .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("no number `{key}` in {line}"))
+}
+
+/// The timing figures of a bridge report, printed: they depend on the host, not on vge.
+fn print_timing(what: &str, report: &str) {
+    let f = |k: &str| json_field(report, k).unwrap_or_else(|| "?".to_owned());
+    eprintln!(
+        "hil timing (measured, not asserted) {what}: {} Hz achieved of {}, {} deadline misses ({} skipped), \
+         wake jitter p99 {} us max {} us, loop p50 {} us max {} us, {} stale, {} lost",
+        f("achieved_rate_hz"),
+        f("rate_hz"),
+        f("deadline_misses"),
+        f("skipped_periods"),
+        f("jitter_p99_us"),
+        f("jitter_max_us"),
+        f("loop_p50_us"),
+        f("loop_max_us"),
+        f("stale_frames"),
+        f("lost_frames"),
+    );
 }
 
 /// An untrained but real policy file (format version 2, f32 weights), exported from a seeded
@@ -293,38 +346,155 @@ fn hold_policy(seed: u64) -> std::path::PathBuf {
     path
 }
 
-fn spawn_emulator(iface: &str, seed: u64, idle_timeout_s: f64) -> std::process::Child {
-    spawn_emulator_with(iface, seed, idle_timeout_s, &[])
+/// `vge-bridge emulate --model sim` on `iface`, tolerant of guest stalls ([`TOLERANT_NODES`],
+/// unless `extra` sets the command timeout itself).
+fn spawn_emulator(iface: &str, seed: u64) -> std::process::Child {
+    spawn_emulator_with(iface, seed, &[])
 }
 
-fn spawn_emulator_with(iface: &str, seed: u64, idle_timeout_s: f64, extra: &[&str]) -> std::process::Child {
+fn spawn_emulator_with(iface: &str, seed: u64, extra: &[&str]) -> std::process::Child {
+    let mut args = vec!["emulate", "--iface", iface, "--model", "sim", "--json"];
+    let seed = seed.to_string();
+    let idle = EMULATOR_IDLE_S.to_string();
+    args.extend(["--seed", &seed]);
+    if !extra.contains(&"--idle-timeout-s") {
+        args.extend(["--idle-timeout-s", &idle]);
+    }
+    if !extra.contains(&"--command-timeout-s") {
+        args.extend(TOLERANT_NODES);
+    }
+    args.extend(extra);
     std::process::Command::new(workspace_bin("vge-bridge"))
-        .args(["emulate", "--iface", iface, "--model", "sim", "--json", "--seed", &seed.to_string()])
-        .args(["--idle-timeout-s", &idle_timeout_s.to_string()])
-        .args(extra)
+        .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("vge-bridge emulate starts")
 }
 
-fn bridge_run(args: &[&str]) -> String {
+/// What a finished `vge-bridge` process left.
+struct Finished {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+fn finished(out: std::process::Output) -> Finished {
+    Finished {
+        code: out.status.code(),
+        stdout: String::from_utf8_lossy(&out.stdout).trim().to_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// `vge-bridge run ARGS --json` to its end.
+fn bridge_run_status(args: &[&str]) -> Finished {
     let out =
         std::process::Command::new(workspace_bin("vge-bridge")).arg("run").args(args).arg("--json").output();
-    let out = out.expect("vge-bridge run starts");
-    let stdout = String::from_utf8_lossy(&out.stdout).trim().to_owned();
-    assert!(
-        out.status.success(),
-        "vge-bridge run failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
+    finished(out.expect("vge-bridge run starts"))
+}
+
+/// [`bridge_run_status`] of a run that must end normally (exit status 0): its JSON report.
+fn bridge_run(args: &[&str]) -> String {
+    let run = bridge_run_status(args);
+    assert_eq!(run.code, Some(0), "vge-bridge run failed: {}\n{}", run.stdout, run.stderr);
+    run.stdout
+}
+
+/// `vge-bridge run ARGS --json` in the background.
+fn spawn_bridge(args: &[&str]) -> std::process::Child {
+    std::process::Command::new(workspace_bin("vge-bridge"))
+        .arg("run")
+        .args(args)
+        .arg("--json")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("vge-bridge run starts")
+}
+
+/// Ctrl-C (SIGINT) to a child.
+fn interrupt(child: &std::process::Child) {
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success(), "SIGINT to {}", child.id());
 }
 
 fn wait_for_output(child: std::process::Child) -> String {
     let out = child.wait_with_output().expect("emulator exits");
     assert!(out.status.success(), "emulator failed: {}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8_lossy(&out.stdout).trim().to_owned()
+}
+
+/// Counts the bridge's enabled command sets on the bus (enabled joint commands to finger 0),
+/// so a test waits for the loop to have run so many steps, however fast the guest is.
+struct CommandCounter {
+    count: std::sync::Arc<(std::sync::Mutex<u64>, std::sync::Condvar)>,
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<thread::JoinHandle<()>>,
+}
+
+impl CommandCounter {
+    fn start(iface: &str) -> Self {
+        let socket = open(iface);
+        deep_queue(&socket);
+        socket.set_read_timeout(Duration::from_millis(100)).expect("timeout");
+        let count = std::sync::Arc::new((std::sync::Mutex::new(0), std::sync::Condvar::new()));
+        let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (counting, stop) = (count.clone(), done.clone());
+        let thread = thread::spawn(move || {
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                let Ok(frame) = socket.read_frame() else { continue };
+                let Ok((id, data)) = standard_id_and_data(&frame) else { continue };
+                if let Ok(Message::JointCommand(c)) = Message::decode(id, data)
+                    && c.finger.index() == 0
+                    && c.enable
+                {
+                    let (n, changed) = &*counting;
+                    *n.lock().expect("counter lock") += 1;
+                    changed.notify_all();
+                }
+            }
+        });
+        Self { count, done, thread: Some(thread) }
+    }
+
+    /// Waits until `n` enabled command sets were seen (panics after `timeout`); the count.
+    fn wait_for(&self, n: u64, timeout: Duration) -> u64 {
+        let (count, changed) = &*self.count;
+        let guard = count.lock().expect("counter lock");
+        let (guard, _) = changed.wait_timeout_while(guard, timeout, |c| *c < n).expect("counter lock");
+        assert!(*guard >= n, "only {} enabled command sets on the bus within {timeout:?}", *guard);
+        *guard
+    }
+
+    fn seen(&self) -> u64 {
+        *self.count.0.lock().expect("counter lock")
+    }
+}
+
+impl Drop for CommandCounter {
+    fn drop(&mut self) {
+        self.done.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// A socket's receive queue large enough for seconds of the bus (SO_RCVBUFFORCE: the tests
+/// run as root in the guest), so a reader the guest does not schedule for a while loses no
+/// frame. Falls back to the system's limit (SO_RCVBUF) elsewhere.
+fn deep_queue(socket: &impl socketcan::SocketOptions) {
+    const SOL_SOCKET: i32 = 1;
+    const SO_RCVBUF: i32 = 8;
+    const SO_RCVBUFFORCE: i32 = 33;
+    let bytes = 16 << 20;
+    if socket.set_socket_option_int(SOL_SOCKET, SO_RCVBUFFORCE, bytes).is_err() {
+        socket.set_socket_option_int(SOL_SOCKET, SO_RCVBUF, bytes).expect("SO_RCVBUF");
+    }
 }
 
 /// Everything on the bus (classic and FD) while it runs, as protocol messages in bus order.
@@ -336,6 +506,7 @@ struct Capture {
 impl Capture {
     fn start(iface: &str) -> Self {
         let socket = socketcan::CanFdSocket::open(iface).expect("FD socket (vcan MTU 72)");
+        deep_queue(&socket);
         socket.set_read_timeout(Duration::from_millis(100)).expect("timeout");
         let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let stop = done.clone();
@@ -371,37 +542,60 @@ impl Capture {
     }
 }
 
+/// The heartbeats of `node` in a capture: when, counter, state.
+fn beats_of(seen: &[(Instant, Message)], node: u8) -> Vec<(Instant, u8, NodeState)> {
+    seen.iter()
+        .filter_map(|(t, m)| match m {
+            Message::Heartbeat(h) if h.node == node => Some((*t, h.counter, h.state)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The longest gap between two heartbeats of node 0 in a capture: 100 ms where the guest runs
+/// the emulator on time, more where it stalled. Bounds on reaction times scale with it.
+fn longest_heartbeat_gap(seen: &[(Instant, Message)]) -> Duration {
+    beats_of(seen, 0).windows(2).map(|w| w[1].0.duration_since(w[0].0)).max().unwrap_or(Duration::ZERO)
+}
+
 /// The gait that ships with vge (policies/cube.vgep, what scripts/demo.sh runs) turns the
 /// cube more than a full turn over CAN, switching contacts, without a drop: the emulated
-/// hand's nodes on vcan0, the bridge driving them at 20 Hz for 30 s, the demo's run (the
-/// shipped gait turns about 0.39 rad/s: 15 s are not a full turn).
+/// hand's nodes on vcan0, the bridge driving them for 600 steps, the demo's 30 s at 20 Hz (the
+/// shipped gait turns about 0.39 rad/s: 15 s are not a full turn). Steps, not seconds: the
+/// simulated hand moves in lockstep with the commands, so a slow guest runs the same gait.
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn the_shipped_gait_turns_the_cube_a_full_turn_over_vcan() {
     let iface = hil_iface();
     let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
-    let emulator = spawn_emulator(&iface, 0, 2.0);
+    let emulator = spawn_emulator(&iface, 0);
     thread::sleep(Duration::from_millis(500)); // the emulator grasps the cube first
-    let over_can =
-        bridge_run(&["--policy", policy, "--backend", "can", "--iface", &iface, "--duration", "30"]);
+    let mut args = vec!["--policy", policy, "--backend", "can", "--iface", &iface];
+    args.extend(["--steps", "600", "--duration", "0"]);
+    args.extend(TOLERANT);
+    let over_can = bridge_run(&args);
     let emulated = wait_for_output(emulator);
     eprintln!("{over_can}\n{emulated}");
-    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("duration"), "{over_can}");
+    print_timing("shipped gait", &over_can);
+    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("steps"), "{over_can}");
+    assert_eq!(json_f64(&over_can, "steps"), 600.0, "{over_can}");
     assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "dropped: {emulated}");
     assert!(json_f64(&emulated, "rotation_rad") >= std::f64::consts::TAU, "{emulated}");
     assert!(json_f64(&emulated, "contact_switches") >= 10.0, "{emulated}");
 }
 
 /// Emulator and bridge as processes on vcan0 (classic frames, or the FD option), against the
-/// same policy and seed run in-process; returns how many FD frames a third socket saw.
+/// same policy and seed run in-process for the same number of steps; returns how many FD
+/// frames a third socket saw.
 fn closed_loop_matches_in_process(fd: bool) -> usize {
     let iface = hil_iface();
     let policy = exported_policy(3);
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let duration = "2.0";
+    let steps = ["--steps", "40", "--duration", "0"];
 
     // A third socket counts FD frames on the bus while the loop runs.
     let capture = socketcan::CanFdSocket::open(&iface).expect("FD socket (vcan MTU 72)");
+    deep_queue(&capture);
     capture.set_read_timeout(Duration::from_millis(200)).expect("timeout");
     let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let counting = done.clone();
@@ -416,38 +610,44 @@ fn closed_loop_matches_in_process(fd: bool) -> usize {
     });
 
     let mut emulator_args = vec![];
-    let mut run_args =
-        vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", duration];
+    let mut run_args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface];
+    run_args.extend(steps);
+    run_args.extend(TOLERANT);
     if fd {
         emulator_args.push("--fd");
         run_args.push("--fd");
     }
-    let emulator = spawn_emulator_with(&iface, 5, 2.0, &emulator_args);
+    let emulator = spawn_emulator_with(&iface, 5, &emulator_args);
     thread::sleep(Duration::from_millis(500)); // the emulator resets the sim (grasp) first
     let over_can = bridge_run(&run_args);
     let emulated = wait_for_output(emulator);
     done.store(true, std::sync::atomic::Ordering::Relaxed);
     let fd_frames = counter.join().expect("counter");
-    let in_process =
-        bridge_run(&["--policy", policy_arg, "--backend", "sim", "--seed", "5", "--duration", duration]);
+    let mut sim_args = vec!["--policy", policy_arg, "--backend", "sim", "--seed", "5"];
+    sim_args.extend(steps);
+    sim_args.extend(TOLERANT);
+    let in_process = bridge_run(&sim_args);
     let _ = std::fs::remove_file(&policy);
     eprintln!(
         "over CAN (fd {fd}): {over_can}\nemulator: {emulated}\nin-process: {in_process}\nFD frames {fd_frames}"
     );
+    print_timing("closed loop over CAN", &over_can);
 
-    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("duration"));
+    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("steps"));
+    assert_eq!(json_field(&in_process, "stop_reason").as_deref(), Some("steps"));
     assert_eq!(json_f64(&over_can, "bad_frames"), 0.0);
     assert_eq!(json_f64(&emulated, "bad_frames"), 0.0);
-    // Both runs are the same lockstep exchange of the same frames; they may differ by a step
-    // or two at the ends (start-up and halt timing), so compare per-step rotation.
+    // Both runs are the same lockstep exchange of the same 40 command sets; they may differ
+    // at the end by the halt's hold periods the in-process hand had no time to take.
     let (rot_can, steps_can) = (json_f64(&emulated, "rotation_rad"), json_f64(&emulated, "sim_steps"));
     let (rot_sim, steps_sim) = (json_f64(&in_process, "rotation_rad"), json_f64(&in_process, "sim_steps"));
     assert!((steps_can - steps_sim).abs() <= 3.0, "{steps_can} vs {steps_sim} sim steps");
+    assert!(steps_can >= 40.0 && steps_sim >= 40.0, "{steps_can} and {steps_sim} sim steps");
     assert!(rot_sim.abs() > 1e-3, "the policy should move the object at all: {rot_sim}");
     // Tolerance: both are the same lockstep exchange of the same quantised frames, so the
-    // trajectories agree step for step; they differ only in the up-to-3 extra periods at the
-    // ends (start-up queries, halt holds), in which the targets do not change and the object
-    // only settles: far below 0.01 rad. 10% of the rotation covers timing of the last step.
+    // trajectories agree step for step; they differ only in the up-to-3 hold periods at the
+    // end, in which the targets do not change and the object only settles: far below 0.01
+    // rad. 10% of the rotation covers the last step's timing.
     let tolerance = 0.01 + 0.1 * rot_sim.abs();
     assert!((rot_can - rot_sim).abs() <= tolerance, "over CAN {rot_can} rad vs in-process {rot_sim} rad");
     fd_frames
@@ -462,34 +662,53 @@ fn closed_loop_over_can_turns_the_object_as_the_in_process_sim_does() {
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn closed_loop_over_can_fd_turns_the_object_as_the_in_process_sim_does() {
-    // 40 steps at 20 Hz: one hand command and five node states per step (plus start-up).
+    // 40 steps: one hand command and five node states per step (plus start-up and halt).
     let fd_frames = closed_loop_matches_in_process(true);
-    assert!(fd_frames >= 6 * 38, "only {fd_frames} FD frames on the bus");
+    assert!(fd_frames >= 6 * 40, "only {fd_frames} FD frames on the bus");
 }
 
+/// The emulator stops (Ctrl-C: its summary says how many steps it took) after the bridge ran
+/// 10 steps; the bridge's watchdog halts it within its 5 periods. At 5 Hz, so that a guest
+/// stall is not itself 5 periods; the heartbeat timeout is the later 3 s.
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn stopping_the_emulator_fires_the_bridge_watchdog() {
     let iface = hil_iface();
     // i8 weights: the bridge runs every weight type (f16 below).
     let policy = exported_policy_as(4, "i8");
-    let mut emulator = spawn_emulator(&iface, 1, 30.0);
-    thread::sleep(Duration::from_millis(500));
-    let killer = thread::spawn(move || {
-        thread::sleep(Duration::from_millis(1500));
-        emulator.kill().expect("kill the emulator");
-        emulator.wait().expect("reaped")
-    });
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "20"]);
-    killer.join().expect("killer thread");
+    let counter = CommandCounter::start(&iface);
+    let emulator = spawn_emulator(&iface, 1);
+    thread::sleep(Duration::from_millis(500));
+    let bridge = spawn_bridge(&[
+        "--policy",
+        policy_arg,
+        "--backend",
+        "can",
+        "--iface",
+        &iface,
+        "--duration",
+        "120",
+        "--rate",
+        "5",
+        "--heartbeat-timeout-s",
+        "3",
+    ]);
+    counter.wait_for(10, Duration::from_secs(60));
+    interrupt(&emulator);
+    let emulated = wait_for_output(emulator);
+    let run = finished(bridge.wait_with_output().expect("bridge exits"));
     let _ = std::fs::remove_file(&policy);
-    eprintln!("{report}");
-    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("watchdog"), "{report}");
-    // It stopped within the watchdog's 5 periods (20 Hz) of the emulator's death, not at 20 s.
-    let steps = json_f64(&report, "steps");
-    assert!(steps < 20.0 * 4.0, "{steps} steps");
+    eprintln!("{}\n{}\n{emulated}", run.stdout, run.stderr);
+    print_timing("watchdog", &run.stdout);
+    assert_eq!(json_field(&run.stdout, "stop_reason").as_deref(), Some("watchdog"), "{}", run.stdout);
+    assert_eq!(run.code, Some(10), "the watchdog's exit status");
+    assert!(run.stderr.contains("safety halt (watchdog)"), "{}", run.stderr);
+    // Steps the bridge sent after the nodes' last: at most the watchdog's 5 periods, and one
+    // in flight (sent before the last answer came back).
+    let (steps, sim_steps) = (json_f64(&run.stdout, "steps"), json_f64(&emulated, "sim_steps"));
+    assert!(sim_steps >= 10.0, "{emulated}");
+    assert!(steps - sim_steps <= 5.0 + 1.0, "{steps} bridge steps, {sim_steps} taken by the nodes");
 }
 
 #[test]
@@ -497,53 +716,47 @@ fn stopping_the_emulator_fires_the_bridge_watchdog() {
 fn bad_frames_from_a_third_socket_are_counted_and_ignored() {
     let iface = hil_iface();
     let policy = exported_policy_as(5, "f16");
-    let emulator = spawn_emulator(&iface, 2, 2.0);
+    let counter = CommandCounter::start(&iface);
+    let emulator = spawn_emulator(&iface, 2);
     thread::sleep(Duration::from_millis(500));
-    let injector_iface = iface.clone();
-    let injected = 30;
-    let injector = thread::spawn(move || {
-        let socket = open(&injector_iface);
-        // Inject only once the bridge is on the bus (its first joint command): a fixed
-        // 300 ms head start lost the first frame when a loaded machine started it later.
-        socket.set_read_timeout(READ_TIMEOUT).expect("read timeout");
-        let deadline = Instant::now() + Duration::from_secs(20);
-        loop {
-            assert!(Instant::now() < deadline, "the bridge sent no joint command within 20 s");
-            let Ok(frame) = socket.read_frame() else { continue };
-            let Ok((id, data)) = standard_id_and_data(&frame) else { continue };
-            if let Ok(Message::JointCommand(_)) = Message::decode(id, data) {
-                break;
-            }
-        }
-        for i in 0..injected {
-            let frame = match i % 3 {
-                // An id no node uses.
-                0 => CanFrame::new(StandardId::new(0x555).expect("id"), &[0xff; 8]),
-                // A joint-state id with a short payload.
-                1 => CanFrame::new(StandardId::new(0x181).expect("id"), &[1, 2, 3]),
-                // An extended id.
-                _ => CanFrame::new(socketcan::ExtendedId::new(0x1abc_def0).expect("id"), &[0; 8]),
-            };
-            socket.write_frame(&frame.expect("frame")).expect("inject");
-            thread::sleep(Duration::from_millis(20));
-        }
-    });
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "2.0"]);
-    injector.join().expect("injector");
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
+    args.extend(TOLERANT);
+    let bridge = spawn_bridge(&args);
+    // Inject only once the bridge runs (its first enabled commands).
+    counter.wait_for(1, Duration::from_secs(60));
+    let socket = open(&iface);
+    let injected = 30;
+    for i in 0..injected {
+        let frame = match i % 3 {
+            // An id no node uses.
+            0 => CanFrame::new(StandardId::new(0x555).expect("id"), &[0xff; 8]),
+            // A joint-state id with a short payload.
+            1 => CanFrame::new(StandardId::new(0x181).expect("id"), &[1, 2, 3]),
+            // An extended id.
+            _ => CanFrame::new(socketcan::ExtendedId::new(0x1abc_def0).expect("id"), &[0; 8]),
+        };
+        socket.write_frame(&frame.expect("frame")).expect("inject");
+        thread::sleep(Duration::from_millis(20));
+    }
+    // Five more steps: the bridge has taken in everything injected before them.
+    counter.wait_for(counter.seen() + 5, Duration::from_secs(60));
+    interrupt(&bridge);
+    let run = finished(bridge.wait_with_output().expect("bridge exits"));
     let emulated = wait_for_output(emulator);
     let _ = std::fs::remove_file(&policy);
-    eprintln!("{report}\n{emulated}");
-    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("duration"), "{report}");
+    eprintln!("{}\n{emulated}", run.stdout);
+    print_timing("bad frames", &run.stdout);
+    assert_eq!(run.code, Some(0), "Ctrl-C is a normal stop: {}", run.stderr);
+    assert_eq!(json_field(&run.stdout, "stop_reason").as_deref(), Some("stop_requested"), "{}", run.stdout);
     // The unknown and the extended ids never reach the bridge (its socket's filter drops
     // them); the short joint-state frames pass the filter and are counted.
-    assert_eq!(json_f64(&report, "bad_frames"), f64::from(injected / 3), "{report}");
+    assert_eq!(json_f64(&run.stdout, "bad_frames"), f64::from(injected / 3), "{}", run.stdout);
     // The nodes' filter passes only commands and the host heartbeat: none of these.
     assert_eq!(json_f64(&emulated, "bad_frames"), 0.0, "{emulated}");
 }
 
-// ---------------------------------------------------------------- issue 13: faults on the wire
+// ---------------------------------------------------------------- faults on the wire
 
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
@@ -641,46 +854,45 @@ fn heartbeats_both_ways_and_enable_states_follow_the_commands() {
     let iface = hil_iface();
     let policy = exported_policy(6);
     let capture = Capture::start(&iface);
-    let emulator = spawn_emulator(&iface, 3, 1.5);
+    let emulator_started = Instant::now();
+    let emulator = spawn_emulator(&iface, 3);
     thread::sleep(Duration::from_millis(500));
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "3.0"]);
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "3.0"];
+    args.extend(TOLERANT);
+    let bridge_started = Instant::now();
+    let report = bridge_run(&args);
+    let bridge_life_s = bridge_started.elapsed().as_secs_f64();
     let emulated = wait_for_output(emulator);
+    let emulator_life_s = emulator_started.elapsed().as_secs_f64();
     let seen = capture.stop();
     let _ = std::fs::remove_file(&policy);
     eprintln!("{report}\n{emulated}");
+    print_timing("heartbeats", &report);
 
-    // Heartbeats at 10 Hz: the host's over the bridge's ~3.2 s, each node's over the
-    // emulator's whole life (~5 s), counters incrementing by one.
-    let beats = |node: u8| -> Vec<(Instant, u8, NodeState)> {
-        seen.iter()
-            .filter_map(|(t, m)| match m {
-                Message::Heartbeat(h) if h.node == node => Some((*t, h.counter, h.state)),
-                _ => None,
-            })
-            .collect()
-    };
+    // Every node's first heartbeat is its boot-up message (state booting, counter 0); the
+    // counters then increment by one, and no sender bursts: at most one beat per 100 ms
+    // period over the process's life (as the test saw it, which is no shorter), plus the
+    // boot-up and the one a late beat may catch up.
     for node in (0..NUM_FINGERS).chain([HOST_NODE]) {
-        let b = beats(node);
-        let span = b.last().map(|l| l.0.duration_since(b[0].0).as_secs_f64()).unwrap_or(0.0);
-        let rate = (b.len() as f64 - 1.0) / span.max(1e-9);
-        assert!(
-            b.len() >= 25 && (8.0..=12.0).contains(&rate),
-            "node {node:#x}: {} beats, {rate:.1} Hz",
-            b.len()
-        );
+        let b = beats_of(&seen, node);
+        assert!(b.len() >= 3, "node {node:#x}: {} beats", b.len());
+        let life_s = if node == HOST_NODE { bridge_life_s } else { emulator_life_s };
+        eprintln!("hil: node {node:#x} sent {} heartbeats in a life of {life_s:.2} s", b.len());
+        assert!(b.len() as f64 <= life_s * 10.0 + 2.0, "node {node:#x} bursts: {} in {life_s} s", b.len());
         assert!(b.windows(2).all(|w| w[1].1 == w[0].1.wrapping_add(1)), "node {node:#x} counter skips");
+        if node < NUM_FINGERS {
+            assert_eq!((b[0].1, b[0].2), (0, NodeState::Booting), "node {node}: boot-up message first");
+            assert!(b[1..].iter().all(|x| x.2 != NodeState::Booting), "node {node} booted once");
+        }
     }
     assert!(
-        beats(HOST_NODE).iter().any(|b| b.2 == NodeState::Enabled),
+        beats_of(&seen, HOST_NODE).iter().any(|b| b.2 == NodeState::Enabled),
         "host heartbeat says enabled while running"
     );
-    assert!(
-        beats(2).iter().any(|b| b.2 == NodeState::Enabled)
-            && beats(2).iter().any(|b| b.2 == NodeState::Ready)
-    );
-    assert_eq!(json_f64(&report, "heartbeats_out"), beats(HOST_NODE).len() as f64, "{report}");
+    let node2 = beats_of(&seen, 2);
+    assert!(node2.iter().any(|b| b.2 == NodeState::Enabled) && node2.iter().any(|b| b.2 == NodeState::Ready));
+    assert_eq!(json_f64(&report, "heartbeats_out"), beats_of(&seen, HOST_NODE).len() as f64, "{report}");
 
     // Every joint position reports the enable flag of the command it answers (same finger,
     // same seq): disabled during the start-up queries and after the final disable.
@@ -706,11 +918,11 @@ fn heartbeats_both_ways_and_enable_states_follow_the_commands() {
             _ => {}
         }
     }
+    let steps = json_f64(&report, "steps") as usize;
     assert!(
-        checked >= 5 * 55 && disabled_replies >= 10,
-        "{checked} positions checked, {disabled_replies} disabled"
+        checked >= 5 * steps && disabled_replies >= 10,
+        "{checked} positions checked for {steps} steps, {disabled_replies} disabled"
     );
-    assert_eq!(json_f64(&report, "stale_frames") + json_f64(&report, "implausible_frames"), 0.0, "{report}");
 }
 
 #[test]
@@ -719,15 +931,15 @@ fn a_killed_bridge_leaves_the_nodes_holding_with_fault_command_timeout() {
     let iface = hil_iface();
     let policy = exported_policy(7);
     let capture = Capture::start(&iface);
-    let emulator = spawn_emulator_with(&iface, 4, 2.0, &["--command-timeout-s", "0.3"]);
+    let counter = CommandCounter::start(&iface);
+    let command_timeout_s = 1.0;
+    let emulator = spawn_emulator_with(&iface, 4, &["--command-timeout-s", &command_timeout_s.to_string()]);
     thread::sleep(Duration::from_millis(500));
-    let mut bridge = std::process::Command::new(workspace_bin("vge-bridge"))
-        .args(["run", "--policy", policy.to_str().expect("utf-8"), "--backend", "can", "--iface", &iface])
-        .args(["--duration", "30", "--json"])
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .expect("bridge starts");
-    thread::sleep(Duration::from_millis(1500));
+    let policy_arg = policy.to_str().expect("utf-8");
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
+    args.extend(TOLERANT);
+    let mut bridge = spawn_bridge(&args);
+    counter.wait_for(10, Duration::from_secs(60));
     bridge.kill().expect("SIGKILL the bridge");
     let killed_at = Instant::now();
     bridge.wait().expect("reaped");
@@ -751,35 +963,40 @@ fn a_killed_bridge_leaves_the_nodes_holding_with_fault_command_timeout() {
     let mut fingers: Vec<u8> = faults.iter().map(|f| f.1).collect();
     fingers.sort_unstable();
     assert_eq!(fingers, [0, 1, 2, 3, 4], "one command_timeout fault per finger on the bus");
-    let latency = faults[0].0.duration_since(killed_at);
-    assert!(latency < Duration::from_millis(800), "faults {latency:?} after the kill");
-    // After the fault the nodes report it: heartbeat state fault, and no further sim step
-    // (nothing moves: the positions stay what they were).
+    // The faults come a command timeout after the kill, late by at most what the guest
+    // stalled (its longest heartbeat gap) twice over, and a heartbeat period.
+    let latency = faults[0].0.saturating_duration_since(killed_at);
+    let stall = longest_heartbeat_gap(&seen);
+    let bound = Duration::from_secs_f64(command_timeout_s) + 2 * stall + Duration::from_millis(100);
+    eprintln!(
+        "hil: command_timeout raised {:.0} ms after the bridge was killed (bound {:.0} ms: longest heartbeat gap {:.0} ms)",
+        latency.as_secs_f64() * 1e3,
+        bound.as_secs_f64() * 1e3,
+        stall.as_secs_f64() * 1e3
+    );
+    assert!(latency <= bound, "faults {latency:?} after the kill, bound {bound:?}");
+    // After the fault the nodes report it: heartbeat state fault.
     assert!(
         seen.iter()
             .any(|(t, m)| *t > faults[0].0
                 && matches!(m, Message::Heartbeat(h) if h.state == NodeState::Fault))
     );
-    eprintln!(
-        "hil: command_timeout raised {:.0} ms after the bridge was killed",
-        latency.as_secs_f64() * 1e3
-    );
 }
 
-/// Injects from a third socket, for every enabled command of `finger` seen on the bus,
-/// the frame `forge` makes of that command; returns how many it sent.
+/// Injects from a third socket, for every enabled command of `finger` seen on the bus, the
+/// frame `forge` makes of that command, until `stop` is raised; returns how many it sent.
 fn spawn_injector(
     iface: &str,
     finger: u8,
-    run_for: Duration,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     mut forge: impl FnMut(&JointCommand) -> Option<RawFrame> + Send + 'static,
 ) -> thread::JoinHandle<usize> {
     let socket = open(iface);
+    deep_queue(&socket);
     socket.set_read_timeout(Duration::from_millis(50)).expect("timeout");
     thread::spawn(move || {
-        let start = Instant::now();
         let mut sent = 0;
-        while start.elapsed() < run_for {
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
             let Ok(frame) = socket.read_frame() else { continue };
             let Ok((id, data)) = standard_id_and_data(&frame) else { continue };
             if let Ok(Message::JointCommand(c)) = Message::decode(id, data)
@@ -802,15 +1019,16 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
     let policy = exported_policy(8);
     let policy_arg = policy.to_str().expect("utf-8 temp path");
 
-    // 1. After 1 s, finger 2 also "reports" +3.2767 / -3.2768 rad (0x7FFF / 0x8000) with the
-    //    current seq, answering every command.
-    let emulator = spawn_emulator(&iface, 6, 1.5);
+    // 1. From the bridge's 4th command on, finger 2 also "reports" +3.2767 / -3.2768 rad
+    //    (0x7FFF / 0x8000) with the current seq, answering every command. At 5 Hz: the halt
+    //    comes after more than 5 such periods in a row, and a guest stall is few periods.
+    let emulator = spawn_emulator(&iface, 6);
     thread::sleep(Duration::from_millis(500));
-    let started = Instant::now();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let mut n = 0u32;
-    let injector = spawn_injector(&iface, 2, Duration::from_secs(6), move |c| {
+    let injector = spawn_injector(&iface, 2, stop.clone(), move |c| {
         n += 1;
-        (started.elapsed() > Duration::from_secs(1)).then(|| {
+        (n > 3).then(|| {
             let p = JointPosition {
                 finger: c.finger,
                 q_rad: [3.2767, 0.0, 0.0],
@@ -825,29 +1043,51 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
             frame
         })
     });
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "5.0"]);
+    let run = bridge_run_status(&[
+        "--policy",
+        policy_arg,
+        "--backend",
+        "can",
+        "--iface",
+        &iface,
+        "--duration",
+        "60",
+        "--rate",
+        "5",
+        "--heartbeat-timeout-s",
+        "3",
+    ]);
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let emulated = wait_for_output(emulator);
     let injected = injector.join().expect("injector");
+    let report = run.stdout;
     eprintln!("{report}\n{emulated}\ninjected {injected}");
+    print_timing("implausible positions", &report);
     assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("implausible_state"), "{report}");
+    assert_eq!(run.code, Some(14), "implausible_state's exit status: {}", run.stderr);
     assert!(json_field(&report, "stop_detail").is_some_and(|d| d.contains("node 2")), "{report}");
-    assert!(json_f64(&report, "implausible_frames") >= 4.0 && json_f64(&report, "holds") >= 4.0, "{report}");
-    assert!(json_f64(&report, "steps") < 40.0, "halted within a few periods of the first: {report}");
+    // More than 5 periods in a row, each a hold, before the halt.
+    assert!(json_f64(&report, "implausible_frames") >= 5.0 && json_f64(&report, "holds") >= 5.0, "{report}");
     assert_eq!(
         json_field(&emulated, "terminated").as_deref(),
         Some("false"),
         "the bridge held the grasp: {emulated}"
     );
 
-    // 2. Three position frames of finger 4 replayed with a seq 20 commands old: dropped and
-    //    counted, the run goes on.
-    let emulator = spawn_emulator(&iface, 6, 1.5);
+    // 2. Three position frames of finger 4 replayed with a seq 20 commands old, at the
+    //    bridge's 10th to 12th command: dropped and counted, the run goes on. At 4 Hz: the
+    //    emulator's own frames fall 3 commands behind (stale) only if the guest stalls 0.75 s.
+    let counter = CommandCounter::start(&iface);
+    let emulator = spawn_emulator(&iface, 6);
     thread::sleep(Duration::from_millis(500));
-    let mut replays = 0;
-    let injector = spawn_injector(&iface, 4, Duration::from_secs(3), move |c| {
-        replays += 1;
-        (10..13).contains(&replays).then(|| {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let replayed = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let replays = replayed.clone();
+    let mut commands = 0;
+    let injector = spawn_injector(&iface, 4, stop.clone(), move |c| {
+        commands += 1;
+        (10..13).contains(&commands).then(|| {
+            replays.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let old = JointPosition {
                 finger: c.finger,
                 q_rad: [0.3; 3],
@@ -857,13 +1097,28 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
             Message::JointPosition(old).encode().expect("in range")
         })
     });
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "2.0"]);
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
+    args.extend(["--rate", "4"]);
+    args.extend(TOLERANT);
+    let bridge = spawn_bridge(&args);
+    // The three replays sent, then three more steps: the bridge has taken them in.
+    let waiting = Instant::now();
+    while replayed.load(std::sync::atomic::Ordering::Relaxed) < 3 {
+        assert!(waiting.elapsed() < Duration::from_secs(60), "the replays were not sent in 60 s");
+        thread::sleep(Duration::from_millis(20));
+    }
+    counter.wait_for(counter.seen() + 3, Duration::from_secs(60));
+    interrupt(&bridge);
+    let run = finished(bridge.wait_with_output().expect("bridge exits"));
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let emulated = wait_for_output(emulator);
     assert_eq!(injector.join().expect("injector"), 3);
     let _ = std::fs::remove_file(&policy);
+    let report = run.stdout;
     eprintln!("{report}\n{emulated}");
-    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("duration"), "{report}");
+    print_timing("stale replays", &report);
+    assert_eq!(run.code, Some(0), "{}", run.stderr);
+    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("stop_requested"), "{report}");
     assert_eq!(json_f64(&report, "stale_frames"), 3.0, "{report}");
     assert!((1.0..=3.0).contains(&json_f64(&report, "holds")), "{report}");
 }
@@ -873,39 +1128,41 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
 fn a_flood_of_id_0x000_does_not_disturb_the_loop() {
     let iface = hil_iface();
     let policy = hold_policy(9);
-    let emulator = spawn_emulator(&iface, 7, 1.5);
+    let counter = CommandCounter::start(&iface);
+    let emulator = spawn_emulator(&iface, 7);
     thread::sleep(Duration::from_millis(500));
-    // 5,000 frames of id 0x000 at 800/s (6.25 s), from 0.5 s into the run.
-    let flood_iface = iface.clone();
-    let flood = thread::spawn(move || {
-        let socket = open(&flood_iface);
-        let frame = CanFrame::new(StandardId::new(0x000).expect("id"), &[0xff; 8]).expect("frame");
-        thread::sleep(Duration::from_millis(500));
-        let start = Instant::now();
-        let mut sent = 0u32;
-        for k in 0..5000u32 {
-            let due = start + Duration::from_secs_f64(f64::from(k) / 800.0);
-            if let Some(wait) = due.checked_duration_since(Instant::now()) {
-                thread::sleep(wait);
-            }
-            if socket.write_frame(&frame).is_ok() {
-                sent += 1;
-            }
-        }
-        (sent, start.elapsed())
-    });
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "7.5"]);
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
+    args.extend(TOLERANT);
+    let bridge = spawn_bridge(&args);
+    // 5,000 frames of id 0x000 at 800/s (6.25 s) while the bridge runs.
+    counter.wait_for(1, Duration::from_secs(60));
+    let socket = open(&iface);
+    let frame = CanFrame::new(StandardId::new(0x000).expect("id"), &[0xff; 8]).expect("frame");
+    let start = Instant::now();
+    let mut sent = 0u32;
+    for k in 0..5000u32 {
+        let due = start + Duration::from_secs_f64(f64::from(k) / 800.0);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            thread::sleep(wait);
+        }
+        if socket.write_frame(&frame).is_ok() {
+            sent += 1;
+        }
+    }
+    let took = start.elapsed();
+    counter.wait_for(counter.seen() + 5, Duration::from_secs(60));
+    interrupt(&bridge);
+    let run = finished(bridge.wait_with_output().expect("bridge exits"));
     let emulated = wait_for_output(emulator);
-    let (sent, took) = flood.join().expect("flood");
     let _ = std::fs::remove_file(&policy);
+    let report = run.stdout;
     eprintln!("{report}\n{emulated}\nflood: {sent} frames in {took:?}");
+    print_timing("flood of 0x000", &report);
     assert_eq!(sent, 5000);
-    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("duration"), "{report}");
-    assert_eq!(json_f64(&report, "deadline_misses"), 0.0, "{report}");
+    assert_eq!(run.code, Some(0), "{}", run.stderr);
+    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("stop_requested"), "{report}");
     assert_eq!(json_f64(&report, "bad_frames"), 0.0, "the kernel filter drops the flood: {report}");
-    assert!((json_f64(&report, "achieved_rate_hz") - 20.0).abs() < 0.5, "{report}");
     assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "object held: {emulated}");
 }
 
@@ -914,29 +1171,31 @@ fn a_flood_of_id_0x000_does_not_disturb_the_loop() {
 fn error_frames_are_counted_and_bus_off_halts_the_bridge() {
     let iface = hil_iface();
     let policy = exported_policy(10);
-    let emulator = spawn_emulator(&iface, 8, 1.5);
+    let counter = CommandCounter::start(&iface);
+    let emulator = spawn_emulator(&iface, 8);
     thread::sleep(Duration::from_millis(500));
-    let inject_iface = iface.clone();
-    let injector = thread::spawn(move || {
-        let socket = open(&inject_iface);
-        thread::sleep(Duration::from_millis(700));
-        // Error-passive (controller problem, data[1] = 0x10 rx/0x20 tx passive) three times,
-        // then bus-off.
-        for class in [0x004, 0x004, 0x004, 0x040] {
-            let frame = socketcan::CanErrorFrame::new_error(class, &[0, 0x20, 0, 0, 0, 0, 0, 0])
-                .expect("error frame");
-            socket.write_frame(&frame).expect("vcan carries error frames written by a raw socket");
-            thread::sleep(Duration::from_millis(200));
-        }
-    });
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let report =
-        bridge_run(&["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "5.0"]);
-    injector.join().expect("injector");
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "120"];
+    args.extend(TOLERANT);
+    let bridge = spawn_bridge(&args);
+    // Once the bridge runs: error-passive (controller problem, data[1] = 0x10 rx/0x20 tx
+    // passive) three times, then bus-off.
+    counter.wait_for(3, Duration::from_secs(60));
+    let socket = open(&iface);
+    for class in [0x004, 0x004, 0x004, 0x040] {
+        let frame =
+            socketcan::CanErrorFrame::new_error(class, &[0, 0x20, 0, 0, 0, 0, 0, 0]).expect("error frame");
+        socket.write_frame(&frame).expect("vcan carries error frames written by a raw socket");
+        thread::sleep(Duration::from_millis(200));
+    }
+    let run = finished(bridge.wait_with_output().expect("bridge exits"));
     let emulated = wait_for_output(emulator);
     let _ = std::fs::remove_file(&policy);
+    let report = run.stdout;
     eprintln!("{report}\n{emulated}");
+    print_timing("error frames", &report);
     assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("bus_off"), "{report}");
+    assert_eq!(run.code, Some(16), "bus_off's exit status: {}", run.stderr);
     assert_eq!(json_f64(&report, "error_frames_controller"), 3.0, "{report}");
     assert_eq!(json_f64(&report, "error_frames_bus_off"), 1.0, "{report}");
 }
@@ -945,19 +1204,119 @@ fn error_frames_are_counted_and_bus_off_halts_the_bridge() {
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn the_emulator_prints_its_summary_on_ctrl_c() {
     let iface = hil_iface();
-    let emulator = spawn_emulator(&iface, 9, 30.0);
-    thread::sleep(Duration::from_millis(1500));
-    let status = std::process::Command::new("kill")
-        .args(["-INT", &emulator.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(status.success());
+    let listener = open(&iface);
+    listener.set_read_timeout(READ_TIMEOUT).expect("read timeout");
+    let emulator = spawn_emulator_with(&iface, 9, &["--idle-timeout-s", "60"]);
+    // Its heartbeats say it runs (its Ctrl-C handler is installed before it serves).
+    let mut beats = 0;
+    let up = Instant::now();
+    while beats < 10 {
+        assert!(up.elapsed() < Duration::from_secs(60), "the emulator sent {beats} heartbeats in 60 s");
+        let Ok(frame) = listener.read_frame() else { continue };
+        let Ok((id, data)) = standard_id_and_data(&frame) else { continue };
+        if let Ok(Message::Heartbeat(_)) = Message::decode(id, data) {
+            beats += 1;
+        }
+    }
+    interrupt(&emulator);
     let started = Instant::now();
     let out = emulator.wait_with_output().expect("emulator exits");
     let stdout = String::from_utf8_lossy(&out.stdout).trim().to_owned();
     eprintln!("{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success(), "Ctrl-C is a normal stop: {}", String::from_utf8_lossy(&out.stderr));
-    assert!(started.elapsed() < Duration::from_secs(2), "stopped promptly");
-    assert!(json_f64(&stdout, "heartbeats_sent") >= 50.0, "{stdout}");
+    eprintln!("hil: the emulator stopped {:.0} ms after Ctrl-C", started.elapsed().as_secs_f64() * 1e3);
+    assert!(
+        started.elapsed() < Duration::from_secs(20),
+        "stopped on Ctrl-C, not after its 60 s idle timeout"
+    );
+    assert!(json_f64(&stdout, "heartbeats_sent") >= 10.0, "{stdout}");
     assert_eq!(json_f64(&stdout, "sim_steps"), 0.0, "{stdout}");
+}
+
+/// A finger's joint controller that reboots mid-run (the emulator's node 2 after its 20th
+/// enabled command: boot-up heartbeat, counter from 0, disabled) makes the bridge hold the
+/// last safe targets, disable every finger and stop with node_restarted, exit status 13; the
+/// object stays held. Again with stdout closed: the status is the halt's all the same.
+#[test]
+#[ignore = "needs vcan0: run scripts/hil.sh"]
+fn a_node_that_restarts_mid_run_makes_the_bridge_hold_and_halt() {
+    let iface = hil_iface();
+    let policy = exported_policy(11);
+    let policy_arg = policy.to_str().expect("utf-8 temp path");
+    let restart = ["--restart-node", "2", "--restart-after-commands", "20"];
+    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "120"];
+    args.extend(TOLERANT);
+
+    let capture = Capture::start(&iface);
+    let emulator = spawn_emulator_with(&iface, 10, &restart);
+    thread::sleep(Duration::from_millis(500));
+    let run = bridge_run_status(&args);
+    let emulated = wait_for_output(emulator);
+    let seen = capture.stop();
+    let report = &run.stdout;
+    eprintln!("{report}\n{}\n{emulated}", run.stderr);
+    print_timing("node restart", report);
+    assert_eq!(json_f64(&emulated, "restarts"), 1.0, "{emulated}");
+    assert_eq!(json_field(report, "stop_reason").as_deref(), Some("node_restarted"), "{report}");
+    assert_eq!(run.code, Some(13), "node_restarted's exit status: {}", run.stderr);
+    assert!(
+        json_field(report, "stop_detail")
+            .is_some_and(|d| d == "node 2 (middle) restarted: boot-up heartbeat (state booting)"),
+        "{report}"
+    );
+    assert!(run.stderr.contains("safety halt (node_restarted)"), "{}", run.stderr);
+    // It halted at the 20th step or within the periods a lagging node can be behind (beyond
+    // those the watchdog would have halted first).
+    let steps = json_f64(report, "steps");
+    assert!((20.0..=20.0 + 60.0).contains(&steps), "{steps} steps");
+    assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "object held: {emulated}");
+
+    // On the bus: node 2's boot-up after its power-up one, then the bridge's halt: the last
+    // safe targets held (enabled, unchanged) for 3 periods, then the same targets disabled,
+    // and the host's heartbeat saying fault.
+    let boot_ups: Vec<usize> = seen
+        .iter()
+        .enumerate()
+        .filter(
+            |(_, (_, m))| matches!(m, Message::Heartbeat(h) if h.node == 2 && h.state == NodeState::Booting),
+        )
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(boot_ups.len(), 2, "power-up and restart");
+    let commands: Vec<(usize, JointCommand)> = seen
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, m))| match m {
+            Message::JointCommand(c) if c.finger.index() == 0 => Some((i, *c)),
+            _ => None,
+        })
+        .collect();
+    let tail = &commands[commands.len() - 4..];
+    assert!(tail.iter().all(|(i, _)| *i > boot_ups[1]), "the halt follows the restart");
+    assert!(tail[..3].iter().all(|(_, c)| c.enable) && !tail[3].1.enable, "held 3 periods, then disabled");
+    assert!(tail.iter().all(|(_, c)| c.q_target_rad == tail[0].1.q_target_rad), "the same targets held");
+    let host_fault = seen[boot_ups[1]..].iter().any(
+        |(_, m)| matches!(m, Message::Heartbeat(h) if h.node == HOST_NODE && h.state == NodeState::Fault),
+    );
+    assert!(host_fault, "the host's heartbeat says fault while it halts");
+
+    // With stdout a pipe without a reader: no report, the same halt and status.
+    let emulator = spawn_emulator_with(&iface, 10, &restart);
+    thread::sleep(Duration::from_millis(500));
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = std::process::Command::new(workspace_bin("vge-bridge"))
+        .arg("run")
+        .args(&args)
+        .arg("--json")
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .expect("vge-bridge run starts");
+    let emulated = wait_for_output(emulator);
+    let _ = std::fs::remove_file(&policy);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{stderr}\n{emulated}");
+    assert_eq!(out.status.code(), Some(13), "{stderr}");
+    assert!(stderr.contains("safety halt (node_restarted)") && !stderr.contains("panicked"), "{stderr}");
 }
