@@ -70,7 +70,7 @@ pub struct PolicyScore {
     pub file: String,
     /// The env step it was exported at.
     pub step: u64,
-    /// CRC-32 of the file's bytes (a rescore is skipped only for the same files).
+    /// The file's CRC-32 (its format's checksum; a rescore is skipped only for the same files).
     pub crc32: u32,
     /// Share of episodes turned >= 2 pi about z without a drop.
     pub success_rate: f64,
@@ -169,8 +169,11 @@ impl PlannedPolicy {
         Ok(Self { file: file.to_owned(), step, bytes })
     }
 
+    /// The file's CRC-32, as its format stores it: of everything before the 4-byte trailer,
+    /// which holds that CRC (so the CRC of a whole valid file would be the same constant for
+    /// every file). [`check_policy`] has verified the trailer.
     fn crc32(&self) -> u32 {
-        crc32fast::hash(&self.bytes)
+        crc32fast::hash(&self.bytes[..self.bytes.len().saturating_sub(4)])
     }
 }
 

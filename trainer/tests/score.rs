@@ -92,8 +92,10 @@ fn training_writes_the_score_and_vge_score_skips_it_or_scores_again() {
     assert_eq!(last.snapshots[2].file, "snapshots/policy-400.vgep");
     let mean_return = last.snapshots.iter().map(|p| p.mean_return).sum::<f64>() / 3.0;
     assert!((last.mean_return - mean_return).abs() < 1e-9, "{last:?}");
-    // The final policy is the snapshot at its step: the same bytes, the same figures.
+    // The final policy is the snapshot at its step: the same bytes, the same figures; the
+    // other snapshots are other files.
     assert_eq!(last.snapshots[2].crc32, s.final_policy.crc32);
+    assert_ne!(last.snapshots[1].crc32, s.final_policy.crc32);
     assert_eq!(last.snapshots[2].mean_return, s.final_policy.mean_return);
     for p in [selected, &s.final_policy] {
         assert!((0.0..=1.0).contains(&p.success_rate) && (0.0..=1.0).contains(&p.drop_rate), "{p:?}");

@@ -72,11 +72,12 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
     assert_eq!(
         csv,
-        "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps\n\
-         fg,fge,3,2,0.5000,200.00,100.00,20000\n\
-         fg,controller-alone,,,0.0500,11.50,,\n\
-         cs,fge,0,0,,,,\n\
-         cs,vge,1,0,0.0000,12.50,,20000\n"
+        "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps,\
+         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high\n\
+         fg,fge,3,2,0.5000,200.00,100.00,20000,0,,,,,,\n\
+         fg,controller-alone,,,0.0500,11.50,,,,,,,,,\n\
+         cs,fge,0,0,,,,,0,,,,,,\n\
+         cs,vge,1,0,0.0000,12.50,,20000,0,,,,,,\n"
     );
     let fge = &written.rows[0];
     assert_eq!((fge.controller, fge.seeds, fge.learned, fge.unfinished), (ControllerKind::Fg, 3, 2, 1));
@@ -85,19 +86,24 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     // tests (0 and its final 0.6, 0.4, 0.5) average 0.3, 0.2, 0.25.
     assert!(
         md.contains(
-            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | - | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
+            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | - | - | - | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
         ),
         "{md}"
     );
     assert!(
-        md.contains("| FG | controller-alone | (no learning) | - | - | - | 0.05 | - | 11.5 | 7.3 | - |"),
+        md.contains(
+            "| FG | controller-alone | (no learning) | - | - | - | - | - | 0.05 | - | 11.5 | 7.3 | - |"
+        ),
         "{md}"
     );
     assert!(md.contains("\nThe last 3 periodic tests (the final one included)"), "{md}");
     // Not learned, and its last test (12.5) beat its first (5.0) by more than a quarter.
-    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | - | 27% |"), "{md}");
+    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | - | - | - | 27% |"), "{md}");
     assert!(md.contains("\nStill rising: a seed that did not learn"), "{md}");
-    assert!(md.contains("| CS | fge | 0/0 (0%), 1 running | - | - | 67% | - | - | - | - | - |"), "{md}");
+    assert!(
+        md.contains("| CS | fge | 0/0 (0%), 1 running | - | - | - | - | 67% | - | - | - | - | - |"),
+        "{md}"
+    );
     for png in ["curves-fg.png", "curves-cs.png"] {
         let bytes = std::fs::read(out.join(png)).expect(png);
         assert!(bytes.starts_with(b"\x89PNG"), "{png}");
@@ -139,7 +145,7 @@ fn a_seed_that_passed_a_periodic_test_and_ended_below_it_is_counted_apart() {
     // Per seed, in seed order whatever the folders' order.
     assert!(
         md.contains(
-            "| CS | vge | 1/3 (33%), 1 passed earlier, 1 still rising | 2: 0%, 7: 20%, 11: 90% | 1/1 |"
+            "| CS | vge | 1/3 (33%), 1 passed earlier, 1 still rising | 2: 0%, 7: 20%, 11: 90% | 1/1 | - | - |"
         ),
         "{md}"
     );
@@ -185,4 +191,62 @@ fn committed_table1_is_what_its_run_folders_give() {
             );
         }
     }
+}
+
+/// A `score.json` whose selected and final policies succeed in `success` of the episodes.
+fn write_score(dir: &Path, success: f64) {
+    let policy = |file: &str| {
+        serde_json::json!({
+            "file": file, "step": 20000, "crc32": 1, "success_rate": success, "mean_return": 100.0,
+            "drop_rate": 0.0, "mean_rotation_rad": 7.0, "mean_contact_switches": 20.0,
+        })
+    };
+    let score = serde_json::json!({
+        "definition": vge_trainer::score::DEFINITION, "episodes": 100, "seed": 1u64 << 52,
+        "episode_s": 30.0, "grasp_noise_rad": 0.02,
+        "selected": policy("policy-best.vgep"), "final": policy("policy.vgep"),
+    });
+    std::fs::write(dir.join("score.json"), score.to_string()).expect("score.json");
+}
+
+#[test]
+fn scored_cells_get_their_iqm_intervals_improvements_and_profiles() {
+    let root = tempdir("scored");
+    for (k, s) in [0.2, 0.9, 0.95, 1.0].into_iter().enumerate() {
+        let dir = root.join(format!("vge/seed-{k}"));
+        fake_run(&dir, "cube-fg-vge.toml", Some((s, 100.0)));
+        write_score(&dir, s);
+    }
+    for (k, s) in [0.1, 0.3].into_iter().enumerate() {
+        let dir = root.join(format!("rl/seed-{k}"));
+        fake_run(&dir, "cube-fg-rl.toml", Some((s, 100.0)));
+        write_score(&dir, s);
+    }
+    // A finished run not scored yet: counted, not in the statistics.
+    fake_run(&root.join("rl/seed-2"), "cube-fg-rl.toml", Some((0.5, 100.0)));
+    let out = tempdir("scored-out");
+    let written = table1::write(&[root], &out).expect("table");
+    let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
+    // VGE: IQM of 0.2, 0.9, 0.95, 1.0 drops one from each end (0.925), mean 0.7625.
+    let vge = csv.lines().find(|l| l.starts_with("fg,vge,")).expect("vge row");
+    let fields: Vec<&str> = vge.split(',').collect();
+    assert_eq!((fields[8], fields[9], fields[12]), ("4", "0.9250", "0.7625"), "{vge}");
+    let (low, high): (f64, f64) = (fields[10].parse().expect("low"), fields[11].parse().expect("high"));
+    assert!(low <= 0.925 && 0.925 <= high && low < high, "{vge}");
+    let rl = csv.lines().find(|l| l.starts_with("fg,rl,")).expect("rl row");
+    assert_eq!(rl.split(',').nth(8), Some("2"), "two of three scored: {rl}");
+    // P(VGE > RL): 7 of the 8 pairs.
+    let improvement = std::fs::read_to_string(out.join("improvement.csv")).expect("improvement.csv");
+    let mut lines = improvement.lines();
+    assert_eq!(lines.next(), Some("a,b,prob_improvement,ci_low,ci_high"));
+    let row = lines.next().expect("one computable pair");
+    assert!(row.starts_with("fg/vge,fg/rl,0.8750,"), "{improvement}");
+    assert_eq!(lines.next(), None, "the other pairs' cells have no runs: {improvement}");
+    assert_eq!(written.improvements.len(), 1);
+    let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
+    assert!(md.contains("| fg/vge | fg/rl | 0.88 |"), "{md}");
+    assert!(md.contains("0.93 ["), "the IQM with its interval: {md}");
+    assert!(md.contains("(2 of 3 runs)"), "{md}");
+    let png = std::fs::read(out.join("profiles-fg.png")).expect("profiles-fg.png");
+    assert!(png.starts_with(b"\x89PNG"));
 }
