@@ -74,7 +74,8 @@ fn copy_tree(from: &Path, to: &Path) {
     }
 }
 
-/// Every file under `dir` with its bytes.
+/// Every file under `dir` with its bytes, but `vge.lock`: the lock of the folder, which
+/// names the last process that wrote, or tried to write, it.
 fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     let mut files = BTreeMap::new();
     let mut stack = vec![dir.to_owned()];
@@ -83,6 +84,8 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             let path = entry.expect("entry").path();
             if path.is_dir() {
                 stack.push(path);
+            } else if path.file_name().is_some_and(|n| n == vge_trainer::run_lock::LOCK_FILE) {
+                continue;
             } else {
                 let bytes = std::fs::read(&path).expect("read");
                 files.insert(path, bytes);
