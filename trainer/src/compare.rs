@@ -349,10 +349,10 @@ fn read_groups(specs: &[GroupSpec]) -> Result<Vec<(String, Vec<RunCurves>)>, Com
     let definition = |s: &Score| {
         format!("{}, {} s episodes, grasp noise {} rad", s.definition, s.episode_s, s.grasp_noise_rad)
     };
-    if let Some(first) = scores.first() {
-        if let Some(other) = scores.iter().find(|s| definition(s) != definition(first)) {
-            return Err(CompareError::Mixed(format!("{} against {}", definition(first), definition(other))));
-        }
+    if let Some(first) = scores.first()
+        && let Some(other) = scores.iter().find(|s| definition(s) != definition(first))
+    {
+        return Err(CompareError::Mixed(format!("{} against {}", definition(first), definition(other))));
     }
     Ok(groups)
 }

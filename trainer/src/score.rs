@@ -356,10 +356,10 @@ pub fn score_run(
     let env = score_env(&config);
     if !options.force {
         // A score.json that cannot be read is scored again (and replaced).
-        if let Ok(Some(existing)) = read_score(dir) {
-            if same_score(&existing, options, &config, (&selected, &final_policy, &snapshots)) {
-                return Ok((ScoreOutcome::Skipped(existing), notes));
-            }
+        if let Ok(Some(existing)) = read_score(dir)
+            && same_score(&existing, options, &config, (&selected, &final_policy, &snapshots))
+        {
+            return Ok((ScoreOutcome::Skipped(existing), notes));
         }
     }
     let all: Vec<&PlannedPolicy> = selected.iter().chain([&final_policy]).chain(&snapshots).collect();
