@@ -765,8 +765,7 @@ fn eval(args: EvalArgs) -> anyhow::Result<()> {
     // The success test's env for an object, with the robustness test's disturbances set the
     // one way it sets them.
     let env_for = |object: ObjectShape| {
-        let mut env = EnvConfig::default();
-        env.object = vge_sim::ObjectConfig::of(object);
+        let env = EnvConfig { object: vge_sim::ObjectConfig::of(object), ..EnvConfig::default() };
         let mut env = vge_trainer::eval::success_test_env(&env, episode_s, grasp_noise_rad);
         use vge_trainer::robustness::Axis;
         for (axis, level) in [

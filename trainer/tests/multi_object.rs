@@ -107,8 +107,8 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     let selected = best["selected_step"].as_u64().expect("selected_step");
     assert!([100, 200, 300].contains(&selected), "{best}");
     let row = rows.iter().find(|r| r[0] as u64 == selected).expect("the selected row");
-    let worst = row[header.iter().position(|h| *h == "cube_success").unwrap()]
-        .min(row[header.iter().position(|h| *h == "sphere_success").unwrap()]);
+    let worst = row[header.iter().position(|h| *h == "cube_success").expect("cube_success column")]
+        .min(row[header.iter().position(|h| *h == "sphere_success").expect("sphere_success column")]);
     assert_eq!(best["validation_worst_object_success_rate"].as_f64(), Some(worst));
     assert!(run.join("policy-best.vgep").exists());
 
