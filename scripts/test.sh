@@ -24,7 +24,10 @@ breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
   if [[ -n ${rerun_build:-} ]]; then pkill -P "$rerun_build" 2>/dev/null || true; kill "$rerun_build" 2>/dev/null || true; fi
-  printf '\n==> step times (s), %s\n' "$([[ $rc == 0 ]] && echo "all passed" || echo "FAILED (exit $rc) in the last step")"
+  # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
+  local verdict="all passed"
+  [[ ${finished:-0} == 1 && $rc == 0 ]] || verdict="FAILED (exit $rc) in the last step"
+  printf '\n==> step times (s), %s\n' "$verdict"
   for i in "${!step_names[@]}"; do
     next=${step_starts[i + 1]:-$end}
     printf '%6d  %s\n' $((next - step_starts[i])) "${step_names[i]}"
@@ -164,4 +167,4 @@ if ! wait "$rerun_build"; then
   tail -n 60 "$rerun_target/build.log"; echo "the rerun build failed (log: $rerun_target/build.log)"; exit 1
 fi
 CARGO_TARGET_DIR=$rerun_target cargo test --release "${rerun[@]}"
-
+finished=1
