@@ -43,7 +43,8 @@ step "system packages"
 # user-mode-linux: a CAN-capable guest for HIL tests where this kernel has no vcan.
 # kmod/iproute2: insmod and ip inside that guest.
 # qemu-system-arm: runs the Cortex-M4F firmware (mps2-an386) in the export tests.
-scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm
+# strace: the run-folder crash tests kill vge and inject ENOSPC at chosen system calls with it.
+scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm strace
 
 step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, in .deps/py)"
 # export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
