@@ -394,12 +394,20 @@ fn repo_root() -> PathBuf {
 
 #[test]
 fn every_shipped_config_loads_and_validates() {
-    let dir = repo_root().join("configs");
+    // Every TOML under configs/, folders included: a config that no test loads can rot.
+    let mut pending = vec![repo_root().join("configs")];
     let mut names = Vec::new();
-    for entry in std::fs::read_dir(&dir).expect("configs/") {
-        let path = entry.expect("entry").path();
-        let c = load_config(&path, &[]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        names.push(c.name.clone());
+    while let Some(dir) = pending.pop() {
+        for entry in std::fs::read_dir(&dir).expect("configs/") {
+            let path = entry.expect("entry").path();
+            if path.is_dir() {
+                pending.push(path);
+                continue;
+            }
+            assert_eq!(path.extension().and_then(|e| e.to_str()), Some("toml"), "{}", path.display());
+            let c = load_config(&path, &[]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            names.push(c.name.clone());
+        }
     }
     for ctl in ["igm", "cs", "fg"] {
         for m in Method::ALL {
@@ -416,7 +424,12 @@ fn every_shipped_config_loads_and_validates() {
     assert!(names.contains(&"cube-fg-vge-robust-hold4".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-4tips-magnitude".to_owned()));
     assert!(names.contains(&"cube-fg-vge-robust-4tips-droppenalty".to_owned()));
-    assert_eq!(names.len(), 25);
+    for variant in
+        ["heavy-cube", "low-friction", "torque-2x", "side-on", "fixed-start-paper-reward", "sac-alpha0"]
+    {
+        assert!(names.iter().any(|n| n.contains(variant)), "missing variant {variant}: {names:?}");
+    }
+    assert_eq!(names.len(), 32, "{names:?}");
 }
 
 #[test]
