@@ -1,5 +1,5 @@
-"""The README's Python example runs as written: it is python/examples/quickstart.py, run
-here from the repository root, and the README's "## Python" section shows that file."""
+"""The Python guide's example runs as written: it is python/examples/quickstart.py, run
+here from the repository root, and the "## Python" section of docs/python.md shows that file."""
 
 import re
 import subprocess
@@ -17,10 +17,10 @@ def test_quickstart_runs(repo):
 
 
 def test_readme_shows_the_quickstart(repo):
-    readme = (repo / "README.md").read_text()
+    readme = (repo / "docs/python.md").read_text()
     section = re.search(r"^## Python\n(.*?)(?=^## |\Z)", readme, flags=re.M | re.S)
     if section is None:
-        pytest.skip("README.md has no `## Python` section yet")
+        pytest.skip("docs/python.md has no `## Python` section yet")
     blocks = re.findall(r"```python\n(.*?)```", section.group(1), flags=re.S)
-    assert blocks, "the README's Python section has no python code block"
+    assert blocks, "the `## Python` section of docs/python.md has no python code block"
     assert blocks[0] == (repo / "python/examples/quickstart.py").read_text()
