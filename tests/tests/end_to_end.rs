@@ -33,6 +33,7 @@ fn short_run_config() -> Config {
         "run.checkpoint_interval=200",
         "run.eval_interval=400",
         "run.eval_episodes=1",
+        "run.score_episodes=0",
         "sac.threads=1",
     ] {
         apply_override(&mut c, o).expect(o);

@@ -497,6 +497,16 @@ pub struct RunSection {
     /// Uniform noise on the initial grasp pose of evaluation episodes (rad; 0 makes every
     /// deterministic episode the same).
     pub eval_grasp_noise_rad: f32,
+    /// Held-out episodes training scores the run's policies on at its end (`score.json`,
+    /// [`crate::score`]: the selected, final and last snapshots' policies, this many episodes
+    /// each); 0 leaves the scoring to `vge score`. Left out of the canonical TOML at its
+    /// default, so that stored configs keep their hashes.
+    #[serde(skip_serializing_if = "is_default_score_episodes")]
+    pub score_episodes: usize,
+}
+
+fn is_default_score_episodes(v: &usize) -> bool {
+    *v == crate::score::DEFAULT_EPISODES
 }
 
 impl Default for RunSection {
@@ -509,6 +519,7 @@ impl Default for RunSection {
             eval_episodes: crate::eval::SUCCESS_TEST_EPISODES,
             eval_episode_s: crate::eval::SUCCESS_TEST_EPISODE_S,
             eval_grasp_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
+            score_episodes: crate::score::DEFAULT_EPISODES,
         }
     }
 }
@@ -755,12 +766,13 @@ impl Config {
         let nets = params
             .saturating_mul(12 * 4)
             .saturating_add((self.sac.batch as u64).saturating_mul(units).saturating_mul(24 * 4));
-        let eval = (self.run.eval_episodes as u64).saturating_mul(EVAL_EPISODE_BYTES);
+        let eval =
+            (self.run.eval_episodes.max(self.run.score_episodes) as u64).saturating_mul(EVAL_EPISODE_BYTES);
         vec![
             ("sac.buffer_size", replay),
             ("num_envs, env.episode_length", envs),
             ("sac.hidden, sac.batch", nets),
-            ("run.eval_episodes", eval),
+            ("run.eval_episodes, run.score_episodes", eval),
         ]
     }
 

@@ -120,6 +120,7 @@ fn rl_bc_stores_and_clones_controller_actions_it_did_not_execute() {
         "run.eval_interval=0",
         "run.eval_episodes=1",
         "run.eval_episode_s=1.0",
+        "run.score_episodes=0",
     ] {
         apply_override(&mut c, o).expect(o);
     }

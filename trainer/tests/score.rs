@@ -12,6 +12,8 @@ use std::sync::OnceLock;
 use vge_trainer::score::{HELD_OUT_SEED, SCORE_FILE, Score};
 
 const STEPS: u64 = 400;
+/// `run.score_episodes` of the tiny run: training's own score at its end.
+const TRAINED_SCORE_EPISODES: usize = 4;
 
 fn vge(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_vge")).args(args).output().expect("vge runs")
@@ -34,10 +36,17 @@ fn trained() -> &'static Path {
         ]
         .map(str::to_owned)
         .into();
-        for o in common::TINY.iter().filter(|o| !o.starts_with("run.eval_interval")) {
+        for o in common::TINY
+            .iter()
+            .filter(|o| !o.starts_with("run.eval_interval") && !o.starts_with("run.score_"))
+        {
             args.extend(["--set".to_owned(), (*o).to_owned()]);
         }
-        args.extend(["--set".to_owned(), "run.eval_interval=100".to_owned()]);
+        // Training scores its policies at its end, on TRAINED_SCORE_EPISODES episodes each.
+        for o in ["run.eval_interval=100".to_owned(), format!("run.score_episodes={TRAINED_SCORE_EPISODES}")]
+        {
+            args.extend(["--set".to_owned(), o]);
+        }
         let out = Command::new(env!("CARGO_BIN_EXE_vge")).args(&args).output().expect("vge train");
         assert!(out.status.success(), "training failed: {}", String::from_utf8_lossy(&out.stderr));
         dir
@@ -77,7 +86,7 @@ fn stderr(out: &Output) -> String {
 fn training_writes_the_score_and_vge_score_skips_it_or_scores_again() {
     let dir = copy_of_run("score-skip");
     let s = read_score(&dir);
-    assert_eq!((s.episodes, s.seed), (100, HELD_OUT_SEED));
+    assert_eq!((s.episodes, s.seed), (TRAINED_SCORE_EPISODES, HELD_OUT_SEED), "run.score_episodes");
     assert_eq!((s.episode_s, s.grasp_noise_rad), (1.0, 0.02), "the run's success test (TINY: 1 s)");
     let best: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("best-eval.json")).expect("best-eval.json"))
@@ -105,7 +114,7 @@ fn training_writes_the_score_and_vge_score_skips_it_or_scores_again() {
     // Scored with the same episodes already: skipped, the file untouched.
     let before = std::fs::read(dir.join(SCORE_FILE)).expect("score.json");
     let path = dir.to_str().expect("utf-8");
-    let out = vge(&["score", path]);
+    let out = vge(&["score", path, "--episodes", &TRAINED_SCORE_EPISODES.to_string()]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("already scored, skipped"), "{out:?}");
     assert_eq!(std::fs::read(dir.join(SCORE_FILE)).expect("score.json"), before);

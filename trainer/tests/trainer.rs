@@ -547,6 +547,7 @@ fn tiny_config_with(total: u64, extra: &[&str]) -> Config {
         "run.eval_episodes=2",
         "run.eval_episode_s=1.0",
         "run.eval_interval=70",
+        "run.score_episodes=0",
     ]
     .iter()
     .chain(extra)

@@ -540,7 +540,13 @@ impl<'a> Trainer<'a> {
                 evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, cost, evaluated)?;
             // The run's score on held-out episodes (`score.json`, crate::score), now that every
             // policy it scores is written.
-            crate::score::score_run(self.folder.dir(), &crate::score::ScoreOptions::default(), &mut |_| {})?;
+            if self.config.run.score_episodes > 0 {
+                let options = crate::score::ScoreOptions {
+                    episodes: self.config.run.score_episodes,
+                    ..Default::default()
+                };
+                crate::score::score_run(self.folder.dir(), &options, &mut |_| {})?;
+            }
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)
         };

@@ -44,6 +44,9 @@ pub const TINY: &[&str] = &[
     "run.eval_interval=0",
     "run.eval_episodes=2",
     "run.eval_episode_s=1.0",
+    // Training's held-out score at its end (100 episodes per policy) would cost a tiny run
+    // most of its time; trainer/tests/score.rs tests it.
+    "run.score_episodes=0",
 ];
 
 /// The repository's `configs/` file `name`.
