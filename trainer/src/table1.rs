@@ -85,6 +85,9 @@ pub struct Row {
     /// episodes, with 95% stratified bootstrap intervals ([`crate::stats`]); None where no
     /// run of the cell is scored.
     pub selected_success: Option<crate::stats::Aggregates>,
+    /// The same for the final policy (`score.json`'s `final`): the paper's rule on the same
+    /// held-out episodes, kept beside the selection.
+    pub final_success: Option<crate::stats::Aggregates>,
 }
 
 /// Seed of the bootstrap of every interval of the table (each cell's generator also takes
@@ -238,6 +241,14 @@ pub fn rows(
                 &label,
             )
             .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
+            let label = format!("{} final", cell_label(controller, method.name()));
+            let final_success = crate::compare::aggregates(
+                &crate::compare::success_rates(&finished, crate::compare::Judged::Final),
+                &crate::stats::Bootstrap::default(),
+                BOOTSTRAP_SEED,
+                &label,
+            )
+            .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
             rows.push(Row {
                 controller,
                 method: method.name().to_owned(),
@@ -265,6 +276,7 @@ pub fn rows(
                 ),
                 scored: selected.len(),
                 selected_success,
+                final_success,
             });
         }
         if let Some(&(success_rate, mean_return, switches)) = alone.get(&controller) {
@@ -286,6 +298,7 @@ pub fn rows(
                 selection_learned: (0, 0),
                 scored: 0,
                 selected_success: None,
+                final_success: None,
             });
         }
     }
@@ -297,12 +310,14 @@ pub fn rows(
 /// empty below two seeds; `seeds` and `learned` empty for the controller alone; the figures
 /// empty for a cell with no finished run; `scored` counts the finished runs with a score
 /// of their selected policy, and the IQM and mean with their 95% intervals are of those
-/// runs' held-out success, empty where none is scored).
+/// runs' held-out success, empty where none is scored), then `final_iqm,final_iqm_ci_low,
+/// final_iqm_ci_high`: the IQM of the final policies' held-out success, the paper's rule.
 #[must_use]
 pub fn to_csv(rows: &[Row]) -> String {
     let mut text = String::from(
         "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps,\
-         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high\n",
+         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high,final_iqm,final_iqm_ci_low,\
+         final_iqm_ci_high\n",
     );
     for r in rows {
         let alone = r.method == CONTROLLER_ALONE;
@@ -319,8 +334,12 @@ pub fn to_csv(rows: &[Row]) -> String {
                 )
             },
         );
+        let final_iqm = r.final_success.map_or_else(
+            || ",,".to_owned(),
+            |a| format!("{:.4},{:.4},{:.4}", a.iqm.point, a.iqm.ci_low, a.iqm.ci_high),
+        );
         text.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{aggregates}\n",
+            "{},{},{},{},{},{},{},{},{},{aggregates},{final_iqm}\n",
             r.controller.name(),
             r.method,
             count(r.seeds),
@@ -354,7 +373,7 @@ pub fn to_markdown_with(rows: &[Row], improvements: &[crate::compare::Improvemen
 #[must_use]
 pub fn to_markdown(rows: &[Row]) -> String {
     let mut text = String::from(
-        "| controller | method | seeds learned (ours) | final success per seed (seed: rate) | learned by the run's selection | selected policy's held-out success, IQM [95% CI] | its mean [95% CI] | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| controller | method | seeds learned (ours) | final success per seed (seed: rate) | learned by the run's selection | selected policy's held-out success, IQM [95% CI] | its mean [95% CI] | final policy's held-out success, IQM [95% CI] | paper (about 10 seeds) | final success rate, mean | success of the last 3 periodic tests, mean | final return, mean ± std | contact switches per episode, mean | env steps |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let paper = paper_learned_share(r.controller, &r.method)
@@ -390,7 +409,7 @@ pub fn to_markdown(rows: &[Row]) -> String {
         if r.method != CONTROLLER_ALONE && r.seeds == 0 {
             // All of the cell's runs are still running: no figures yet.
             text.push_str(&format!(
-                "| {} | {} | {learned} | - | - | - | - | {paper} | - | - | - | - | - |\n",
+                "| {} | {} | {learned} | - | - | - | - | - | {paper} | - | - | - | - | - |\n",
                 r.controller.name().to_uppercase(),
                 r.method
             ));
@@ -417,8 +436,10 @@ pub fn to_markdown(rows: &[Row]) -> String {
             }
             None => ("-".to_owned(), "-".to_owned()),
         };
+        let final_iqm =
+            r.final_success.map_or_else(|| "-".to_owned(), |a| crate::compare::with_interval(&a.iqm));
         text.push_str(&format!(
-            "| {} | {} | {learned} | {per_seed} | {selection} | {iqm} | {mean} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
+            "| {} | {} | {learned} | {per_seed} | {selection} | {iqm} | {mean} | {final_iqm} | {paper} | {:.2} | {late} | {ret} | {switches} | {steps} |\n",
             r.controller.name().to_uppercase(),
             r.method,
             r.success_rate_mean,
@@ -579,7 +600,8 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
         if finished.values().flatten().any(|r| r.score.is_some()) {
             let path = out.join(format!("profiles-{}.png", controller.name()));
             let caption = format!(
-                "{} controller, cube: runs whose selected policy succeeds in more than tau of the held-out episodes",
+                // Short: the figure is 500 px wide, and the panel's own title says the rest.
+                "{} controller, cube: held-out success of selected policies",
                 controller.name().to_uppercase()
             );
             crate::compare::draw_profiles(

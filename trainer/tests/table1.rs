@@ -73,11 +73,12 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     assert_eq!(
         csv,
         "controller,method,seeds,learned,success_rate_mean,return_mean,return_std,env_steps,\
-         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high\n\
-         fg,fge,3,2,0.5000,200.00,100.00,20000,0,,,,,,\n\
-         fg,controller-alone,,,0.0500,11.50,,,,,,,,,\n\
-         cs,fge,0,0,,,,,0,,,,,,\n\
-         cs,vge,1,0,0.0000,12.50,,20000,0,,,,,,\n"
+         scored,iqm,iqm_ci_low,iqm_ci_high,mean,mean_ci_low,mean_ci_high,final_iqm,final_iqm_ci_low,\
+         final_iqm_ci_high\n\
+         fg,fge,3,2,0.5000,200.00,100.00,20000,0,,,,,,,,,\n\
+         fg,controller-alone,,,0.0500,11.50,,,,,,,,,,,,\n\
+         cs,fge,0,0,,,,,0,,,,,,,,,\n\
+         cs,vge,1,0,0.0000,12.50,,20000,0,,,,,,,,,\n"
     );
     let fge = &written.rows[0];
     assert_eq!((fge.controller, fge.seeds, fge.learned, fge.unfinished), (ControllerKind::Fg, 3, 2, 1));
@@ -86,22 +87,22 @@ fn cells_count_finished_seeds_by_config_and_write_every_artefact() {
     // tests (0 and its final 0.6, 0.4, 0.5) average 0.3, 0.2, 0.25.
     assert!(
         md.contains(
-            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | - | - | - | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
+            "| FG | fge | 2/3 (67%), 1 still rising, 1 running | 0: 60%, 0: 40%, 0: 50% | - | - | - | - | 73% | 0.50 | 0.25 | 200.0 ± 100.0 | 5.0 | 20000 |"
         ),
         "{md}"
     );
     assert!(
         md.contains(
-            "| FG | controller-alone | (no learning) | - | - | - | - | - | 0.05 | - | 11.5 | 7.3 | - |"
+            "| FG | controller-alone | (no learning) | - | - | - | - | - | - | 0.05 | - | 11.5 | 7.3 | - |"
         ),
         "{md}"
     );
     assert!(md.contains("\nThe last 3 periodic tests (the final one included)"), "{md}");
     // Not learned, and its last test (12.5) beat its first (5.0) by more than a quarter.
-    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | - | - | - | 27% |"), "{md}");
+    assert!(md.contains("| CS | vge | 0/1 (0%), 1 still rising | 0: 0% | - | - | - | - | 27% |"), "{md}");
     assert!(md.contains("\nStill rising: a seed that did not learn"), "{md}");
     assert!(
-        md.contains("| CS | fge | 0/0 (0%), 1 running | - | - | - | - | 67% | - | - | - | - | - |"),
+        md.contains("| CS | fge | 0/0 (0%), 1 running | - | - | - | - | - | 67% | - | - | - | - | - |"),
         "{md}"
     );
     for png in ["curves-fg.png", "curves-cs.png"] {
@@ -193,9 +194,10 @@ fn committed_table1_is_what_its_run_folders_give() {
     }
 }
 
-/// A `score.json` whose selected and final policies succeed in `success` of the episodes.
+/// A `score.json` whose selected policy succeeds in `success` of the episodes and whose
+/// final policy in half as many.
 fn write_score(dir: &Path, success: f64) {
-    let policy = |file: &str| {
+    let policy = |file: &str, success: f64| {
         serde_json::json!({
             "file": file, "step": 20000, "crc32": 1, "success_rate": success, "mean_return": 100.0,
             "drop_rate": 0.0, "mean_rotation_rad": 7.0, "mean_contact_switches": 20.0,
@@ -204,7 +206,7 @@ fn write_score(dir: &Path, success: f64) {
     let score = serde_json::json!({
         "definition": vge_trainer::score::DEFINITION, "episodes": 100, "seed": 1u64 << 52,
         "episode_s": 30.0, "grasp_noise_rad": 0.02,
-        "selected": policy("policy-best.vgep"), "final": policy("policy.vgep"),
+        "selected": policy("policy-best.vgep", success), "final": policy("policy.vgep", success / 2.0),
     });
     std::fs::write(dir.join("score.json"), score.to_string()).expect("score.json");
 }
@@ -233,6 +235,8 @@ fn scored_cells_get_their_iqm_intervals_improvements_and_profiles() {
     assert_eq!((fields[8], fields[9], fields[12]), ("4", "0.9250", "0.7625"), "{vge}");
     let (low, high): (f64, f64) = (fields[10].parse().expect("low"), fields[11].parse().expect("high"));
     assert!(low <= 0.925 && 0.925 <= high && low < high, "{vge}");
+    // Beside it the final policies' IQM: of 0.1, 0.45, 0.475, 0.5.
+    assert_eq!(fields[15], "0.4625", "{vge}");
     let rl = csv.lines().find(|l| l.starts_with("fg,rl,")).expect("rl row");
     assert_eq!(rl.split(',').nth(8), Some("2"), "two of three scored: {rl}");
     // P(VGE > RL): 7 of the 8 pairs.
