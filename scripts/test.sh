@@ -24,6 +24,7 @@ breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
   if [[ -n ${rerun_build:-} ]]; then pkill -P "$rerun_build" 2>/dev/null || true; kill "$rerun_build" 2>/dev/null || true; fi
+  if [[ -n ${py_install:-} ]]; then kill "$py_install" 2>/dev/null || true; fi
   # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
   local verdict="all passed"
   [[ ${finished:-0} == 1 && $rc == 0 ]] || verdict="FAILED (exit $rc) in the last step"
@@ -46,7 +47,7 @@ step "system packages"
 # strace: the run-folder crash tests kill vge and inject ENOSPC at chosen system calls with it.
 scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm strace
 
-step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, in .deps/py)"
+step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, onnx, in .deps/py; a first install in the background)"
 # export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
 # imported actors) in onnxruntime.
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
@@ -55,11 +56,26 @@ step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, in .deps/
 # model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs); rliable computes the
 # aggregates of vge_trainer::stats for comparison (trainer/tests/stats_vs_rliable.rs; its arch
 # 7 needs pandas < 3).
+# A first install downloads about 400 MB: it runs in the background while the Rust steps
+# below compile (it mostly waits on the network and the disk), and the workspace tests wait
+# for it (python_tools_ready).
+py_log=$repo/.deps/py-install.log
 if ! .deps/py/bin/python -c 'import cantools, tensorboard, rerun, mujoco, rliable.library, onnx, onnxruntime, maturin, gymnasium, pytest; assert rerun.__version__ == "0.36.3"; assert mujoco.__version__ == "4.0.0"' 2>/dev/null; then
   python3 -m venv .deps/py
-  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 rliable "pandas<3" onnx onnxruntime maturin gymnasium pytest
+  echo "installing in the background (log: $py_log)"
+  .deps/py/bin/python -m pip install --quiet --disable-pip-version-check cantools tensorboard rerun-sdk==0.36.3 mujoco==4.0.0 rliable "pandas<3" onnx onnxruntime maturin gymnasium pytest \
+    >"$py_log" 2>&1 &
+  py_install=$!
 fi
-.deps/py/bin/python -c 'import importlib.metadata, cantools, tensorboard, rerun, mujoco, rliable.library; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__, "rliable", importlib.metadata.version("rliable"))'
+python_tools_ready() {
+  if [[ -n ${py_install:-} ]]; then
+    local waited=$SECONDS
+    if ! wait "$py_install"; then cat "$py_log"; echo "pip install into .deps/py failed (log: $py_log)"; exit 1; fi
+    py_install=
+    echo "python tools installed (waited $((SECONDS - waited)) s for pip)"
+  fi
+  .deps/py/bin/python -c 'import importlib.metadata, cantools, tensorboard, rerun, mujoco, rliable.library; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__, "rliable", importlib.metadata.version("rliable"))'
+}
 
 step "rust components and targets"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done
@@ -117,6 +133,7 @@ step "cargo test --workspace (release; clippy -D warnings on every target as it 
 # --no-run first builds (and lints) every target, examples included, as `cargo clippy
 # --workspace --all-targets` would: the workspace has no benches.
 cargo test --release --workspace --no-run
+python_tools_ready
 cargo test --release --workspace
 
 step "Python package (python/: pyo3 + numpy, built by maturin; pytest python/tests)"
