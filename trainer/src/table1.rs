@@ -232,23 +232,22 @@ pub fn rows(
             let mut per_seed: Vec<(u64, f64)> =
                 finished.iter().filter_map(|r| r.final_success.map(|s| (r.seed, s))).collect();
             per_seed.sort_by_key(|&(seed, _)| seed);
-            let selected = crate::compare::success_rates(&finished, crate::compare::Judged::Selected);
-            let label = format!("{} selected", cell_label(controller, method.name()));
-            let selected_success = crate::compare::aggregates(
-                &selected,
-                &crate::stats::Bootstrap::default(),
-                BOOTSTRAP_SEED,
-                &label,
-            )
-            .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
-            let label = format!("{} final", cell_label(controller, method.name()));
-            let final_success = crate::compare::aggregates(
-                &crate::compare::success_rates(&finished, crate::compare::Judged::Final),
-                &crate::stats::Bootstrap::default(),
-                BOOTSTRAP_SEED,
-                &label,
-            )
-            .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
+            // IQM and mean of the held-out success of one policy per run (the label seeds the
+            // cell's bootstrap, so each stays "CELL selected" / "CELL final").
+            let aggregates = |judged: crate::compare::Judged| {
+                let rates = crate::compare::success_rates(&finished, judged);
+                let label = format!("{} {}", cell_label(controller, method.name()), judged.name());
+                crate::compare::aggregates(
+                    &rates,
+                    &crate::stats::Bootstrap::default(),
+                    BOOTSTRAP_SEED,
+                    &label,
+                )
+                .map(|a| (rates.len(), a))
+                .map_err(|e| PlotError::Draw(format!("{label}: {e}")))
+            };
+            let (scored, selected_success) = aggregates(crate::compare::Judged::Selected)?;
+            let (_, final_success) = aggregates(crate::compare::Judged::Final)?;
             rows.push(Row {
                 controller,
                 method: method.name().to_owned(),
@@ -274,7 +273,7 @@ pub fn rows(
                     finished.iter().filter(|r| r.selected.is_some_and(|s| s.learned())).count(),
                     finished.iter().filter(|r| r.selected.is_some()).count(),
                 ),
-                scored: selected.len(),
+                scored,
                 selected_success,
                 final_success,
             });
