@@ -23,7 +23,8 @@ step() {
 breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
-  if [[ -n ${rerun_build:-} ]]; then pkill -P "$rerun_build" 2>/dev/null || true; kill "$rerun_build" 2>/dev/null || true; fi
+  local bg
+  for bg in ${rerun_build:-} ${python_build:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
   if [[ -n ${py_install:-} ]]; then kill "$py_install" 2>/dev/null || true; fi
   # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
   local verdict="all passed"
@@ -34,6 +35,9 @@ breakdown() {
     printf '%6d  %s\n' $((next - step_starts[i])) "${step_names[i]}"
   done
   printf '%6d  total\n' "$end"
+  # CPU time of this script and everything it ran: a fresh machine's wall time is bounded
+  # below by the children's CPU time over its cores.
+  printf 'CPU time (user, system) of the shell, then of its children:\n'; times
 }
 trap breakdown EXIT
 
@@ -98,6 +102,30 @@ RUSTC_WORKSPACE_WRAPPER="$(rustc --print sysroot)/bin/clippy-driver"
 export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
 [[ -x $RUSTC_WORKSPACE_WRAPPER ]] || { echo "clippy-driver not found at $RUSTC_WORKSPACE_WRAPPER"; exit 1; }
 
+# Two builds that nothing else waits on until late run in the background from here, at low
+# priority, on the CPU the main build and the tests leave idle (linking, single-threaded
+# tests, the pip download): the Python package's workspace (its own target dir, python/target),
+# and the Rerun SDK (with its Arrow and gRPC stack, a larger build than the rest together),
+# which only `--record` needs, so the main test build leaves it out: the two crates that
+# record are built with it in a target dir of their own. Their steps below wait for them.
+export PYO3_PYTHON=$repo/.deps/py/bin/python
+python_log=$repo/python/target/background-build.log
+mkdir -p python/target
+nice -n 10 cargo build --release --manifest-path python/Cargo.toml --workspace >"$python_log" 2>&1 &
+python_build=$!
+rerun=(-p vge-sim -p vge-bridge --features vge-sim/rerun,vge-bridge/rerun --test recording)
+rerun_target=$repo/target/rerun
+mkdir -p "$rerun_target"
+CARGO_TARGET_DIR=$rerun_target nice -n 19 cargo test --release "${rerun[@]}" --no-run \
+  >"$rerun_target/build.log" 2>&1 &
+rerun_build=$!
+# Waits for background build $1 (pid), named $2, whose log is $3.
+background_ready() {
+  local waited=$SECONDS
+  if ! wait "$1"; then tail -n 60 "$3"; echo "the $2 build failed (log: $3)"; exit 1; fi
+  echo "$2 build ready (waited $((SECONDS - waited)) s for it)"
+}
+
 step "dependency rule: vge-controllers and vge-bridge never link libtorch"
 for crate in vge-controllers vge-bridge; do
   tree=$(cargo tree -p "$crate" -e normal,build --prefix none)
@@ -148,24 +176,14 @@ echo "python/: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 # built once; linted through the clippy wrapper above): the reference binary the tests compare
 # with and the [env] keys' unit tests. Then the package, built by pip through maturin in the
 # same target dir and installed into .deps/py.
-export PYO3_PYTHON=$repo/.deps/py/bin/python
+background_ready "$python_build" "Python workspace" "$python_log"
+python_build=
 cargo build --release --manifest-path python/Cargo.toml --workspace
 cargo test --release --manifest-path python/Cargo.toml --workspace
 PATH="$repo/.deps/py/bin:$PATH" .deps/py/bin/python -m pip install --quiet --disable-pip-version-check \
   --no-build-isolation --no-deps --force-reinstall ./python
 ls -l python/target/wheels/
 .deps/py/bin/python -m pytest -q python/tests
-
-# The Rerun SDK (and its Arrow and gRPC stack) is a large build that only `--record` needs, so
-# the workspace's main test build leaves it out, and the two crates that record are built with
-# it in a target dir of their own, in the background at low priority while the HIL and Slurm
-# steps (which mostly wait on a guest and on timers) run; its test runs after them.
-rerun=(-p vge-sim -p vge-bridge --features vge-sim/rerun,vge-bridge/rerun --test recording)
-rerun_target=$repo/target/rerun
-mkdir -p "$rerun_target"
-CARGO_TARGET_DIR=$rerun_target nice -n 19 cargo test --release "${rerun[@]}" --no-run \
-  >"$rerun_target/build.log" 2>&1 &
-rerun_build=$!
 
 step "HIL runner passes the guest's exit status back"
 set +e; scripts/canvm/run.sh /bin/sh -c 'exit 7'; rc=$?; set -e
@@ -180,9 +198,8 @@ step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
 # cluster, runs trainer/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
 scripts/slurm/test.sh
 
-step "Rerun recordings: the optional rerun feature, built in the background since the HIL step"
-if ! wait "$rerun_build"; then
-  tail -n 60 "$rerun_target/build.log"; echo "the rerun build failed (log: $rerun_target/build.log)"; exit 1
-fi
+step "Rerun recordings: the optional rerun feature, built in the background since the start"
+background_ready "$rerun_build" "Rerun feature" "$rerun_target/build.log"
+rerun_build=
 CARGO_TARGET_DIR=$rerun_target cargo test --release "${rerun[@]}"
 finished=1
