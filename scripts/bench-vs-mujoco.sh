@@ -21,7 +21,7 @@ if ! "$venv/bin/python" -c 'import mujoco; assert mujoco.__version__ == "4.0.0"'
   [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check mujoco==4.0.0
 fi
-cargo build --release -p vge-trainer --bin vge >&2
+cargo build --release -p vge-cli --bin vge >&2
 vge=target/release/vge
 model=target/vge-hand.mjcf.xml
 "$vge" bench sim --write-mjcf "$model" --mujoco-timestep-s "$(python3 -c "print(1/$mujoco_hz)")"

@@ -30,7 +30,7 @@ if ! "$venv/bin/python" -c 'import torch, stable_baselines3; assert torch.__vers
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check torch==2.13.0 stable-baselines3
 fi
 scripts/setup-libtorch.sh
-cargo build --release -p vge-trainer --bin vge >&2
+cargo build --release -p vge-cli --bin vge >&2
 vge=target/release/vge
 updates=400
 out=target/bench-vs-sb3.jsonl

@@ -24,7 +24,7 @@ vge=${VGE_BIN:-$repo/target/release/vge}
 extra=()
 for kv in ${VGE_SET:-}; do extra+=(--set "$kv"); done
 if [ ! -x "$vge" ]; then
-  (cd "$repo" && scripts/setup-libtorch.sh && cargo build --release -p vge-trainer --bin vge)
+  (cd "$repo" && scripts/setup-libtorch.sh && cargo build --release -p vge-cli --bin vge)
 fi
 mkdir -p "$out/controllers"
 for kind in fg cs igm; do

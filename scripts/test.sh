@@ -58,7 +58,7 @@ step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, onnx, in 
 # event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
 # the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py); MuJoCo steps the
 # model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs); rliable computes the
-# aggregates of vge_trainer::stats for comparison (trainer/tests/stats_vs_rliable.rs; its arch
+# aggregates of vge_lab::stats for comparison (lab/tests/stats_vs_rliable.rs; its arch
 # 7 needs pandas < 3).
 # A first install downloads about 400 MB: it runs in the background while the Rust steps
 # below compile (it mostly waits on the network and the disk), and the workspace tests wait
@@ -126,14 +126,27 @@ background_ready() {
   echo "$2 build ready (waited $((SECONDS - waited)) s for it)"
 }
 
-step "dependency rule: vge-controllers and vge-bridge never link libtorch"
-for crate in vge-controllers vge-bridge; do
-  tree=$(cargo tree -p "$crate" -e normal,build --prefix none)
+step "dependency rule: only the learner links libtorch (vge-lab, vge-controllers, vge-bridge and vge without training never do)"
+# `vge-cli --no-default-features`: the vge command without its `train` feature (eval, score,
+# compare, plot, inspect, import, controller, ...).
+for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features"; do
+  # shellcheck disable=SC2086
+  tree=$(cargo tree -p $crate -e normal,build --prefix none)
   if grep -q '^torch-sys ' <<<"$tree"; then
-    echo "$crate depends on torch-sys:"; cargo tree -p "$crate" -i torch-sys; exit 1
+    # shellcheck disable=SC2086
+    echo "$crate depends on torch-sys:"; cargo tree -p $crate -i torch-sys; exit 1
   fi
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
+# ...and that build compiles (linted), reads a policy and refuses to train, naming the feature.
+# It shares the dependencies' artifacts; target/release/vge is the full binary again after
+# the workspace's test build below.
+cargo build --release -p vge-cli --no-default-features
+target/release/vge inspect policies/cube.vgep | head -3
+if target/release/vge train --config configs/cube-fg-rl.toml --out "target/no-train-$$" 2>target/no-train-refusal.txt; then
+  echo "vge without the train feature trained"; exit 1
+fi
+grep "train\` feature" target/no-train-refusal.txt || { cat target/no-train-refusal.txt; exit 1; }
 
 step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon, no rerun)"
 # Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
@@ -195,7 +208,7 @@ scripts/hil.sh
 
 step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
 # Installs slurmctld, slurmd, slurm-client and munge when missing, starts a throw-away
-# cluster, runs trainer/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
+# cluster, runs cli/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
 scripts/slurm/test.sh
 
 step "Rerun recordings: the optional rerun feature, built in the background since the start"

@@ -3,51 +3,7 @@
 use tch::Tensor;
 use tch::nn::{self, Module};
 
-use crate::ExportError;
-
-/// Shape of an actor MLP: `obs_dim -> hidden[0] -> ... -> act_dim`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ActorSpec {
-    pub obs_dim: usize,
-    pub hidden: Vec<usize>,
-    pub act_dim: usize,
-}
-
-impl ActorSpec {
-    /// Variable-path name of hidden layer `i` relative to the actor prefix (`"l0"`, `"l1"`, ...).
-    pub fn hidden_name(i: usize) -> String {
-        format!("l{i}")
-    }
-
-    /// Variable-path name of the mean layer relative to the actor prefix.
-    pub const MEAN_NAME: &'static str = "mean";
-
-    /// `(in_dim, out_dim)` of every linear layer, hidden layers first, mean layer last.
-    pub fn layer_dims(&self) -> Vec<(usize, usize)> {
-        let mut dims = Vec::with_capacity(self.hidden.len() + 1);
-        let mut prev = self.obs_dim;
-        for &h in &self.hidden {
-            dims.push((prev, h));
-            prev = h;
-        }
-        dims.push((prev, self.act_dim));
-        dims
-    }
-
-    /// Checks that every dimension is non-zero and fits in `i64`.
-    pub fn validate(&self) -> Result<(), ExportError> {
-        let all = std::iter::once(self.obs_dim).chain(self.hidden.iter().copied()).chain([self.act_dim]);
-        for d in all {
-            if d == 0 {
-                return Err(ExportError::InvalidSpec(format!("zero dimension in {self:?}")));
-            }
-            if i64::try_from(d).is_err() {
-                return Err(ExportError::InvalidSpec(format!("dimension {d} does not fit in i64")));
-            }
-        }
-        Ok(())
-    }
-}
+use crate::{ActorSpec, ExportError};
 
 /// The deterministic head of a SAC actor: `tanh(mean(relu(... relu(l0(obs)))))`.
 ///

@@ -2,8 +2,6 @@
 
 use std::path::PathBuf;
 
-use tch::Kind;
-
 /// Why an actor could not be exported.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
@@ -16,9 +14,9 @@ pub enum ExportError {
     /// The variable exists but has another shape than the spec implies.
     #[error("variable `{name}` has shape {got:?}, expected {expected:?}")]
     WrongShape { name: String, expected: Vec<i64>, got: Vec<i64> },
-    /// The variable is not `f32` (`Kind::Float`).
-    #[error("variable `{name}` has kind {kind:?}, expected Float (f32)")]
-    WrongKind { name: String, kind: Kind },
+    /// The variable is not `f32` (tch's `Kind::Float`); `kind` is the kind it has.
+    #[error("variable `{name}` has kind {kind}, expected Float (f32)")]
+    WrongKind { name: String, kind: String },
     /// The variable holds a NaN or infinity at this flat (row-major) index.
     #[error("variable `{name}` holds a non-finite value at flat index {index}")]
     NonFinite { name: String, index: usize },
@@ -26,6 +24,7 @@ pub enum ExportError {
     #[error("runtime rejected the exported layers")]
     Runtime(#[from] vge_runtime::RuntimeError),
     /// libtorch failed while copying a tensor out.
+    #[cfg(feature = "tch")]
     #[error(transparent)]
     Tch(#[from] tch::TchError),
     /// The policy file (or the metadata going into it) failed validation.

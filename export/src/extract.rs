@@ -3,61 +3,9 @@
 use std::collections::HashMap;
 
 use tch::{Device, Kind, Tensor, nn::VarStore};
-use vge_runtime::{Activation, Layer};
+use vge_runtime::Activation;
 
-use crate::{ActorSpec, ExportError};
-
-/// One dense layer with owned parameters, in the runtime's layout.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ExportedLayer {
-    pub in_dim: usize,
-    pub out_dim: usize,
-    /// Row-major `out_dim × in_dim` (same layout as a tch `Linear` weight).
-    pub weights: Vec<f32>,
-    pub bias: Vec<f32>,
-    pub activation: Activation,
-}
-
-impl ExportedLayer {
-    /// Borrows this layer for the runtime.
-    pub fn as_runtime_layer(&self) -> Layer<'_> {
-        Layer {
-            in_dim: self.in_dim,
-            out_dim: self.out_dim,
-            weights: vge_runtime::Weights::F32(&self.weights),
-            bias: &self.bias,
-            activation: self.activation,
-        }
-    }
-}
-
-/// An actor's deterministic head as owned layers: hidden layers with ReLU, mean layer with tanh.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ExportedActor {
-    pub layers: Vec<ExportedLayer>,
-}
-
-impl ExportedActor {
-    /// Borrows every layer for the runtime, e.g. for `vge_runtime::Mlp::new(&actor.as_runtime_layers())`.
-    pub fn as_runtime_layers(&self) -> Vec<Layer<'_>> {
-        self.layers.iter().map(ExportedLayer::as_runtime_layer).collect()
-    }
-
-    /// Builds a runtime MLP borrowing these layers.
-    pub fn to_mlp<const MAX_LAYERS: usize, const MAX_WIDTH: usize>(
-        &self,
-    ) -> Result<vge_runtime::Mlp<'_, MAX_LAYERS, MAX_WIDTH>, ExportError> {
-        Ok(vge_runtime::Mlp::new(&self.as_runtime_layers())?)
-    }
-
-    pub fn obs_dim(&self) -> usize {
-        self.layers.first().map_or(0, |l| l.in_dim)
-    }
-
-    pub fn act_dim(&self) -> usize {
-        self.layers.last().map_or(0, |l| l.out_dim)
-    }
-}
+use crate::{ActorSpec, ExportError, ExportedActor, ExportedLayer};
 
 /// Reads the actor built by [`build_actor`](crate::build_actor) under `prefix` (e.g. `"actor"`)
 /// from `vs`, checking names, shapes, kinds and finiteness against `spec`.
@@ -105,7 +53,7 @@ fn read_f32(vars: &HashMap<String, Tensor>, name: &str, shape: &[usize]) -> Resu
     }
     let kind = t.f_kind()?;
     if kind != Kind::Float {
-        return Err(ExportError::WrongKind { name: name.to_owned(), kind });
+        return Err(ExportError::WrongKind { name: name.to_owned(), kind: format!("{kind:?}") });
     }
     let flat = tch::no_grad(|| -> Result<Tensor, tch::TchError> {
         t.f_detach()?.f_to_device(Device::Cpu)?.f_contiguous()?.f_flatten(0, -1)

@@ -5,6 +5,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
+#[cfg(feature = "tch")]
 use tch::nn::VarStore;
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
 use vge_runtime::{Activation, PolicyError, WeightType};
@@ -278,6 +279,7 @@ pub fn read_policy_bytes(path: &Path, max_len: usize) -> Result<Vec<u8>, ExportE
 
 /// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`
 /// and encodes it with `meta` as a policy file (version 2, `f32` weights).
+#[cfg(feature = "tch")]
 pub fn export_policy(
     vs: &VarStore,
     prefix: &str,

@@ -90,10 +90,10 @@ def test_bad_keys_name_the_key(repo):
 
 
 def test_env_keys_are_the_trainers(repo):
-    """Every key of the trainer's EnvSection (trainer/src/config.rs) is one HandEnv reads."""
+    """Every key of the lab's EnvSection (lab/src/config.rs) is one HandEnv reads."""
     import re
 
-    src = (repo / "trainer/src/config.rs").read_text()
+    src = (repo / "lab/src/config.rs").read_text()
     body = src[src.index("pub struct EnvSection {") :]
     body = body[: body.index("\n}\n")]
     trainer_keys = re.findall(r"^\s*pub (\w+):", body, flags=re.M)

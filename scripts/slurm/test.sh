@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Run vge's Slurm test (trainer/tests/slurm.rs) on a throw-away one-node Slurm cluster on
+# Run vge's Slurm test (cli/tests/slurm.rs) on a throw-away one-node Slurm cluster on
 # localhost: scripts/slurm/start.sh (installs slurm-wlm's daemons and munge when missing),
 # the test, scripts/slurm/stop.sh. Fails, with the reason, where Slurm cannot be started.
 # Prints the seconds each part took. Extra arguments go to the test binary.

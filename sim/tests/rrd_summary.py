@@ -6,7 +6,7 @@
   entities     {path: {"static": [components], "temporal": [components], "steps": [steps]}}
   scalars      {path: [[step, value], ...]} for every entity holding Scalars
 
-The Rust tests (sim/tests/recording.rs, trainer/tests/record.rs, tests/tests/recording.rs)
+The Rust tests (sim/tests/recording.rs, cli/tests/record.rs, tests/tests/recording.rs)
 check these against the episode they recorded."""
 import json
 import sys

@@ -12,8 +12,8 @@ use vge_bridge::control_loop::{self, LoopConfig, StopReason};
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
 use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::InProcessTransport;
+use vge_lab::config::{Config, apply_override};
 use vge_sim::{EnvConfig, NUM_JOINTS, OBS_DIM};
-use vge_trainer::config::{Config, apply_override};
 use vge_trainer::nets::{GaussianActor, NetSpec};
 
 fn short_run_config() -> Config {

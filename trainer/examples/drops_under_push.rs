@@ -9,13 +9,13 @@
 //!
 //! Arguments: POLICY FORCE_STD_N [EPISODES=20] [SEED=2000].
 use anyhow::Context;
-use vge_runtime::{AlignedBytes, Policy};
-use vge_sim::{EnvConfig, NUM_FINGERS};
-use vge_trainer::eval::{
+use vge_lab::eval::{
     EVAL_MAX_LAYERS, EVAL_MAX_WIDTH, SUCCESS_TEST_EPISODE_S, SUCCESS_TEST_GRASP_NOISE_RAD,
     run_episode_observed, success_test_env,
 };
-use vge_trainer::robustness::Axis;
+use vge_lab::robustness::Axis;
+use vge_runtime::{AlignedBytes, Policy};
+use vge_sim::{EnvConfig, NUM_FINGERS};
 
 /// How far the object may sink below its starting height before a drop counts as begun (m).
 const ONSET_M: f32 = 0.005;

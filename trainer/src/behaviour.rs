@@ -30,9 +30,9 @@ use rand_chacha::ChaCha8Rng;
 use thiserror::Error;
 use vge_sim::{NUM_JOINTS, OBS_DIM};
 
-use crate::config::{BcSection, Config, FgeSection, Method};
-use crate::controllers::{Controller, ControllerInput};
 use crate::replay::Source;
+use vge_controllers::{Controller, ControllerInput};
+use vge_lab::config::{BcSection, Config, FgeSection, Method};
 
 /// FGE's probability of following the controller at training step `step`: `p_start` until
 /// `decay_start`, linear to `p_end` at `decay_end`, `p_end` after.

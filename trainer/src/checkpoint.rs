@@ -31,20 +31,18 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::atomic_file::sync_dir;
 use crate::replay::{ReplayBuffer, ReplayError};
 use crate::sac::{ACTOR_FILE, CRITIC_FILE, OPTIM_FILE, Sac, TARGET_ACTOR_FILE, TARGET_FILE};
+use vge_lab::atomic_file::sync_dir;
+use vge_lab::run_dir::RunDir;
 
-/// The checkpoint folder in a run directory.
-pub const DIR: &str = "checkpoint";
-/// Where [`save`] writes a checkpoint before renaming it to [`DIR`].
-pub const TMP_DIR: &str = "checkpoint.tmp";
-/// The previous checkpoint while [`save`] swaps the folders.
-pub const OLD_DIR: &str = "checkpoint.old";
+/// The checkpoint folder in a run directory; [`save`] writes to the temporary one first and
+/// keeps the previous one while it swaps them (names: [`vge_lab::run_dir`]).
+pub use vge_lab::run_dir::{CHECKPOINT as DIR, CHECKPOINT_OLD as OLD_DIR, CHECKPOINT_TMP as TMP_DIR};
 /// The list of the checkpoint's files with their lengths and CRCs, written last.
 pub const MANIFEST: &str = "manifest.json";
 /// The training loop's state (`crate::train`).
-pub const STATE_FILE: &str = "state.toml";
+pub use vge_lab::run_dir::CHECKPOINT_STATE as STATE_FILE;
 /// The replay buffer ([`ReplayBuffer::write_to`]).
 pub const REPLAY_FILE: &str = "replay.bin";
 /// Every file a vge checkpoint holds besides its manifest: one of these that the manifest
@@ -294,16 +292,9 @@ fn swap_into_place(out_dir: &Path) -> Result<(), CheckpointError> {
     Ok(())
 }
 
-/// The checkpoint folder a resume of `out_dir` reads: `checkpoint/` when it exists (whatever
-/// state it is in), else `checkpoint.old/` when that exists (a save killed between its two
-/// renames), else `None`.
+/// The checkpoint folder a resume of `out_dir` reads ([`RunDir::resume_checkpoint`]).
 pub fn resume_dir(out_dir: &Path) -> Option<PathBuf> {
-    let dir = out_dir.join(DIR);
-    if dir.symlink_metadata().is_ok() {
-        return Some(dir);
-    }
-    let old = out_dir.join(OLD_DIR);
-    old.symlink_metadata().is_ok().then_some(old)
+    RunDir::new(out_dir).resume_checkpoint()
 }
 
 /// Reads `dir`'s manifest and checks every file against it (module docs): the manifest, or

@@ -3,37 +3,23 @@
 //! Parameter paths are part of the export contract (`vge-export` reads the actor by name):
 //! `actor.l{i}` hidden layers, `actor.mean`, `actor.log_std`; `critic.w{i}` / `critic.b{i}`.
 
-use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
-/// The number format of the hidden layers' matmuls in the learner's updates (the
-/// `sac.matmul` key). Weights, optimiser state, biases' master copies, layer norm, the
-/// heads and every loss stay f32; acting, evaluation and export are always f32, as the
-/// runtime computes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MatmulPrecision {
-    #[default]
-    F32,
-    /// Inputs, weights and biases rounded to bfloat16 for the matmul (f32 accumulation, f32
-    /// result): on a CPU with AVX512_BF16 a 256-wide layer runs ~2x as fast
-    /// (`examples/matmul_dtypes`); the 1- and 15-wide heads would run slower, so stay f32.
-    Bf16,
-}
+pub use vge_lab::config::MatmulPrecision;
 
-impl MatmulPrecision {
-    /// Runs `op`, which passes each matmul operand through the cast it is given: unchanged
-    /// in f32, rounded to bf16 in [`Self::Bf16`] (and the result back to f32). One place
-    /// for the rounding, whatever the layer's op (linear, addmm, baddbmm).
-    fn matmul(self, op: impl FnOnce(&dyn Fn(&Tensor) -> Tensor) -> Tensor) -> Tensor {
-        match self {
-            Self::F32 => op(&Tensor::shallow_clone),
-            Self::Bf16 => op(&|t: &Tensor| t.to_kind(Kind::BFloat16)).to_kind(Kind::Float),
-        }
+/// Runs `op`, which passes each matmul operand through the cast it is given: unchanged in
+/// f32, rounded to bf16 in [`MatmulPrecision::Bf16`] (and the result back to f32). One place
+/// for the rounding, whatever the layer's op (linear, addmm, baddbmm).
+fn precision_matmul(
+    precision: MatmulPrecision,
+    op: impl FnOnce(&dyn Fn(&Tensor) -> Tensor) -> Tensor,
+) -> Tensor {
+    match precision {
+        MatmulPrecision::F32 => op(&Tensor::shallow_clone),
+        MatmulPrecision::Bf16 => op(&|t: &Tensor| t.to_kind(Kind::BFloat16)).to_kind(Kind::Float),
     }
 }
-
 /// log σ is squashed into [LOG_STD_MIN, LOG_STD_MAX] (as in CleanRL's SAC) so that the policy
 /// can neither collapse to a point nor explode early in training.
 pub const LOG_STD_MIN: f64 = -5.0;
@@ -156,7 +142,7 @@ impl GaussianActor {
             let affine = |cast: &dyn Fn(&Tensor) -> Tensor| {
                 cast(&h).linear(&cast(&layer.ws), layer.bs.as_ref().map(cast))
             };
-            h = self.precision.matmul(affine).relu();
+            h = precision_matmul(self.precision, affine).relu();
         }
         h
     }
@@ -310,7 +296,9 @@ impl TwinCritic {
         let x = self.input(obs, action);
         let batch = x.size()[0];
         let x = x.unsqueeze(0).expand([Self::TWINS, batch, -1], false);
-        self.forward(x, |p, h, w, b| p.matmul(|cast| cast(b).baddbmm(&cast(h), &cast(w), 1.0, 1.0)))
+        self.forward(x, |p, h, w, b| {
+            precision_matmul(p, |cast| cast(b).baddbmm(&cast(h), &cast(w), 1.0, 1.0))
+        })
     }
 
     /// Q-values of the first twin alone, shape `[batch, 1]` (TD3's actor loss reads only
@@ -318,7 +306,7 @@ impl TwinCritic {
     /// each stacked weight, in the same layer order as [`Self::q_values`].
     pub fn q1(&self, obs: &Tensor, action: &Tensor) -> Tensor {
         self.forward(self.input(obs, action), |p, h, w, b| {
-            p.matmul(|cast| cast(&b.get(0)).addmm(&cast(h), &cast(&w.get(0))))
+            precision_matmul(p, |cast| cast(&b.get(0)).addmm(&cast(h), &cast(&w.get(0))))
         })
     }
 

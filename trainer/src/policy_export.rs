@@ -1,37 +1,27 @@
-//! What a trained hand actor becomes on disk: the policy file's metadata for the hand's
-//! observation and action layouts, and the export of an actor's variables.
+//! What a trained hand actor becomes on disk: the export of an actor's variables, with the
+//! hand's metadata ([`hand_policy_meta`]).
 
 use tch::nn::VarStore;
-use vge_export::{ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyMeta, Provenance, export_policy};
+use vge_export::{ActorSpec, ExportError, ObsNorm, Provenance, export_policy};
+use vge_lab::config::Config;
+pub use vge_lab::policy_meta::hand_policy_meta;
 use vge_sim::EnvConfig;
-use vge_sim::kinematics::JOINT_NAMES;
-use vge_sim::observation::{OBS_DIM, OBS_LAYOUT};
+use vge_sim::observation::OBS_DIM;
 
-fn slice(name: &str, range: std::ops::Range<usize>) -> ObsSlice {
-    // The observation is 65 floats: the casts are exact.
-    ObsSlice::new(name, range.start as u32..range.end as u32)
-}
+use crate::sac::Sac;
+use crate::train::TrainError;
 
-/// Metadata of a hand policy trained on `env`: named observation slices (as
-/// `vge_sim::observation` lays them out), `finger.joint` action names, actions scaled to the
-/// env's largest joint-target change per step, and the env's control rate.
-pub fn hand_policy_meta(env: &EnvConfig, provenance: Provenance) -> PolicyMeta {
-    let action_names = env
-        .hand
-        .fingers
-        .iter()
-        .flat_map(|f| JOINT_NAMES.iter().map(move |j| format!("{}.{j}", f.name)))
-        .collect::<Vec<_>>();
-    let act_dim = action_names.len();
-    PolicyMeta {
-        obs_layout: OBS_LAYOUT.iter().map(|(name, range)| slice(name, range.clone())).collect(),
-        action_names,
-        obs_norm: ObsNorm::identity(OBS_DIM),
-        action_scale: vec![env.max_action_rad; act_dim],
-        action_offset: vec![0.0; act_dim],
-        control_hz: env.control_hz,
-        provenance,
-    }
+/// The actor of `sac` encoded as a policy file (hand metadata, provenance with the config
+/// hash, seed and steps).
+pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, TrainError> {
+    let hidden: Vec<usize> = config.sac.hidden.iter().map(|&h| h as usize).collect();
+    let provenance = Provenance {
+        vge_version: env!("CARGO_PKG_VERSION").to_owned(),
+        config_hash: config.hash_hex(),
+        seed: config.seed,
+        steps,
+    };
+    Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
 }
 
 /// Policy-file bytes of the actor in `actor_vs` (variables `actor.*`, as `nets::GaussianActor`

@@ -11,12 +11,12 @@ use std::sync::atomic::AtomicBool;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
+use vge_controllers::{Controller, ControllerInput, IgmConfig};
+use vge_lab::config::{Config, apply_override, load_config};
+use vge_lab::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
+use vge_sim::gait::ContactSwitches;
 use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
 use vge_trainer::behaviour::{Behaviour, BehaviourError, StepContext};
-use vge_trainer::config::{Config, apply_override, load_config};
-use vge_trainer::controllers::{Controller, ControllerInput, IgmConfig};
-use vge_trainer::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
-use vge_trainer::gait::ContactSwitches;
 use vge_trainer::nets::{GaussianActor, NetSpec};
 use vge_trainer::replay::{ReplayBuffer, Source};
 use vge_trainer::train::train;
@@ -46,7 +46,7 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
         let (mut obs, _) = env.reset(seed).expect("reset");
         let mut behaviour = Behaviour::new(config.method, h, config.vge.hard_stop, config.fge.clone(), 1);
         let mut controllers: Vec<Box<dyn Controller + Send>> =
-            vec![vge_trainer::controllers::ControllerKind::Fg.build(
+            vec![vge_controllers::ControllerKind::Fg.build(
                 &env_config,
                 IgmConfig::default(),
                 config.cs_config(&env_config),
@@ -85,12 +85,11 @@ fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
     let inputs = [env.privileged().map(ControllerInput::from_privileged)];
     let learner = [[0.0f32; NUM_JOINTS]];
     let ctx = StepContext { step: 7, obs: &[obs], learner: &learner, inputs: &inputs };
-    let mut controllers: Vec<Box<dyn Controller + Send>> =
-        vec![vge_trainer::controllers::ControllerKind::Fg.build(
-            &env_config,
-            IgmConfig::default(),
-            config.cs_config(&env_config),
-        )];
+    let mut controllers: Vec<Box<dyn Controller + Send>> = vec![vge_controllers::ControllerKind::Fg.build(
+        &env_config,
+        IgmConfig::default(),
+        config.cs_config(&env_config),
+    )];
     let mut ctl_rngs = vec![ChaCha8Rng::seed_from_u64(1)];
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config.clone() });

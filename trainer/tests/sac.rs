@@ -250,7 +250,7 @@ fn updates_after_load_networks_start_from_the_loaded_weights() {
 #[test]
 fn bf16_matmul_updates_track_f32_ones_and_acting_stays_f32() {
     use vge_trainer::nets::MatmulPrecision;
-    for algorithm in [Algorithm::Sac, Algorithm::TD3] {
+    for algorithm in [Algorithm::Sac, Algorithm::td3()] {
         let learner = |matmul| {
             let config = SacConfig {
                 algorithm,

@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
+use vge_controllers::{Controller, ControllerError, ControllerInput};
+use vge_lab::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
 use vge_sim::{NUM_JOINTS, OBS_DIM};
 use vge_trainer::behaviour::{Behaviour, QFn, StepContext, bc_beta, fge_probability, p_controller};
-use vge_trainer::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
-use vge_trainer::controllers::{Controller, ControllerError, ControllerInput};
 use vge_trainer::nets::NetSpec;
 use vge_trainer::replay::{ReplayBuffer, Source};
 use vge_trainer::sac::{Algorithm, BcTerm, EntropyCoef, Sac, SacConfig};
@@ -41,7 +41,7 @@ fn sac_auto_alpha_drives_the_point_to_its_target() {
 
 #[test]
 fn td3_drives_the_point_to_its_target() {
-    let r = train_point_mass(Algorithm::TD3, EntropyCoef::Fixed(0.0), 3, 3000).expect("train");
+    let r = train_point_mass(Algorithm::td3(), EntropyCoef::Fixed(0.0), 3, 3000).expect("train");
     assert!(r.eval_return > -3.0, "td3: eval return {} (zero action {})", r.eval_return, r.zero_return);
 }
 
@@ -286,7 +286,7 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
 
     // TD3's deterministic actor: beta * mean(mask * minQ(s,a) * |(a - mu(s)) / scale|^2), on
     // the updates that step the actor (every second one).
-    let mut td3 = small_learner(Algorithm::TD3);
+    let mut td3 = small_learner(Algorithm::td3());
     assert_eq!(td3.update(&batch).bc_loss, 0.0, "no actor step on the first update");
     let q = td3.q_of(&batch.obs, &batch.action);
     let mu = tch::no_grad(|| td3.actor.deterministic(&batch.obs));
@@ -449,7 +449,7 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     assert_eq!(c.sac.batch, 128);
     assert_eq!(c.method, Method::Fge);
     assert_eq!(c.sac.hidden, vec![64, 64]);
-    assert!(matches!(c.sac_config().entropy, EntropyCoef::Auto { .. }));
+    assert!(matches!(vge_trainer::sac::SacConfig::for_hand(&c).entropy, EntropyCoef::Auto { .. }));
     let mut d = Config::default();
     apply_override(&mut d, "vge.horizon=3").expect("override");
     assert_eq!(d.vge.horizon, 3);
@@ -503,7 +503,7 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
-    assert_eq!(bf16.sac_config().matmul, vge_trainer::nets::MatmulPrecision::Bf16);
+    assert_eq!(vge_trainer::sac::SacConfig::for_hand(&bf16).matmul, vge_trainer::nets::MatmulPrecision::Bf16);
     assert!(bf16.to_toml_string().expect("toml").contains("matmul = \"bf16\""));
     assert!(!Config::default().to_toml_string().expect("toml").contains("matmul"));
     refuse("sac.matmul=\"f16\"", "matmul");
@@ -642,7 +642,7 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     let again_dir = tempdir("again");
     train(&tiny_config(140), &again_dir, false, &never, &mut |_| {}).expect("again");
     assert!(std::fs::read(again_dir.join("policy.vgep")).expect("policy") == full_policy);
-    let report = vge_trainer::eval::eval_policy_file(
+    let report = vge_lab::eval::eval_policy_file(
         &full_dir.join("policy.vgep"),
         &tiny_config(140).env.env_config(0),
         1,
@@ -809,7 +809,7 @@ fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     let err = refused(stage2(20, &["sac.hidden=[16, 16]"]));
     assert!(err.contains("sac.hidden") && err.contains(&source.display().to_string()), "{err}");
     let mut sac = stage2(20, &[]);
-    sac.algorithm = vge_trainer::config::AlgorithmName::Sac;
+    sac.algorithm = vge_lab::config::AlgorithmName::Sac;
     sac.td3 = Default::default();
     assert!(refused(sac).contains("algorithm"));
     let mut nowhere = stage2(20, &[]);

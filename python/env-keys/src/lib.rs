@@ -1,9 +1,9 @@
 //! The `[env]` keys of a vge config and their mapping to [`vge_sim::EnvConfig`], as the
-//! trainer maps them (`vge_trainer::config::EnvSection::env_config`).
+//! lab maps them (`vge_lab::config::EnvSection::env_config`).
 //!
-//! A copy, not a dependency: the trainer links libtorch and the Python package must not.
-//! Two tests keep the copy honest (python/tests/test_config.py): every key the trainer's
-//! `EnvSection` declares is a key here, and a config loaded here drives the controllers to
+//! A copy, not a dependency: the lab brings plots, statistics, sweeps and ONNX that the
+//! Python package does not need. Two tests keep the copy honest (python/tests/test_env.py):
+//! every key the lab's `EnvSection` declares is a key here, and a config loaded here drives the controllers to
 //! the same returns, to the bit, as `vge controller --config` on the same file.
 //!
 //! Keys are read from a TOML table (a config file's `[env]`, or Python keyword arguments

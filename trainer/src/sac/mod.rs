@@ -50,9 +50,16 @@ pub enum Algorithm {
 }
 
 impl Algorithm {
-    /// TD3 with CleanRL's defaults.
-    pub const TD3: Self =
-        Self::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 2 };
+    /// TD3 with the `[td3]` section's defaults (CleanRL's), written once in the config.
+    pub fn td3() -> Self {
+        let t = vge_lab::config::Td3Section::default();
+        Self::Td3 {
+            explore_std: t.explore_std,
+            target_noise_std: t.target_noise_std,
+            target_noise_clip: t.target_noise_clip,
+            policy_delay: t.policy_delay,
+        }
+    }
 }
 
 /// The learner's configuration (SAC or TD3, see [`Algorithm`]).
@@ -76,6 +83,47 @@ pub struct SacConfig {
     pub actor_hold_updates: u64,
     /// The hidden layers' matmuls inside updates (acting and export are always f32).
     pub matmul: MatmulPrecision,
+}
+
+impl SacConfig {
+    /// The learner of a run config, for the hand (obs 65, action 15): the `[sac]` section's
+    /// sizes and rates, `algorithm`, and `[td3]` for TD3.
+    pub fn for_hand(config: &vge_lab::config::Config) -> Self {
+        use vge_lab::config::{AlgorithmName, Alpha, AlphaName};
+        let act = vge_sim::NUM_JOINTS as i64;
+        let sac = &config.sac;
+        let entropy = match sac.alpha {
+            Alpha::Fixed(a) => EntropyCoef::Fixed(a),
+            Alpha::Named(AlphaName::Auto) => EntropyCoef::Auto {
+                target_entropy: sac.target_entropy.unwrap_or(-(act as f64)),
+                initial: sac.initial_alpha,
+            },
+        };
+        let t = &config.td3;
+        let algorithm = match config.algorithm {
+            AlgorithmName::Sac => Algorithm::Sac,
+            AlgorithmName::Td3 => Algorithm::Td3 {
+                explore_std: t.explore_std,
+                target_noise_std: t.target_noise_std,
+                target_noise_clip: t.target_noise_clip,
+                policy_delay: t.policy_delay,
+            },
+        };
+        Self {
+            algorithm,
+            net: NetSpec { obs_dim: vge_sim::OBS_DIM as i64, act_dim: act, hidden: sac.hidden.clone() },
+            action_scale: vec![config.env.max_action_rad; act as usize],
+            gamma: sac.gamma,
+            tau: sac.tau,
+            actor_lr: sac.actor_lr,
+            critic_lr: sac.critic_lr,
+            entropy,
+            critic_layer_norm: sac.critic_layer_norm,
+            min_policy_std: sac.min_policy_std,
+            actor_hold_updates: sac.actor_hold_updates,
+            matmul: sac.matmul,
+        }
+    }
 }
 
 impl SacConfig {

@@ -8,13 +8,7 @@
 
 use std::time::Instant;
 
-/// Cost of a run up to some moment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RunCost {
-    pub wall_s: f64,
-    /// None when an earlier session was run by a vge that did not count it.
-    pub cpu_s: Option<f64>,
-}
+pub use vge_lab::run_eval::RunCost;
 
 /// The run's clock: the earlier sessions' cost plus this session's so far.
 #[derive(Debug)]

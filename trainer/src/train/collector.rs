@@ -11,10 +11,10 @@ use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, Perturbatio
 use super::TrainError;
 use super::metrics::Window;
 use crate::behaviour::{Behaviour, Decision, StepContext};
-use crate::config::Config;
-use crate::controllers::{Controller, ControllerInput, IgmConfig};
 use crate::replay::ReplayBuffer;
 use crate::sac::{Sac, mix_seed, standard_normal};
+use vge_controllers::{Controller, ControllerInput, IgmConfig};
+use vge_lab::config::Config;
 
 /// Salt of the behaviour-noise seeds.
 const SALT_ACT: u64 = 0xac7;
@@ -278,8 +278,10 @@ impl Collector {
 mod tests {
     use tch::Device;
 
+    use crate::sac::SacConfig;
+
     use super::*;
-    use crate::config::apply_override;
+    use vge_lab::config::apply_override;
 
     /// An actor that outputs NaN (here: weights poisoned) stops the run with an error naming
     /// the step and the env; the NaN is never clipped into a valid action.
@@ -290,7 +292,7 @@ mod tests {
             apply_override(&mut config, o).expect(o);
         }
         config.validate().expect("valid");
-        let sac = Sac::new_seeded(config.sac_config(), Device::Cpu, 0).expect("learner");
+        let sac = Sac::new_seeded(SacConfig::for_hand(&config), Device::Cpu, 0).expect("learner");
         tch::no_grad(|| {
             for (_, mut t) in sac.actor_vs.variables() {
                 let _ = t.fill_(f64::NAN);

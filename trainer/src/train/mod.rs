@@ -11,7 +11,7 @@
 //!
 //! Output directory:
 //! - `vge.lock`: held by the one process writing the folder, with its pid
-//!   ([`crate::run_lock`]);
+//!   ([`vge_lab::run_lock`]);
 //! - `config.toml`: the effective configuration;
 //! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
 //! - `tensorboard/`: the metrics rows as TensorBoard scalars (`train/<column>`), one event
@@ -26,7 +26,7 @@
 //!   ([`crate::checkpoint`]);
 //! - `policy.vgep`: the exported actor at the end, and `final-eval.json` its evaluation,
 //!   written last: a run is finished when both read back whole
-//!   ([`crate::sweep::check_finished`]);
+//!   ([`vge_lab::sweep::check_finished`]);
 //! - `snapshots/policy-<step>.vgep`: the actor exported at each periodic evaluation;
 //! - `policy-best.vgep`, `best-eval.json`: model selection, reported apart from the final
 //!   policy. The snapshot with the best periodic evaluation (success, then return; a run on
@@ -48,7 +48,6 @@
 
 mod clock;
 mod collector;
-mod evaluation;
 mod metrics;
 mod run_folder;
 mod state;
@@ -65,16 +64,19 @@ use vge_sim::{NUM_JOINTS, OBS_DIM, SimError};
 
 use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, bc_beta};
 use crate::checkpoint::CheckpointError;
-use crate::config::{Config, ConfigError};
-use crate::eval::EvalError;
+pub use crate::policy_export::export_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
-use crate::sac::Sac;
+use crate::sac::{Sac, SacConfig};
 use clock::{RunClock, RunCost};
 use collector::Collector;
-pub use evaluation::{Rescored, export_actor, rescore_final_eval};
 use run_folder::RunFolder;
 pub use run_folder::{RUN_FILES, check_no_run};
 use state::{Counters, TrainState};
+use vge_lab::config::{Config, ConfigError};
+use vge_lab::eval::EvalError;
+use vge_lab::run_eval as evaluation;
+pub use vge_lab::run_eval::{Rescored, rescore_final_eval};
+use vge_lab::run_lock::RunLock;
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -103,13 +105,15 @@ pub enum TrainError {
     #[error("{dir} already holds a run (found {found}): {advice}")]
     RunExists { dir: String, found: String, advice: String },
     #[error(transparent)]
-    Lock(#[from] crate::run_lock::LockError),
+    Lock(#[from] vge_lab::run_lock::LockError),
     #[error("behaviour policy: {0}")]
     Behaviour(#[from] BehaviourError),
     #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
     NonFiniteAction { step: u64, env: usize, value: f32 },
     #[error(transparent)]
-    Score(#[from] crate::score::ScoreError),
+    Score(#[from] vge_lab::score::ScoreError),
+    #[error(transparent)]
+    RunEval(#[from] vge_lab::run_eval::RunEvalError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
@@ -187,11 +191,7 @@ const OBS_MIN_STD: f32 = 1e-2;
 
 /// The effective configuration stored in a run directory (for `--resume DIR`).
 pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
-    let path = dir.join("config.toml");
-    let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
-    let config = Config::from_toml_str(&text)?;
-    config.validate()?;
-    Ok(config)
+    Ok(vge_lab::run_eval::run_config(dir)?)
 }
 
 /// Trains `config` into `out_dir`. With `resume`, continues from `out_dir/checkpoint` (the
@@ -328,7 +328,24 @@ struct Trainer<'a> {
     times: PhaseTimes,
     clock: Instant,
     /// This session's latest periodic evaluation (step, report).
-    last_evaluation: Option<(u64, crate::eval::ObjectsReport)>,
+    last_evaluation: Option<(u64, vge_lab::eval::ObjectsReport)>,
+}
+
+/// One writer per folder: a resume reads the checkpoint under the folder's lock, and a new
+/// run takes it before looking for signs of a run there (a folder being written is refused
+/// naming its writer, not as a run to resume). `None`: no folder yet, for a new run.
+fn lock_existing_folder(out_dir: &Path, resume: bool) -> Result<Option<RunLock>, TrainError> {
+    if out_dir.is_dir() {
+        let lock = RunLock::acquire(out_dir)?;
+        if !resume {
+            run_folder::check_no_run(out_dir)?;
+        }
+        Ok(Some(lock))
+    } else if resume {
+        Err(CheckpointError::NoCheckpoint { out_dir: out_dir.to_owned() }.into())
+    } else {
+        Ok(None)
+    }
 }
 
 impl<'a> Trainer<'a> {
@@ -337,24 +354,11 @@ impl<'a> Trainer<'a> {
         config.validate()?;
         // Before anything is allocated: what the run needs must fit this machine.
         config.check_fits_memory()?;
-        // One writer per folder: a resume reads the checkpoint under the folder's lock, and a
-        // new run takes it before looking for signs of a run there (a folder being written
-        // is refused naming its writer, not as a run to resume).
-        let lock = if out_dir.is_dir() {
-            let lock = crate::run_lock::RunLock::acquire(out_dir)?;
-            if !resume {
-                run_folder::check_no_run(out_dir)?;
-            }
-            Some(lock)
-        } else if resume {
-            return Err(CheckpointError::NoCheckpoint { out_dir: out_dir.to_owned() }.into());
-        } else {
-            None
-        };
+        let lock = lock_existing_folder(out_dir, resume)?;
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
         }
-        let mut sac = Sac::new_seeded(config.sac_config(), Device::Cpu, config.seed)?;
+        let mut sac = Sac::new_seeded(SacConfig::for_hand(config), Device::Cpu, config.seed)?;
         let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
         let mut behaviour = Behaviour::from_config(config);
         let mut collector = Collector::new(config)?;
@@ -375,7 +379,7 @@ impl<'a> Trainer<'a> {
         let lock = match lock {
             Some(lock) => lock,
             None => {
-                let lock = crate::run_lock::RunLock::acquire(out_dir)?;
+                let lock = RunLock::acquire(out_dir)?;
                 run_folder::check_no_run(out_dir)?;
                 lock
             }
@@ -538,14 +542,14 @@ impl<'a> Trainer<'a> {
             let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
             let path =
                 evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, cost, evaluated)?;
-            // The run's score on held-out episodes (`score.json`, crate::score), now that every
+            // The run's score on held-out episodes (`score.json`, vge_lab::score), now that every
             // policy it scores is written.
             if self.config.run.score_episodes > 0 {
-                let options = crate::score::ScoreOptions {
+                let options = vge_lab::score::ScoreOptions {
                     episodes: self.config.run.score_episodes,
                     ..Default::default()
                 };
-                crate::score::score_run(self.folder.dir(), &options, &mut |_| {})?;
+                vge_lab::score::score_run(self.folder.dir(), &options, &mut |_| {})?;
             }
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)

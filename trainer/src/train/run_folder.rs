@@ -2,7 +2,7 @@
 //! training goes, and the checkpoint (module docs of [`super`] list every file).
 //!
 //! One process writes a folder at a time ([`RunLock`], held as long as the [`RunFolder`]).
-//! Every file is written whole or not at all ([`crate::atomic_file`]) but the ones that grow
+//! Every file is written whole or not at all ([`vge_lab::atomic_file`]) but the ones that grow
 //! row by row: `metrics.csv` and `eval.csv` get rows appended (a row cut short by a kill is
 //! past the checkpoint), and a resume checks each of them whole (a header, complete rows)
 //! before it appends, rewriting it atomically to the rows up to its checkpoint. A folder
@@ -14,34 +14,19 @@ use std::path::{Path, PathBuf};
 use super::metrics::{METRICS_HEADER, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
-use crate::atomic_file;
 use crate::checkpoint;
-use crate::config::Config;
 use crate::replay::ReplayBuffer;
-use crate::run_lock::RunLock;
 use crate::sac::Sac;
 use crate::tensorboard::EventWriter;
+use vge_lab::atomic_file;
+use vge_lab::config::Config;
+use vge_lab::run_lock::RunLock;
 
-/// What a run writes into its folder from its first moments on, the checkpoint's folders
-/// included: a folder holding any of them holds a run, which `vge train --config` must not
-/// start over.
-pub const RUN_FILES: [&str; 10] = [
-    "config.toml",
-    "metrics.csv",
-    "eval.csv",
-    "tensorboard",
-    checkpoint::DIR,
-    checkpoint::OLD_DIR,
-    checkpoint::TMP_DIR,
-    "snapshots",
-    "policy.vgep",
-    "final-eval.json",
-];
+pub use vge_lab::run_dir::RUN_FILES;
 
 /// Refuses `dir` for a new run when it holds any of [`RUN_FILES`], naming those found.
 pub fn check_no_run(dir: &Path) -> Result<(), TrainError> {
-    let found: Vec<&str> =
-        RUN_FILES.iter().copied().filter(|name| dir.join(name).symlink_metadata().is_ok()).collect();
+    let found = vge_lab::run_dir::RunDir::new(dir).run_files_present();
     if found.is_empty() {
         return Ok(());
     }
@@ -90,15 +75,15 @@ impl RunFolder {
         resumed: bool,
         lock: RunLock,
     ) -> Result<Self, TrainError> {
-        let metrics_path = dir.join("metrics.csv");
-        let config_path = dir.join("config.toml");
+        let metrics_path = dir.join(vge_lab::run_dir::METRICS);
+        let config_path = dir.join(vge_lab::run_dir::CONFIG);
         let effective = config.to_toml_string()?;
         if resumed {
             if !resume_csv(&metrics_path, step)? {
                 atomic_file::write(&metrics_path, format!("{METRICS_HEADER}\n").as_bytes())
                     .map_err(io_err(&metrics_path))?;
             }
-            let eval_path = dir.join("eval.csv");
+            let eval_path = dir.join(vge_lab::run_dir::EVAL);
             if !resume_csv(&eval_path, step)? && eval_path.exists() {
                 // Rows are appended to it with its header when the file is new.
                 std::fs::remove_file(&eval_path).map_err(io_err(&eval_path))?;
@@ -116,7 +101,7 @@ impl RunFolder {
         // from one checkpoint may start within a second); a resumed one starts with a
         // session-start marker so that TensorBoard drops the interrupted session's points
         // past the checkpoint.
-        let tb_dir = dir.join("tensorboard");
+        let tb_dir = dir.join(vge_lab::run_dir::TENSORBOARD);
         let suffix = format!(".s{step}.p{}", std::process::id());
         let mut events = EventWriter::create(&tb_dir, &suffix).map_err(io_err(&tb_dir))?;
         if resumed {
@@ -150,7 +135,7 @@ impl RunFolder {
     pub fn checkpoint(&self, sac: &Sac, replay: &ReplayBuffer, state: &TrainState) -> Result<(), TrainError> {
         let path = &self.metrics_path;
         self.metrics.get_ref().sync_data().map_err(io_err(path))?;
-        let eval = self.dir.join("eval.csv");
+        let eval = self.dir.join(vge_lab::run_dir::EVAL);
         match File::options().append(true).open(&eval) {
             Ok(file) => file.sync_data().map_err(io_err(&eval))?,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}

@@ -1,0 +1,340 @@
+//! `vge bench`: vge's hot paths on this machine (updates, simulator, firmware, runtime,
+//! controllers).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Subcommand;
+use vge_controllers::rollout::{self, ControllerKind, RolloutOptions};
+use vge_sim::{EnvConfig, ObjectShape};
+
+#[derive(Debug, Subcommand)]
+pub enum Bench {
+    /// Full SAC updates per second: batch 256, 256x256 actor and twin critics, obs 65,
+    /// action 15, alpha 0, critics with layer norm (the training defaults); also the
+    /// achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison.
+    Update {
+        /// Print one JSON line instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Timed updates (after 20 warm-up updates).
+        #[arg(long, default_value_t = 300)]
+        updates: usize,
+        /// Minibatch size.
+        #[arg(long, default_value_t = 256)]
+        batch: i64,
+        /// Seed of the network initialisation and random batches.
+        #[arg(long, default_value_t = 0)]
+        seed: i64,
+        /// Learner: sac or td3 (TD3 updates the actor every second step).
+        #[arg(long, default_value = "sac", value_parser = ["sac", "td3"])]
+        algorithm: String,
+        /// Layer norm in the critics' hidden layers (`sac.critic_layer_norm`).
+        #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+        layer_norm: bool,
+        /// Number format of the hidden layers' matmuls (`sac.matmul`): f32 or bf16 (f32
+        /// master weights; pays on CPUs with AVX512_BF16).
+        #[arg(long, default_value = "f32", value_parser = ["f32", "bf16"])]
+        matmul: String,
+    },
+    /// Simulator throughput: control steps per second of one world on one thread, and of N
+    /// worlds stepped across all cores, at the default env rates.
+    Sim {
+        /// Print one JSON line instead of a summary.
+        #[arg(long)]
+        json: bool,
+        /// Control steps per world.
+        #[arg(long, default_value_t = 2_000)]
+        steps: usize,
+        /// Worlds in the vectorized run.
+        #[arg(long, default_value_t = 8)]
+        worlds: usize,
+        /// Threads for the vectorized run (0: all cores).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Write the benchmarked task as a MuJoCo model instead (MJCF: the same hand, object
+        /// and motors, the first world's settled grasp as keyframe `grasp`) and exit; what
+        /// scripts/bench-vs-mujoco.sh times MuJoCo on.
+        #[arg(long, value_name = "FILE")]
+        write_mjcf: Option<PathBuf>,
+        /// MuJoCo's time step in the written model (s); default 1/240, the rate of the stored
+        /// comparison (docs/results/sim-vs-mujoco/).
+        #[arg(long, default_value_t = 1.0 / 240.0, requires = "write_mjcf")]
+        mujoco_timestep_s: f32,
+    },
+    /// The policy on a Cortex-M4F (runtime/firmware-m4 under qemu-system-arm -icount), as
+    /// f32, f16 and i8 weights: flash and RAM of the firmware (linked against the STM32F405's
+    /// 1 MiB flash and 128 KiB SRAM), instructions per forward, and the largest action
+    /// difference from tch's f32 forward on the host. Needs the thumbv7em-none-eabihf target
+    /// and qemu-system-arm (scripts/test.sh installs both); builds three firmwares (minutes).
+    Firmware {
+        /// Print one JSON line per weight type instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Policy file to measure (e.g. a run's policy.vgep); default: a seeded untrained
+        /// 65-256-256-15 actor.
+        #[arg(long, value_name = "FILE")]
+        policy: Option<PathBuf>,
+        /// Host observations compared with tch.
+        #[arg(long, default_value_t = 10_000)]
+        observations: usize,
+        /// Seed of the untrained actor and of the observations.
+        #[arg(long, default_value_t = 0)]
+        seed: i64,
+        /// The firmware's optimisation level: 3 (default, fastest) or s / z (smaller flash,
+        /// more instructions).
+        #[arg(long, value_parser = ["3", "2", "s", "z"])]
+        opt_level: Option<String>,
+    },
+    /// Policy forward latency at batch 1 (65-256-256-15): the no_std runtime against tch.
+    Runtime {
+        /// Print one JSON line instead of a summary.
+        #[arg(long)]
+        json: bool,
+        /// Timed forwards per implementation.
+        #[arg(long, default_value_t = 20_000)]
+        iters: usize,
+    },
+    /// The sub-skill controllers' cost per call, which the behaviour policy pays every step
+    /// until the hard stop: the contact-force QP alone for 3, 4 and 5 contacts (clarabel),
+    /// and IGM, CS and FG on the simulated cube (the adapter from the sim state included;
+    /// median and 90th percentile over every step of the rollout).
+    Controllers {
+        /// Print one JSON line instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Rollout episodes per controller (10 s each).
+        #[arg(long, default_value_t = 2)]
+        episodes: usize,
+    },
+}
+
+/// `vge bench`.
+pub fn run(bench: Bench) -> anyhow::Result<()> {
+    match bench {
+        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, .. } => write_mjcf(&path, mujoco_timestep_s),
+        Bench::Sim { json, steps, worlds, threads, write_mjcf: None, .. } => {
+            bench_sim(json, steps, worlds, threads)
+        }
+        Bench::Controllers { json, episodes } => bench_controllers(json, episodes),
+        #[cfg(feature = "train")]
+        Bench::Update { json, updates, batch, seed, algorithm, layer_norm, matmul } => {
+            libtorch::update(json, updates, batch, seed, &algorithm, layer_norm, &matmul)
+        }
+        #[cfg(feature = "train")]
+        Bench::Firmware { json, policy, observations, seed, opt_level } => {
+            libtorch::firmware(json, policy, observations, seed, opt_level.as_deref())
+        }
+        #[cfg(feature = "train")]
+        Bench::Runtime { json, iters } => libtorch::runtime(json, iters),
+        #[cfg(not(feature = "train"))]
+        Bench::Update { .. } | Bench::Firmware { .. } | Bench::Runtime { .. } => {
+            Err(super::without_training("vge bench update, firmware and runtime (they compare with tch)"))
+        }
+    }
+}
+
+/// `vge bench sim --write-mjcf`.
+fn write_mjcf(path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<()> {
+    let xml = vge_sim::mjcf::settled_grasp_mjcf(&EnvConfig::default(), 0, mujoco_timestep_s)?;
+    std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("wrote {} (MuJoCo, time step {mujoco_timestep_s} s)", path.display());
+    Ok(())
+}
+
+/// `vge bench sim`.
+fn bench_sim(json: bool, steps: usize, worlds: usize, threads: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(steps > 0 && worlds > 0, "--steps and --worlds must be at least 1");
+    let settings = vge_sim::bench::BenchSettings {
+        env: EnvConfig::default(),
+        steps_per_world: steps,
+        num_worlds: worlds,
+        threads,
+    };
+    if !json {
+        eprintln!("stepping 1 world then {worlds} worlds, {steps} control steps each...");
+    }
+    let r = vge_sim::bench::run(&settings)?;
+    if json {
+        println!("{}", r.to_json_line());
+    } else {
+        println!(
+            "control steps/s, one world, one thread: {:>8.0}  ({:.0} simulated s per s)",
+            r.control_steps_per_s_single,
+            r.sim_seconds_per_s()
+        );
+        println!(
+            "control steps/s, {worlds} worlds, {} threads: {:>8.0}  ({:.2}x)",
+            r.threads_used,
+            r.control_steps_per_s_vec,
+            r.speedup()
+        );
+    }
+    Ok(())
+}
+
+/// `vge bench controllers`.
+fn bench_controllers(json: bool, episodes: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    let mut doc = serde_json::Map::new();
+    for k in 3..=5usize {
+        let us = vge_controllers::qp::bench_contact_force_qp(k, 200)
+            .with_context(|| format!("contact-force QP with {k} contacts"))?;
+        doc.insert(format!("qp_{k}_contacts_us"), serde_json::json!(us));
+        if !json {
+            println!("contact-force QP, {k} contacts: {us:>8.1} us per call");
+        }
+    }
+    let mut options = RolloutOptions::default();
+    options.env.episode_length_steps = (10.0 * options.env.control_hz).round() as usize;
+    for kind in ControllerKind::ALL {
+        let s = rollout::run_with(kind, ObjectShape::Cube, episodes, 0, &options, |_, _| {})?;
+        doc.insert(format!("{kind}_median_us"), serde_json::json!(s.controller_median_us));
+        doc.insert(format!("{kind}_p90_us"), serde_json::json!(s.controller_p90_us));
+        if !json {
+            println!(
+                "{:<3} on the cube: median {:>8.1} us, p90 {:>8.1} us per call",
+                kind.name().to_uppercase(),
+                s.controller_median_us,
+                s.controller_p90_us
+            );
+        }
+    }
+    if json {
+        println!("{}", serde_json::Value::Object(doc));
+    }
+    Ok(())
+}
+
+/// The benchmarks that run or compare with libtorch.
+#[cfg(feature = "train")]
+mod libtorch {
+    use std::path::PathBuf;
+
+    use anyhow::Context;
+
+    /// `vge bench update`.
+    pub fn update(
+        json: bool,
+        updates: usize,
+        batch: i64,
+        seed: i64,
+        algorithm: &str,
+        layer_norm: bool,
+        matmul: &str,
+    ) -> anyhow::Result<()> {
+        anyhow::ensure!(updates > 0, "--updates must be at least 1");
+        anyhow::ensure!(batch > 0, "--batch must be at least 1");
+        let mut config = vge_trainer::sac::SacConfig::hand_default(0.05);
+        config.entropy = vge_trainer::sac::EntropyCoef::Fixed(0.0);
+        config.critic_layer_norm = layer_norm;
+        if matmul == "bf16" {
+            config.matmul = vge_trainer::nets::MatmulPrecision::Bf16;
+        }
+        if algorithm == "td3" {
+            config.algorithm = vge_trainer::sac::Algorithm::td3();
+        }
+        let r = vge_trainer::bench_update::run(config, batch, 20, updates, seed)?;
+        if json {
+            let line = serde_json::json!({
+                "bench": "update",
+                "algorithm": algorithm,
+                "layer_norm": layer_norm,
+                "matmul": matmul,
+                "updates_per_s": r.updates_per_s,
+                "gflops": r.gflops,
+                "matmul_gflops": r.matmul_gflops,
+                "ratio_to_matmul": r.gflops / r.matmul_gflops,
+                "batch": r.batch,
+                "updates": r.updates,
+                "threads": r.threads,
+                "mkl_code_branch": vge_trainer::mkl::code_branch(),
+            });
+            println!("{line}");
+        } else {
+            println!(
+                "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}, {matmul} matmuls",
+                algorithm.to_uppercase(),
+                r.batch,
+                r.threads,
+                r.updates
+            );
+            println!("  updates/s        {:>8.1}", r.updates_per_s);
+            println!("  achieved GFLOP/s {:>8.2}", r.gflops);
+            println!("  matmul GFLOP/s   {:>8.2}  (1024^3 f32 matmul, same run)", r.matmul_gflops);
+            println!(
+                "  MKL code branch  {:>8}  (see VGE_MKL_VENDOR_CHECK in vge_trainer::mkl)",
+                vge_trainer::mkl::code_branch().unwrap_or("no MKL")
+            );
+        }
+        Ok(())
+    }
+
+    /// `vge bench runtime`.
+    pub fn runtime(json: bool, iters: usize) -> anyhow::Result<()> {
+        anyhow::ensure!(iters > 0, "--iters must be at least 1");
+        let config = vge_export::bench::BenchConfig { iters, ..Default::default() };
+        let r = vge_export::bench::run(&config)?;
+        if json {
+            println!("{}", r.to_json_line());
+        } else {
+            println!("batch-1 forward, {:?}, {} iterations", r.dims, r.iters);
+            println!("  vge-runtime  median {:>8.0} ns", r.runtime_ns);
+            println!("  tch          median {:>8.0} ns  ({} threads)", r.tch_ns, r.tch_threads);
+            println!("  speedup {:.1}x, max |diff| {:.2e}", r.tch_ns / r.runtime_ns, r.max_abs_diff);
+        }
+        Ok(())
+    }
+
+    /// `vge bench firmware`.
+    pub fn firmware(
+        json: bool,
+        policy: Option<PathBuf>,
+        observations: usize,
+        seed: i64,
+        opt_level: Option<&str>,
+    ) -> anyhow::Result<()> {
+        anyhow::ensure!(observations > 0, "--observations must be at least 1");
+        let file = match &policy {
+            Some(path) => vge_export::PolicyFile::read(path)
+                .with_context(|| format!("reading policy file {}", path.display()))?,
+            None => vge_export::firmware_bench::seeded_policy(seed)?,
+        };
+        let target_dir = std::env::temp_dir().join("vge-bench-firmware");
+        let rows =
+            vge_export::firmware_bench::run(&file, &target_dir, opt_level, observations, seed, |msg| {
+                eprintln!("{msg}")
+            })?;
+        if json {
+            for r in &rows {
+                println!("{}", r.to_json_line());
+            }
+            return Ok(());
+        }
+        println!(
+            "Cortex-M4F (qemu mps2-an386, STM32F405 memory sizes), opt-level {}, policy {}",
+            opt_level.unwrap_or("3"),
+            match &policy {
+                Some(p) => p.display().to_string(),
+                None => format!("untrained, seed {seed}"),
+            }
+        );
+        println!(
+            "weights  file B   flash B   RAM B  instructions  ms@168MHz  max|diff| vs tch ({observations} obs)"
+        );
+        for r in &rows {
+            println!(
+                "{:<6} {:>8} {:>9} {:>7} {:>13.0} {:>10.2}  {:.2e}",
+                r.weights.name(),
+                r.file_bytes,
+                r.flash_bytes,
+                r.ram_bytes,
+                r.instructions_per_forward,
+                r.instructions_per_forward / vge_export::firmware_bench::CLOCK_HZ * 1e3,
+                r.max_abs_diff
+            );
+        }
+        println!("(ms at one instruction per cycle: an estimate; RAM = static + stack peak)");
+        Ok(())
+    }
+}

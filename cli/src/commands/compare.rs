@@ -1,0 +1,55 @@
+//! `vge compare`: groups of scored runs compared with rliable's statistics.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+#[derive(Debug, Args)]
+/// Compare groups of scored runs the way the field reports them (rliable's statistics):
+/// per group the IQM and mean of the runs' held-out success (score.json) with 95%
+/// stratified bootstrap intervals, the probability that a run of one group beats a run
+/// of another with its interval, performance profiles and IQM learning curves.
+///
+/// Each group is NAME=DIR,DIR,... (run folders, or folders with runs below them). Every
+/// run must have its score.json (`vge score`). Writes OUT/compare.csv (group, policy,
+/// runs, iqm, iqm_ci_low, iqm_ci_high, mean, mean_ci_low, mean_ci_high; for the
+/// selected, final and last-snapshot policies), OUT/compare.md, OUT/improvement.csv
+/// (a, b, prob_improvement, ci_low, ci_high; selected policy), OUT/aggregates.png,
+/// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
+/// env steps, with 95% bands). Definitions: docs/scoring.md.
+///
+/// Example:
+///   vge compare fge=docs/results/table1/cube-fg-fge vge=docs/results/cube-fg-vge-seeds
+///       --out cmp/ --pairs vge:fge
+#[command(verbatim_doc_comment)]
+pub struct CompareArgs {
+    /// Groups: NAME=DIR,DIR,...
+    #[arg(required = true, value_parser = vge_lab::compare::parse_group)]
+    groups: Vec<vge_lab::compare::GroupSpec>,
+    /// Output folder (created).
+    #[arg(long)]
+    out: PathBuf,
+    /// Pairs A:B whose probability of improvement P(A > B) to report (default: every
+    /// ordered pair of groups).
+    #[arg(long, value_delimiter = ',', value_parser = vge_lab::compare::parse_pair)]
+    pairs: Vec<(String, String)>,
+    /// Seed of the bootstrap resampling.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Bootstrap resamples per interval (at least 2000).
+    #[arg(long, default_value_t = vge_lab::stats::RESAMPLES)]
+    resamples: usize,
+}
+
+/// `vge compare`.
+pub fn run(args: CompareArgs) -> anyhow::Result<()> {
+    let CompareArgs { groups, out, pairs, seed, resamples } = args;
+    let bootstrap = vge_lab::stats::Bootstrap { resamples, ..Default::default() };
+    let pairs = (!pairs.is_empty()).then_some(pairs.as_slice());
+    let written = vge_lab::compare::write(&groups, pairs, &out, seed, &bootstrap)?;
+    print!("{}", std::fs::read_to_string(out.join("compare.md")).unwrap_or_default());
+    for f in &written.files {
+        eprintln!("wrote {}", f.display());
+    }
+    Ok(())
+}

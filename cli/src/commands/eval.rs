@@ -1,0 +1,356 @@
+//! `vge eval`: the success test of a policy file (or a finished run's final policy) on
+//! vge-runtime in the simulator, on one object or several, with its gait diagram or a Rerun
+//! recording of the first episode.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+use vge_sim::{EnvConfig, ObjectShape};
+
+/// The episodes of the success test (`vge eval`, `vge robustness`).
+#[derive(Debug, Clone, Copy, Args)]
+pub struct EpisodeArgs {
+    #[arg(long, default_value_t = ObjectShape::Cube)]
+    pub object: ObjectShape,
+    /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Episode length in seconds of sim time.
+    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_EPISODE_S)]
+    pub episode_s: f32,
+    /// Uniform noise (+-rad) on the initial grasp's roll and closing angles; 0 starts
+    /// every episode from the same grasp (then, without sensor noise or perturbations,
+    /// all episodes are the same).
+    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
+    pub grasp_noise_rad: f32,
+}
+
+#[derive(Debug, Args)]
+/// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
+/// return, rotation, contact switches, drops and success rate.
+///
+/// The defaults are the success test that training's evaluations and `vge plot` use:
+/// 20 episodes of 30 s from initial grasps randomised by +-0.02 rad; an episode succeeds
+/// when the object turns >= 2 pi about z without a drop, and a seed has learned when its
+/// policy succeeds in >= 50% of them. Episodes run side by side on all cores.
+pub struct EvalArgs {
+    /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
+    #[arg(long, required_unless_present = "run")]
+    policy: Option<PathBuf>,
+    /// Instead of --policy: score a finished training run's final policy again, with its
+    /// config and the very episodes of its `final-eval.json`, by this vge's success test, and
+    /// print the stored figures beside the new ones (for runs scored by an older vge). A run
+    /// on several objects is scored on each of them.
+    #[arg(long, conflicts_with_all = ["policy", "plot", "record", "noise_q_rad", "noise_normal_frac", "noise_position_m", "perturb_force_n", "perturb_magnitude_n", "objects"])]
+    run: Option<PathBuf>,
+    /// With --run: replace the run's `final-eval.json` by the new score.
+    #[arg(long, requires = "run")]
+    write: bool,
+    /// Episodes to run (the success test uses 20).
+    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_EPISODES)]
+    episodes: usize,
+    #[command(flatten)]
+    episode: EpisodeArgs,
+    /// Instead of --object: the success test on each of these objects, `all` (the paper's
+    /// five: cube, sphere, cylinder, dodecahedron, icosahedron) or a comma-separated list
+    /// (e.g. `cube,hexagonal-prism`, the prism being no training object): --episodes episodes
+    /// per object, every object on the same seeds; one row per object and the overall
+    /// figures (all episodes pooled). With --plot F.png: one gait diagram per object,
+    /// F-<object>.png.
+    #[arg(long, value_name = "all|NAME,NAME,...", value_parser = parse_object_list, conflicts_with_all = ["object", "record"])]
+    objects: Option<ObjectList>,
+    /// Gaussian noise on observed joint positions (rad).
+    #[arg(long, default_value_t = 0.0)]
+    noise_q_rad: f32,
+    /// Noise on contact normals, as a fraction of their length.
+    #[arg(long, default_value_t = 0.0)]
+    noise_normal_frac: f32,
+    /// Gaussian noise on contact positions (m).
+    #[arg(long, default_value_t = 0.0)]
+    noise_position_m: f32,
+    /// Random external force on the object, std per axis (N).
+    #[arg(long, default_value_t = 0.0)]
+    perturb_force_n: f32,
+    /// Instead: a random external force of this magnitude (N) in a random direction.
+    #[arg(long, default_value_t = 0.0, conflicts_with = "perturb_force_n")]
+    perturb_magnitude_n: f32,
+    /// Also draw the gait diagram of the first episode (seed --seed) into this PNG: each
+    /// finger's contact over time above the object's rotation.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Also record the first episode (seed --seed) into this Rerun file: each finger link's
+    /// pose and the object's, the fingertip and link contact points with their normal forces
+    /// (arrows, 1 cm per N), the 15 actions and the reward, one row per control step on the
+    /// `step` and `sim_time` timelines. Open it with the Rerun viewer: `rerun F.rrd` (from
+    /// `pip install rerun-sdk==0.36.3`). Needs a vge built with `--features rerun`.
+    #[arg(long, value_name = "F.rrd")]
+    record: Option<PathBuf>,
+    #[arg(long)]
+    json: bool,
+}
+
+/// The objects of `vge eval --objects`.
+#[derive(Debug, Clone)]
+pub struct ObjectList(Vec<ObjectShape>);
+
+fn parse_object_list(s: &str) -> Result<ObjectList, String> {
+    vge_lab::eval::parse_objects(s).map(ObjectList)
+}
+
+pub fn run(args: EvalArgs) -> anyhow::Result<()> {
+    let EvalArgs {
+        policy,
+        episodes,
+        episode: EpisodeArgs { object, seed, episode_s, grasp_noise_rad },
+        objects,
+        noise_q_rad,
+        noise_normal_frac,
+        noise_position_m,
+        perturb_force_n,
+        perturb_magnitude_n,
+        plot,
+        record,
+        json,
+        run,
+        write,
+    } = args;
+    if let Some(dir) = run {
+        return rescore_run(&dir, write, json);
+    }
+    if record.is_some() && !cfg!(feature = "rerun") {
+        return Err(rerun_missing());
+    }
+    let policy = policy.context("--policy or --run is required")?;
+    anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
+    anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
+    for (name, v) in [
+        ("noise-q-rad", noise_q_rad),
+        ("noise-normal-frac", noise_normal_frac),
+        ("noise-position-m", noise_position_m),
+        ("perturb-force-n", perturb_force_n),
+        ("perturb-magnitude-n", perturb_magnitude_n),
+        ("grasp-noise-rad", grasp_noise_rad),
+    ] {
+        anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
+    }
+    // The success test's env for an object, with the robustness test's disturbances set the
+    // one way it sets them.
+    let env_for = |object: ObjectShape| {
+        let env = EnvConfig { object: vge_sim::ObjectConfig::of(object), ..EnvConfig::default() };
+        let mut env = vge_lab::eval::success_test_env(&env, episode_s, grasp_noise_rad);
+        use vge_lab::robustness::Axis;
+        for (axis, level) in [
+            (Axis::JointNoise, noise_q_rad),
+            (Axis::NormalError, noise_normal_frac),
+            (Axis::PositionError, noise_position_m),
+            (Axis::Perturbation, perturb_force_n),
+            (Axis::PerturbationMagnitude, perturb_magnitude_n),
+        ] {
+            axis.apply(&mut env, level);
+        }
+        env
+    };
+    if let Some(ObjectList(objects)) = objects {
+        let envs: Vec<EnvConfig> = objects.iter().map(|&o| env_for(o)).collect();
+        return eval_objects(&policy, &envs, episodes, seed, episode_s, plot.as_deref(), json);
+    }
+    let env = env_for(object);
+    // Before the evaluation, so that a path that cannot be written fails at once.
+    if let Some(rrd) = &record {
+        record_episode(&policy, &env, seed, rrd)?;
+    }
+    let report = vge_lab::eval::eval_policy_file(&policy, &env, episodes, seed)
+        .with_context(|| format!("evaluating {}", policy.display()))?;
+    if let Some(png) = &plot {
+        draw_gait_diagram(&policy, &env, seed, png)?;
+    }
+    if json {
+        println!("{}", report.to_json_line());
+    } else {
+        print_eval_report(&report, &policy, episode_s, object);
+    }
+    Ok(())
+}
+
+/// `vge eval --objects`: the success test on each of `envs` (one per object).
+fn eval_objects(
+    policy: &Path,
+    envs: &[EnvConfig],
+    episodes: usize,
+    seed: u64,
+    episode_s: f32,
+    plot: Option<&Path>,
+    json: bool,
+) -> anyhow::Result<()> {
+    let bytes = vge_lab::eval::read_policy_file(policy)?;
+    let report = vge_lab::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
+        .with_context(|| format!("evaluating {}", policy.display()))?;
+    if let Some(png) = plot {
+        for env in envs {
+            draw_gait_diagram(policy, env, seed, &per_object_path(png, env.object.shape))?;
+        }
+    }
+    if json {
+        /// The overall report with the per-object figures beside it.
+        #[derive(serde::Serialize)]
+        struct Line<'a> {
+            #[serde(flatten)]
+            overall: &'a vge_lab::eval::EvalReport,
+            per_object: vge_lab::eval::PerObjectFigures,
+        }
+        let line = Line { overall: &report.overall, per_object: report.figures() };
+        println!("{}", serde_json::to_string(&line).context("writing the report as JSON")?);
+        return Ok(());
+    }
+    println!("{episodes} episodes of {episode_s} s per object, policy {}", policy.display());
+    print_objects_table(&report.per_object, &report.overall);
+    let verdict = match report.worst_object() {
+        Some(_) if report.every_object_learned() => "learned on every object".to_owned(),
+        Some((object, success)) => format!("not learned on every object (worst: the {object}, {success:.2})"),
+        None => "no objects".to_owned(),
+    };
+    println!(
+        "verdict: {verdict} (success >= {:.0}% of an object's episodes)",
+        100.0 * vge_lab::eval::LEARNED_SUCCESS_RATE
+    );
+    Ok(())
+}
+
+/// One row per object and the overall figures: success, drops, rotation, return, switches.
+fn print_objects_table(
+    per_object: &[(ObjectShape, vge_lab::eval::EvalReport)],
+    overall: &vge_lab::eval::EvalReport,
+) {
+    println!(
+        "  {:<16} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9}",
+        "object", "episodes", "success", "drops", "rot_rad", "return", "switches"
+    );
+    let row = |name: &str, r: &vge_lab::eval::EvalReport| {
+        println!(
+            "  {name:<16} {:>8} {:>7.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}",
+            r.episodes,
+            r.success_rate,
+            r.drop_rate,
+            r.mean_rotation_rad,
+            r.mean_return,
+            r.mean_contact_switches
+        );
+    };
+    for (object, r) in per_object {
+        row(object.name(), r);
+    }
+    row("overall", overall);
+}
+
+/// `F.png` -> `F-<object>.png`: an object's file beside the others.
+fn per_object_path(path: &Path, object: ObjectShape) -> PathBuf {
+    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}-{}.{}", object.name(), ext.to_string_lossy()),
+        None => format!("{stem}-{}", object.name()),
+    };
+    path.with_file_name(name)
+}
+
+/// `vge eval --run DIR [--write]`.
+fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
+    let r = vge_lab::run_eval::rescore_final_eval(dir, write)
+        .with_context(|| format!("scoring the run in {}", dir.display()))?;
+    if json {
+        println!("{}", r.report.to_json_line());
+        return Ok(());
+    }
+    let stored = |v: Option<f64>, unit: &str| v.map_or("-".to_owned(), |v| format!("{v:.3}{unit}"));
+    println!("{}", dir.display());
+    println!(
+        "  success rate     {:.3} (stored: {})",
+        r.report.success_rate,
+        stored(r.stored_success_rate, "")
+    );
+    println!(
+        "  rotation         {:.2} rad per episode (stored: {})",
+        r.report.mean_rotation_rad,
+        stored(r.stored_rotation_rad, " rad")
+    );
+    println!(
+        "  drops {:.2}, contact switches {:.1} per episode, learned: {}",
+        r.report.drop_rate,
+        r.report.mean_contact_switches,
+        r.report.learned()
+    );
+    if !r.per_object.is_empty() {
+        print_objects_table(&r.per_object, &r.report);
+    }
+    if write {
+        println!("  final-eval.json rewritten");
+    }
+    Ok(())
+}
+
+/// `vge eval --plot`: the gait diagram of the episode with seed `seed`.
+fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> anyhow::Result<()> {
+    let bytes = vge_lab::eval::read_policy_file(policy)?;
+    let trace = vge_lab::eval::trace_policy_bytes(&bytes, env, seed)
+        .with_context(|| format!("tracing {}", policy.display()))?;
+    let o = &trace.outcome;
+    let title = format!(
+        "{}: the {}, episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+        policy.display(),
+        env.object.shape,
+        o.rotation_rad,
+        o.length as f32 * trace.dt_s,
+        o.contact_switches,
+        if o.terminated { ", dropped" } else { "" }
+    );
+    vge_lab::gait_diagram::plot(&trace, &title, png).with_context(|| format!("drawing {}", png.display()))?;
+    eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
+    Ok(())
+}
+
+/// `vge eval --record`: the episode with seed `seed` written to the Rerun file `rrd`.
+#[cfg(feature = "rerun")]
+fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, rrd: &Path) -> anyhow::Result<()> {
+    let bytes = vge_lab::eval::read_policy_file(policy)?;
+    let outcome = vge_lab::eval::record_policy_bytes(&bytes, env, seed, rrd)
+        .with_context(|| format!("recording {} into {}", policy.display(), rrd.display()))?;
+    eprintln!(
+        "vge eval: episode seed {seed} ({} steps) recorded in {}; open it with `rerun {}`",
+        outcome.length,
+        rrd.display(),
+        rrd.display()
+    );
+    Ok(())
+}
+
+/// Stand-in without the Rerun SDK: refuses.
+#[cfg(not(feature = "rerun"))]
+fn record_episode(_: &Path, _: &EnvConfig, _: u64, _: &Path) -> anyhow::Result<()> {
+    Err(rerun_missing())
+}
+
+/// Why `--record` cannot run in this build.
+fn rerun_missing() -> anyhow::Error {
+    anyhow::anyhow!(
+        "--record writes a Rerun recording, and this vge was built without the Rerun SDK: rebuild it with \
+         `--features rerun` (cargo build --release -p vge-cli --features rerun)"
+    )
+}
+
+fn print_eval_report(report: &vge_lab::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
+    println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
+    println!("  mean return        {:.3}", report.mean_return);
+    println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
+    println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
+    println!("  dropped            {:.2} of episodes", report.drop_rate);
+    println!(
+        "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
+        report.mean_contact_switches
+    );
+    println!("  mean contacts      {:.2}; mean length {:.0} steps", report.mean_contacts, report.mean_length);
+    let verdict = if report.learned() { "learned" } else { "not learned" };
+    println!(
+        "  verdict            {verdict} (success >= {:.0}% of episodes)",
+        100.0 * vge_lab::eval::LEARNED_SUCCESS_RATE
+    );
+}

@@ -1,0 +1,122 @@
+//! `vge score`: finished runs scored on many held-out episodes (`score.json`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+#[derive(Debug, Args)]
+/// Score finished runs on many held-out episodes and write DIR/score.json (training
+/// writes it at its end too): the run's selected policy (its own model selection on
+/// validation grasps, policy-best.vgep), its final policy (policy.vgep) and, where the
+/// last 3 periodic snapshots are kept, their mean, all on the same episodes.
+///
+/// The episodes: --episodes (default 100) of the run's success test (30 s, grasps
+/// randomised by 0.02 rad in every stored config; no training disturbances) from env
+/// seeds --seed + k, the same for every run and apart from the validation and test
+/// episodes training drew. An episode succeeds when the object turns >= 2 pi about z
+/// without a drop. score.json: {"episodes", "seed", "selected", "final",
+/// "last_snapshots"}, each policy's success_rate, mean_return, drop_rate,
+/// mean_rotation_rad, its file, step and CRC-32 (docs/scoring.md).
+///
+/// A run already scored with the same episodes, seed, definition and policy files is
+/// skipped (--force scores it again). An unfinished run (no final-eval.json) is refused
+/// and nothing is written; a missing, damaged or other-layout policy file fails naming
+/// the file. Runs are scored one after another, their episodes side by side on
+/// --threads threads (default: RAYON_NUM_THREADS, else all cores).
+///
+/// Examples:
+///   vge score docs/results/table1/cube-fg-fge/seed-*
+///   vge score --threads 1 --episodes 200 runs/fg/seed-0
+#[command(verbatim_doc_comment)]
+pub struct ScoreArgs {
+    /// Finished run folders (each with config.toml, final-eval.json, policy.vgep).
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// Held-out episodes per policy.
+    #[arg(long, default_value_t = vge_lab::score::DEFAULT_EPISODES)]
+    episodes: usize,
+    /// Env seed of the first held-out episode (episode k: seed + k).
+    #[arg(long, default_value_t = vge_lab::score::HELD_OUT_SEED)]
+    seed: u64,
+    /// Score again runs whose score.json already holds this score.
+    #[arg(long)]
+    force: bool,
+    /// Threads the episodes run on (default: RAYON_NUM_THREADS, else all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    threads: Option<u32>,
+}
+
+/// `vge score`.
+pub fn run(args: ScoreArgs) -> anyhow::Result<()> {
+    let ScoreArgs { runs, episodes, seed, force, threads } = args;
+    score(&runs, episodes, seed, force, threads)
+}
+
+/// `vge score`: every run in turn, its episodes on `threads` threads, a progress line per
+/// batch of episodes.
+fn score(
+    runs: &[PathBuf],
+    episodes: usize,
+    seed: u64,
+    force: bool,
+    threads: Option<u32>,
+) -> anyhow::Result<()> {
+    use vge_lab::score::{ScoreOptions, ScoreOutcome, score_run};
+    let options = ScoreOptions { episodes, seed, force };
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        pool = pool.num_threads(n as usize);
+    }
+    let pool = pool.build().context("starting the scoring threads")?;
+    let mut failed = Vec::new();
+    for (i, dir) in runs.iter().enumerate() {
+        let started = std::time::Instant::now();
+        let mut last_shown = std::time::Instant::now();
+        let mut show = |p: &vge_lab::score::ScoreProgress| {
+            if p.done == p.total || last_shown.elapsed().as_secs_f64() >= 10.0 {
+                eprintln!(
+                    "vge score: run {}/{} {}: {} episodes of {} ({}), {:.0} s",
+                    i + 1,
+                    runs.len(),
+                    p.dir.display(),
+                    p.done,
+                    p.total,
+                    p.file,
+                    started.elapsed().as_secs_f64()
+                );
+                last_shown = std::time::Instant::now();
+            }
+        };
+        match pool.install(|| score_run(dir, &options, &mut show)) {
+            Ok((outcome, notes)) => {
+                for note in notes {
+                    eprintln!("vge score: {}: {note}", dir.display());
+                }
+                let (verb, s) = match &outcome {
+                    ScoreOutcome::Scored(s) => ("scored", s),
+                    ScoreOutcome::Skipped(s) => ("already scored, skipped", s),
+                };
+                let selected =
+                    s.selected.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                let last =
+                    s.last_snapshots.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
+                println!(
+                    "{}: {verb}: success on {} held-out episodes: selected {selected}, final {:.2}, last snapshots {last} ({:.0} s)",
+                    dir.display(),
+                    s.episodes,
+                    s.final_policy.success_rate,
+                    started.elapsed().as_secs_f64()
+                );
+            }
+            Err(e) => {
+                eprintln!("vge score: {e}");
+                failed.push(dir.display().to_string());
+            }
+        }
+    }
+    if !failed.is_empty() {
+        bail!("{} of {} runs not scored: {}", failed.len(), runs.len(), failed.join(", "));
+    }
+    Ok(())
+}

@@ -1,0 +1,176 @@
+//! `vge train`: one run, new or resumed, with a progress bar; Ctrl-C or SIGTERM saves a
+//! checkpoint and stops it.
+
+use std::path::PathBuf;
+
+#[cfg(feature = "train")]
+use anyhow::{Context, bail};
+use clap::Args;
+
+#[derive(Debug, Args)]
+/// Train a policy with SAC (or TD3: `algorithm = "td3"`) and the configured behaviour
+/// policy (RL, RL+BC, FGE, VGE, VGE+BC) from a TOML config (see configs/).
+///
+/// Writes DIR/config.toml, DIR/metrics.csv (step, return, rotation, contacts, controller
+/// share, losses), the same curves for TensorBoard in DIR/tensorboard (`tensorboard
+/// --logdir DIR`), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
+/// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues, also
+/// after a kill (from the last periodic checkpoint).
+///
+/// A run can start from another run's networks (actor, critics, observation
+/// normaliser) with the config key `init_from = "DIR"` or `--set init_from=DIR`: a
+/// second curriculum stage, e.g. configs/cube-fg-fge-robust-finetune.toml, which
+/// fine-tunes a trained gait under sensor noise and pushes.
+pub struct TrainArgs {
+    /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.
+    #[arg(long, required_unless_present = "resume")]
+    config: Option<PathBuf>,
+    /// Output directory of the run.
+    #[arg(long, required_unless_present = "resume")]
+    out: Option<PathBuf>,
+    /// Continue the run in this directory from its last checkpoint (its config.toml). The
+    /// checkpoint's files are checked against its manifest first: a damaged, truncated or
+    /// older vge's checkpoint is refused, naming the file.
+    #[arg(long, conflicts_with_all = ["config", "out"])]
+    resume: Option<PathBuf>,
+    /// Override the config's seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Override the config's total env steps.
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Override any config field, e.g. `--set sac.batch=128 --set vge.horizon=20`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+}
+
+/// `vge train`.
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    #[cfg(feature = "train")]
+    {
+        let TrainArgs { config, out, resume, seed, steps, overrides } = args;
+        train(config, out, resume, seed, steps, &overrides, &*stop_on_signal()?).map(|_| ())
+    }
+    #[cfg(not(feature = "train"))]
+    {
+        let _ = args;
+        Err(super::without_training("vge train"))
+    }
+}
+
+#[cfg(feature = "train")]
+/// The run `vge train` works on: a new one (`--config`, `--out`, refused where a run already
+/// is) or the one in `--resume DIR`, with the overrides applied.
+fn train_target(
+    resume: Option<PathBuf>,
+    config: Option<PathBuf>,
+    out: Option<PathBuf>,
+    overrides: &[String],
+) -> anyhow::Result<(vge_lab::config::Config, PathBuf, bool)> {
+    use vge_lab::config as cfg;
+    Ok(match (resume, config, out) {
+        (Some(dir), _, _) => {
+            let text = std::fs::read_to_string(dir.join(vge_lab::run_dir::CONFIG))
+                .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
+            let origin = dir.join(vge_lab::run_dir::CONFIG).display().to_string();
+            cfg::check_resumable(&text, &origin)?;
+            let config = cfg::parse_with_overrides(&text, &origin, overrides)?;
+            config.validate()?;
+            (config, dir, true)
+        }
+        // A folder holding a run, or being written, is refused by `train` (naming what it found).
+        (None, Some(path), Some(out)) => (cfg::load_config(&path, overrides)?, out, false),
+        _ => bail!("give --config and --out, or --resume DIR"),
+    })
+}
+
+#[cfg(feature = "train")]
+fn progress_bar(total_steps: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(total_steps);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} steps ({eta} left) {msg}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar
+}
+
+#[cfg(feature = "train")]
+pub(crate) fn train(
+    config: Option<PathBuf>,
+    out: Option<PathBuf>,
+    resume: Option<PathBuf>,
+    seed: Option<u64>,
+    steps: Option<u64>,
+    overrides: &[String],
+    stop: &std::sync::atomic::AtomicBool,
+) -> anyhow::Result<bool> {
+    use vge_trainer::train as tr;
+    let mut overrides = overrides.to_vec();
+    if let Some(seed) = seed {
+        overrides.push(format!("seed={seed}"));
+    }
+    if let Some(steps) = steps {
+        overrides.push(format!("total_steps={steps}"));
+    }
+    let (config, out_dir, resuming) = train_target(resume, config, out, &overrides)?;
+    let bar = progress_bar(config.total_steps);
+    let resumed_from = if resuming { vge_lab::sweep::checkpoint_step(&out_dir) } else { None };
+    // The controller only where the method queries it (rl runs ignore `controller`).
+    let controller = config.controller.filter(|_| config.method.queries_controller());
+    eprintln!(
+        "training {} ({}{}, {}, seed {}){} into {}{}",
+        config.name,
+        config.method.name(),
+        controller.map_or(String::new(), |c| format!(" + {}", c.name())),
+        config.algorithm.name(),
+        config.seed,
+        config.init_from_dir().map_or(String::new(), |d| format!(" from the networks of {}", d.display())),
+        out_dir.display(),
+        match (resuming, resumed_from) {
+            (true, Some(step)) => format!(", resuming from step {step}"),
+            (true, None) => ", resuming".to_owned(),
+            _ => String::new(),
+        }
+    );
+    let summary = tr::train(&config, &out_dir, resuming, stop, &mut |p: &tr::Progress| {
+        bar.set_position(p.step);
+        bar.set_message(format!(
+            "{:.0} steps/s, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
+            p.steps_per_s,
+            p.mean_return,
+            p.mean_rotation_rad,
+            100.0 * p.controller_share,
+            p.episodes
+        ));
+    })?;
+    bar.finish();
+    println!("time this session: {}", summary.times);
+    if summary.stopped {
+        println!(
+            "stopped at step {}: checkpoint saved; continue with `vge train --resume {}`",
+            summary.steps,
+            out_dir.display()
+        );
+    } else if let Some(policy) = summary.policy {
+        println!(
+            "done: {} steps, {} updates; policy written to {}",
+            summary.steps,
+            summary.updates,
+            policy.display()
+        );
+    }
+    Ok(summary.stopped)
+}
+
+#[cfg(feature = "train")]
+/// A flag raised by Ctrl-C or SIGTERM: training saves a checkpoint and returns.
+pub(crate) fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(stop)
+}

@@ -1,0 +1,82 @@
+//! `vge`: train, evaluate, export and inspect finger-gaiting policies. This file parses the
+//! command line and dispatches; each subcommand is a module of `commands`.
+
+mod closed_output;
+mod commands;
+
+use std::io::Write as _;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use commands::{
+    bench, compare, controller, eval, export, import, inspect, plot, robustness, score, sweep, train,
+};
+
+/// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
+/// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
+#[derive(Debug, Parser)]
+#[command(version, about, long_about = None)]
+#[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0.")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    Train(train::TrainArgs),
+    Sweep(sweep::SweepArgs),
+    Plot(plot::PlotArgs),
+    Score(score::ScoreArgs),
+    Compare(compare::CompareArgs),
+    Eval(eval::EvalArgs),
+    Robustness(robustness::RobustnessArgs),
+    Export(export::ExportArgs),
+    Import(import::ImportArgs),
+    Inspect(inspect::InspectArgs),
+    Controller(controller::ControllerArgs),
+    /// Measure vge's hot paths on this machine.
+    #[command(subcommand)]
+    Bench(bench::Bench),
+}
+
+/// MKL's vendor check, answered by `vge` so that MKL runs its AVX-512 kernels on AMD CPUs
+/// that have them (`vge_trainer::mkl` says why and what it measured). build.rs exports it
+/// from the executable, where it takes precedence over libtorch's own copy.
+#[cfg(feature = "train")]
+#[unsafe(no_mangle)]
+#[allow(unsafe_code)]
+pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
+    vge_trainer::mkl::intel_cpu_answer()
+}
+
+fn main() -> ExitCode {
+    closed_output::end_quietly_when_closed();
+    // Before libtorch allocates anything; a refusal only costs speed (vge_trainer::heap).
+    #[cfg(feature = "train")]
+    if !vge_trainer::heap::keep_freed_memory() {
+        eprintln!("vge: note: glibc heap settings not applied; updates may run slower");
+    }
+    let result = match Cli::parse().command {
+        Command::Train(args) => train::run(args),
+        Command::Sweep(args) => sweep::run(args),
+        Command::Plot(args) => plot::run(args),
+        Command::Score(args) => score::run(args),
+        Command::Compare(args) => compare::run(args),
+        Command::Eval(args) => eval::run(args),
+        Command::Robustness(args) => robustness::run(args),
+        Command::Export(args) => export::run(args),
+        Command::Import(args) => import::run(args),
+        Command::Inspect(args) => inspect::run(args),
+        Command::Controller(args) => controller::run(args),
+        Command::Bench(bench) => bench::run(bench),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // Not eprintln!: with stderr closed the failure must still exit 1, not 0.
+            let _ = writeln!(std::io::stderr(), "vge: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,190 @@
+//! Inputs are bounded before anything is allocated: every float of the config refuses NaN
+//! and infinity (the float fields found from the config's schema, not listed here), sizes
+//! that no machine holds are refused with the memory they would take, and a policy file
+//! longer than any policy is refused unread by `vge inspect` and `vge eval`.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use vge_lab::config::{Config, parse_with_overrides};
+
+/// What `--set KEY=VALUE` on an empty config file gives (the --set path of every command).
+fn with(set: &str) -> Result<Config, String> {
+    parse_with_overrides("", "probe", &[set.to_owned()]).map_err(|e| e.to_string())
+}
+
+/// The names serde lists when it refuses an unknown key in the section `prefix`
+/// (`unknown field `x`, expected one of `a`, `b`` or `expected `a` or `b``); None when
+/// `prefix` is not a section.
+fn section_keys(prefix: &str) -> Option<Vec<String>> {
+    let probe =
+        if prefix.is_empty() { "zz_no_such_key".to_owned() } else { format!("{prefix}.zz_no_such_key") };
+    let err = with(&format!("{probe}=1")).expect_err("an unknown key is refused");
+    let listed = err.split("unknown field `zz_no_such_key`, expected").nth(1)?;
+    Some(listed.split('`').skip(1).step_by(2).map(str::to_owned).collect())
+}
+
+/// Every leaf key of the config schema (`sac.gamma`), sections walked recursively.
+fn schema_keys(prefix: &str, out: &mut Vec<String>) {
+    for name in section_keys(prefix).expect("a section") {
+        let key = if prefix.is_empty() { name } else { format!("{prefix}.{name}") };
+        if section_keys(&key).is_some() {
+            schema_keys(&key, out);
+        } else {
+            out.push(key);
+        }
+    }
+}
+
+#[test]
+fn every_float_field_of_the_schema_refuses_nan_and_infinity_naming_its_key() {
+    let mut keys = Vec::new();
+    schema_keys("", &mut keys);
+    assert!(
+        keys.iter().any(|k| k == "sac.gamma") && keys.iter().any(|k| k == "run.eval_episode_s"),
+        "{keys:?}"
+    );
+    let mut floats = Vec::new();
+    for key in &keys {
+        // A float field takes `nan` (a float array, such as env.mass_scale, `[nan, nan]`);
+        // any other field refuses it when the config is read.
+        let Some(shape) = ["{}", "[{}, {}]"]
+            .into_iter()
+            .find(|v| with(&format!("{key}={}", v.replace("{}", "nan"))).is_ok())
+        else {
+            continue;
+        };
+        floats.push(key.clone());
+        for bad in ["nan", "inf", "-inf"] {
+            let set = format!("{key}={}", shape.replace("{}", bad));
+            let config = with(&set).expect("reads");
+            let err = config.validate().expect_err(&format!("{set} is refused")).to_string();
+            assert!(err.contains(key.as_str()) && err.contains("finite"), "{set}: {err}");
+        }
+    }
+    // The schema's float fields, found above: the issue counted 28.
+    assert!(floats.len() >= 28, "only {} float fields found: {floats:?}", floats.len());
+}
+
+/// `vge ARGS`: whether it succeeded, its stderr, and the largest resident set it reached
+/// (bytes). Measured by a Python parent (`RUSAGE_CHILDREN`): a child's peak counts the memory
+/// of the process that started it, which for this test binary, libtorch and all, would hide
+/// what vge itself takes.
+fn vge_with_peak_memory(args: &[&str]) -> (bool, String, u64) {
+    let script = "import resource, subprocess, sys\n\
+        r = subprocess.run(sys.argv[1:], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)\n\
+        sys.stderr.buffer.write(r.stderr)\n\
+        print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n";
+    let out = Command::new(common::python())
+        .arg("-c")
+        .arg(script)
+        .arg(env!("CARGO_BIN_EXE_vge"))
+        .args(args)
+        .output()
+        .expect("python runs (VGE_PYTHON, or .deps/py made by scripts/test.sh)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let fields: Vec<&str> = stdout.split_whitespace().collect();
+    let [code, kib] = fields[..] else { panic!("python printed {stdout:?}") };
+    // ru_maxrss is in KiB on Linux.
+    let peak = kib.parse::<u64>().expect("KiB") * 1024;
+    (code == "0", String::from_utf8_lossy(&out.stderr).into_owned(), peak)
+}
+
+/// What vge takes beyond its start (libtorch's libraries alone are over 100 MB resident):
+/// the peak of `vge --help`.
+fn baseline_bytes() -> u64 {
+    static BASELINE: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *BASELINE.get_or_init(|| {
+        let (ok, err, peak) = vge_with_peak_memory(&["--help"]);
+        assert!(ok, "{err}");
+        peak
+    })
+}
+
+const LIMIT_BYTES: u64 = 100 << 20;
+
+fn machine_memory_bytes() -> u64 {
+    let text = std::fs::read_to_string("/proc/meminfo").expect("/proc/meminfo");
+    let line = text.lines().find(|l| l.starts_with("MemTotal:")).expect("MemTotal");
+    line.split_whitespace().nth(1).expect("kB").parse::<u64>().expect("number") * 1024
+}
+
+#[test]
+fn sizes_no_machine_holds_are_refused_with_the_estimate_before_anything_is_allocated() {
+    let root = common::temp_dir("config-bounds");
+    let config = common::config("cube-fg-vge.toml");
+    // A replay buffer twice this machine's memory: valid anywhere it fits, refused here.
+    let twice_here = (2 * machine_memory_bytes() / 656).to_string();
+    for (set, key, why) in [
+        ("sac.buffer_size=1000000000000".to_owned(), "sac.buffer_size", "more than the 1.10 TB"),
+        ("num_envs=100000000".to_owned(), "num_envs", "more than the 1.10 TB"),
+        ("env.episode_length=1000000000000".to_owned(), "env.episode_length", "more than the 1.10 TB"),
+        ("run.eval_episodes=100000000000000".to_owned(), "run.eval_episodes", "more than the 1.10 TB"),
+        (format!("sac.buffer_size={twice_here}"), "sac.buffer_size", "more than this machine's"),
+    ] {
+        let out = root.join("run");
+        let args =
+            ["train", "--config", config.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8")];
+        let (ok, err, peak) = vge_with_peak_memory(&[&args[..], &["--set", &set]].concat());
+        assert!(!ok, "{set} was not refused");
+        assert!(err.contains("would hold about") && err.contains(key) && err.contains(why), "{set}: {err}");
+        assert!(peak < baseline_bytes() + LIMIT_BYTES, "{set}: refused after taking {peak} bytes");
+        assert!(!out.exists(), "{set}: a refused run left a folder");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn eval_episode_s_nan_is_refused_by_vge_train_naming_the_key() {
+    let root = common::temp_dir("config-nan");
+    let config = common::config("cube-fg-vge.toml");
+    let out = root.join("run");
+    let args = ["train", "--config", config.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8")];
+    for bad in ["nan", "inf"] {
+        let set = format!("run.eval_episode_s={bad}");
+        let (ok, err, _) = vge_with_peak_memory(&[&args[..], &["--set", &set]].concat());
+        assert!(!ok && err.contains("run.eval_episode_s must be a finite number"), "{set}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A 2 GB sparse file (as `truncate -s 2G`).
+fn sparse_2gb(dir: &Path) -> std::path::PathBuf {
+    let path = dir.join("z.vgep");
+    std::fs::File::create(&path).expect("create").set_len(2 << 30).expect("set_len");
+    path
+}
+
+#[test]
+fn a_2gb_sparse_policy_file_is_refused_unread_by_inspect_and_eval() {
+    let root = common::temp_dir("policy-size");
+    let z = sparse_2gb(&root);
+    let z = z.to_str().expect("utf-8");
+    let limit = vge_lab::eval::EVAL_MAX_FILE_LEN;
+    assert_eq!(limit, vge_export::MAX_FILE_LEN, "inspect and eval read the same files");
+    for args in [vec!["inspect", z], vec!["eval", "--policy", z, "--episodes", "1"]] {
+        let (ok, err, peak) = vge_with_peak_memory(&args);
+        assert!(!ok, "{args:?} accepted a 2 GB file");
+        assert!(
+            err.contains("2147483648 bytes")
+                && err.contains(&format!("at most {limit} bytes"))
+                && err.contains("not read"),
+            "{args:?}: {err}"
+        );
+        assert!(peak < baseline_bytes() + LIMIT_BYTES, "{args:?}: refused after taking {peak} bytes");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn the_largest_policies_fit_the_file_size_limits() {
+    use vge_runtime::policy::{HAND_MAX_FILE_LEN, HAND_MAX_LAYERS, HAND_MAX_WIDTH};
+    // The shipped policy, and an actor at the hand's capacity: 3 hidden layers of 256.
+    let shipped = std::fs::metadata(Path::new(env!("CARGO_MANIFEST_DIR")).join("../policies/cube.vgep"))
+        .expect("policy");
+    assert!(shipped.len() < HAND_MAX_FILE_LEN as u64);
+    let widest = 4 * (HAND_MAX_LAYERS * HAND_MAX_WIDTH * HAND_MAX_WIDTH) as u64;
+    assert!(widest < HAND_MAX_FILE_LEN as u64 && (HAND_MAX_FILE_LEN as u64) < 4 << 20, "{HAND_MAX_FILE_LEN}");
+}

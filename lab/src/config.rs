@@ -1,0 +1,1084 @@
+//! One TOML file per experiment ([`Config`]), with `--set key.path=value` overrides applied
+//! to the TOML value before deserialising ([`load_config`], [`apply_override`]) and
+//! validation with clear messages ([`Config::validate`]).
+//!
+//! Every section has defaults, so a file names only what differs; unknown keys are errors
+//! (a typo must not silently train the default).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use vge_sim::{
+    DomainRandomization, EnvConfig, HandOrientation, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape,
+    PerturbationConfig,
+};
+
+use vge_controllers::{ControllerKind, CsConfig};
+
+/// A configuration that cannot be read, overridden or used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    #[error("reading config {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("parsing config {path}: {message}")]
+    Parse { path: String, message: String },
+    #[error("override {0:?}: expected key.path=value")]
+    OverrideSyntax(String),
+    #[error("override {key}: {message}")]
+    Override { key: String, message: String },
+    #[error("invalid config: {0}")]
+    Invalid(String),
+}
+
+/// The behaviour policy and loss (the paper's five methods).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Learner only.
+    Rl,
+    /// Learner only, plus the value-weighted BC loss.
+    RlBc,
+    /// Fixed guided exploration: follow the controller with a state-independent probability
+    /// decaying with training steps.
+    Fge,
+    /// Value-guided exploration.
+    Vge,
+    /// VGE plus the value-weighted BC loss.
+    VgeBc,
+}
+
+impl Method {
+    pub const ALL: [Self; 5] = [Self::Rl, Self::RlBc, Self::Fge, Self::Vge, Self::VgeBc];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rl => "rl",
+            Self::RlBc => "rl-bc",
+            Self::Fge => "fge",
+            Self::Vge => "vge",
+            Self::VgeBc => "vge-bc",
+        }
+    }
+
+    /// Whether the behaviour policy ever follows a controller.
+    pub fn uses_controller(self) -> bool {
+        matches!(self, Self::Fge | Self::Vge | Self::VgeBc)
+    }
+
+    /// Whether the controller is queried during training: to be followed (FGE, VGE, VGE+BC)
+    /// or only to label the learner's states with its action (RL+BC).
+    pub fn queries_controller(self) -> bool {
+        self.uses_controller() || self == Self::RlBc
+    }
+
+    /// Whether the actor gets the BC loss.
+    pub fn uses_bc(self) -> bool {
+        matches!(self, Self::RlBc | Self::VgeBc)
+    }
+}
+
+/// The environment. Env `i` of the vector gets `objects[i % objects.len()]`, each spelt as
+/// [`ObjectShape::name`] gives it (`"cube"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EnvSection {
+    pub objects: Vec<ObjectShape>,
+    pub control_hz: f32,
+    pub episode_length: usize,
+    pub max_action_rad: f32,
+    /// End an episode as soon as fewer than this many fingertips touch the object (0: never).
+    /// The paper ends episodes only on a drop or at the time limit, which is the default;
+    /// the reward is paid only while >= 3 fingertips touch the object either way.
+    pub terminate_below_contacts: usize,
+    /// Charge a backward turn about z even while fewer than 3 fingertips touch (default),
+    /// so a back-and-forth earns nothing; `false` is the paper's reward, which one VGE seed
+    /// gamed that way (see `vge_sim::EnvConfig::charge_reverse_rotation`).
+    pub charge_reverse_rotation: bool,
+    /// The rotation about z is paid only while at least this many fingertips touch the
+    /// object (the paper's 3, the default). 4 asks for gaits that keep four fingertips on:
+    /// under pushes of the cube's weight a frozen grasp on five fingertips holds for 30 s,
+    /// one on three drops within seconds however hard it squeezes
+    /// (`sim/examples/hold_under_push.rs`).
+    #[serde(skip_serializing_if = "is_paper_reward_min_contacts")]
+    pub reward_min_contacts: usize,
+    /// Randomise the initial grasp (one non-thumb finger open with probability 0.5).
+    pub randomize_fingers: bool,
+    /// Uniform noise on the initial grasp pose (rad).
+    pub grasp_pose_noise_rad: f32,
+    pub noise_q_std_rad: f32,
+    pub noise_normal_std_frac: f32,
+    pub noise_position_std_m: f32,
+    /// Random force on the object, Gaussian per component with this std (N).
+    pub perturb_force_std_n: f32,
+    /// Or a force of this magnitude (N) in a random direction, as the robustness test's
+    /// `perturbation_magnitude_n` axis; at most one of the two is set.
+    #[serde(skip_serializing_if = "is_zero_f32")]
+    pub perturb_force_magnitude_n: f32,
+    /// Probability per control step that a new force is drawn.
+    pub perturb_change_probability: f32,
+    /// Domain randomisation: the object's mass times a factor drawn per episode from
+    /// `[lo, hi]` (`[1.0, 1.0]`: off).
+    pub mass_scale: [f32; 2],
+    /// Likewise the object's friction coefficient.
+    pub friction_scale: [f32; 2],
+    /// Control steps between an action and its effect (a real hand's bus and motor delay).
+    pub action_latency_steps: usize,
+    /// Subtracted from the reward of the step on which the object drops (reward units,
+    /// rad/s; 0: the paper's reward, where a drop costs only the turn it ends). For gaits
+    /// that must hold under pushes: at gamma 0.99 a gait turning 0.33 rad/s is worth about
+    /// 33, which is all a drop costs without it. With the force's ramp on
+    /// (`perturb_ramp_start`, `perturb_ramp_steps`) it ramps with the force. The success
+    /// and robustness tests run without it.
+    #[serde(skip_serializing_if = "is_zero_f32")]
+    pub drop_penalty: f32,
+    /// Curriculum: the force on the object (`perturb_force_std_n`) grows linearly from 0
+    /// to its level over the first this-many env steps, set at each episode's start (0:
+    /// full from the start). Sensor noise is not ramped: the observation normaliser is
+    /// fixed from the warm-up's data, which should hold the noise the policy will meet (at
+    /// 50% normal error a policy trained without it kept 8% of its return, one trained
+    /// with 25% from the start 85%).
+    pub perturb_ramp_steps: u64,
+    /// The step the force's ramp starts at: no force on the object before it, then
+    /// `perturb_ramp_steps` of linear growth (0: from the first step). Lets the gait be
+    /// learned undisturbed first: a run whose pushes grew from step 0 was at half force by
+    /// 300k, before any gait (`docs/results/cube-fg-vge-robust/`).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub perturb_ramp_start: u64,
+    /// Curriculum for a run that starts from trained networks ([`Config::init_from`]): the
+    /// sensor noise (`noise_*`) grows linearly from 0 to its level over the first this-many
+    /// env steps, set at each episode's start (0: full from the start). Refused for a run
+    /// that fits its observation normaliser, whose warm-up data would then hold no noise.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub noise_ramp_steps: u64,
+    /// Task variant: the object's mass (kg), absolute, in place of the object's default
+    /// (0.15 kg). It stays in the success test (it is the object, not a disturbance);
+    /// `mass_scale` multiplies it per episode. Absent: the default.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_mass_kg: Option<f32>,
+    /// Task variant: the object's Coulomb friction coefficient, absolute, in place of the
+    /// default 0.8 (combined with the fingers' 0.8 by average); `friction_scale` multiplies
+    /// it per episode. Absent: the default.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub object_friction: Option<f32>,
+    /// Task variant: the finger motors' torque cap (N m) on the four fingers, the thumb's 1.5
+    /// times it as by default (it opposes two fingers). The cap sets the grip force: by
+    /// default (0.3 N m) the motors saturate about 0.015 rad past contact. Absent: 0.3.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_torque_cap_nm: Option<f32>,
+    /// Task variant: the finger motors' position stiffness (N m/rad, every joint). Absent:
+    /// the default 20.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motor_stiffness_nm_per_rad: Option<f32>,
+    /// Task variant: the hand's orientation to gravity, `"palm_down"` (default: gravity along
+    /// the rotation axis) or `"side_on"` (gravity along the hand's +x, from the thumb towards
+    /// the middle and ring fingers; see `vge_sim::HandOrientation`).
+    #[serde(skip_serializing_if = "is_palm_down")]
+    pub hand_orientation: HandOrientation,
+    /// Task variant: whether the fingers collide with each other (default false: the hand
+    /// touches the object only, and fingers can pass through each other).
+    #[serde(skip_serializing_if = "is_false")]
+    pub finger_collisions: bool,
+}
+
+/// Keeps the default orientation out of the serialised config, as [`is_zero`] does.
+fn is_palm_down(o: &HandOrientation) -> bool {
+    *o == HandOrientation::PalmDown
+}
+
+/// Keeps a switch that is off out of the serialised config, as [`is_zero`] does.
+fn is_false(v: &bool) -> bool {
+    !*v
+}
+
+/// Keeps a key that is off out of the serialised config, so that configs from before it
+/// existed keep their hash.
+fn is_zero(v: &u64) -> bool {
+    *v == 0
+}
+
+/// [`is_zero`] for a level.
+fn is_zero_f32(v: &f32) -> bool {
+    *v == 0.0
+}
+
+/// Keeps the paper's reward threshold (the default) out of the serialised config, as
+/// [`is_zero`] does.
+fn is_paper_reward_min_contacts(v: &usize) -> bool {
+    *v == EnvConfig::default().reward_min_contacts
+}
+
+impl Default for EnvSection {
+    fn default() -> Self {
+        let env = EnvConfig::default();
+        Self {
+            objects: vec![ObjectShape::Cube],
+            control_hz: env.control_hz,
+            episode_length: env.episode_length_steps,
+            max_action_rad: env.max_action_rad,
+            terminate_below_contacts: env.min_contacts,
+            charge_reverse_rotation: env.charge_reverse_rotation,
+            reward_min_contacts: env.reward_min_contacts,
+            randomize_fingers: env.grasp.randomize_fingers,
+            grasp_pose_noise_rad: env.grasp.pose_noise_rad,
+            noise_q_std_rad: 0.0,
+            noise_normal_std_frac: 0.0,
+            noise_position_std_m: 0.0,
+            perturb_force_std_n: 0.0,
+            perturb_force_magnitude_n: 0.0,
+            perturb_change_probability: 0.0,
+            mass_scale: env.randomization.mass_scale,
+            friction_scale: env.randomization.friction_scale,
+            action_latency_steps: env.randomization.action_latency_steps,
+            drop_penalty: env.drop_penalty,
+            perturb_ramp_steps: 0,
+            perturb_ramp_start: 0,
+            noise_ramp_steps: 0,
+            object_mass_kg: None,
+            object_friction: None,
+            motor_torque_cap_nm: None,
+            motor_stiffness_nm_per_rad: None,
+            hand_orientation: env.physics.hand_orientation,
+            finger_collisions: env.physics.finger_collisions,
+        }
+    }
+}
+
+impl EnvSection {
+    /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length).
+    pub fn env_config(&self, index: usize) -> EnvConfig {
+        let mut env = EnvConfig::default();
+        let object =
+            self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectShape::Cube);
+        env.object = ObjectConfig::of(object);
+        env.control_hz = self.control_hz;
+        env.episode_length_steps = self.episode_length;
+        env.max_action_rad = self.max_action_rad;
+        env.min_contacts = self.terminate_below_contacts;
+        env.charge_reverse_rotation = self.charge_reverse_rotation;
+        env.reward_min_contacts = self.reward_min_contacts;
+        env.drop_penalty = self.drop_penalty;
+        env.grasp.randomize_fingers = self.randomize_fingers;
+        env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
+        env.noise = NoiseConfig {
+            q_std_rad: self.noise_q_std_rad,
+            normal_std_frac: self.noise_normal_std_frac,
+            position_std_m: self.noise_position_std_m,
+        };
+        env.perturbation = PerturbationConfig {
+            force_std_n: self.perturb_force_std_n,
+            force_magnitude_n: self.perturb_force_magnitude_n,
+            change_probability: self.perturb_change_probability,
+        };
+        env.randomization = DomainRandomization {
+            mass_scale: self.mass_scale,
+            friction_scale: self.friction_scale,
+            action_latency_steps: self.action_latency_steps,
+        };
+        if let Some(mass_kg) = self.object_mass_kg {
+            env.object.mass_kg = mass_kg;
+        }
+        if let Some(friction) = self.object_friction {
+            env.object.friction = friction;
+        }
+        if let Some(cap_nm) = self.motor_torque_cap_nm {
+            env.hand.set_finger_torque_cap_nm(cap_nm);
+        }
+        if let Some(kp) = self.motor_stiffness_nm_per_rad {
+            env.physics.motor_stiffness_nm_per_rad = kp;
+        }
+        env.physics.hand_orientation = self.hand_orientation;
+        env.physics.finger_collisions = self.finger_collisions;
+        env
+    }
+}
+
+/// SAC. `alpha = "auto"` tunes α to `target_entropy` (default -act_dim); a number fixes it
+/// (the paper: 0).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SacSection {
+    pub hidden: Vec<i64>,
+    pub actor_lr: f64,
+    pub critic_lr: f64,
+    pub batch: usize,
+    pub gamma: f64,
+    pub tau: f64,
+    pub alpha: Alpha,
+    pub initial_alpha: f64,
+    pub target_entropy: Option<f64>,
+    pub buffer_size: usize,
+    /// Gradient updates per environment transition.
+    pub utd: f64,
+    /// Transitions collected with uniform random learner actions before updates start.
+    pub warmup: u64,
+    /// libtorch intra-op threads (0: leave libtorch's default).
+    pub threads: i32,
+    /// Normalise observations by the mean and std of the warm-up data (fixed after that,
+    /// saved with the networks and exported in the policy file).
+    pub normalize_obs: bool,
+    /// Layer normalisation in the critics' hidden layers (against Q divergence).
+    pub critic_layer_norm: bool,
+    /// SAC only: floor of the policy's pre-tanh σ, as a fraction of the action range (0:
+    /// CleanRL's exp(-5) = 0.007). With alpha = 0 nothing else keeps σ up; see
+    /// `GaussianActor::with_min_std`.
+    pub min_policy_std: f64,
+    /// The first this-many updates train only the critics, the actor held (and SAC's α):
+    /// for a run from trained networks ([`Config::init_from`]) under new conditions, whose
+    /// critic must learn them before it steers the actor. Fine-tuned without a hold, a
+    /// gait lost all its clean success within 20k updates.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub actor_hold_updates: u64,
+    /// The number format of the hidden layers' matmuls in updates: "f32" or "bf16" (f32
+    /// master weights; a ~2x faster matmul on CPUs with AVX512_BF16). Acting, evaluation
+    /// and the exported policy are f32 either way.
+    #[serde(skip_serializing_if = "is_f32")]
+    pub matmul: MatmulPrecision,
+}
+
+/// The number format of the hidden layers' matmuls in the learner's updates (the
+/// `sac.matmul` key). Weights, optimiser state, biases' master copies, layer norm, the
+/// heads and every loss stay f32; acting, evaluation and export are always f32, as the
+/// runtime computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MatmulPrecision {
+    #[default]
+    F32,
+    /// Inputs, weights and biases rounded to bfloat16 for the matmul (f32 accumulation, f32
+    /// result): on a CPU with AVX512_BF16 a 256-wide layer runs ~2x as fast
+    /// (`examples/matmul_dtypes` of vge-trainer); the 1- and 15-wide heads would run slower,
+    /// so stay f32.
+    Bf16,
+}
+
+/// Keeps the key out of serialised configs at its default, so their hashes stay those of
+/// configs from before it.
+fn is_f32(p: &MatmulPrecision) -> bool {
+    *p == MatmulPrecision::F32
+}
+
+/// α: a fixed number or `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Alpha {
+    Fixed(f64),
+    Named(AlphaName),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AlphaName {
+    Auto,
+}
+
+impl Default for SacSection {
+    fn default() -> Self {
+        Self {
+            hidden: vec![256, 256],
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            batch: 256,
+            gamma: 0.99,
+            tau: 0.005,
+            alpha: Alpha::Fixed(0.0),
+            initial_alpha: 0.1,
+            target_entropy: None,
+            buffer_size: 1_000_000,
+            utd: 1.0,
+            warmup: 10_000,
+            threads: 2,
+            normalize_obs: true,
+            critic_layer_norm: true,
+            min_policy_std: 0.0,
+            actor_hold_updates: 0,
+            matmul: MatmulPrecision::F32,
+        }
+    }
+}
+
+/// The off-policy learner: SAC (the `[sac]` section) or TD3 (the `[sac]` section's sizes,
+/// rates, γ, τ, batch, buffer, UTD and warm-up, plus `[td3]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum AlgorithmName {
+    Sac,
+    Td3,
+}
+
+impl AlgorithmName {
+    /// The name as configs spell it (`"sac"`, `"td3"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sac => "sac",
+            Self::Td3 => "td3",
+        }
+    }
+}
+
+/// TD3's noises (fractions of the action scale) and actor delay.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Td3Section {
+    pub explore_std: f64,
+    pub target_noise_std: f64,
+    pub target_noise_clip: f64,
+    pub policy_delay: u64,
+}
+
+/// CleanRL's TD3: the one place these defaults are written (the learner's
+/// `Algorithm::td3()` reads them from here).
+impl Default for Td3Section {
+    fn default() -> Self {
+        Self { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 2 }
+    }
+}
+
+/// VGE's selection horizon and the hard stop (also used by FGE and RL+BC).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VgeSection {
+    /// H (the paper's Algorithm 2): the source is chosen every `horizon` steps and followed
+    /// for `horizon` steps, and it is also the length of the contact-switching trajectory
+    /// `dq_switch(h), h = 1..H`, so that one controller pick runs one whole detach and
+    /// re-attach.
+    pub horizon: usize,
+    /// Training step (env transitions) after which the controller is never queried again.
+    pub hard_stop: u64,
+}
+
+impl Default for VgeSection {
+    fn default() -> Self {
+        // 50 steps (2.5 s at 20 Hz): the switch length at which CS broke and remade the
+        // contact most reliably (controllers::cs::CsConfig).
+        Self { horizon: 50, hard_stop: 4_000_000 }
+    }
+}
+
+/// FGE: the probability of following the controller, linear from `p_start` at step
+/// `decay_start` to `p_end` at `decay_end`, constant outside.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FgeSection {
+    pub p_start: f64,
+    pub p_end: f64,
+    pub decay_start: u64,
+    pub decay_end: u64,
+}
+
+impl Default for FgeSection {
+    fn default() -> Self {
+        Self { p_start: 0.5, p_end: 0.0, decay_start: 0, decay_end: 4_000_000 }
+    }
+}
+
+/// BC: β linear from `beta_start` at step 0 to 0 at `beta_zero_step`. What is cloned is
+/// the controller's action at a replayed state: the executed one for VGE+BC (the paper's
+/// `a != a_pi`), the one queried but not executed for RL+BC (the learner alone acts).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BcSection {
+    pub beta_start: f64,
+    pub beta_zero_step: u64,
+}
+
+impl Default for BcSection {
+    fn default() -> Self {
+        Self { beta_start: 0.1, beta_zero_step: 4_000_000 }
+    }
+}
+
+/// Bookkeeping: logging, checkpoints, evaluation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunSection {
+    /// One metrics row every this many env steps.
+    pub log_interval: u64,
+    /// Checkpoint every this many env steps (0: only at the end / on stop).
+    pub checkpoint_interval: u64,
+    /// Save the replay buffer with checkpoints (needed for an exact resume).
+    pub save_replay: bool,
+    /// Evaluation of the exported actor on the runtime every this many env steps (0: never),
+    /// with the success test of `vge eval` ([`crate::eval`]).
+    pub eval_interval: u64,
+    /// Episodes per evaluation (periodic and final).
+    pub eval_episodes: usize,
+    /// Length of an evaluation episode (s).
+    pub eval_episode_s: f32,
+    /// Uniform noise on the initial grasp pose of evaluation episodes (rad; 0 makes every
+    /// deterministic episode the same).
+    pub eval_grasp_noise_rad: f32,
+    /// Held-out episodes training scores the run's policies on at its end (`score.json`,
+    /// [`crate::score`]: the selected, final and last snapshots' policies, this many episodes
+    /// each); 0 leaves the scoring to `vge score`. Left out of the canonical TOML at its
+    /// default, so that stored configs keep their hashes.
+    #[serde(skip_serializing_if = "is_default_score_episodes")]
+    pub score_episodes: usize,
+}
+
+fn is_default_score_episodes(v: &usize) -> bool {
+    *v == crate::score::DEFAULT_EPISODES
+}
+
+impl Default for RunSection {
+    fn default() -> Self {
+        Self {
+            log_interval: 10_000,
+            checkpoint_interval: 200_000,
+            save_replay: true,
+            eval_interval: 0,
+            eval_episodes: crate::eval::SUCCESS_TEST_EPISODES,
+            eval_episode_s: crate::eval::SUCCESS_TEST_EPISODE_S,
+            eval_grasp_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
+            score_episodes: crate::score::DEFAULT_EPISODES,
+        }
+    }
+}
+
+/// One experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub name: String,
+    pub seed: u64,
+    /// Env transitions to train for (all envs together).
+    pub total_steps: u64,
+    pub num_envs: usize,
+    pub method: Method,
+    /// Required for fge, vge, vge-bc; spelt as [`ControllerKind::name`] gives it (`"fg"`).
+    pub controller: Option<ControllerKind>,
+    pub algorithm: AlgorithmName,
+    /// A run folder whose checkpoint's networks start this run: the actor, the critics,
+    /// their targets and the observation normaliser they carry (a second curriculum stage,
+    /// e.g. fine-tuning a gait under domain randomisation). The optimiser, the replay buffer
+    /// and the counters start fresh; the warm-up acts with the loaded actor instead of
+    /// uniform random actions, and the normaliser is kept rather than refitted. The
+    /// algorithm and network sizes must match the folder's. A relative path is taken from
+    /// the working directory; `{seed}` in it becomes the run's seed, so that a sweep
+    /// fine-tunes each stage-1 seed into the same seed of stage 2. Only read when a run
+    /// starts, not on `--resume`.
+    pub init_from: Option<PathBuf>,
+    pub env: EnvSection,
+    pub sac: SacSection,
+    pub td3: Td3Section,
+    pub vge: VgeSection,
+    pub fge: FgeSection,
+    pub bc: BcSection,
+    pub run: RunSection,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            name: "run".to_owned(),
+            seed: 0,
+            total_steps: 6_000_000,
+            num_envs: 8,
+            method: Method::Vge,
+            controller: Some(ControllerKind::Fg),
+            algorithm: AlgorithmName::Sac,
+            init_from: None,
+            env: EnvSection::default(),
+            sac: SacSection::default(),
+            td3: Td3Section::default(),
+            vge: VgeSection::default(),
+            fge: FgeSection::default(),
+            bc: BcSection::default(),
+            run: RunSection::default(),
+        }
+    }
+}
+
+/// The most memory a run may hold by [`Config::memory_estimate`], whatever the machine: 1 TiB.
+/// Beyond it a size is a typo (`sac.buffer_size = 1000000000000` asks for 656 TB).
+pub const MAX_RUN_BYTES: u64 = 1 << 40;
+
+/// One env of the training vector with its controller, generator and bookkeeping, besides its
+/// episode's rewards: a generous bound on the measured growth of `vge train`'s resident memory
+/// per env.
+const ENV_BYTES: u64 = 4 << 20;
+
+/// One evaluation episode's outcome as an evaluation keeps it.
+const EVAL_EPISODE_BYTES: u64 = 256;
+
+/// `bytes` in decimal units, 3 significant digits (`656 MB`, `1.10 TB`).
+fn bytes_text(bytes: u64) -> String {
+    let units = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut x = bytes as f64;
+    let mut unit = 0;
+    while x >= 1000.0 && unit + 1 < units.len() {
+        x /= 1000.0;
+        unit += 1;
+    }
+    match x {
+        _ if unit == 0 => format!("{bytes} B"),
+        x if x >= 100.0 => format!("{x:.0} {}", units[unit]),
+        x if x >= 10.0 => format!("{x:.1} {}", units[unit]),
+        x => format!("{x:.2} {}", units[unit]),
+    }
+}
+
+/// `MemTotal` of `/proc/meminfo`, in bytes (None where it cannot be read: not Linux).
+fn machine_memory_bytes() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.trim_start_matches("MemTotal:").trim().trim_end_matches("kB").trim().parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+fn invalid(msg: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid(msg.into())
+}
+
+impl Config {
+    /// Parses TOML text (no overrides).
+    pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
+        parse_with_overrides(text, "<string>", &[])
+    }
+
+    /// The canonical TOML of this configuration (what a run directory stores).
+    pub fn to_toml_string(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| invalid(format!("cannot serialise: {e}")))
+    }
+
+    /// FNV-1a 64 of the canonical TOML, as 16 hex digits.
+    pub fn hash_hex(&self) -> String {
+        let text = self.to_toml_string().unwrap_or_default();
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in text.bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        format!("{h:016x}")
+    }
+
+    /// The run folder [`Self::init_from`] names, `{seed}` replaced by this run's seed.
+    pub fn init_from_dir(&self) -> Option<PathBuf> {
+        let path = self.init_from.as_ref()?;
+        Some(PathBuf::from(path.to_string_lossy().replace("{seed}", &self.seed.to_string())))
+    }
+
+    /// CS's configuration on `env`: its trajectory is H = `vge.horizon` steps long, the
+    /// paper's one H (see [`VgeSection::horizon`]).
+    pub fn cs_config(&self, env: &EnvConfig) -> CsConfig {
+        CsConfig { horizon_steps: self.vge.horizon, ..CsConfig::for_env(env) }
+    }
+
+    /// Checks every field; the message names the key. Every float first (finite, whatever the
+    /// field), then the sections in file order (the top-level keys, then env, sac, td3, vge,
+    /// fge, bc, run), each by its own validator, and last the memory the sizes add up to
+    /// ([`Self::memory_estimate`], at most [`MAX_RUN_BYTES`]).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_finite()?;
+        self.validate_top_level()?;
+        self.env.validate()?;
+        self.sac.validate()?;
+        if self.algorithm == AlgorithmName::Td3 {
+            self.td3.validate()?;
+            if self.sac.alpha != Alpha::Fixed(0.0) {
+                return Err(invalid(
+                    "sac.alpha is SAC's entropy coefficient: leave it at 0 with algorithm = \"td3\"",
+                ));
+            }
+        }
+        if self.env.noise_ramp_steps > 0 && self.init_from.is_none() && self.sac.normalize_obs {
+            return Err(invalid(
+                "env.noise_ramp_steps ramps the sensor noise up from 0, but this run fits its observation \
+                 normaliser to the warm-up's data, which would hold no noise (a policy normalised \
+                 without normal noise kept 8% of its return at 50% error): use it with init_from, \
+                 whose normaliser is kept, or ramp only the force (env.perturb_ramp_steps)",
+            ));
+        }
+        self.vge.validate()?;
+        self.fge.validate()?;
+        self.bc.validate()?;
+        self.run.validate()?;
+        self.validate_sizes()
+    }
+
+    /// Refuses a NaN or infinite float anywhere in the config, naming its key. The floats are
+    /// found in the config's TOML form, not listed here, so that every float field (one added
+    /// later too) is covered.
+    fn validate_finite(&self) -> Result<(), ConfigError> {
+        fn first_non_finite(key: String, value: &toml::Value) -> Option<(String, f64)> {
+            match value {
+                toml::Value::Float(x) if !x.is_finite() => Some((key, *x)),
+                toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
+                    first_non_finite(if key.is_empty() { k.clone() } else { format!("{key}.{k}") }, v)
+                }),
+                toml::Value::Array(a) => {
+                    a.iter().enumerate().find_map(|(i, v)| first_non_finite(format!("{key}[{i}]"), v))
+                }
+                _ => None,
+            }
+        }
+        let value = toml::Value::try_from(self).map_err(|e| invalid(format!("cannot serialise: {e}")))?;
+        match first_non_finite(String::new(), &value) {
+            Some((key, x)) => Err(invalid(format!("{key} must be a finite number, got {x}"))),
+            None => Ok(()),
+        }
+    }
+
+    /// The largest allocations of a training run of this config, each estimated from the
+    /// sizes that set it: (the keys, bytes). What [`Self::validate`] and
+    /// [`Self::check_fits_memory`] bound before anything is allocated.
+    pub fn memory_estimate(&self) -> Vec<(&'static str, u64)> {
+        let (obs, act) = (vge_sim::OBS_DIM as u64, vge_sim::NUM_JOINTS as u64);
+        // A transition: obs, next obs, action, BC action, and 4 scalars, as f32.
+        let replay = (self.sac.buffer_size as u64).saturating_mul((2 * obs + 2 * act + 4) * 4);
+        // Each env, and its episode's rewards (kept for the Monte-Carlo returns).
+        let per_env = ENV_BYTES.saturating_add((self.env.episode_length as u64).saturating_mul(4));
+        let envs = (self.num_envs as u64).saturating_mul(per_env);
+        // The actor and twin critics with their targets, Adam's moments and gradients (about
+        // 12 copies of the parameters), and a minibatch's activations through them (about 24
+        // f32 per unit and row: forward and backward passes of five networks).
+        let widths: Vec<u64> = std::iter::once(obs + act)
+            .chain(self.sac.hidden.iter().map(|&h| h.max(0) as u64))
+            .chain(std::iter::once(act))
+            .collect();
+        let params = widths.windows(2).fold(0u64, |sum, w| sum.saturating_add(w[0].saturating_mul(w[1])));
+        let units = widths.iter().fold(0u64, |sum, &w| sum.saturating_add(w));
+        let nets = params
+            .saturating_mul(12 * 4)
+            .saturating_add((self.sac.batch as u64).saturating_mul(units).saturating_mul(24 * 4));
+        let eval =
+            (self.run.eval_episodes.max(self.run.score_episodes) as u64).saturating_mul(EVAL_EPISODE_BYTES);
+        vec![
+            ("sac.buffer_size", replay),
+            ("num_envs, env.episode_length", envs),
+            ("sac.hidden, sac.batch", nets),
+            ("run.eval_episodes, run.score_episodes", eval),
+        ]
+    }
+
+    /// [`Self::memory_estimate`] as one sentence: the total and its parts.
+    fn memory_text(&self) -> (u64, String) {
+        let parts = self.memory_estimate();
+        let total = parts.iter().fold(0u64, |sum, (_, b)| sum.saturating_add(*b));
+        let shown: Vec<String> = parts.iter().map(|(k, b)| format!("{k}: {}", bytes_text(*b))).collect();
+        (total, format!("about {} ({})", bytes_text(total), shown.join(", ")))
+    }
+
+    /// The sizes against [`MAX_RUN_BYTES`], independent of the machine the config is read on
+    /// (a login node checks what a cluster's nodes will run).
+    fn validate_sizes(&self) -> Result<(), ConfigError> {
+        let (total, text) = self.memory_text();
+        if total > MAX_RUN_BYTES {
+            return Err(invalid(format!(
+                "this run would hold {text}, more than the {} vge allows a run: a size is wrong",
+                bytes_text(MAX_RUN_BYTES)
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuses a run whose [`Self::memory_estimate`] exceeds this machine's memory (`MemTotal`
+    /// of `/proc/meminfo`), before anything is allocated: an allocation it cannot hold aborts
+    /// the process. Where `/proc/meminfo` cannot be read, [`Self::validate`]'s fixed bound is
+    /// all there is.
+    pub fn check_fits_memory(&self) -> Result<(), ConfigError> {
+        let Some(machine) = machine_memory_bytes() else { return Ok(()) };
+        let (total, text) = self.memory_text();
+        if total > machine {
+            return Err(invalid(format!(
+                "this run would hold {text}, more than this machine's {} of memory (MemTotal in \
+                 /proc/meminfo): lower the sizes",
+                bytes_text(machine)
+            )));
+        }
+        Ok(())
+    }
+
+    /// The keys outside any section.
+    fn validate_top_level(&self) -> Result<(), ConfigError> {
+        if self.num_envs == 0 {
+            return Err(invalid("num_envs must be at least 1"));
+        }
+        if self.total_steps == 0 {
+            return Err(invalid("total_steps must be at least 1"));
+        }
+        if self.method.queries_controller() && self.controller.is_none() {
+            return Err(invalid(format!(
+                "method {:?} queries a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
+                self.method.name()
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl EnvSection {
+    /// `[env]`: every object's sim configuration must be valid.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.objects.is_empty() {
+            return Err(invalid("env.objects must name at least one object"));
+        }
+        // Checked here, before the sim's own check, so the message names the key the user wrote.
+        for (key, n) in [
+            ("env.terminate_below_contacts", self.terminate_below_contacts),
+            ("env.reward_min_contacts", self.reward_min_contacts),
+        ] {
+            if n > NUM_FINGERS {
+                return Err(invalid(format!("{key} = {n}: the hand has {NUM_FINGERS} fingertips")));
+            }
+        }
+        if self.perturb_force_std_n > 0.0 && self.perturb_force_magnitude_n > 0.0 {
+            return Err(invalid(
+                "env.perturb_force_std_n and env.perturb_force_magnitude_n are two ways to draw the \
+                 force on the object: set one",
+            ));
+        }
+        // The task variants, named here before the sim's own check sees them unnamed.
+        for (key, value, zero_ok) in [
+            ("env.object_mass_kg", self.object_mass_kg, false),
+            ("env.object_friction", self.object_friction, true),
+            ("env.motor_torque_cap_nm", self.motor_torque_cap_nm, false),
+            ("env.motor_stiffness_nm_per_rad", self.motor_stiffness_nm_per_rad, false),
+        ] {
+            if let Some(v) = value
+                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
+            {
+                let need = if zero_ok { ">= 0" } else { "> 0" };
+                return Err(invalid(format!("{key} must be a finite number {need}, got {v}")));
+            }
+        }
+        for i in 0..self.objects.len() {
+            self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
+        }
+        if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
+            return Err(invalid("env.max_action_rad must be > 0"));
+        }
+        if (self.perturb_ramp_steps > 0 || self.perturb_ramp_start > 0)
+            && self.perturb_force_std_n == 0.0
+            && self.perturb_force_magnitude_n == 0.0
+        {
+            return Err(invalid(
+                "env.perturb_ramp_steps / env.perturb_ramp_start ramp the force on the object, but \
+                 env.perturb_force_std_n and env.perturb_force_magnitude_n are 0: set the force to ramp to",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl SacSection {
+    /// `[sac]` (also the sizes, rates and buffer of TD3).
+    fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_hidden()?;
+        for (key, v) in
+            [("sac.actor_lr", self.actor_lr), ("sac.critic_lr", self.critic_lr), ("sac.utd", self.utd)]
+        {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(invalid(format!("{key} must be a positive number, got {v}")));
+            }
+        }
+        if !(self.gamma > 0.0 && self.gamma <= 1.0) {
+            return Err(invalid(format!("sac.gamma must be in (0, 1], got {}", self.gamma)));
+        }
+        if !(self.tau > 0.0 && self.tau <= 1.0) {
+            return Err(invalid(format!("sac.tau must be in (0, 1], got {}", self.tau)));
+        }
+        match self.alpha {
+            Alpha::Fixed(a) if !(a.is_finite() && a >= 0.0) => {
+                return Err(invalid(format!("sac.alpha must be >= 0 or \"auto\", got {a}")));
+            }
+            Alpha::Named(_) if !(self.initial_alpha.is_finite() && self.initial_alpha > 0.0) => {
+                return Err(invalid("sac.initial_alpha must be > 0 with alpha = \"auto\""));
+            }
+            _ => {}
+        }
+        if self.batch == 0 {
+            return Err(invalid("sac.batch must be at least 1"));
+        }
+        if self.buffer_size < self.batch {
+            return Err(invalid(format!(
+                "sac.buffer_size {} is smaller than sac.batch {}",
+                self.buffer_size, self.batch
+            )));
+        }
+        if self.threads < 0 {
+            return Err(invalid("sac.threads must be >= 0"));
+        }
+        Ok(())
+    }
+
+    /// `sac.hidden`: positive widths, and an actor the deployment side can load (refused
+    /// before hours of training).
+    fn validate_hidden(&self) -> Result<(), ConfigError> {
+        use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
+        if self.hidden.is_empty() || self.hidden.iter().any(|&h| h <= 0) {
+            return Err(invalid(format!(
+                "sac.hidden must be non-empty positive widths, got {:?}",
+                self.hidden
+            )));
+        }
+        if self.hidden.len() + 1 > HAND_MAX_LAYERS || self.hidden.iter().any(|&h| h as usize > HAND_MAX_WIDTH)
+        {
+            return Err(invalid(format!(
+                "sac.hidden = {:?}: vge-bridge and the firmware run actors of at most {} hidden layers of \
+                 width <= {HAND_MAX_WIDTH} (vge_runtime::HandPolicy)",
+                self.hidden,
+                HAND_MAX_LAYERS - 1
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Td3Section {
+    /// `[td3]` (checked only with `algorithm = "td3"`).
+    fn validate(&self) -> Result<(), ConfigError> {
+        for (key, v) in [
+            ("td3.explore_std", self.explore_std),
+            ("td3.target_noise_std", self.target_noise_std),
+            ("td3.target_noise_clip", self.target_noise_clip),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(format!("{key} must be finite and >= 0, got {v}")));
+            }
+        }
+        if self.policy_delay == 0 {
+            return Err(invalid("td3.policy_delay must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+impl VgeSection {
+    /// `[vge]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.horizon == 0 {
+            return Err(invalid("vge.horizon (H) must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+impl FgeSection {
+    /// `[fge]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        for (key, p) in [("fge.p_start", self.p_start), ("fge.p_end", self.p_end)] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(invalid(format!("{key} must be a probability, got {p}")));
+            }
+        }
+        if self.decay_end < self.decay_start {
+            return Err(invalid("fge.decay_end must not be before fge.decay_start"));
+        }
+        Ok(())
+    }
+}
+
+impl BcSection {
+    /// `[bc]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.beta_start.is_finite() && self.beta_start >= 0.0) {
+            return Err(invalid(format!("bc.beta_start must be >= 0, got {}", self.beta_start)));
+        }
+        Ok(())
+    }
+}
+
+impl RunSection {
+    /// `[run]`.
+    fn validate(&self) -> Result<(), ConfigError> {
+        if self.log_interval == 0 {
+            return Err(invalid("run.log_interval must be at least 1"));
+        }
+        if self.eval_episode_s <= 0.0 {
+            return Err(invalid(format!("run.eval_episode_s must be > 0, got {}", self.eval_episode_s)));
+        }
+        Ok(())
+    }
+}
+
+/// Reads `path`, applies `overrides` (`"sac.batch=128"`), deserialises and validates.
+pub fn load_config(path: &Path, overrides: &[String]) -> Result<Config, ConfigError> {
+    let shown = path.display().to_string();
+    let text =
+        std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: shown.clone(), source })?;
+    let config = parse_with_overrides(&text, &shown, overrides)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// Keys whose default changed while runs were stored without them: resuming such a run
+/// would switch it to the new default mid-run. (section, key, what to do).
+const CHANGED_DEFAULTS: [(&str, &str, &str); 1] = [(
+    "env",
+    "charge_reverse_rotation",
+    "backward turns cost reward by default since 8e9ed9f, and this run was trained on the \
+     paper's reward, which pays only while >= 3 fingertips touch: add \
+     `charge_reverse_rotation = false` under [env] to continue it as it was",
+)];
+
+/// Refuses a stored run's config (`text`, from `origin`) that lacks a key whose default
+/// has changed since ([`CHANGED_DEFAULTS`]): resumed, the run would silently train on.
+pub fn check_resumable(text: &str, origin: &str) -> Result<(), ConfigError> {
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
+        path: origin.to_owned(),
+        message: e.to_string(),
+    })?;
+    for (section, key, advice) in CHANGED_DEFAULTS {
+        let present = table.get(section).and_then(|s| s.as_table()).is_some_and(|s| s.contains_key(key));
+        if !present {
+            return Err(invalid(format!("{origin} predates {section}.{key}: {advice}")));
+        }
+    }
+    Ok(())
+}
+
+/// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
+pub fn parse_with_overrides(text: &str, origin: &str, overrides: &[String]) -> Result<Config, ConfigError> {
+    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
+        path: origin.to_owned(),
+        message: e.to_string(),
+    })?;
+    for o in overrides {
+        apply_override_table(&mut table, o)?;
+    }
+    Config::deserialize(toml::Value::Table(table))
+        .map_err(|e| ConfigError::Parse { path: origin.to_owned(), message: e.to_string() })
+}
+
+/// Applies one `key.path=value` override to a config (through its TOML form, so that the
+/// value is parsed exactly as in a file), then re-validates the field types.
+pub fn apply_override(config: &mut Config, assignment: &str) -> Result<(), ConfigError> {
+    let value = toml::Value::try_from(&*config).map_err(|e| invalid(format!("cannot serialise: {e}")))?;
+    let toml::Value::Table(mut table) = value else {
+        return Err(invalid("config is not a table"));
+    };
+    apply_override_table(&mut table, assignment)?;
+    *config = Config::deserialize(toml::Value::Table(table))
+        .map_err(|e| ConfigError::Override { key: assignment.to_owned(), message: e.to_string() })?;
+    Ok(())
+}
+
+/// The value text as TOML (`128`, `"fg"`, `[256, 256]`, `true`); a bare word that is not
+/// valid TOML is taken as a string (`method=vge`).
+fn parse_value(text: &str) -> toml::Value {
+    let doc = format!("v = {text}");
+    match doc.parse::<toml::Table>() {
+        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(text.to_owned())),
+        Err(_) => toml::Value::String(text.to_owned()),
+    }
+}
+
+fn apply_override_table(table: &mut toml::Table, assignment: &str) -> Result<(), ConfigError> {
+    let (key, value) =
+        assignment.split_once('=').ok_or_else(|| ConfigError::OverrideSyntax(assignment.to_owned()))?;
+    let key = key.trim();
+    let parts: Vec<&str> = key.split('.').collect();
+    if key.is_empty() || parts.iter().any(|p| p.is_empty()) {
+        return Err(ConfigError::OverrideSyntax(assignment.to_owned()));
+    }
+    let err = |message: String| ConfigError::Override { key: key.to_owned(), message };
+    let mut node = table;
+    for part in &parts[..parts.len() - 1] {
+        let entry = node.entry((*part).to_owned()).or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        node = entry.as_table_mut().ok_or_else(|| err(format!("{part:?} is not a table")))?;
+    }
+    let last = parts[parts.len() - 1];
+    node.insert(last.to_owned(), parse_value(value.trim()));
+    Ok(())
+}

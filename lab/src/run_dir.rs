@@ -1,0 +1,167 @@
+//! A run folder's layout: every file name a run writes or a tool reads, in one place.
+//!
+//! `vge train` writes these (vge-trainer's `train` module says when and how each is made
+//! crash-safe); `vge score`, `vge plot`, `vge sweep` and the success tests read them. A
+//! [`RunDir`] is a path with one method per file, so no other module spells a file name.
+
+use std::path::{Path, PathBuf};
+
+/// The resolved configuration the run trained with.
+pub const CONFIG: &str = "config.toml";
+/// One row every `run.log_interval` env steps.
+pub const METRICS: &str = "metrics.csv";
+/// The periodic success tests (the validation episodes).
+pub const EVAL: &str = "eval.csv";
+/// TensorBoard event files, one per session.
+pub const TENSORBOARD: &str = "tensorboard";
+/// The actor exported at each periodic evaluation, `policy-<step>.vgep`.
+pub const SNAPSHOTS: &str = "snapshots";
+/// The final actor, written last but one.
+pub const POLICY: &str = "policy.vgep";
+/// The final actor's success test, written last: a run is finished when it and [`POLICY`]
+/// read back whole.
+pub const FINAL_EVAL: &str = "final-eval.json";
+/// The selected snapshot (best validation success) and its test on held-out episodes.
+pub const POLICY_BEST: &str = "policy-best.vgep";
+pub const BEST_EVAL: &str = "best-eval.json";
+/// `vge score`'s held-out scores of the selected, final and last snapshots' policies.
+pub const SCORE: &str = "score.json";
+/// Held by the one process writing the folder.
+pub const LOCK: &str = "vge.lock";
+/// The checkpoint folder.
+pub const CHECKPOINT: &str = "checkpoint";
+/// Where a checkpoint is written before it is renamed to [`CHECKPOINT`].
+pub const CHECKPOINT_TMP: &str = "checkpoint.tmp";
+/// The previous checkpoint while a save swaps the folders.
+pub const CHECKPOINT_OLD: &str = "checkpoint.old";
+/// The training loop's counters and generator, inside a checkpoint.
+pub const CHECKPOINT_STATE: &str = "state.toml";
+
+/// What a run writes into its folder from its first moments on, the checkpoint's folders
+/// included: a folder holding any of them holds a run, which `vge train --config` must not
+/// start over.
+pub const RUN_FILES: [&str; 10] = [
+    CONFIG,
+    METRICS,
+    EVAL,
+    TENSORBOARD,
+    CHECKPOINT,
+    CHECKPOINT_OLD,
+    CHECKPOINT_TMP,
+    SNAPSHOTS,
+    POLICY,
+    FINAL_EVAL,
+];
+
+/// A run folder: the path of each of its files.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RunDir {
+    root: PathBuf,
+}
+
+impl RunDir {
+    pub fn new(root: impl Into<PathBuf>) -> Self {
+        Self { root: root.into() }
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    pub fn config(&self) -> PathBuf {
+        self.root.join(CONFIG)
+    }
+
+    pub fn metrics(&self) -> PathBuf {
+        self.root.join(METRICS)
+    }
+
+    pub fn eval_csv(&self) -> PathBuf {
+        self.root.join(EVAL)
+    }
+
+    pub fn tensorboard(&self) -> PathBuf {
+        self.root.join(TENSORBOARD)
+    }
+
+    pub fn snapshots(&self) -> PathBuf {
+        self.root.join(SNAPSHOTS)
+    }
+
+    /// The actor exported at the periodic evaluation of env step `step`.
+    pub fn snapshot(&self, step: u64) -> PathBuf {
+        self.snapshots().join(format!("policy-{step}.vgep"))
+    }
+
+    pub fn policy(&self) -> PathBuf {
+        self.root.join(POLICY)
+    }
+
+    pub fn final_eval(&self) -> PathBuf {
+        self.root.join(FINAL_EVAL)
+    }
+
+    pub fn policy_best(&self) -> PathBuf {
+        self.root.join(POLICY_BEST)
+    }
+
+    pub fn best_eval(&self) -> PathBuf {
+        self.root.join(BEST_EVAL)
+    }
+
+    pub fn score(&self) -> PathBuf {
+        self.root.join(SCORE)
+    }
+
+    pub fn lock(&self) -> PathBuf {
+        self.root.join(LOCK)
+    }
+
+    pub fn checkpoint(&self) -> PathBuf {
+        self.root.join(CHECKPOINT)
+    }
+
+    pub fn checkpoint_tmp(&self) -> PathBuf {
+        self.root.join(CHECKPOINT_TMP)
+    }
+
+    pub fn checkpoint_old(&self) -> PathBuf {
+        self.root.join(CHECKPOINT_OLD)
+    }
+
+    /// The checkpoint folder a resume reads: `checkpoint/` when it exists (whatever state it
+    /// is in), else `checkpoint.old/` when that exists (a save killed between its two
+    /// renames), else `None`.
+    pub fn resume_checkpoint(&self) -> Option<PathBuf> {
+        let dir = self.checkpoint();
+        if dir.symlink_metadata().is_ok() {
+            return Some(dir);
+        }
+        let old = self.checkpoint_old();
+        old.symlink_metadata().is_ok().then_some(old)
+    }
+
+    /// Which of [`RUN_FILES`] the folder holds.
+    pub fn run_files_present(&self) -> Vec<&'static str> {
+        RUN_FILES.iter().copied().filter(|name| self.root.join(name).symlink_metadata().is_ok()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_resume_reads_the_checkpoint_then_the_previous_one() {
+        let tmp = std::env::temp_dir().join(format!("vge-run-dir-{}", std::process::id()));
+        let run = RunDir::new(&tmp);
+        std::fs::create_dir_all(run.checkpoint_old()).expect("mkdir");
+        assert_eq!(run.resume_checkpoint(), Some(run.checkpoint_old()));
+        std::fs::create_dir_all(run.checkpoint()).expect("mkdir");
+        assert_eq!(run.resume_checkpoint(), Some(run.checkpoint()));
+        assert_eq!(run.run_files_present(), vec![CHECKPOINT, CHECKPOINT_OLD]);
+        std::fs::remove_dir_all(&tmp).expect("clean up");
+        assert_eq!(run.resume_checkpoint(), None);
+        assert_eq!(run.snapshot(50_000), tmp.join("snapshots/policy-50000.vgep"));
+    }
+}

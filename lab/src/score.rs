@@ -1,0 +1,478 @@
+//! A run's score (`vge score`, and training at its end): its policies on many held-out
+//! episodes, so that runs can be aggregated with confidence intervals ([`crate::stats`]).
+//!
+//! A finished run folder is scored on [`DEFAULT_EPISODES`] (or `--episodes N`) episodes of
+//! its own success test (its config's task without the disturbances it may train with,
+//! `run.eval_episode_s` long, grasps randomised by `run.eval_grasp_noise_rad`: 30 s and
+//! 0.02 rad in every stored config), from env seeds [`HELD_OUT_SEED`] + k. Those seeds are
+//! the same for every run (so runs meet the same episodes) and apart from the validation and
+//! test episodes training drew (refused if they ever met; [`check_held_out`]), so nothing
+//! the run selected on is reused. Three policies are scored on them:
+//!
+//! - `selected`: the run's own model selection, `policy-best.vgep` at `best-eval.json`'s
+//!   `selected_step` (null for a run without periodic snapshots, which has no selection);
+//! - `final`: `policy.vgep`, the paper's rule (its step: `final-eval.json`'s `env_steps`);
+//! - `last_snapshots`: where the last [`LAST_SNAPSHOTS`] periodic snapshots (`snapshots/`,
+//!   the steps of the last rows of `eval.csv`) are all kept, the mean of their figures (and
+//!   each one's), a less noisy view of where the run ended than one policy.
+//!
+//! Written to `DIR/score.json` whole or not at all (temporary file and rename). A run whose
+//! score.json already holds the same definition, episodes, seed and policy files (their
+//! CRC-32) is skipped. An unfinished run (no `final-eval.json`) is refused and nothing is
+//! written; a missing, damaged or other-layout policy file fails naming the file.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use vge_sim::{EnvConfig, NUM_JOINTS, OBS_DIM};
+
+use crate::config::Config;
+use crate::eval::{EpisodeOutcome, EvalError, EvalReport};
+
+/// The score's file in a run folder.
+pub const SCORE_FILE: &str = crate::run_dir::SCORE;
+/// What a score means; a different definition is scored again, never compared.
+pub const DEFINITION: &str = "held-out success test v1";
+/// Episodes per policy by default (and at the end of training).
+pub const DEFAULT_EPISODES: usize = 100;
+/// Env seed of the first held-out episode (episode k: this + k), 2^52: far from the seeds
+/// training's validation and test episodes start at for any seed below about 4.5e9.
+pub const HELD_OUT_SEED: u64 = 1 << 52;
+/// Periodic snapshots whose mean is scored beside the selected and final policies.
+pub const LAST_SNAPSHOTS: usize = 3;
+
+#[derive(Debug, Error)]
+pub enum ScoreError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{dir}: not a finished run ({what}); nothing written")]
+    Unfinished { dir: PathBuf, what: String },
+    #[error("{path}: {message}")]
+    RunFile { path: PathBuf, message: String },
+    #[error("policy file {path}: {message}")]
+    Policy { path: PathBuf, message: String },
+    #[error("scoring {path}: {source}")]
+    Eval { path: PathBuf, source: EvalError },
+    #[error(
+        "held-out episodes {first}..{end} meet the run's {set} episodes from seed {theirs} (run seed {seed}): \
+         choose another --seed"
+    )]
+    Overlap { first: u64, end: u64, set: &'static str, theirs: u64, seed: u64 },
+    #[error("--episodes must be at least 1")]
+    NoEpisodes,
+}
+
+/// One policy's figures on the held-out episodes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PolicyScore {
+    /// The policy file, relative to the run folder.
+    pub file: String,
+    /// The env step it was exported at.
+    pub step: u64,
+    /// The file's CRC-32 (its format's checksum; a rescore is skipped only for the same files).
+    pub crc32: u32,
+    /// Share of episodes turned >= 2 pi about z without a drop.
+    pub success_rate: f64,
+    pub mean_return: f64,
+    pub drop_rate: f64,
+    pub mean_rotation_rad: f64,
+    pub mean_contact_switches: f64,
+}
+
+/// The last periodic snapshots: the mean of their figures, and each one's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SnapshotsScore {
+    pub success_rate: f64,
+    pub mean_return: f64,
+    pub drop_rate: f64,
+    pub mean_rotation_rad: f64,
+    pub mean_contact_switches: f64,
+    pub snapshots: Vec<PolicyScore>,
+}
+
+/// `score.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Score {
+    /// [`DEFINITION`].
+    pub definition: String,
+    /// Episodes per policy.
+    pub episodes: usize,
+    /// Env seed of the first episode (episode k: seed + k).
+    pub seed: u64,
+    pub episode_s: f32,
+    pub grasp_noise_rad: f32,
+    /// The run's model selection; None for a run without one.
+    pub selected: Option<PolicyScore>,
+    #[serde(rename = "final")]
+    pub final_policy: PolicyScore,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_snapshots: Option<SnapshotsScore>,
+}
+
+/// How to score.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ScoreOptions {
+    pub episodes: usize,
+    pub seed: u64,
+    /// Score again even when score.json holds this very score.
+    pub force: bool,
+}
+
+impl Default for ScoreOptions {
+    fn default() -> Self {
+        Self { episodes: DEFAULT_EPISODES, seed: HELD_OUT_SEED, force: false }
+    }
+}
+
+/// Where a long scoring is: episodes done of all policies of the run.
+#[derive(Debug, Clone, Copy)]
+pub struct ScoreProgress<'a> {
+    pub dir: &'a Path,
+    /// The policy file being scored, relative to the run folder.
+    pub file: &'a str,
+    pub done: usize,
+    pub total: usize,
+}
+
+/// What [`score_run`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ScoreOutcome {
+    /// Scored now and written.
+    Scored(Score),
+    /// score.json already held this score.
+    Skipped(Score),
+}
+
+/// Why a run's score lacks a part (for the caller to print).
+pub type Notes = Vec<String>;
+
+/// A policy file to score: its place, step and bytes.
+struct PlannedPolicy {
+    file: String,
+    step: u64,
+    bytes: Vec<u8>,
+}
+
+impl PlannedPolicy {
+    fn read(dir: &Path, file: &str, step: u64) -> Result<Self, ScoreError> {
+        let path = dir.join(file);
+        let bytes = std::fs::read(&path).map_err(|e| ScoreError::Policy {
+            path: path.clone(),
+            message: if e.kind() == std::io::ErrorKind::NotFound {
+                "missing".to_owned()
+            } else {
+                e.to_string()
+            },
+        })?;
+        check_policy(&path, &bytes)?;
+        Ok(Self { file: file.to_owned(), step, bytes })
+    }
+
+    /// The file's CRC-32, as its format stores it: of everything before the 4-byte trailer,
+    /// which holds that CRC (so the CRC of a whole valid file would be the same constant for
+    /// every file). [`check_policy`] has verified the trailer.
+    fn crc32(&self) -> u32 {
+        crc32fast::hash(&self.bytes[..self.bytes.len().saturating_sub(4)])
+    }
+}
+
+/// A policy file the evaluator can run on the hand: valid (framing, checksum, fields) and
+/// of the hand's observation and action layouts. Checked before any episode runs, so that a
+/// bad file fails at once, not after the others' episodes.
+fn check_policy(path: &Path, bytes: &[u8]) -> Result<(), ScoreError> {
+    let bad = |message: String| ScoreError::Policy { path: path.to_owned(), message };
+    let info =
+        vge_runtime::policy::inspect(bytes).map_err(|e| bad(format!("not a valid policy file: {e}")))?;
+    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
+        return Err(bad(format!(
+            "another layout: it maps {} observations to {} actions, the hand needs {OBS_DIM} -> {NUM_JOINTS}",
+            info.obs_dim, info.act_dim
+        )));
+    }
+    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
+        .map_err(|e| bad(format!("another observation layout: {e}")))
+}
+
+/// The fields of `best-eval.json` and `final-eval.json` the score reads.
+#[derive(Deserialize)]
+struct BestEvalStep {
+    selected_step: u64,
+}
+#[derive(Deserialize)]
+struct FinalEvalSteps {
+    env_steps: u64,
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ScoreError> {
+    let text =
+        std::fs::read_to_string(path).map_err(|source| ScoreError::Io { path: path.to_owned(), source })?;
+    serde_json::from_str(&text)
+        .map_err(|e| ScoreError::RunFile { path: path.to_owned(), message: e.to_string() })
+}
+
+/// The run's config (`DIR/config.toml`).
+fn run_config(dir: &Path) -> Result<Config, ScoreError> {
+    let path = dir.join(crate::run_dir::CONFIG);
+    let text =
+        std::fs::read_to_string(&path).map_err(|source| ScoreError::Io { path: path.clone(), source })?;
+    let config = crate::config::parse_with_overrides(&text, &path.display().to_string(), &[])
+        .map_err(|e| ScoreError::RunFile { path: path.clone(), message: e.to_string() })?;
+    config.validate().map_err(|e| ScoreError::RunFile { path, message: e.to_string() })?;
+    Ok(config)
+}
+
+/// The env the run's policies are scored in: its success test's ([`crate::eval`]), the
+/// first env of its config without training disturbances.
+fn score_env(config: &Config) -> EnvConfig {
+    crate::eval::success_test_env(
+        &crate::eval::without_training_disturbances(&config.env.env_config(0)),
+        config.run.eval_episode_s,
+        config.run.eval_grasp_noise_rad,
+    )
+}
+
+/// Refuses held-out episodes that would meet the validation or test episodes training drew
+/// ([`crate::run_eval::EpisodeSet`], `run.eval_episodes` each).
+pub fn check_held_out(config: &Config, first: u64, episodes: usize) -> Result<(), ScoreError> {
+    let n = config.run.eval_episodes.max(1) as u64;
+    let end = first.saturating_add(episodes as u64);
+    for (episode_set, set) in crate::run_eval::EpisodeSet::ALL {
+        let theirs = episode_set.first_seed(config);
+        if first < theirs.saturating_add(n) && theirs < end {
+            return Err(ScoreError::Overlap { first, end, set, theirs, seed: config.seed });
+        }
+    }
+    Ok(())
+}
+
+/// The policies of a finished run to score: selected (if any), final, last snapshots (if
+/// all kept). Fails on an unfinished run and on a missing or bad policy file.
+fn plan(
+    dir: &Path,
+    notes: &mut Notes,
+) -> Result<(Option<PlannedPolicy>, PlannedPolicy, Vec<PlannedPolicy>), ScoreError> {
+    if !dir.join(crate::run_dir::CONFIG).is_file() {
+        return Err(ScoreError::RunFile {
+            path: dir.join(crate::run_dir::CONFIG),
+            message: "missing: not a run folder".to_owned(),
+        });
+    }
+    let final_eval = dir.join(crate::run_dir::FINAL_EVAL);
+    if !final_eval.is_file() {
+        return Err(ScoreError::Unfinished {
+            dir: dir.to_owned(),
+            what: "no final-eval.json: training has not ended (`vge train --resume DIR` finishes it)"
+                .to_owned(),
+        });
+    }
+    let final_step = read_json::<FinalEvalSteps>(&final_eval)?.env_steps;
+    let final_policy = PlannedPolicy::read(dir, crate::run_dir::POLICY, final_step)?;
+    let best_eval = dir.join(crate::run_dir::BEST_EVAL);
+    let selected = if best_eval.is_file() {
+        let step = read_json::<BestEvalStep>(&best_eval)?.selected_step;
+        Some(PlannedPolicy::read(dir, crate::run_dir::POLICY_BEST, step)?)
+    } else {
+        notes.push("no best-eval.json: the run has no model selection (no periodic snapshots)".to_owned());
+        None
+    };
+    let eval_csv = dir.join(crate::run_dir::EVAL);
+    let steps: Vec<u64> = if eval_csv.is_file() {
+        let columns = crate::plot::csv_columns(&eval_csv, &["step"])
+            .map_err(|e| ScoreError::RunFile { path: eval_csv.clone(), message: e.to_string() })?;
+        columns.into_iter().next().unwrap_or_default().into_iter().map(|s| s as u64).collect()
+    } else {
+        Vec::new()
+    };
+    let last = &steps[steps.len().saturating_sub(LAST_SNAPSHOTS)..];
+    let files: Vec<(String, u64)> = last.iter().map(|s| (format!("snapshots/policy-{s}.vgep"), *s)).collect();
+    let snapshots = if last.len() == LAST_SNAPSHOTS && files.iter().all(|(f, _)| dir.join(f).is_file()) {
+        files.iter().map(|(f, s)| PlannedPolicy::read(dir, f, *s)).collect::<Result<Vec<_>, _>>()?
+    } else {
+        notes.push(format!(
+            "the last {LAST_SNAPSHOTS} periodic snapshots are not all kept: no last_snapshots"
+        ));
+        Vec::new()
+    };
+    Ok((selected, final_policy, snapshots))
+}
+
+/// Whether `existing` is the score these options and files would give.
+fn same_score(
+    existing: &Score,
+    options: &ScoreOptions,
+    config: &Config,
+    policies: (&Option<PlannedPolicy>, &PlannedPolicy, &[PlannedPolicy]),
+) -> bool {
+    let (selected, final_policy, snapshots) = policies;
+    let same_file =
+        |s: &PolicyScore, p: &PlannedPolicy| s.file == p.file && s.step == p.step && s.crc32 == p.crc32();
+    existing.definition == DEFINITION
+        && existing.episodes == options.episodes
+        && existing.seed == options.seed
+        && existing.episode_s == config.run.eval_episode_s
+        && existing.grasp_noise_rad == config.run.eval_grasp_noise_rad
+        && match (&existing.selected, selected) {
+            (Some(s), Some(p)) => same_file(s, p),
+            (None, None) => true,
+            _ => false,
+        }
+        && same_file(&existing.final_policy, final_policy)
+        && match &existing.last_snapshots {
+            Some(s) => {
+                s.snapshots.len() == snapshots.len()
+                    && s.snapshots.iter().zip(snapshots).all(|(s, p)| same_file(s, p))
+            }
+            None => snapshots.is_empty(),
+        }
+}
+
+/// `DIR/score.json`, if the run has one (an error if it cannot be read).
+pub fn read_score(dir: &Path) -> Result<Option<Score>, ScoreError> {
+    let path = dir.join(SCORE_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    read_json(&path).map(Some)
+}
+
+/// Scores the finished run in `dir` ([module docs](self)) and writes `DIR/score.json`,
+/// calling `progress` as episodes finish. Episodes run on rayon's current pool.
+pub fn score_run(
+    dir: &Path,
+    options: &ScoreOptions,
+    progress: &mut dyn FnMut(&ScoreProgress),
+) -> Result<(ScoreOutcome, Notes), ScoreError> {
+    if options.episodes == 0 {
+        return Err(ScoreError::NoEpisodes);
+    }
+    let config = run_config(dir)?;
+    let mut notes = Notes::new();
+    let (selected, final_policy, snapshots) = plan(dir, &mut notes)?;
+    check_held_out(&config, options.seed, options.episodes)?;
+    let env = score_env(&config);
+    if !options.force {
+        // A score.json that cannot be read is scored again (and replaced).
+        if let Ok(Some(existing)) = read_score(dir)
+            && same_score(&existing, options, &config, (&selected, &final_policy, &snapshots))
+        {
+            return Ok((ScoreOutcome::Skipped(existing), notes));
+        }
+    }
+    let all: Vec<&PlannedPolicy> = selected.iter().chain([&final_policy]).chain(&snapshots).collect();
+    let total = all.len() * options.episodes;
+    let mut scores = Vec::with_capacity(all.len());
+    for (k, p) in all.iter().enumerate() {
+        let done_before = k * options.episodes;
+        let report = run_policy(dir, p, &env, options, &mut |done| {
+            progress(&ScoreProgress { dir, file: &p.file, done: done_before + done, total });
+        })?;
+        scores.push(PolicyScore {
+            file: p.file.clone(),
+            step: p.step,
+            crc32: p.crc32(),
+            success_rate: report.success_rate,
+            mean_return: report.mean_return,
+            drop_rate: report.drop_rate,
+            mean_rotation_rad: report.mean_rotation_rad,
+            mean_contact_switches: report.mean_contact_switches,
+        });
+    }
+    let mut scores = scores.into_iter();
+    let selected = selected.as_ref().and_then(|_| scores.next());
+    let final_score = scores.next().ok_or_else(|| ScoreError::RunFile {
+        path: dir.join(crate::run_dir::POLICY),
+        message: "not scored".to_owned(),
+    })?;
+    let snapshot_scores: Vec<PolicyScore> = scores.collect();
+    let score = Score {
+        definition: DEFINITION.to_owned(),
+        episodes: options.episodes,
+        seed: options.seed,
+        episode_s: config.run.eval_episode_s,
+        grasp_noise_rad: config.run.eval_grasp_noise_rad,
+        selected,
+        final_policy: final_score,
+        last_snapshots: (!snapshot_scores.is_empty()).then(|| mean_of_snapshots(snapshot_scores)),
+    };
+    let path = dir.join(SCORE_FILE);
+    let text = serde_json::to_string_pretty(&score)
+        .map_err(|e| ScoreError::RunFile { path: path.clone(), message: e.to_string() })?;
+    write_whole(&path, format!("{text}\n").as_bytes()).map_err(|source| ScoreError::Io { path, source })?;
+    Ok((ScoreOutcome::Scored(score), notes))
+}
+
+/// Writes `bytes` to `path` whole or not at all: to `path.tmp`, synced, renamed into place
+/// (the same rule as the run folder's other files; a kill leaves the previous file).
+fn write_whole(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut name = path.file_name().map(std::ffi::OsStr::to_os_string).unwrap_or_default();
+    name.push(".tmp");
+    let tmp = path.with_file_name(name);
+    let mut file = std::fs::File::create(&tmp)?;
+    file.write_all(bytes)?;
+    file.sync_all()?;
+    std::fs::rename(&tmp, path)
+}
+
+fn mean_of_snapshots(snapshots: Vec<PolicyScore>) -> SnapshotsScore {
+    let n = snapshots.len() as f64;
+    let mean = |f: fn(&PolicyScore) -> f64| snapshots.iter().map(f).sum::<f64>() / n;
+    SnapshotsScore {
+        success_rate: mean(|s| s.success_rate),
+        mean_return: mean(|s| s.mean_return),
+        drop_rate: mean(|s| s.drop_rate),
+        mean_rotation_rad: mean(|s| s.mean_rotation_rad),
+        mean_contact_switches: mean(|s| s.mean_contact_switches),
+        snapshots,
+    }
+}
+
+/// The policy's episodes, a batch at a time (each a few episodes per thread) so that
+/// progress can be shown; the same episodes as one call would run.
+fn run_policy(
+    dir: &Path,
+    p: &PlannedPolicy,
+    env: &EnvConfig,
+    options: &ScoreOptions,
+    progress: &mut dyn FnMut(usize),
+) -> Result<EvalReport, ScoreError> {
+    let batch = (4 * rayon::current_num_threads()).clamp(10, 64);
+    let mut outcomes: Vec<EpisodeOutcome> = Vec::with_capacity(options.episodes);
+    while outcomes.len() < options.episodes {
+        let n = batch.min(options.episodes - outcomes.len());
+        let seed = options.seed.wrapping_add(outcomes.len() as u64);
+        let report = crate::eval::eval_policy_bytes(&p.bytes, env, n, seed)
+            .map_err(|source| ScoreError::Eval { path: dir.join(&p.file), source })?;
+        outcomes.extend(report.per_episode);
+        progress(outcomes.len());
+    }
+    Ok(crate::eval::summarise(&outcomes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn held_out_episodes_stay_apart_from_training_s_validation_and_test_episodes() {
+        let mut config = Config::default();
+        for seed in 0..100 {
+            config.seed = seed;
+            check_held_out(&config, HELD_OUT_SEED, 100_000).expect("apart");
+        }
+        config.seed = 2;
+        let validation = 2 * 1_000_003 + 0xe7a1;
+        assert!(matches!(
+            check_held_out(&config, validation - 5, 10),
+            Err(ScoreError::Overlap { set: "validation", .. })
+        ));
+        // Ends just before the validation episodes: apart.
+        check_held_out(&config, validation - 10, 10).expect("apart");
+        let test = 2 * 1_000_033 + 0x7e57;
+        assert!(matches!(
+            check_held_out(&config, test + 19, 1),
+            Err(ScoreError::Overlap { set: "test", .. })
+        ));
+    }
+}
