@@ -10,7 +10,9 @@ use tch::nn::VarStore;
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
 use vge_runtime::{Activation, PolicyError, WeightType};
 
-use crate::{ActorSpec, ExportError, ExportedActor, ExportedLayer, extract_actor};
+#[cfg(feature = "tch")]
+use crate::{ActorSpec, extract_actor};
+use crate::{ExportError, ExportedActor, ExportedLayer};
 
 /// Who made the policy, from what.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -129,7 +129,7 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
         Bench::Runtime { json, iters } => libtorch::runtime(json, iters),
         #[cfg(not(feature = "train"))]
         Bench::Update { .. } | Bench::Firmware { .. } | Bench::Runtime { .. } => {
-            Err(super::without_training("vge bench update, firmware and runtime (they compare with tch)"))
+            Err(super::without_training("vge bench update/firmware/runtime (they compare with tch)"))
         }
     }
 }

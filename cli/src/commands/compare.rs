@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-#[derive(Debug, Args)]
 /// Compare groups of scored runs the way the field reports them (rliable's statistics):
 /// per group the IQM and mean of the runs' held-out success (score.json) with 95%
 /// stratified bootstrap intervals, the probability that a run of one group beats a run
@@ -21,6 +20,7 @@ use clap::Args;
 /// Example:
 ///   vge compare fge=docs/results/table1/cube-fg-fge vge=docs/results/cube-fg-vge-seeds
 ///       --out cmp/ --pairs vge:fge
+#[derive(Debug, Args)]
 #[command(verbatim_doc_comment)]
 pub struct CompareArgs {
     /// Groups: NAME=DIR,DIR,...

@@ -6,13 +6,13 @@ use clap::Args;
 use vge_controllers::rollout::{self, ControllerKind, RolloutOptions};
 use vge_sim::ObjectShape;
 
-#[derive(Debug, Args)]
 /// Roll out one sub-skill controller alone on the simulated hand.
 ///
 /// IGM (in-grasp manipulation: contact-force QP + rotation), CS (contact switching: a
 /// detach/re-attach trajectory of one finger) or FG (both). Prints mean return,
 /// mean_rotation_rad (object rotation about z per episode), mean fingertip contacts,
 /// drops (episodes ended early) and the controller's cost per call.
+#[derive(Debug, Args)]
 pub struct ControllerArgs {
     #[arg(long, value_parser = parse_controller_kind)]
     kind: ControllerKind,

@@ -26,7 +26,6 @@ pub struct EpisodeArgs {
     pub grasp_noise_rad: f32,
 }
 
-#[derive(Debug, Args)]
 /// Evaluate a policy file on vge-runtime in the simulator (the success test): mean
 /// return, rotation, contact switches, drops and success rate.
 ///
@@ -34,6 +33,7 @@ pub struct EpisodeArgs {
 /// 20 episodes of 30 s from initial grasps randomised by +-0.02 rad; an episode succeeds
 /// when the object turns >= 2 pi about z without a drop, and a seed has learned when its
 /// policy succeeds in >= 50% of them. Episodes run side by side on all cores.
+#[derive(Debug, Args)]
 pub struct EvalArgs {
     /// The policy file (`DIR/policy.vgep` of a training run, or `vge export`'s output).
     #[arg(long, required_unless_present = "run")]

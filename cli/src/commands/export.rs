@@ -12,7 +12,6 @@ use vge_export::Provenance;
 #[cfg(feature = "train")]
 use vge_sim::EnvConfig;
 
-#[derive(Debug, Args)]
 /// Write a policy file (postcard, see docs/policy-format.md) from an actor.
 ///
 /// The file carries the actor's layers, the hand's observation and action layouts, the
@@ -22,6 +21,7 @@ use vge_sim::EnvConfig;
 /// `--format onnx` writes the same policy as one ONNX graph (opset 17) from the raw
 /// observation to the action instead (docs/onnx.md): normalisation, layers, tanh, action
 /// scale, with the layouts, control rate and provenance in its metadata_props.
+#[derive(Debug, Args)]
 #[command(group = clap::ArgGroup::new("source").required(true).args(["actor", "init", "policy"]))]
 pub struct ExportArgs {
     /// Actor variables saved by tch (`VarStore::save`, names `actor.l{i}`, `actor.mean`, ...).
@@ -123,8 +123,8 @@ fn export_onnx(args: &ExportArgs, vgep: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(feature = "train")]
 /// The policy file of a saved (`--actor`) or fresh (`--init`) actor.
+#[cfg(feature = "train")]
 fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::Result<Vec<u8>> {
     anyhow::ensure!(args.hidden.iter().all(|&h| h > 0), "--hidden widths must be positive");
     let env = EnvConfig::default();
@@ -160,5 +160,5 @@ fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::R
 /// Without libtorch there is no actor to export: only `--policy` works.
 #[cfg(not(feature = "train"))]
 fn export_actor(_: &ExportArgs, _: vge_export::WeightType) -> anyhow::Result<Vec<u8>> {
-    Err(super::without_training("vge export --actor or --init"))
+    Err(super::without_training("vge export --actor/--init"))
 }

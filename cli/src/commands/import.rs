@@ -8,7 +8,6 @@ use clap::Args;
 use vge_export::Provenance;
 use vge_sim::EnvConfig;
 
-#[derive(Debug, Args)]
 /// Import an MLP actor from an ONNX file (e.g. a Stable-Baselines3 actor exported with
 /// torch.onnx.export) as a policy file for the hand, for `vge eval`, `vge-bridge` and the
 /// firmware.
@@ -20,6 +19,7 @@ use vge_sim::EnvConfig;
 /// nothing then.
 ///
 /// Example: vge import --onnx sac_actor.onnx --out sac.vgep --action-scale hand
+#[derive(Debug, Args)]
 pub struct ImportArgs {
     /// The ONNX model of the actor.
     #[arg(long, value_name = "F.onnx")]

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-#[derive(Debug, Args)]
 /// Check a policy file and print what it holds: format version, dimensions, layers,
 /// parameter count, provenance, checksum status. Exits non-zero if it is not valid.
+#[derive(Debug, Args)]
 pub struct InspectArgs {
     /// The policy file.
     file: PathBuf,

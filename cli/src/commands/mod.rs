@@ -18,7 +18,7 @@ pub mod train;
 #[cfg(not(feature = "train"))]
 pub(crate) fn without_training(what: &str) -> anyhow::Error {
     anyhow::anyhow!(
-        "{what} needs libtorch, and this vge was built without its `train` feature: build it with the \
-         default features (cargo build --release -p vge-cli)"
+        "{what}: needs libtorch, and this vge was built without its `train` feature; build it with \
+         the default features (cargo build --release -p vge-cli)"
     )
 }

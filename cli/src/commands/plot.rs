@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-#[derive(Debug, Args)]
 /// Plot training curves of run directories (mean and min-max over runs of the same
 /// experiment) into a PNG, and print a markdown table of final success rates; or, with
 /// --table1, the paper's Table I and Fig. 3 from all runs below the given folders.
@@ -27,6 +26,7 @@ use clap::Args;
 /// Examples:
 ///   vge plot runs/fg/seed-* --out fg.png --success-csv fg.csv
 ///   vge plot --table1 docs/results/table1 docs/results/table1 docs/results/cube-fg-vge-seeds
+#[derive(Debug, Args)]
 #[command(verbatim_doc_comment)]
 pub struct PlotArgs {
     /// Run directories (each with config.toml and metrics.csv); with --table1, folders

@@ -9,7 +9,6 @@ use vge_sim::EnvConfig;
 
 use super::eval::EpisodeArgs;
 
-#[derive(Debug, Args)]
 /// The paper's robustness test (Fig. 4): return, success and drops of a policy against the
 /// level of one disturbance at a time.
 ///
@@ -25,6 +24,7 @@ use super::eval::EpisodeArgs;
 /// DIR/robustness.png.
 ///
 /// Example: vge robustness --policy runs/fg/seed-0/policy.vgep --episodes 10 --out rob/
+#[derive(Debug, Args)]
 pub struct RobustnessArgs {
     /// The policy file.
     #[arg(long)]

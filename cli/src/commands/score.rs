@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-#[derive(Debug, Args)]
 /// Score finished runs on many held-out episodes and write DIR/score.json (training
 /// writes it at its end too): the run's selected policy (its own model selection on
 /// validation grasps, policy-best.vgep), its final policy (policy.vgep) and, where the
@@ -28,6 +27,7 @@ use clap::Args;
 /// Examples:
 ///   vge score docs/results/table1/cube-fg-fge/seed-*
 ///   vge score --threads 1 --episodes 200 runs/fg/seed-0
+#[derive(Debug, Args)]
 #[command(verbatim_doc_comment)]
 pub struct ScoreArgs {
     /// Finished run folders (each with config.toml, final-eval.json, policy.vgep).

@@ -10,7 +10,6 @@ use clap::Args;
 #[cfg(feature = "train")]
 use super::train::{stop_on_signal, train};
 
-#[derive(Debug, Args)]
 /// Train one config for several seeds, one run directory each (DIR/seed-N). A finished
 /// seed (DIR/seed-N/policy.vgep) is skipped and an interrupted one resumed, so the same
 /// command again continues a sweep.
@@ -26,6 +25,7 @@ use super::train::{stop_on_signal, train};
 ///   vge sweep --config configs/cube-fg-vge.toml --seeds 0..10 --out runs/fg --slurm
 ///       --partition cpu --time 24:00:00 --cpus-per-task 4
 ///   vge plot runs/fg/seed-* --out fg.png
+#[derive(Debug, Args)]
 #[command(verbatim_doc_comment)]
 pub struct SweepArgs {
     /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml.
@@ -117,8 +117,8 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
     }
 }
 
-#[cfg(feature = "train")]
 /// The seeds one after the other in this process.
+#[cfg(feature = "train")]
 fn sweep_in_process(sweep: &vge_lab::sweep::Sweep) -> anyhow::Result<()> {
     use vge_lab::sweep::{SeedState, seed_state};
     let stop = stop_on_signal()?;
@@ -142,8 +142,8 @@ fn sweep_in_process(sweep: &vge_lab::sweep::Sweep) -> anyhow::Result<()> {
     Ok(())
 }
 
-#[cfg(feature = "train")]
 /// The seeds as child processes, `jobs` at a time.
+#[cfg(feature = "train")]
 fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) -> anyhow::Result<()> {
     use vge_lab::sweep::{Outcome, Parallel, run_parallel, summary_line};
     let exe = std::env::current_exe().context("finding the vge binary to start the jobs")?;
@@ -178,8 +178,8 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) ->
     Ok(())
 }
 
-#[cfg(feature = "train")]
 /// Writes DIR/sweep.sbatch and, unless --dry-run, submits it.
+#[cfg(feature = "train")]
 fn sweep_slurm(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep) -> anyhow::Result<()> {
     use vge_lab::sweep::{Slurm, array_spec, on_path, submit, write_sbatch};
     // Before any file is written: a login node without Slurm is the likely mistake.

@@ -7,7 +7,6 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-#[derive(Debug, Args)]
 /// Train a policy with SAC (or TD3: `algorithm = "td3"`) and the configured behaviour
 /// policy (RL, RL+BC, FGE, VGE, VGE+BC) from a TOML config (see configs/).
 ///
@@ -21,6 +20,7 @@ use clap::Args;
 /// normaliser) with the config key `init_from = "DIR"` or `--set init_from=DIR`: a
 /// second curriculum stage, e.g. configs/cube-fg-fge-robust-finetune.toml, which
 /// fine-tunes a trained gait under sensor noise and pushes.
+#[derive(Debug, Args)]
 pub struct TrainArgs {
     /// Experiment config (TOML), e.g. configs/cube-fg-vge.toml. Not needed with --resume.
     #[arg(long, required_unless_present = "resume")]
@@ -58,9 +58,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
 }
 
-#[cfg(feature = "train")]
 /// The run `vge train` works on: a new one (`--config`, `--out`, refused where a run already
 /// is) or the one in `--resume DIR`, with the overrides applied.
+#[cfg(feature = "train")]
 fn train_target(
     resume: Option<PathBuf>,
     config: Option<PathBuf>,
@@ -165,8 +165,8 @@ pub(crate) fn train(
     Ok(summary.stopped)
 }
 
-#[cfg(feature = "train")]
 /// A flag raised by Ctrl-C or SIGTERM: training saves a checkpoint and returns.
+#[cfg(feature = "train")]
 pub(crate) fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let flag = stop.clone();
