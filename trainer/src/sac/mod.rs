@@ -52,7 +52,11 @@ pub enum Algorithm {
 impl Algorithm {
     /// TD3 with the `[td3]` section's defaults (CleanRL's), written once in the config.
     pub fn td3() -> Self {
-        let t = vge_lab::config::Td3Section::default();
+        Self::td3_of(&vge_lab::config::Td3Section::default())
+    }
+
+    /// TD3 with a config's `[td3]` section.
+    pub fn td3_of(t: &vge_lab::config::Td3Section) -> Self {
         Self::Td3 {
             explore_std: t.explore_std,
             target_noise_std: t.target_noise_std,
@@ -99,15 +103,9 @@ impl SacConfig {
                 initial: sac.initial_alpha,
             },
         };
-        let t = &config.td3;
         let algorithm = match config.algorithm {
             AlgorithmName::Sac => Algorithm::Sac,
-            AlgorithmName::Td3 => Algorithm::Td3 {
-                explore_std: t.explore_std,
-                target_noise_std: t.target_noise_std,
-                target_noise_clip: t.target_noise_clip,
-                policy_delay: t.policy_delay,
-            },
+            AlgorithmName::Td3 => Algorithm::td3_of(&config.td3),
         };
         Self {
             algorithm,
