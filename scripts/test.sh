@@ -6,7 +6,7 @@
 #   formatting, the dependency rules (no libtorch in the bridge or the controllers, no
 #   rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F, the
 #   workspace tests in release with clippy (-D warnings) on every target as it compiles, the
-#   Rerun recording feature in its own build, the hardware-in-the-loop tests on vcan0, and
+#   Python package, the hardware-in-the-loop tests on vcan0, and
 #   `vge sweep --slurm` on a one-node Slurm cluster started on localhost. It ends with each
 #   step's time.
 set -euo pipefail
@@ -24,7 +24,7 @@ breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
   local bg
-  for bg in ${rerun_build:-} ${python_build:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
+  for bg in ${python_build:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
   if [[ -n ${py_install:-} ]]; then kill "$py_install" 2>/dev/null || true; fi
   # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
   local verdict="all passed"
@@ -55,8 +55,9 @@ step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, onnx, in 
 # export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
 # imported actors) in onnxruntime.
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
-# event files are read back with TensorBoard's own reader, and `--record`'s .rrd files with
-# the Rerun SDK of the `rerun` crate's version (sim/tests/rrd_summary.py); MuJoCo steps the
+# event files are read back with TensorBoard's own reader; `--record`'s recordings are drawn
+# into .rrd files by python/vge/recording.py and read back with the Rerun SDK
+# (sim/tests/rrd_summary.py); MuJoCo steps the
 # model `vge bench sim --write-mjcf` writes (sim/tests/mujoco_model.rs); rliable computes the
 # aggregates of vge_lab::stats for comparison (lab/tests/stats_vs_rliable.rs; its arch
 # 7 needs pandas < 3).
@@ -102,23 +103,14 @@ RUSTC_WORKSPACE_WRAPPER="$(rustc --print sysroot)/bin/clippy-driver"
 export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
 [[ -x $RUSTC_WORKSPACE_WRAPPER ]] || { echo "clippy-driver not found at $RUSTC_WORKSPACE_WRAPPER"; exit 1; }
 
-# Two builds that nothing else waits on until late run in the background from here, at low
-# priority, on the CPU the main build and the tests leave idle (linking, single-threaded
-# tests, the pip download): the Python package's workspace (its own target dir, python/target),
-# and the Rerun SDK (with its Arrow and gRPC stack, a larger build than the rest together),
-# which only `--record` needs, so the main test build leaves it out: the two crates that
-# record are built with it in a target dir of their own. Their steps below wait for them.
+# The Python package's workspace (its own target dir, python/target) builds in the background
+# from here, at low priority, on the CPU the main build and the tests leave idle (linking,
+# single-threaded tests, the pip download); its step below waits for it.
 export PYO3_PYTHON=$repo/.deps/py/bin/python
 python_log=$repo/python/target/background-build.log
 mkdir -p python/target
 nice -n 10 cargo build --release --manifest-path python/Cargo.toml --workspace >"$python_log" 2>&1 &
 python_build=$!
-rerun=(-p vge-sim -p vge-bridge --features vge-sim/rerun,vge-bridge/rerun --test recording)
-rerun_target=$repo/target/rerun
-mkdir -p "$rerun_target"
-CARGO_TARGET_DIR=$rerun_target nice -n 19 cargo test --release "${rerun[@]}" --no-run \
-  >"$rerun_target/build.log" 2>&1 &
-rerun_build=$!
 # Waits for background build $1 (pid), named $2, whose log is $3.
 background_ready() {
   local waited=$SECONDS
@@ -148,13 +140,13 @@ if target/release/vge train --config configs/cube-fg-rl.toml --out "target/no-tr
 fi
 grep "train\` feature" target/no-train-refusal.txt || { cat target/no-train-refusal.txt; exit 1; }
 
-step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon, no rerun)"
+step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
 # Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
 # description alone, not its physics (firmware-bridge/Cargo.toml). This overwrites
 # target/release/vge-bridge with the CAN-only binary; the test builds below put the full one back.
 can_only=(-p vge-bridge --no-default-features --features std)
 tree=$(cargo tree "${can_only[@]}" -e normal --prefix none)
-for dep in rapier3d rayon rerun; do
+for dep in rapier3d rayon; do
   if grep -q "^$dep " <<<"$tree"; then
     echo "vge-bridge without its sim feature depends on $dep:"; cargo tree "${can_only[@]}" -e normal -i "$dep"; exit 1
   fi
@@ -211,8 +203,4 @@ step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
 # cluster, runs cli/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
 scripts/slurm/test.sh
 
-step "Rerun recordings: the optional rerun feature, built in the background since the start"
-background_ready "$rerun_build" "Rerun feature" "$rerun_target/build.log"
-rerun_build=
-CARGO_TARGET_DIR=$rerun_target cargo test --release "${rerun[@]}"
 finished=1

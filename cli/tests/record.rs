@@ -1,6 +1,6 @@
-//! `vge eval --record F.rrd`: with the `rerun` feature the first episode is written for the
-//! Rerun viewer and read back by Rerun's own Python SDK (sim/tests/rrd_summary.py, rerun-sdk
-//! 0.36.3 in .deps/py); without it the flag is refused with the way to get it.
+//! `vge eval --record F.jsonl`: the first episode, step by step, drawn by the Python
+//! package's converter and read back by Rerun's own Python SDK (sim/tests/rrd_summary.py,
+//! rerun-sdk 0.36.3 in .deps/py); a `.rrd` name is refused with the way to get one.
 
 mod common;
 
@@ -14,15 +14,14 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-#[cfg(feature = "rerun")]
 #[test]
 fn eval_record_writes_the_first_episode_step_by_step() {
     let dir = common::temp_dir("eval-record");
     let policy = dir.join("init.vgep").display().to_string();
     let export = vge(&["export", "--init", "--seed", "3", "--out", &policy]);
     assert!(export.status.success(), "{}", text(&export.stderr));
-    let rrd = dir.join("episode.rrd");
-    let rrd_arg = rrd.display().to_string();
+    let recording = dir.join("episode.jsonl");
+    let recording_arg = recording.display().to_string();
     let run = vge(&[
         "eval",
         "--episodes",
@@ -33,21 +32,18 @@ fn eval_record_writes_the_first_episode_step_by_step() {
         "--policy",
         &policy,
         "--record",
-        &rrd_arg,
+        &recording_arg,
     ]);
     assert!(run.status.success(), "{}", text(&run.stderr));
-    assert!(text(&run.stderr).contains(&format!("open it with `rerun {rrd_arg}`")), "{}", text(&run.stderr));
+    assert!(
+        text(&run.stderr).contains(&format!("`python -m vge.recording {recording_arg} --spawn`")),
+        "{}",
+        text(&run.stderr)
+    );
     let report: serde_json::Value = serde_json::from_slice(&run.stdout).expect("one JSON line");
     let episode = &report["per_episode"][0];
 
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/tests/rrd_summary.py");
-    let read = Command::new(common::python())
-        .arg(script)
-        .arg(&rrd)
-        .output()
-        .expect("python runs (VGE_PYTHON, or .deps/py made by scripts/test.sh with rerun-sdk)");
-    assert!(read.status.success(), "rerun-sdk could not read the recording: {}", text(&read.stderr));
-    let doc: serde_json::Value = serde_json::from_slice(&read.stdout).expect("one JSON object");
+    let doc = common::recording_summary(&recording, &dir.join("episode.rrd"));
 
     // 1 s at the policy's 20 Hz: 20 control steps, one frame each.
     assert_eq!(episode["length"], 20, "{report}");
@@ -80,13 +76,13 @@ fn eval_record_writes_the_first_episode_step_by_step() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[cfg(not(feature = "rerun"))]
 #[test]
-fn eval_record_without_the_rerun_feature_says_how_to_get_it() {
-    let rrd = std::env::temp_dir().join(format!("vge-no-rerun-{}.rrd", std::process::id()));
-    let out = vge(&["eval", "--policy", "/nonexistent.vgep", "--record", &rrd.display().to_string()]);
+fn eval_record_into_an_rrd_name_says_how_to_get_one() {
+    let rrd = std::env::temp_dir().join(format!("vge-record-{}.rrd", std::process::id()));
+    let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
+    let out = vge(&["eval", "--policy", policy, "--record", &rrd.display().to_string()]);
     assert!(!out.status.success());
     let err = text(&out.stderr);
-    assert!(err.contains("--features rerun"), "{err}");
+    assert!(err.contains("not a Rerun .rrd") && err.contains("python -m vge.recording"), "{err}");
     assert!(!rrd.exists(), "nothing written");
 }

@@ -6,9 +6,8 @@
 //!   only (joint limits, observation layout), without the physics: no rapier3d. A real
 //!   hand's joint limits come from a hand file ([`hand_file`], `--hand FILE`).
 //! - `sim`: the simulated hand as well ([`sim_hand`]: `run --backend sim`, `emulate --model
-//!   sim`), with vge-sim's rapier3d physics.
-//! - `rerun` (implies `sim`): `run --record F.rrd`, the simulated episode written for the
-//!   Rerun viewer (`SimHand::record_to`, vge-sim's `recording`).
+//!   sim`), with vge-sim's rapier3d physics, and `run --record F.jsonl`, the simulated
+//!   episode recorded (`SimHand::record_to`, vge-sim's `recording`).
 //!
 //! Without `std` this crate is only [`protocol`], `no_std`, so joint controller firmware can
 //! share the frame definitions. The bridge never links libtorch: it reads policy files with

@@ -201,14 +201,13 @@ enum Command {
         /// Seed of the simulated episode (backend sim).
         #[arg(long, default_value_t = 0)]
         seed: u64,
-        /// Record the simulated episode (backend sim) into this Rerun file: each finger link's
-        /// pose and the object's, the fingertip and link contact points with their normal
-        /// forces (arrows, 1 cm per N), the joint-target changes sent and the reward, one row
-        /// per control step on the `step` and `sim_time` timelines. Open it with the Rerun
-        /// viewer: `rerun F.rrd` (from `pip install rerun-sdk==0.36.3`). Needs a vge-bridge
-        /// built with `--features rerun`. Refused with --backend can: a real hand does not
-        /// report where the object is.
-        #[arg(long, value_name = "F.rrd")]
+        /// Record the simulated episode (backend sim) into this file (JSON Lines): each finger
+        /// link's pose and the object's, the fingertip and link contact points with their
+        /// normal forces, the joint-target changes sent and the reward, one line per control
+        /// step. See it in the Rerun viewer with the Python package:
+        /// `python -m vge.recording F.jsonl --spawn` (`pip install ./python rerun-sdk`).
+        /// Refused with --backend can: a real hand does not report where the object is.
+        #[arg(long, value_name = "F.jsonl")]
         record: Option<PathBuf>,
         #[command(flatten)]
         loop_args: LoopArgs,
@@ -460,8 +459,9 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     "--record needs --backend sim: over CAN the hand reports its joints and fingertip \
                      sensors but not the object, whose pose the recording is about"
                 );
-                if !cfg!(feature = "rerun") {
-                    return Err(rerun_missing());
+                #[cfg(feature = "sim")]
+                if let Some(path) = &record {
+                    vge_sim::recording::check_path(path)?;
                 }
             }
             let limits = match &hand {
@@ -662,14 +662,6 @@ fn no_sim(what: &str) -> anyhow::Error {
     )
 }
 
-/// Why `run --record` cannot run in this build.
-fn rerun_missing() -> anyhow::Error {
-    anyhow::anyhow!(
-        "--record writes a Rerun recording, and this vge-bridge was built without the Rerun SDK: rebuild \
-         it with `--features rerun` (cargo build --release -p vge-bridge --features rerun)"
-    )
-}
-
 /// Emulates the hand's nodes on `iface` with the simulated hand holding `object`; the summary.
 #[cfg(feature = "sim")]
 fn emulate_sim(
@@ -760,49 +752,25 @@ fn run_against_sim<P: PolicyRunner>(
     let nodes_flag = nodes_stop.clone();
     // In-process the link cannot lose commands; the timeout only guards a stalled loop.
     let mut hand = SimHand::new(env, seed, Duration::from_secs(1)).context("building the simulated hand")?;
-    if let Some(rrd) = record {
-        start_recording(&mut hand, rrd)?;
+    if let Some(path) = record {
+        hand.record_to(path).with_context(|| format!("recording into {}", path.display()))?;
     }
     let nodes = thread::spawn(move || {
         let mut hand = hand;
         sim_hand::serve(&mut nodes_end, &mut hand, Duration::from_secs(5), &nodes_flag)?;
-        let recorded = finish_recording(&mut hand)?;
+        let recorded = hand.finish_recording()?;
         Ok::<_, sim_hand::SimHandError>((hand.summary(), recorded))
     });
     let report = control_loop::run(&mut bridge_end, runner, cfg, stop);
     nodes_stop.store(true, Ordering::Relaxed);
     let (summary, recorded) =
         nodes.join().map_err(|_| anyhow::anyhow!("the simulated hand's thread panicked"))??;
-    if let (Some(rrd), Some(steps)) = (record, recorded) {
+    if let (Some(path), Some(steps)) = (record, recorded) {
         note!(
-            "vge-bridge: {steps} sim steps recorded in {}; open it with `rerun {}`",
-            rrd.display(),
-            rrd.display()
+            "vge-bridge: {steps} sim steps recorded in {}; see it in Rerun with `python -m vge.recording {} --spawn`",
+            path.display(),
+            path.display()
         );
     }
     Ok((report?, summary))
-}
-
-/// `run --record`: the simulated hand records each step into `rrd`.
-#[cfg(feature = "rerun")]
-fn start_recording(hand: &mut SimHand, rrd: &Path) -> anyhow::Result<()> {
-    hand.record_to(rrd).with_context(|| format!("recording into {}", rrd.display()))
-}
-
-/// Stand-in without the Rerun SDK: refuses.
-#[cfg(all(feature = "sim", not(feature = "rerun")))]
-fn start_recording(_: &mut SimHand, _: &Path) -> anyhow::Result<()> {
-    Err(rerun_missing())
-}
-
-/// Completes the recording, if any: the steps it holds.
-#[cfg(feature = "rerun")]
-fn finish_recording(hand: &mut SimHand) -> Result<Option<u64>, sim_hand::SimHandError> {
-    hand.finish_recording()
-}
-
-/// Without the Rerun SDK nothing was recorded.
-#[cfg(all(feature = "sim", not(feature = "rerun")))]
-fn finish_recording(_: &mut SimHand) -> Result<Option<u64>, sim_hand::SimHandError> {
-    Ok(None)
 }

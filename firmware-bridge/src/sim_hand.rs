@@ -31,7 +31,6 @@ pub enum SimHandError {
     Protocol(#[from] ProtocolError),
     #[error(transparent)]
     Transport(#[from] TransportError),
-    #[cfg(feature = "rerun")]
     #[error("recording: {0}")]
     Recording(#[from] vge_sim::RecordingError),
 }
@@ -102,8 +101,7 @@ pub struct SimHand {
     terminated: bool,
     /// The nodes' protocol duties; `serve` polls it for heartbeats and timeouts.
     pub nodes: NodeSupervisor,
-    /// Where each step goes for the Rerun viewer (`run --record`), if anywhere.
-    #[cfg(feature = "rerun")]
+    /// Where each step is recorded (`run --record`), if anywhere.
     recorder: Option<vge_sim::EpisodeRecorder>,
 }
 
@@ -121,21 +119,18 @@ impl SimHand {
             tracker,
             terminated: false,
             nodes: NodeSupervisor::new(command_timeout, Instant::now()),
-            #[cfg(feature = "rerun")]
             recorder: None,
         })
     }
 
-    /// Records every step from now on into the Rerun file `rrd` ([`vge_sim::recording`]); the
-    /// actions recorded are the joint-target changes the commands asked for.
-    #[cfg(feature = "rerun")]
-    pub fn record_to(&mut self, rrd: &std::path::Path) -> Result<(), SimHandError> {
-        self.recorder = Some(vge_sim::EpisodeRecorder::create(rrd, self.env.config())?);
+    /// Records every step from now on into `path` ([`vge_sim::recording`]); the actions
+    /// recorded are the joint-target changes the commands asked for.
+    pub fn record_to(&mut self, path: &std::path::Path) -> Result<(), SimHandError> {
+        self.recorder = Some(vge_sim::EpisodeRecorder::create(path, self.env.config())?);
         Ok(())
     }
 
     /// Completes the recording [`Self::record_to`] began, if any: the steps it holds.
-    #[cfg(feature = "rerun")]
     pub fn finish_recording(&mut self) -> Result<Option<u64>, SimHandError> {
         Ok(self.recorder.take().map(vge_sim::EpisodeRecorder::finish).transpose()?)
     }
@@ -191,7 +186,6 @@ impl SimHand {
         self.obs = result.obs;
         self.tracker.record(result.reward, result.info.object_rotation_z_rad, result.info.tip_contacts);
         self.terminated |= result.terminated;
-        #[cfg(feature = "rerun")]
         if let Some(recorder) = &mut self.recorder {
             recorder.record_step(&self.env, &action, &result)?;
         }

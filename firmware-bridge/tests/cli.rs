@@ -77,23 +77,22 @@ fn without_the_sim_feature_asking_for_the_simulator_is_a_clear_error() {
 }
 
 /// `run --record` writes nothing it cannot write right: not over CAN (the object is not on
-/// the bus), not from a build without the Rerun SDK or without the simulator.
+/// the bus), not into a `.rrd` name (a recording is vge's own file), not from a build without
+/// the simulator.
 #[test]
-fn run_record_is_refused_over_can_and_by_builds_that_cannot_record() {
+fn run_record_is_refused_over_can_and_where_it_cannot_record() {
     let rrd = std::env::temp_dir().join(format!("vge-bridge-cli-{}.rrd", std::process::id()));
     let rrd_arg = rrd.to_str().expect("utf-8 path");
     let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--backend", "can", "--record", rrd_arg]);
     assert!(!out.status.success());
     assert!(stderr(&out).contains("--record needs --backend sim"), "{}", stderr(&out));
-    if !cfg!(feature = "rerun") {
-        let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--record", rrd_arg]);
-        assert!(!out.status.success());
-        let expected = if cfg!(feature = "sim") {
-            "rebuild it with `--features rerun`"
-        } else {
-            "needs the simulator, and this vge-bridge was built without it"
-        };
-        assert!(stderr(&out).contains(expected), "{}", stderr(&out));
-    }
+    let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--record", rrd_arg]);
+    assert!(!out.status.success());
+    let expected = if cfg!(feature = "sim") {
+        "python -m vge.recording"
+    } else {
+        "needs the simulator, and this vge-bridge was built without it"
+    };
+    assert!(stderr(&out).contains(expected), "{}", stderr(&out));
     assert!(!rrd.exists(), "nothing written");
 }

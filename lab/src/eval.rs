@@ -45,7 +45,6 @@ pub enum EvalError {
     NoEpisodes,
     #[error("{0}")]
     InvalidOption(String),
-    #[cfg(feature = "rerun")]
     #[error("recording: {0}")]
     Recording(#[from] vge_sim::RecordingError),
 }
@@ -334,17 +333,16 @@ pub fn trace_policy_bytes(bytes: &[u8], env: &EnvConfig, seed: u64) -> Result<Ga
     })
 }
 
-/// One episode of an encoded policy file on the runtime, written to the Rerun recording `rrd`
-/// step by step (`vge eval --record`; what it holds: [`vge_sim::recording`]).
-#[cfg(feature = "rerun")]
+/// One episode of an encoded policy file on the runtime, recorded into `path` step by step
+/// (`vge eval --record`; what it holds: [`vge_sim::recording`]).
 pub fn record_policy_bytes(
     bytes: &[u8],
     env: &EnvConfig,
     seed: u64,
-    rrd: &Path,
+    path: &Path,
 ) -> Result<EpisodeOutcome, EvalError> {
     with_runtime_policy(bytes, env, |env, policy| {
-        let mut recorder = vge_sim::EpisodeRecorder::create(rrd, env)?;
+        let mut recorder = vge_sim::EpisodeRecorder::create(path, env)?;
         // The episode loop's callback cannot fail: keep the first error and report it after.
         let mut failure = None;
         let outcome = run_episode_observed(env, seed, policy, |env, action, r, _| {

@@ -12,9 +12,9 @@
 //!   the observation layout and its builder ([`observation`]), the action's default step
 //!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
 //!   to drive a real hand (`vge-bridge` without its `sim` feature).
-//! - `rerun` (implies `physics`): `recording`, episodes written as Rerun `.rrd` files for
-//!   `vge eval --record` and `vge-bridge run --record` (off by default: the Rerun SDK is a
-//!   large build).
+//!
+//! With `physics`, [`recording`] writes episodes as JSON Lines files (`vge eval --record`,
+//! `vge-bridge run --record`) that the Python package shows in the Rerun viewer.
 
 pub mod action;
 pub mod angle;
@@ -31,7 +31,7 @@ pub mod mjcf;
 #[cfg(feature = "physics")]
 pub mod objects;
 pub mod observation;
-#[cfg(feature = "rerun")]
+#[cfg(feature = "physics")]
 pub mod recording;
 #[cfg(feature = "physics")]
 pub mod vec_env;
@@ -53,7 +53,7 @@ pub use kinematics::{
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{FingertipReading, OBS_DIM, build_observation};
-#[cfg(feature = "rerun")]
+#[cfg(feature = "physics")]
 pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
 pub use vec_env::VecEnv;

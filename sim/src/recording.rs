@@ -1,129 +1,179 @@
-//! Episodes recorded as Rerun `.rrd` files (feature `rerun`): what `vge eval --record` and
-//! `vge-bridge run --record` write, opened with the Rerun viewer (`rerun F.rrd`, from
-//! `pip install rerun-sdk==0.36.3`, the version of the `rerun` crate that writes them).
+//! Episodes recorded as JSON Lines files: what `vge eval --record` and
+//! `vge-bridge run --record` write, and what the Python package turns into a Rerun
+//! recording (`python -m vge.recording F.jsonl --spawn`, or `-o F.rrd`, with
+//! `pip install rerun-sdk`).
 //!
-//! One row per control step, on two timelines: `step` (control steps since the reset, 1 for
-//! the state after the first action) and `sim_time` (s). The wall clock is left out: it says
-//! nothing about a simulated episode. Entities (world frame: z up, SI units):
+//! The file is the episode's data, not a viewer's format: the Rerun SDK for Rust is a build
+//! twice the size of the rest of vge (its Arrow and gRPC stack), while the Python SDK comes
+//! prebuilt, so vge writes the data and Python draws it ([`FORMAT`] version [`VERSION`]).
 //!
-//! - `world/hand/<finger>/<link>` (`roll`, `proximal`, `distal`): the link body's pose, as a
-//!   transform; the proximal and distal links carry their capsules (static, in the link's
-//!   frame) and `.../distal/tip` the fingertip sphere.
-//! - `world/object`: the object's pose, as a transform, and its shape (static).
-//! - `world/contacts/fingertip_points`, `world/contacts/link_points`: contact points of the
-//!   fingertip spheres and of the link capsules with the object, labelled by finger.
-//! - `world/contacts/fingertip_normal_force_1cm_per_N`, `..._link_normal_force_1cm_per_N`:
-//!   the normal force on the object at each contact point, as arrows of 1 cm per newton
-//!   ([`FORCE_ARROW_M_PER_N`]).
-//! - `action/<finger>/<joint>_rad`: the step's 15 joint-target changes: the policy's output
-//!   in `vge eval`, the change the bridge commanded (after its safety filter) in `vge-bridge`.
-//! - `reward_rad_per_s`: the step's reward; `object_rotation_about_z_rad`: the object's
-//!   rotation about world z since the reset (what the success test measures).
+//! The first line is the header: `format`, `version`, `control_dt_s`, `force_arrow_m_per_n`,
+//! `fingers` (per finger: `name`, `proximal_length_m`, `distal_length_m`, `link_radius_m`,
+//! `tip_radius_m`) and `object` (`shape`, `width_m`, and for the polyhedra the collider's
+//! hull as `mesh_vertices_m` and `mesh_triangles`). Then one line per control step, the
+//! state after it (world frame: z up, SI units, poses as `[x, y, z, qx, qy, qz, qw]`):
+//!
+//! - `step` (control steps since the reset, 1 for the state after the first action) and
+//!   `sim_time_s`;
+//! - `links`: the 15 link bodies' poses, finger by finger (`roll`, `proximal`, `distal`),
+//!   in [`FINGER_NAMES`] order; a link points along its frame's -z;
+//! - `object`: the object's pose;
+//! - `fingertip_contacts`, `link_contacts`: `{finger, point_m, normal_force_n}` per contact
+//!   with the object, the force on the object as a vector (N);
+//! - `action_rad`: the step's 15 joint-target changes: the policy's output in `vge eval`,
+//!   the change the bridge commanded (after its safety filter) in `vge-bridge`;
+//! - `reward`: the step's reward; `rotation_about_z_rad`: the object's rotation about world
+//!   z since the reset (what the success test measures).
 
-use std::path::Path;
-use std::time::Duration;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Vector3};
-use rerun::log::ChunkBatcherConfig;
-use rerun::{
-    Arrows3D, Boxes3D, Capsules3D, Color, Cylinders3D, Ellipsoids3D, Mesh3D, Points3D, Quaternion,
-    RecordingStream, RecordingStreamBuilder, Scalars, Transform3D, ViewCoordinates,
-};
+use nalgebra::Isometry3;
+use serde::Serialize;
 use thiserror::Error;
 
 use crate::env::{Env, EnvConfig, StepResult};
 use crate::error::SimError;
-use crate::kinematics::{FINGER_NAMES, JOINT_NAMES, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
+use crate::kinematics::{FINGER_NAMES, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS};
 use crate::objects::{ObjectConfig, ObjectShape};
 use crate::world::{ContactReading, HandWorld};
 
-/// Length of a contact-force arrow per newton of force (m/N): a grip of a few newtons draws
-/// arrows of a few centimetres beside the 10 cm cube.
+/// The header's `format`.
+pub const FORMAT: &str = "vge episode";
+/// The header's `version`; a reader refuses another.
+pub const VERSION: u32 = 1;
+
+/// Length of a contact-force arrow per newton of force (m/N) in the viewer: a grip of a few
+/// newtons draws arrows of a few centimetres beside the 10 cm cube.
 pub const FORCE_ARROW_M_PER_N: f32 = 0.01;
-
-/// The object's grey.
-const OBJECT_RGB: rerun::datatypes::Rgba32 = rerun::datatypes::Rgba32::from_rgb(190, 190, 190);
-
-/// The link bodies of a finger, in [`HandWorld::link_pose`]'s order.
-const LINK_NAMES: [&str; JOINTS_PER_FINGER] = ["roll", "proximal", "distal"];
-
-/// One colour per finger, so that contacts tell which finger made them.
-const FINGER_COLORS: [[u8; 3]; NUM_FINGERS] =
-    [[230, 85, 13], [49, 130, 189], [49, 163, 84], [117, 107, 177], [214, 39, 40]];
 
 #[derive(Debug, Error)]
 pub enum RecordingError {
     #[error("recording to {path}: {source}")]
-    Create { path: String, source: rerun::RecordingStreamError },
-    #[error("logging to the recording: {0}")]
-    Log(#[from] rerun::RecordingStreamError),
-    #[error("writing the recording: {0}")]
-    Flush(#[from] rerun::sink::SinkFlushError),
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("recording to {path}: {source}")]
+    Encode { path: PathBuf, source: serde_json::Error },
     #[error("simulator: {0}")]
     Sim(#[from] SimError),
     #[error("object shape: {0}")]
     Shape(String),
     #[error("the env has not been reset: nothing to record")]
     NotReset,
+    #[error(
+        "{0}: a recording is vge's episode file (JSON Lines), not a Rerun .rrd: name it F.jsonl, then \
+         `python -m vge.recording F.jsonl --spawn` shows it (or `-o F.rrd` converts it)"
+    )]
+    RrdPath(PathBuf),
 }
 
-/// Writes one episode to an `.rrd` file, a control step at a time.
+#[derive(Serialize)]
+struct Header<'a> {
+    format: &'static str,
+    version: u32,
+    control_dt_s: f64,
+    force_arrow_m_per_n: f32,
+    fingers: Vec<FingerHeader<'a>>,
+    object: ObjectHeader,
+}
+
+#[derive(Serialize)]
+struct FingerHeader<'a> {
+    name: &'a str,
+    proximal_length_m: f32,
+    distal_length_m: f32,
+    link_radius_m: f32,
+    tip_radius_m: f32,
+}
+
+#[derive(Serialize)]
+struct ObjectHeader {
+    shape: String,
+    width_m: f32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mesh_vertices_m: Option<Vec<[f32; 3]>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mesh_triangles: Option<Vec<[u32; 3]>>,
+}
+
+#[derive(Serialize)]
+struct StepRow<'a> {
+    step: u64,
+    sim_time_s: f64,
+    links: Vec<[f32; 7]>,
+    object: [f32; 7],
+    fingertip_contacts: Vec<ContactRow>,
+    link_contacts: Vec<ContactRow>,
+    action_rad: &'a [f32; NUM_JOINTS],
+    reward: f32,
+    rotation_about_z_rad: f64,
+}
+
+#[derive(Serialize)]
+struct ContactRow {
+    finger: usize,
+    point_m: [f32; 3],
+    normal_force_n: [f32; 3],
+}
+
+/// Writes one episode to a JSON Lines file, a control step at a time.
 #[derive(Debug)]
 pub struct EpisodeRecorder {
-    rec: RecordingStream,
+    out: BufWriter<File>,
+    path: PathBuf,
     control_dt_s: f64,
     rotation_rad: f64,
     steps: u64,
 }
 
 impl EpisodeRecorder {
-    /// Creates (or truncates) `path` and logs what does not change over the episode: the
-    /// view's axes and the shapes of the links and the object of `config`.
+    /// Creates (or truncates) `path` and writes the header: the rates and the shapes of the
+    /// links and the object of `config`.
     pub fn create(path: &Path, config: &EnvConfig) -> Result<Self, RecordingError> {
-        let rec = RecordingStreamBuilder::new("vge")
-            // Explicitly on: a `RERUN=off` in the environment must not leave the file asked for
-            // unwritten.
-            .enabled(true)
-            // Rows are batched into chunks every 200 ms by default: 4 steps a chunk at the
-            // bridge's real-time 20 Hz, and 2 s of it took 726 KB instead of 216 KB. Nobody
-            // watches this file live, so chunks wait for 10 s or 2 MiB.
-            .batcher_config(ChunkBatcherConfig {
-                flush_tick: Duration::from_secs(10),
-                ..ChunkBatcherConfig::DEFAULT
-            })
-            .save(path)
-            .map_err(|source| RecordingError::Create { path: path.display().to_string(), source })?;
-        rec.set_log_time_enabled(false);
+        check_path(path)?;
+        let file =
+            File::create(path).map_err(|source| RecordingError::Io { path: path.to_owned(), source })?;
         // In f64 from the rates: f32's control period (0.050000001 s) adds up over an episode.
         let control_dt_s = config.physics_steps_per_control() as f64 / f64::from(config.physics.physics_hz);
-        let recorder = Self { rec, control_dt_s, rotation_rad: 0.0, steps: 0 };
-        recorder.log_geometry(config)?;
+        let mut recorder = Self {
+            out: BufWriter::new(file),
+            path: path.to_owned(),
+            control_dt_s,
+            rotation_rad: 0.0,
+            steps: 0,
+        };
+        let header = Header {
+            format: FORMAT,
+            version: VERSION,
+            control_dt_s,
+            force_arrow_m_per_n: FORCE_ARROW_M_PER_N,
+            fingers: config
+                .hand
+                .fingers
+                .iter()
+                .zip(FINGER_NAMES)
+                .map(|(f, name)| FingerHeader {
+                    name,
+                    proximal_length_m: f.proximal_length_m,
+                    distal_length_m: f.distal_length_m,
+                    link_radius_m: f.link_radius_m,
+                    tip_radius_m: f.tip_radius_m,
+                })
+                .collect(),
+            object: object_header(&config.object)?,
+        };
+        recorder.write_line(&header)?;
         Ok(recorder)
     }
 
-    fn log_geometry(&self, config: &EnvConfig) -> Result<(), RecordingError> {
-        self.rec.log_static("world", &ViewCoordinates::RIGHT_HAND_Z_UP())?;
-        for (f, finger) in config.hand.fingers.iter().enumerate() {
-            let color = finger_color(f);
-            // Links point along their frame's -z; a capsule runs from its origin along +z.
-            for (link, length_m) in [(1, finger.proximal_length_m), (2, finger.distal_length_m)] {
-                let capsule = Capsules3D::from_lengths_and_radii([length_m], [finger.link_radius_m])
-                    .with_translations([[0.0, 0.0, -length_m]])
-                    .with_colors([color]);
-                self.rec.log_static(link_path(f, link), &capsule)?;
-            }
-            let tip = Ellipsoids3D::from_centers_and_radii(
-                [[0.0, 0.0, -finger.distal_length_m]],
-                [finger.tip_radius_m],
-            )
-            .with_colors([color]);
-            self.rec.log_static(format!("{}/tip", link_path(f, 2)), &tip)?;
-        }
-        log_object_shape(&self.rec, &config.object)
+    fn write_line<T: Serialize>(&mut self, row: &T) -> Result<(), RecordingError> {
+        serde_json::to_writer(&mut self.out, row)
+            .map_err(|source| RecordingError::Encode { path: self.path.clone(), source })?;
+        self.out.write_all(b"\n").map_err(|source| RecordingError::Io { path: self.path.clone(), source })
     }
 
-    /// Logs the state after a control step of `env`: poses, contacts, the `action` the policy
-    /// asked for and the step's reward.
+    /// Writes the state after a control step of `env`: poses, contacts, the `action` the
+    /// policy asked for and the step's reward.
     pub fn record_step(
         &mut self,
         env: &Env,
@@ -132,128 +182,96 @@ impl EpisodeRecorder {
     ) -> Result<(), RecordingError> {
         let world = env.world().ok_or(RecordingError::NotReset)?;
         let step = result.info.step as u64;
-        self.rec.set_time_sequence("step", i64::try_from(step).unwrap_or(i64::MAX));
-        self.rec.set_duration_secs("sim_time", step as f64 * self.control_dt_s);
-        self.log_hand(world)?;
-        let object = world.object_state().pose;
-        self.rec.log("world/object", &transform(&object))?;
-        self.log_contacts(world)?;
-        for (f, finger) in FINGER_NAMES.iter().enumerate() {
-            for (j, joint) in JOINT_NAMES.iter().enumerate() {
-                let a = action[joint_index(f, j)];
-                self.rec.log(format!("action/{finger}/{joint}_rad"), &Scalars::single(f64::from(a)))?;
+        self.rotation_rad += f64::from(result.info.object_rotation_z_rad);
+        let mut links = Vec::with_capacity(NUM_JOINTS);
+        for f in 0..NUM_FINGERS {
+            for link in 0..JOINTS_PER_FINGER {
+                links.push(pose7(&world.link_pose(f, link)?));
             }
         }
-        self.rec.log("reward_rad_per_s", &Scalars::single(f64::from(result.reward)))?;
-        self.rotation_rad += f64::from(result.info.object_rotation_z_rad);
-        self.rec.log("object_rotation_about_z_rad", &Scalars::single(self.rotation_rad))?;
+        let (fingertip_contacts, link_contacts) = contacts(world);
+        let row = StepRow {
+            step,
+            sim_time_s: step as f64 * self.control_dt_s,
+            links,
+            object: pose7(&world.object_state().pose),
+            fingertip_contacts,
+            link_contacts,
+            action_rad: action,
+            reward: result.reward,
+            rotation_about_z_rad: self.rotation_rad,
+        };
+        self.write_line(&row)?;
         self.steps += 1;
         Ok(())
     }
 
-    fn log_hand(&self, world: &HandWorld) -> Result<(), RecordingError> {
-        for f in 0..NUM_FINGERS {
-            for link in 0..JOINTS_PER_FINGER {
-                let pose = world.link_pose(f, link)?;
-                self.rec.log(link_path(f, link), &transform(&pose))?;
-            }
-        }
-        Ok(())
-    }
-
-    fn log_contacts(&self, world: &HandWorld) -> Result<(), RecordingError> {
-        let tips: Vec<(usize, ContactReading)> =
-            world.fingertip_contacts().iter().enumerate().filter_map(|(f, c)| c.map(|c| (f, c))).collect();
-        let links: Vec<(usize, ContactReading)> = world
-            .link_contacts()
-            .iter()
-            .enumerate()
-            .flat_map(|(f, pair)| pair.iter().flatten().map(move |c| (f, *c)))
-            .collect();
-        for (kind, contacts) in [("fingertip", &tips), ("link", &links)] {
-            // Logged every step, empty when nothing touches: the viewer shows the latest
-            // value, so a contact that ended must be cleared, not left standing.
-            let points: Vec<[f32; 3]> = contacts.iter().map(|(_, c)| xyz(&c.position_m)).collect();
-            let colors: Vec<Color> = contacts.iter().map(|(f, _)| finger_color(*f)).collect();
-            let labels: Vec<&str> = contacts.iter().map(|(f, _)| FINGER_NAMES[*f]).collect();
-            let forces: Vec<[f32; 3]> = contacts
-                .iter()
-                .map(|(_, c)| xyz(&(c.normal * (c.normal_force_n * FORCE_ARROW_M_PER_N))))
-                .collect();
-            self.rec.log(
-                format!("world/contacts/{kind}_points"),
-                &Points3D::new(points.clone())
-                    .with_radii([0.003])
-                    .with_colors(colors.clone())
-                    .with_labels(labels),
-            )?;
-            self.rec.log(
-                format!("world/contacts/{kind}_normal_force_1cm_per_N"),
-                &Arrows3D::from_vectors(forces).with_origins(points).with_colors(colors),
-            )?;
-        }
-        Ok(())
-    }
-
-    /// Writes everything logged to the file and closes it (the file is complete only then);
-    /// returns the number of steps recorded.
+    /// Writes everything to the file and syncs it (the file is complete only then); returns
+    /// the number of steps recorded.
     pub fn finish(self) -> Result<u64, RecordingError> {
-        self.rec.flush_blocking()?;
-        // Dropping the last handle joins the writer, which ends the file with its footer.
+        let path = self.path;
+        let file = self
+            .out
+            .into_inner()
+            .map_err(|e| RecordingError::Io { path: path.clone(), source: e.into_error() })?;
+        file.sync_all().map_err(|source| RecordingError::Io { path, source })?;
         Ok(self.steps)
     }
 }
 
-fn link_path(finger: usize, link: usize) -> String {
-    format!("world/hand/{}/{}", FINGER_NAMES[finger], LINK_NAMES[link])
+/// Refuses a path ending in `.rrd`: that name promises a file for the viewer itself, and a
+/// user who asks for one learns here how to get it.
+pub fn check_path(path: &Path) -> Result<(), RecordingError> {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("rrd")) {
+        return Err(RecordingError::RrdPath(path.to_owned()));
+    }
+    Ok(())
 }
 
-fn finger_color(finger: usize) -> Color {
-    let [r, g, b] = FINGER_COLORS[finger % NUM_FINGERS];
-    Color::from_rgb(r, g, b)
+/// The fingertip and the link contacts with the object.
+fn contacts(world: &HandWorld) -> (Vec<ContactRow>, Vec<ContactRow>) {
+    let row = |finger: usize, c: &ContactReading| ContactRow {
+        finger,
+        point_m: c.position_m.into(),
+        normal_force_n: (c.normal * c.normal_force_n).into(),
+    };
+    let tips =
+        world.fingertip_contacts().iter().enumerate().filter_map(|(f, c)| c.map(|c| row(f, &c))).collect();
+    let links = world
+        .link_contacts()
+        .iter()
+        .enumerate()
+        .flat_map(|(f, pair)| pair.iter().flatten().map(move |c| row(f, c)))
+        .collect();
+    (tips, links)
 }
 
-fn xyz(v: &Vector3<f32>) -> [f32; 3] {
-    [v.x, v.y, v.z]
-}
-
-fn transform(pose: &Isometry3<f32>) -> Transform3D {
+fn pose7(pose: &Isometry3<f32>) -> [f32; 7] {
+    let t = pose.translation.vector;
     let q = pose.rotation.quaternion();
-    Transform3D::from_translation_rotation(
-        xyz(&pose.translation.vector),
-        Quaternion::from_xyzw([q.i, q.j, q.k, q.w]),
-    )
+    [t.x, t.y, t.z, q.i, q.j, q.k, q.w]
 }
 
 /// The object's shape in its body frame, as its collider has it.
-fn log_object_shape(rec: &RecordingStream, object: &ObjectConfig) -> Result<(), RecordingError> {
-    let half = 0.5 * object.width_m;
-    let color = Color::from(OBJECT_RGB);
+fn object_header(object: &ObjectConfig) -> Result<ObjectHeader, RecordingError> {
+    let mut header = ObjectHeader {
+        shape: object.shape.to_string(),
+        width_m: object.width_m,
+        mesh_vertices_m: None,
+        mesh_triangles: None,
+    };
     match object.shape {
-        ObjectShape::Cube => {
-            rec.log_static("world/object", &Boxes3D::from_half_sizes([[half; 3]]).with_colors([color]))?
-        }
-        ObjectShape::Sphere => rec.log_static(
-            "world/object",
-            &Ellipsoids3D::from_centers_and_radii([[0.0; 3]], [half]).with_colors([color]),
-        )?,
-        // The collider's cylinder stands on its axis, world z, as Rerun's does.
-        ObjectShape::Cylinder => rec.log_static(
-            "world/object",
-            &Cylinders3D::from_lengths_and_radii([object.width_m], [half]).with_colors([color]),
-        )?,
+        // Drawn from `width_m` alone (the cylinder stands on its axis, world z).
+        ObjectShape::Cube | ObjectShape::Sphere | ObjectShape::Cylinder => {}
         ObjectShape::Dodecahedron | ObjectShape::Icosahedron | ObjectShape::HexagonalPrism => {
             let shape = object.shape().map_err(|e| RecordingError::Shape(e.to_string()))?;
             let hull = shape
                 .as_convex_polyhedron()
                 .ok_or_else(|| RecordingError::Shape(format!("{} is not a convex hull", object.shape)))?;
             let (vertices, triangles) = hull.to_trimesh();
-            let vertices: Vec<[f32; 3]> = vertices.iter().map(|v| [v.x, v.y, v.z]).collect();
-            rec.log_static(
-                "world/object",
-                &Mesh3D::new(vertices).with_triangle_indices(triangles).with_albedo_factor(OBJECT_RGB),
-            )?;
+            header.mesh_vertices_m = Some(vertices.iter().map(|v| [v.x, v.y, v.z]).collect());
+            header.mesh_triangles = Some(triangles);
         }
     }
-    Ok(())
+    Ok(header)
 }

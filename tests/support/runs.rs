@@ -6,7 +6,8 @@ use std::process::Command;
 
 #[path = "python.rs"]
 mod python_env;
-pub use python_env::python;
+#[allow(unused_imports)] // each test binary uses its own subset
+pub use python_env::{python, recording_summary};
 
 /// `tag step value` lines for every scalar in `dir`, as TensorBoard reads them.
 pub fn tensorboard_scalars(dir: &std::path::Path) -> Vec<(String, u64, f64)> {

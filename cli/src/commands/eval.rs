@@ -1,6 +1,6 @@
 //! `vge eval`: the success test of a policy file (or a finished run's final policy) on
-//! vge-runtime in the simulator, on one object or several, with its gait diagram or a Rerun
-//! recording of the first episode.
+//! vge-runtime in the simulator, on one object or several, with its gait diagram or a
+//! recording of the first episode for the Rerun viewer.
 
 use std::path::{Path, PathBuf};
 
@@ -79,12 +79,12 @@ pub struct EvalArgs {
     /// finger's contact over time above the object's rotation.
     #[arg(long)]
     plot: Option<PathBuf>,
-    /// Also record the first episode (seed --seed) into this Rerun file: each finger link's
-    /// pose and the object's, the fingertip and link contact points with their normal forces
-    /// (arrows, 1 cm per N), the 15 actions and the reward, one row per control step on the
-    /// `step` and `sim_time` timelines. Open it with the Rerun viewer: `rerun F.rrd` (from
-    /// `pip install rerun-sdk==0.36.3`). Needs a vge built with `--features rerun`.
-    #[arg(long, value_name = "F.rrd")]
+    /// Also record the first episode (seed --seed) into this file (JSON Lines): each finger
+    /// link's pose and the object's, the fingertip and link contact points with their normal
+    /// forces, the 15 actions and the reward, one line per control step. See it in the Rerun
+    /// viewer with the Python package: `python -m vge.recording F.jsonl --spawn` (or `-o F.rrd`;
+    /// `pip install ./python rerun-sdk`).
+    #[arg(long, value_name = "F.jsonl")]
     record: Option<PathBuf>,
     #[arg(long)]
     json: bool,
@@ -118,8 +118,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(dir) = run {
         return rescore_run(&dir, write, json);
     }
-    if record.is_some() && !cfg!(feature = "rerun") {
-        return Err(rerun_missing());
+    if let Some(path) = &record {
+        vge_sim::recording::check_path(path)?;
     }
     let policy = policy.context("--policy or --run is required")?;
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
@@ -157,8 +157,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     }
     let env = env_for(object);
     // Before the evaluation, so that a path that cannot be written fails at once.
-    if let Some(rrd) = &record {
-        record_episode(&policy, &env, seed, rrd)?;
+    if let Some(path) = &record {
+        record_episode(&policy, &env, seed, path)?;
     }
     let report = vge_lab::eval::eval_policy_file(&policy, &env, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
@@ -308,33 +308,19 @@ fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> a
     Ok(())
 }
 
-/// `vge eval --record`: the episode with seed `seed` written to the Rerun file `rrd`.
-#[cfg(feature = "rerun")]
-fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, rrd: &Path) -> anyhow::Result<()> {
+/// `vge eval --record`: the episode with seed `seed` recorded into `path`.
+fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, path: &Path) -> anyhow::Result<()> {
     let bytes = vge_lab::eval::read_policy_file(policy)?;
-    let outcome = vge_lab::eval::record_policy_bytes(&bytes, env, seed, rrd)
-        .with_context(|| format!("recording {} into {}", policy.display(), rrd.display()))?;
+    let outcome = vge_lab::eval::record_policy_bytes(&bytes, env, seed, path)
+        .with_context(|| format!("recording {} into {}", policy.display(), path.display()))?;
     eprintln!(
-        "vge eval: episode seed {seed} ({} steps) recorded in {}; open it with `rerun {}`",
+        "vge eval: episode seed {seed} ({} steps) recorded in {}; see it in Rerun with \
+         `python -m vge.recording {} --spawn`",
         outcome.length,
-        rrd.display(),
-        rrd.display()
+        path.display(),
+        path.display()
     );
     Ok(())
-}
-
-/// Stand-in without the Rerun SDK: refuses.
-#[cfg(not(feature = "rerun"))]
-fn record_episode(_: &Path, _: &EnvConfig, _: u64, _: &Path) -> anyhow::Result<()> {
-    Err(rerun_missing())
-}
-
-/// Why `--record` cannot run in this build.
-fn rerun_missing() -> anyhow::Error {
-    anyhow::anyhow!(
-        "--record writes a Rerun recording, and this vge was built without the Rerun SDK: rebuild it with \
-         `--features rerun` (cargo build --release -p vge-cli --features rerun)"
-    )
 }
 
 fn print_eval_report(report: &vge_lab::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
