@@ -1,6 +1,6 @@
 //! One policy for several objects: a run on two objects tests each of them (eval.csv's
-//! per-object columns, `per_object` in final-eval.json and best-eval.json, the per-object
-//! curves of `vge plot`), and `vge eval --objects` gives one row per object whose figures are
+//! per-object columns, `per_object` in final-eval.json, best-eval.json and `vge score`'s
+//! score.json, the per-object curves of `vge plot`), and `vge eval --objects` gives one row per object whose figures are
 //! those of `vge eval --object` on the same episodes.
 
 mod common;
@@ -111,6 +111,28 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
         .min(row[header.iter().position(|h| *h == "sphere_success").expect("sphere_success column")]);
     assert_eq!(best["validation_worst_object_success_rate"].as_f64(), Some(worst));
     assert!(run.join("policy-best.vgep").exists());
+
+    // vge score scores each object on the same held-out episodes; the figures pool them.
+    let score = vge(&["score", "--episodes", "3", "--threads", "1"], &[run.display().to_string()]);
+    assert!(score.status.success(), "{}", text(&score.stderr));
+    let stdout = text(&score.stdout);
+    assert!(stdout.contains("  cube: selected") && stdout.contains("  sphere: selected"), "{stdout}");
+    let scored = json(&run.join("score.json"));
+    for policy in ["final", "selected"] {
+        let per_object = scored[policy]["per_object"].as_object().unwrap_or_else(|| panic!("{scored}"));
+        assert_eq!(per_object.len(), 2, "{scored}");
+        let mut success = 0.0;
+        for object in ["cube", "sphere"] {
+            assert_eq!(per_object[object]["episodes"].as_u64(), Some(3), "{policy} {object}");
+            success += per_object[object]["success_rate"].as_f64().expect("success_rate") / 2.0;
+        }
+        let pooled = scored[policy]["success_rate"].as_f64().expect("success_rate");
+        assert!((pooled - success).abs() < 1e-9, "{policy}: pooled {pooled}, mean of objects {success}");
+    }
+    let text_order = std::fs::read_to_string(run.join("score.json")).expect("score.json");
+    assert!(text_order.find("\"cube\"") < text_order.find("\"sphere\""), "the config's order");
+    let again = vge(&["score", "--episodes", "3"], &[run.display().to_string()]);
+    assert!(text(&again.stdout).contains("already scored, skipped"), "{}", text(&again.stdout));
 
     // vge plot draws the per-object curves beside the usual figure.
     let png = dir.join("curves.png");

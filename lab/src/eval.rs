@@ -278,6 +278,34 @@ impl ObjectFigures {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PerObjectFigures(pub Vec<(ObjectShape, ObjectFigures)>);
 
+impl PerObjectFigures {
+    /// The objects, in order.
+    pub fn objects(&self) -> Vec<ObjectShape> {
+        self.0.iter().map(|(o, _)| *o).collect()
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for PerObjectFigures {
+    /// Reads the map back in its order; an unknown object name is an error naming it.
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct InOrder;
+        impl<'de> serde::de::Visitor<'de> for InOrder {
+            type Value = PerObjectFigures;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a map from object name to its figures")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let mut figures = Vec::new();
+                while let Some((name, f)) = map.next_entry::<String, ObjectFigures>()? {
+                    figures.push((name.parse::<ObjectShape>().map_err(serde::de::Error::custom)?, f));
+                }
+                Ok(PerObjectFigures(figures))
+            }
+        }
+        deserializer.deserialize_map(InOrder)
+    }
+}
+
 impl Serialize for PerObjectFigures {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeMap;

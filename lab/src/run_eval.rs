@@ -64,7 +64,7 @@ pub fn run_config(dir: &Path) -> Result<Config, RunEvalError> {
 /// without the disturbances it may train with (a config with domain randomisation is judged
 /// by the same test as any other), `run.eval_episode_s` long, grasps randomised by
 /// `run.eval_grasp_noise_rad`.
-fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
+pub(crate) fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
     let run = &config.run;
     crate::eval::success_test_env(
         &crate::eval::without_training_disturbances(&config.env.env_config(index)),
@@ -75,7 +75,7 @@ fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
 
 /// The objects a run trains on, each once, in the order of `env.objects` (a list may name
 /// one twice to give it more envs), with the index of its first place there.
-fn training_objects(config: &Config) -> Vec<(usize, ObjectShape)> {
+pub(crate) fn training_objects(config: &Config) -> Vec<(usize, ObjectShape)> {
     let mut seen = Vec::new();
     for (i, &object) in config.env.objects.iter().enumerate() {
         if !seen.iter().any(|&(_, o)| o == object) {

@@ -16,6 +16,11 @@
 //!   the steps of the last rows of `eval.csv`) are all kept, the mean of their figures (and
 //!   each one's), a less noisy view of where the run ended than one policy.
 //!
+//! A run on several objects (`env.objects`) is scored on the episodes above for *each* of
+//! its objects (the same seeds for every object): each policy's figures are then those of
+//! all its episodes pooled, with `per_object` beside them (the fields of `final-eval.json`'s
+//! `per_object`), as its training's evaluations report them.
+//!
 //! Written to `DIR/score.json` whole or not at all (temporary file and rename). A run whose
 //! score.json already holds the same definition, episodes, seed and policy files (their
 //! CRC-32) is skipped. An unfinished run (no `final-eval.json`) is refused and nothing is
@@ -28,7 +33,7 @@ use thiserror::Error;
 use vge_sim::{EnvConfig, NUM_JOINTS, OBS_DIM};
 
 use crate::config::Config;
-use crate::eval::{EpisodeOutcome, EvalError, EvalReport};
+use crate::eval::{EpisodeOutcome, EvalError, ObjectFigures, PerObjectFigures};
 
 /// The score's file in a run folder.
 pub const SCORE_FILE: &str = crate::run_dir::SCORE;
@@ -78,6 +83,9 @@ pub struct PolicyScore {
     pub drop_rate: f64,
     pub mean_rotation_rad: f64,
     pub mean_contact_switches: f64,
+    /// For a run on several objects: each object's figures (the ones above pool them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub per_object: Option<PerObjectFigures>,
 }
 
 /// The last periodic snapshots: the mean of their figures, and each one's.
@@ -222,14 +230,13 @@ fn run_config(dir: &Path) -> Result<Config, ScoreError> {
     Ok(config)
 }
 
-/// The env the run's policies are scored in: its success test's ([`crate::eval`]), the
-/// first env of its config without training disturbances.
-fn score_env(config: &Config) -> EnvConfig {
-    crate::eval::success_test_env(
-        &crate::eval::without_training_disturbances(&config.env.env_config(0)),
-        config.run.eval_episode_s,
-        config.run.eval_grasp_noise_rad,
-    )
+/// The envs the run's policies are scored in: its success test's ([`crate::eval`]), one per
+/// object it trains on, without training disturbances.
+fn score_envs(config: &Config) -> Vec<EnvConfig> {
+    crate::run_eval::training_objects(config)
+        .into_iter()
+        .map(|(index, _)| crate::run_eval::success_test_env_of(config, index))
+        .collect()
 }
 
 /// Refuses held-out episodes that would meet the validation or test episodes training drew
@@ -307,8 +314,14 @@ fn same_score(
     let (selected, final_policy, snapshots) = policies;
     let same_file =
         |s: &PolicyScore, p: &PlannedPolicy| s.file == p.file && s.step == p.step && s.crc32 == p.crc32();
+    let objects: Vec<_> = crate::run_eval::training_objects(config).into_iter().map(|(_, o)| o).collect();
+    let same_objects = |s: &PolicyScore| match &s.per_object {
+        Some(per_object) => objects.len() > 1 && per_object.objects() == objects,
+        None => objects.len() == 1,
+    };
     existing.definition == DEFINITION
         && existing.episodes == options.episodes
+        && existing.selected.iter().chain([&existing.final_policy]).all(same_objects)
         && existing.seed == options.seed
         && existing.episode_s == config.run.eval_episode_s
         && existing.grasp_noise_rad == config.run.eval_grasp_noise_rad
@@ -350,7 +363,7 @@ pub fn score_run(
     let mut notes = Notes::new();
     let (selected, final_policy, snapshots) = plan(dir, &mut notes)?;
     check_held_out(&config, options.seed, options.episodes)?;
-    let env = score_env(&config);
+    let envs = score_envs(&config);
     if !options.force {
         // A score.json that cannot be read is scored again (and replaced).
         if let Ok(Some(existing)) = read_score(dir)
@@ -360,13 +373,21 @@ pub fn score_run(
         }
     }
     let all: Vec<&PlannedPolicy> = selected.iter().chain([&final_policy]).chain(&snapshots).collect();
-    let total = all.len() * options.episodes;
+    let per_policy = envs.len() * options.episodes;
+    let total = all.len() * per_policy;
     let mut scores = Vec::with_capacity(all.len());
     for (k, p) in all.iter().enumerate() {
-        let done_before = k * options.episodes;
-        let report = run_policy(dir, p, &env, options, &mut |done| {
-            progress(&ScoreProgress { dir, file: &p.file, done: done_before + done, total });
-        })?;
+        let mut outcomes = Vec::with_capacity(per_policy);
+        let mut per_object = Vec::with_capacity(envs.len());
+        for env in &envs {
+            let done_before = k * per_policy + outcomes.len();
+            let object = run_policy(dir, p, env, options, &mut |done| {
+                progress(&ScoreProgress { dir, file: &p.file, done: done_before + done, total });
+            })?;
+            per_object.push((env.object.shape, ObjectFigures::of(&crate::eval::summarise(&object))));
+            outcomes.extend(object);
+        }
+        let report = crate::eval::summarise(&outcomes);
         scores.push(PolicyScore {
             file: p.file.clone(),
             step: p.step,
@@ -376,6 +397,7 @@ pub fn score_run(
             drop_rate: report.drop_rate,
             mean_rotation_rad: report.mean_rotation_rad,
             mean_contact_switches: report.mean_contact_switches,
+            per_object: (per_object.len() > 1).then_some(PerObjectFigures(per_object)),
         });
     }
     let mut scores = scores.into_iter();
@@ -428,15 +450,15 @@ fn mean_of_snapshots(snapshots: Vec<PolicyScore>) -> SnapshotsScore {
     }
 }
 
-/// The policy's episodes, a batch at a time (each a few episodes per thread) so that
-/// progress can be shown; the same episodes as one call would run.
+/// The policy's episodes in `env`, a batch at a time (each a few episodes per thread) so
+/// that progress can be shown; the same episodes as one call would run.
 fn run_policy(
     dir: &Path,
     p: &PlannedPolicy,
     env: &EnvConfig,
     options: &ScoreOptions,
     progress: &mut dyn FnMut(usize),
-) -> Result<EvalReport, ScoreError> {
+) -> Result<Vec<EpisodeOutcome>, ScoreError> {
     let batch = (4 * rayon::current_num_threads()).clamp(10, 64);
     let mut outcomes: Vec<EpisodeOutcome> = Vec::with_capacity(options.episodes);
     while outcomes.len() < options.episodes {
@@ -447,7 +469,7 @@ fn run_policy(
         outcomes.extend(report.per_episode);
         progress(outcomes.len());
     }
-    Ok(crate::eval::summarise(&outcomes))
+    Ok(outcomes)
 }
 
 #[cfg(test)]

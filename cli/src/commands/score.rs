@@ -16,7 +16,9 @@ use clap::Args;
 /// episodes training drew. An episode succeeds when the object turns >= 2 pi about z
 /// without a drop. score.json: {"episodes", "seed", "selected", "final",
 /// "last_snapshots"}, each policy's success_rate, mean_return, drop_rate,
-/// mean_rotation_rad, its file, step and CRC-32 (docs/scoring.md).
+/// mean_rotation_rad, its file, step and CRC-32 (docs/scoring.md). A run on several
+/// objects is scored on those episodes for each object: the figures pool them, and
+/// "per_object" gives each object's.
 ///
 /// A run already scored with the same episodes, seed, definition and policy files is
 /// skipped (--force scores it again). An unfinished run (no final-eval.json) is refused
@@ -108,6 +110,16 @@ fn score(
                     s.final_policy.success_rate,
                     started.elapsed().as_secs_f64()
                 );
+                // A run on several objects: each object's success, selected and final.
+                if let Some(per_object) = &s.final_policy.per_object {
+                    let selected = s.selected.as_ref().and_then(|p| p.per_object.as_ref());
+                    for (k, (object, f)) in per_object.0.iter().enumerate() {
+                        let sel = selected
+                            .and_then(|p| p.0.get(k))
+                            .map_or("-".to_owned(), |(_, f)| format!("{:.2}", f.success_rate));
+                        println!("  {object}: selected {sel}, final {:.2}", f.success_rate);
+                    }
+                }
             }
             Err(e) => {
                 eprintln!("vge score: {e}");
