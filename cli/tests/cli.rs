@@ -436,8 +436,7 @@ fn eval_plot_draws_the_gait_diagram_of_one_episode() {
 /// keeping what describes the training (env steps, wall and CPU time).
 #[test]
 fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
-    let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/results/euler-yaw-reward/table1/cube-fg-fge/seed-0");
+    let stored = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/runs/euler-yaw-fge-seed-0");
     let dir = common::temp_dir("rescore");
     for file in ["config.toml", "policy.vgep"] {
         std::fs::copy(stored.join(file), dir.join(file)).expect("copy the run");
@@ -482,8 +481,8 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
     let _ = std::fs::remove_dir_all(&root);
     std::fs::create_dir_all(&root).expect("temp dir");
     // A run trained on the paper's reward, before env.charge_reverse_rotation existed.
-    let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/results/paper-reward/cube-fg-vge-seeds/seed-0/config.toml");
+    let stored =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/configs/paper-reward-vge-seed-0.toml");
     let old = std::fs::read_to_string(stored).expect("stored config");
     std::fs::write(root.join("config.toml"), &old).expect("write");
     let out = vge(&["train", "--resume", root.to_str().expect("utf-8")], &[]);

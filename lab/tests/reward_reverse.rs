@@ -12,8 +12,7 @@ use vge_lab::eval::{
 use vge_sim::EnvConfig;
 
 fn exploit_policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/results/paper-reward/cube-fg-vge-seeds/seed-1/policy.vgep")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/policies/paper-reward-exploit.vgep")
 }
 
 /// Rotation paid by an episode's rewards (rad): the reward is a rate, paid per control step.

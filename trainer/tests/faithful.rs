@@ -172,7 +172,7 @@ fn bc_log_density_stays_finite_and_moderate_for_actions_at_the_bound() {
 }
 
 fn gait_policy() -> PathBuf {
-    repo_root().join("docs/results/cube-fg-vge-td3-90min/policy.vgep")
+    repo_root().join("tests/fixtures/policies/td3-gait-90min.vgep")
 }
 
 #[test]
