@@ -42,26 +42,46 @@ impl RunLock {
         let io = |source| LockError::Io { path: path.clone(), source };
         let mut file =
             File::options().read(true).write(true).create(true).truncate(false).open(&path).map_err(io)?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(TryLockError::WouldBlock) => {
-                let mut text = String::new();
-                // The holder may not have written its pid yet.
-                let pid = match file.read_to_string(&mut text) {
-                    Ok(_) if !text.trim().is_empty() => text.trim().to_owned(),
-                    _ => "unknown".to_owned(),
-                };
-                return Err(LockError::Held { dir: dir.to_owned(), lock: path, pid });
+        let started = std::time::Instant::now();
+        loop {
+            match file.try_lock() {
+                Ok(()) => break,
+                Err(TryLockError::WouldBlock) => {
+                    let pid = holder_pid(&mut file);
+                    // A lock this process let go of stays held for a moment by a child it is
+                    // starting (between fork and exec the child shares the descriptor): when
+                    // the file names this process, wait that moment out before refusing.
+                    if pid == std::process::id().to_string() && started.elapsed() < SELF_RELEASE_WAIT {
+                        std::thread::sleep(std::time::Duration::from_millis(10));
+                        continue;
+                    }
+                    return Err(LockError::Held { dir: dir.to_owned(), lock: path, pid });
+                }
+                Err(TryLockError::Error(e)) => return Err(io(e)),
             }
-            Err(TryLockError::Error(e)) => return Err(io(e)),
         }
         file.set_len(0).map_err(io)?;
+        // (Reading a holder's pid above moved the position.)
+        std::io::Seek::rewind(&mut file).map_err(io)?;
         file.write_all(format!("{}\n", std::process::id()).as_bytes()).map_err(io)?;
         Ok(Self { _file: file, path })
     }
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+}
+
+/// How long a lock file naming this very process is waited for before it counts as held.
+const SELF_RELEASE_WAIT: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// The pid the lock file holds ("unknown" before the holder has written it).
+fn holder_pid(file: &mut File) -> String {
+    use std::io::Seek;
+    let mut text = String::new();
+    match file.rewind().and_then(|()| file.read_to_string(&mut text)) {
+        Ok(_) if !text.trim().is_empty() => text.trim().to_owned(),
+        _ => "unknown".to_owned(),
     }
 }
 
