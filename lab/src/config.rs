@@ -992,14 +992,72 @@ impl RunSection {
     }
 }
 
-/// Reads `path`, applies `overrides` (`"sac.batch=128"`), deserialises and validates.
+/// Reads `path` (with its bases, [`read_config_table`]), applies `overrides`
+/// (`"sac.batch=128"`), deserialises and validates.
 pub fn load_config(path: &Path, overrides: &[String]) -> Result<Config, ConfigError> {
+    let shown = path.display().to_string();
+    let table = read_config_table(path)?;
+    let config = config_from_table(table, &shown, overrides)?;
+    config.validate()?;
+    Ok(config)
+}
+
+/// The top-level key of a config file that names the file it builds on, relative to the
+/// file's own folder: `base = "cube-base.toml"`. A config is then its base with the keys it
+/// sets replaced (tables merge key by key, any other value replaces the base's whole), so a
+/// grid config states only what sets it apart. A run folder stores the merged config.
+pub const BASE_KEY: &str = "base";
+
+/// Bases of bases, at most this many: a longer chain is a mistake.
+const MAX_BASE_CHAIN: usize = 8;
+
+/// The TOML table of the config file at `path`, its `base` (and the base's base, ...)
+/// merged under it.
+pub fn read_config_table(path: &Path) -> Result<toml::Table, ConfigError> {
+    read_with_bases(path, &mut Vec::new())
+}
+
+fn read_with_bases(path: &Path, chain: &mut Vec<PathBuf>) -> Result<toml::Table, ConfigError> {
     let shown = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: shown.clone(), source })?;
-    let config = parse_with_overrides(&text, &shown, overrides)?;
-    config.validate()?;
-    Ok(config)
+    let mut table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| ConfigError::Parse { path: shown.clone(), message: e.to_string() })?;
+    let Some(base) = table.remove(BASE_KEY) else {
+        return Ok(table);
+    };
+    let parse_err = |message: String| ConfigError::Parse { path: shown.clone(), message };
+    let base = base.as_str().ok_or_else(|| {
+        parse_err(format!("`{BASE_KEY}` names a file, as a string; got a {}", base.type_str()))
+    })?;
+    let base_path = path.parent().unwrap_or(Path::new(".")).join(base);
+    chain.push(path.canonicalize().unwrap_or_else(|_| path.to_owned()));
+    let canonical = base_path.canonicalize().unwrap_or_else(|_| base_path.clone());
+    if chain.contains(&canonical) {
+        return Err(parse_err(format!(
+            "`{BASE_KEY}` {} is a config this one is already built on",
+            base_path.display()
+        )));
+    }
+    if chain.len() > MAX_BASE_CHAIN {
+        return Err(parse_err(format!("more than {MAX_BASE_CHAIN} bases in a chain")));
+    }
+    let mut merged = read_with_bases(&base_path, chain)?;
+    merge_table(&mut merged, table);
+    Ok(merged)
+}
+
+/// `over`'s keys into `base`: tables merge key by key, other values replace.
+fn merge_table(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_table(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
 }
 
 /// Keys whose default changed while runs were stored without them: resuming such a run
@@ -1029,11 +1087,27 @@ pub fn check_resumable(text: &str, origin: &str) -> Result<(), ConfigError> {
 }
 
 /// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
+/// Text has no folder to find a base in: a `base` key is refused ([`load_config`] reads one).
 pub fn parse_with_overrides(text: &str, origin: &str, overrides: &[String]) -> Result<Config, ConfigError> {
-    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
+    let table: toml::Table = text.parse().map_err(|e: toml::de::Error| ConfigError::Parse {
         path: origin.to_owned(),
         message: e.to_string(),
     })?;
+    if table.contains_key(BASE_KEY) {
+        return Err(ConfigError::Parse {
+            path: origin.to_owned(),
+            message: format!("`{BASE_KEY}` is read only from a config file (vge train --config FILE)"),
+        });
+    }
+    config_from_table(table, origin, overrides)
+}
+
+/// The overrides applied to `table`, deserialised (not validated).
+fn config_from_table(
+    mut table: toml::Table,
+    origin: &str,
+    overrides: &[String],
+) -> Result<Config, ConfigError> {
     for o in overrides {
         apply_override_table(&mut table, o)?;
     }

@@ -16,6 +16,40 @@ use vge_sim::{
     PerturbationConfig,
 };
 
+/// The TOML table of the config file at `path` with its `base` chain merged under it (tables
+/// key by key, other values replaced), as `vge_lab::config::read_config_table` reads it.
+fn read_with_bases(path: &std::path::Path, depth: usize) -> Result<toml::Table, EnvKeysError> {
+    let shown = path.display().to_string();
+    let text =
+        std::fs::read_to_string(path).map_err(|source| EnvKeysError::Io { path: shown.clone(), source })?;
+    let mut table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| EnvKeysError::Parse { origin: shown.clone(), message: e.to_string() })?;
+    let Some(base) = table.remove("base") else {
+        return Ok(table);
+    };
+    let invalid = |message: String| EnvKeysError::Invalid { origin: shown.clone(), message };
+    let base = base.as_str().ok_or_else(|| invalid("`base` names a file, as a string".to_owned()))?;
+    // The lab refuses loops by name; a depth bound is enough to refuse them here.
+    if depth >= 8 {
+        return Err(invalid("more than 8 bases in a chain (or a loop)".to_owned()));
+    }
+    let mut merged = read_with_bases(&path.parent().unwrap_or(std::path::Path::new(".")).join(base), depth + 1)?;
+    merge_table(&mut merged, table);
+    Ok(merged)
+}
+
+fn merge_table(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_table(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
 /// Why a set of `[env]` keys cannot become an environment.
 #[derive(Debug, Error)]
 pub enum EnvKeysError {
@@ -171,19 +205,15 @@ impl EnvKeys {
         Ok(keys)
     }
 
-    /// The `[env]` table of the config file at `path` (empty when it has none), with
-    /// `overrides` replacing its keys.
+    /// The `[env]` table of the config file at `path` (empty when it has none) over its
+    /// base's (a config's `base = "FILE"`, as the lab reads it: `vge_lab::config::BASE_KEY`),
+    /// with `overrides` replacing its keys.
     pub fn config_file_table(
         path: &std::path::Path,
         overrides: toml::Table,
     ) -> Result<toml::Table, EnvKeysError> {
         let shown = path.display().to_string();
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| EnvKeysError::Io { path: shown.clone(), source })?;
-        let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| EnvKeysError::Parse {
-            origin: shown.clone(),
-            message: e.to_string(),
-        })?;
+        let mut doc = read_with_bases(path, 0)?;
         let mut env = match doc.remove("env") {
             None => toml::Table::new(),
             Some(toml::Value::Table(t)) => t,
