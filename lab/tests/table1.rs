@@ -21,7 +21,9 @@ fn tempdir(name: &str) -> PathBuf {
 /// evaluations and, when `final_eval` is given as (success rate, mean return), a final one.
 fn fake_run(dir: &Path, config: &str, final_eval: Option<(f64, f64)>) {
     std::fs::create_dir_all(dir).expect("run dir");
-    std::fs::copy(repo().join("configs").join(config), dir.join("config.toml")).expect("config");
+    // As training stores it: the whole config, any base merged in.
+    let merged = vge_lab::config::load_config(&repo().join("configs").join(config), &[]).expect("config");
+    std::fs::write(dir.join("config.toml"), merged.to_toml_string().expect("toml")).expect("config");
     std::fs::write(
         dir.join("metrics.csv"),
         "step,episodes,return,rotation,controller_share\n10000,5,1.0,0.1,0.5\n20000,9,2.0,0.2,0.4\n",
