@@ -37,6 +37,8 @@ pub enum SweepError {
     OtherConfig(String),
     #[error("{0}")]
     Invalid(String),
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> SweepError + '_ {
@@ -420,8 +422,8 @@ pub struct Slurm {
     pub cpus_per_task: usize,
 }
 
-/// The file name the sweep's config is copied to, so the job does not depend on the caller's
-/// working directory or later edits of the original.
+/// The file name the sweep's config is copied to, merged with its bases, so the job depends
+/// neither on the caller's working directory nor on later edits of the original or its bases.
 pub const SWEEP_CONFIG: &str = "sweep-config.toml";
 /// The job script's file name in the sweep's directory.
 pub const SBATCH_FILE: &str = "sweep.sbatch";
@@ -549,7 +551,8 @@ pub fn sbatch_script(
     s
 }
 
-/// Copies the config into the sweep's directory (or checks that the copy there is the same),
+/// Copies the config, merged with its bases, into the sweep's directory (or checks that the
+/// copy there is the same),
 /// writes `DIR/sweep.sbatch` for the seeds not yet done (none: no file) and returns its path
 /// and those seeds.
 /// `vge` is the absolute path of the binary the tasks run.
@@ -579,7 +582,11 @@ pub fn write_sbatch(vge: &Path, sweep: &Sweep, slurm: &Slurm) -> Result<(PathBuf
 }
 
 fn copy_config(from: &Path, to: &Path) -> Result<(), SweepError> {
-    let text = std::fs::read(from).map_err(io_err(from))?;
+    // A copy that kept `base = "..."` would look for the base beside the copy.
+    let merged = crate::config::read_config_table(from)?;
+    let text = toml::to_string(&merged)
+        .map_err(|e| SweepError::Invalid(format!("{}: {e}", from.display())))?
+        .into_bytes();
     match std::fs::read(to) {
         Ok(existing) if existing == text => Ok(()),
         Ok(_) => Err(SweepError::OtherConfig(to.display().to_string())),
@@ -642,6 +649,30 @@ mod tests {
         std::fs::write(dir.join(crate::run_dir::FINAL_EVAL), r#"{"learned": true, "success_rate": 0.55}"#)
             .expect("json");
         assert_eq!(final_success(&dir), Some((0.55, true)));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_sweeps_copy_of_a_config_holds_its_bases_merged_in() {
+        let dir = std::env::temp_dir().join(format!("vge-sweep-copy-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("configs")).expect("dir");
+        let base = dir.join("configs/base.toml");
+        let child = dir.join("configs/child.toml");
+        std::fs::write(&base, "name = \"base\"\ntotal_steps = 1000\nnum_envs = 2\n").expect("base");
+        std::fs::write(&child, "base = \"base.toml\"\nname = \"child\"\n").expect("child");
+        let copy = dir.join(SWEEP_CONFIG);
+        copy_config(&child, &copy).expect("copy");
+        let text = std::fs::read_to_string(&copy).expect("copy");
+        assert!(!text.contains("base.toml"), "{text}");
+        let original = crate::config::load_config(&child, &[]).expect("original");
+        let copied = crate::config::load_config(&copy, &[]).expect("copy loads alone");
+        assert_eq!(copied, original);
+        assert_eq!((copied.total_steps, copied.num_envs, copied.name.as_str()), (1000, 2, "child"));
+        // The same config again is fine; an edited base makes it another sweep's config.
+        copy_config(&child, &copy).expect("same config");
+        std::fs::write(&base, "name = \"base\"\ntotal_steps = 2000\n").expect("edit");
+        assert!(matches!(copy_config(&child, &copy), Err(SweepError::OtherConfig(_))));
         let _ = std::fs::remove_dir_all(&dir);
     }
 
