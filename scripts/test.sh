@@ -5,7 +5,8 @@
 # libtorch from PyPI wheels); later runs find them in place and go straight to the checks:
 #   formatting, the dependency rules (no libtorch in the bridge or the controllers, no
 #   rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F, the
-#   workspace tests in release with clippy (-D warnings) on every target as it compiles, the
+#   workspace tests in release with clippy (-D warnings) on every target as it compiles (run
+#   by cargo-nextest), the
 #   Python package, the hardware-in-the-loop tests on vcan0, and
 #   `vge sweep --slurm` on a one-node Slurm cluster started on localhost. It ends with each
 #   step's time.
@@ -82,10 +83,16 @@ python_tools_ready() {
   .deps/py/bin/python -c 'import importlib.metadata, cantools, tensorboard, rerun, mujoco, rliable.library; print("cantools", cantools.__version__, "tensorboard", tensorboard.__version__, "rerun-sdk", rerun.__version__, "mujoco", mujoco.__version__, "rliable", importlib.metadata.version("rliable"))'
 }
 
-step "rust components and targets"
+step "rust components, targets and cargo-nextest"
 for c in rustfmt clippy; do rustup component list --installed | grep -q "^$c" || rustup component add "$c"; done
 rustup target list --installed | grep -qx thumbv7em-none-eabihf || rustup target add thumbv7em-none-eabihf
 echo "$(rustc --version); targets: $(rustup target list --installed | tr '\n' ' ')"
+# The workspace's test runner (.config/nextest.toml): tests side by side across binaries.
+if ! cargo nextest --version >/dev/null 2>&1; then
+  echo "cargo-nextest is missing: installing it from crates.io (cargo install --locked, a few minutes)"
+  cargo install --locked cargo-nextest
+fi
+cargo nextest --version | head -1
 
 step "libtorch (scripts/setup-libtorch.sh)"
 scripts/setup-libtorch.sh
@@ -157,7 +164,7 @@ cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
 cargo build --release -p vge-bridge --lib --no-default-features --target thumbv7em-none-eabihf
 ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib target/thumbv7em-none-eabihf/release/libvge_bridge.rlib
 
-step "cargo test --workspace (release; clippy -D warnings on every target as it builds)"
+step "workspace tests (release, cargo nextest; clippy -D warnings on every target as it builds)"
 # --no-run first builds (and lints) every target, examples included, as `cargo clippy
 # --workspace --all-targets` would: the workspace has no benches.
 cargo test --release --workspace --no-run
@@ -170,7 +177,11 @@ echo "HIL runner: exit status 7 came back"
 hil_log=$repo/target/hil.log
 scripts/hil.sh >"$hil_log" 2>&1 &
 hil_run=$!
-cargo test --release --workspace
+# nextest runs every test in a process of its own, two at a time on two cores, the longest
+# first (.config/nextest.toml); `cargo test` ran one binary after another and left a core
+# idle through each long single-threaded test. Doctests are cargo test's alone.
+cargo nextest run --release --workspace
+cargo test --release --workspace --doc
 
 step "Python package (python/: pyo3 + numpy, built by maturin; pytest python/tests)"
 # A workspace of its own (python/Cargo.toml, target dir python/target) linking vge-sim,

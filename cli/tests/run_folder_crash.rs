@@ -182,33 +182,60 @@ fn a_kill_at_either_rename_of_a_checkpoint_swap_is_never_started_over_and_resume
     let _ = std::fs::remove_dir_all(&root);
 }
 
+// ENOSPC in each writer gives a named error and a folder that resumes to the same policy (or,
+// before the first checkpoint at 400, a folder emptied of run files that starts again). Three
+// tests of the run's phases, so that they run side by side.
+
 #[test]
-fn enospc_in_each_writer_gives_a_named_error_and_a_folder_that_resumes_to_the_same_policy() {
-    let root = common::temp_dir("crash-enospc");
+fn enospc_before_the_first_checkpoint_gives_a_named_error_and_an_emptied_folder_that_starts_again() {
+    enospc_in_each_writer(
+        "crash-enospc-start",
+        &[
+            ("config.toml.tmp", 1),
+            ("metrics.csv.tmp", 1),
+            ("metrics.csv", 1),
+            ("eval.csv", 1),
+            ("snapshots/policy-400.vgep.tmp", 1),
+            ("checkpoint.tmp/actor.ot", 1),
+        ],
+    );
+}
+
+#[test]
+fn enospc_in_a_periodic_writer_gives_a_named_error_and_a_folder_that_resumes_to_the_same_policy() {
+    enospc_in_each_writer(
+        "crash-enospc-periodic",
+        &[
+            ("metrics.csv", 9),
+            ("eval.csv", 2),
+            ("snapshots/policy-800.vgep.tmp", 1),
+            ("checkpoint.tmp/critic.ot", 2),
+            ("checkpoint.tmp/target.ot", 2),
+            ("checkpoint.tmp/optim.ot", 2),
+            ("checkpoint.tmp/replay.bin", 2),
+            ("checkpoint.tmp/state.toml", 2),
+            ("checkpoint.tmp/manifest.json", 2),
+        ],
+    );
+}
+
+#[test]
+fn enospc_in_a_final_writer_gives_a_named_error_and_a_folder_that_resumes_to_the_same_policy() {
+    enospc_in_each_writer(
+        "crash-enospc-final",
+        &[
+            ("policy-best.vgep.tmp", 1),
+            ("best-eval.json.tmp", 1),
+            ("policy.vgep.tmp", 1),
+            ("final-eval.json.tmp", 1),
+        ],
+    );
+}
+
+/// Each case `(file, which write of it fails)` in a run folder of its own under `name`.
+fn enospc_in_each_writer(name: &str, cases: &[(&str, u32)]) {
+    let root = common::temp_dir(name);
     let config = config_file(&root);
-    // (file, which write of it fails). Before the first checkpoint (at 400) a failed run has
-    // nothing to resume and removes what it wrote; after it, the folder resumes.
-    let cases: &[(&str, u32)] = &[
-        ("config.toml.tmp", 1),
-        ("metrics.csv.tmp", 1),
-        ("metrics.csv", 1),
-        ("eval.csv", 1),
-        ("snapshots/policy-400.vgep.tmp", 1),
-        ("checkpoint.tmp/actor.ot", 1),
-        ("metrics.csv", 9),
-        ("eval.csv", 2),
-        ("snapshots/policy-800.vgep.tmp", 1),
-        ("checkpoint.tmp/critic.ot", 2),
-        ("checkpoint.tmp/target.ot", 2),
-        ("checkpoint.tmp/optim.ot", 2),
-        ("checkpoint.tmp/replay.bin", 2),
-        ("checkpoint.tmp/state.toml", 2),
-        ("checkpoint.tmp/manifest.json", 2),
-        ("policy-best.vgep.tmp", 1),
-        ("best-eval.json.tmp", 1),
-        ("policy.vgep.tmp", 1),
-        ("final-eval.json.tmp", 1),
-    ];
     for (k, &(file, when)) in cases.iter().enumerate() {
         let dir = root.join(format!("run-{k}"));
         let what = format!("ENOSPC at write {when} of {file}");

@@ -1065,7 +1065,7 @@ fn merge_table(base: &mut toml::Table, over: toml::Table) {
 const CHANGED_DEFAULTS: [(&str, &str, &str); 1] = [(
     "env",
     "charge_reverse_rotation",
-    "backward turns cost reward by default since 8e9ed9f, and this run was trained on the \
+    "backward turns cost reward by default now, and this run was trained on the \
      paper's reward, which pays only while >= 3 fingertips touch: add \
      `charge_reverse_rotation = false` under [env] to continue it as it was",
 )];
