@@ -92,6 +92,33 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
         assert!((column("success") - mean).abs() < 1e-3, "{r:?}");
     }
 
+    // metrics.csv: the usual columns, then each object's success, return and rotation over
+    // the window's training episodes (25-step episodes, a row every 50 steps of 2 envs: an
+    // episode of each object ends in every window).
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).expect("metrics.csv");
+    let mut metrics_lines = metrics.lines();
+    let metrics_header: Vec<&str> = metrics_lines.next().expect("header").split(',').collect();
+    let per_object: Vec<String> = ["cube", "sphere"]
+        .iter()
+        .flat_map(|o| ["success", "return", "rotation"].map(|f| format!("{o}_{f}")))
+        .collect();
+    let split = metrics_header.len() - per_object.len();
+    assert_eq!(
+        metrics_header[split..],
+        per_object.iter().map(String::as_str).collect::<Vec<_>>()[..],
+        "{metrics_header:?}"
+    );
+    assert_eq!((metrics_header[0], metrics_header[split - 1]), ("step", "steps_per_s"), "{metrics_header:?}");
+    let metrics_rows: Vec<Vec<&str>> = metrics_lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(metrics_rows.len(), 6, "{metrics}");
+    for row in &metrics_rows {
+        assert_eq!(row.len(), metrics_header.len(), "{metrics}");
+        for field in &row[split..] {
+            let value: f64 = field.parse().unwrap_or_else(|_| panic!("a per-object figure in {row:?}"));
+            assert!(value.is_finite(), "{row:?}");
+        }
+    }
+
     // final-eval.json and best-eval.json: per_object beside the overall figures.
     let final_eval = json(&run.join("final-eval.json"));
     assert_overall_pools(&final_eval, &["cube", "sphere"], 2);

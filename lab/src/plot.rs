@@ -660,10 +660,11 @@ fn multi_object_objects(runs: &[RunCurves]) -> Vec<vge_sim::ObjectShape> {
     objects
 }
 
-/// Per-object curves of the runs trained on several objects: one panel per object with each
-/// experiment's success on that object in the periodic evaluations (`eval.csv`'s
-/// `<object>_success`, mean and min-max over seeds), into `<out stem>-per-object.png` beside
-/// `out`. Returns the file written, or `None` when no run trained on several objects.
+/// Per-object curves of the runs trained on several objects, one column of panels per
+/// object: each experiment's success on that object in the periodic evaluations (`eval.csv`'s
+/// `<object>_success`) above its success in the training episodes (`metrics.csv`'s), mean and
+/// min-max over seeds, into `<out stem>-per-object.png` beside `out`. Returns the file
+/// written, or `None` when no run trained on several objects.
 pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>, PlotError> {
     let objects = multi_object_objects(runs);
     if objects.is_empty() {
@@ -678,39 +679,35 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
             palette.push(&r.experiment);
         }
     }
-    // Per object, each run's curves with that object's success as its evaluation success.
-    let mut per_object: Vec<Vec<RunCurves>> = Vec::new();
-    for &object in &objects {
-        let column = format!("{}_success", object.name());
-        let mut curves = Vec::new();
-        for r in runs.iter().filter(|r| r.objects.contains(&object)) {
-            let eval = r.dir.join(crate::run_dir::EVAL);
-            if !eval.exists() {
-                continue;
+    // Per row (file) and object, each run's curve of that object's success, carried as its
+    // evaluation curve.
+    let rows =
+        [(crate::run_dir::EVAL, "periodic evaluations"), (crate::run_dir::METRICS, "training episodes")];
+    let mut per_panel: Vec<Vec<RunCurves>> = Vec::new();
+    for (file, _) in rows {
+        for &object in &objects {
+            let column = format!("{}_success", object.name());
+            let mut curves = Vec::new();
+            for r in runs.iter().filter(|r| r.objects.contains(&object)) {
+                if let Some((step, success)) = object_success(&r.dir.join(file), &column)? {
+                    curves.push(RunCurves { eval_step: step, eval_success: success, ..r.clone() });
+                }
             }
-            let columns = match csv_columns(&eval, &["step", &column]) {
-                Ok(c) => c,
-                // A run from before the per-object columns has no curve to show.
-                Err(PlotError::Csv { message, .. }) if message.starts_with("no column") => continue,
-                Err(e) => return Err(e),
-            };
-            let [step, success]: [Vec<f64>; 2] = columns
-                .try_into()
-                .map_err(|_| PlotError::Csv { path: eval.clone(), message: "columns".into() })?;
-            curves.push(RunCurves { eval_step: step, eval_success: success, ..r.clone() });
+            per_panel.push(curves);
         }
-        per_object.push(curves);
     }
     // The drawing borrows the path: it ends before the path is returned.
     {
         load_font()?;
         let width = 420 * objects.len() as u32;
-        let root = BitMapBackend::new(&path, (width, 420)).into_drawing_area();
+        let root = BitMapBackend::new(&path, (width, 800)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err)?;
-        let root =
-            root.titled("success per object (periodic evaluations)", ("sans-serif", 20)).map_err(draw_err)?;
-        let panels = root.split_evenly((1, objects.len()));
-        for ((panel, object), curves) in panels.iter().zip(&objects).zip(&per_object) {
+        let root = root.titled("success per object", ("sans-serif", 20)).map_err(draw_err)?;
+        let panels = root.split_evenly((rows.len(), objects.len()));
+        let titles = rows
+            .iter()
+            .flat_map(|(_, what)| objects.iter().map(move |o| format!("the {o}: success, {what}")));
+        for ((panel, title), curves) in panels.iter().zip(titles).zip(&per_panel) {
             let mut groups: Groups = BTreeMap::new();
             for r in curves {
                 groups.entry(r.experiment.as_str()).or_default().push(r);
@@ -719,11 +716,31 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
                 .iter()
                 .map(|(name, rs)| (*name, spread(rs, |r| (&r.eval_step, &r.eval_success)), false))
                 .collect();
-            draw_panel(panel, &format!("the {object}: success"), XAxis::EnvSteps, &drawn, &groups, &palette)?;
+            draw_panel(panel, &title, XAxis::EnvSteps, &drawn, &groups, &palette)?;
         }
         root.present().map_err(draw_err)?;
     }
     Ok(Some(path))
+}
+
+/// A curve's steps and values.
+type StepsAndValues = (Vec<f64>, Vec<f64>);
+
+/// `(step, success)` of a CSV's `column`; `None` when the file or the column is missing (a
+/// run from before the per-object columns, or without periodic evaluations).
+fn object_success(path: &Path, column: &str) -> Result<Option<StepsAndValues>, PlotError> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let columns = match csv_columns(path, &["step", column]) {
+        Ok(c) => c,
+        Err(PlotError::Csv { message, .. }) if message.starts_with("no column") => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    let [step, success]: [Vec<f64>; 2] = columns
+        .try_into()
+        .map_err(|_| PlotError::Csv { path: path.to_owned(), message: "columns".into() })?;
+    Ok(Some((step, success)))
 }
 
 #[cfg(test)]

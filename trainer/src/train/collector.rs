@@ -9,7 +9,7 @@ use tch::Tensor;
 use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
 
 use super::TrainError;
-use super::metrics::Window;
+use super::metrics::{TrainingObjects, Window};
 use crate::behaviour::{Behaviour, Decision, StepContext};
 use crate::replay::ReplayBuffer;
 use crate::sac::{Sac, mix_seed, standard_normal};
@@ -39,6 +39,8 @@ pub(super) struct Collector {
     seed: u64,
     /// The disturbance curricula (`env.perturb_ramp_steps`, `env.noise_ramp_steps`), when on.
     ramp: Option<DisturbanceRamp>,
+    /// Which object each env holds, for the per-object metrics.
+    objects: TrainingObjects,
 }
 
 /// Raises each env's random force on the object and its drop penalty (over
@@ -121,6 +123,7 @@ impl Collector {
             ctl_rngs: (0..n).map(|_| ChaCha8Rng::seed_from_u64(0)).collect(),
             max_action_rad: config.env.max_action_rad,
             seed: config.seed,
+            objects: TrainingObjects::new(&config.env.objects, n),
         })
     }
 
@@ -263,7 +266,9 @@ impl Collector {
             episode.rewards.push(r.reward);
             self.obs[i] = r.obs;
             if r.terminated || r.truncated {
-                window.add_episode(&episode.tracker.outcome(r.terminated), &episode.rewards, gamma);
+                let outcome = episode.tracker.outcome(r.terminated);
+                window.add_episode(&outcome, &episode.rewards, gamma);
+                window.add_object_episode(&self.objects, i, &outcome);
                 finished.push(i);
             }
         }

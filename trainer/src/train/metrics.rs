@@ -2,7 +2,7 @@
 //! row they become.
 
 use serde::{Deserialize, Serialize};
-use vge_sim::EpisodeOutcome;
+use vge_sim::{EpisodeOutcome, ObjectShape};
 
 use crate::behaviour::BehaviourStats;
 use crate::sac::UpdateStats;
@@ -35,7 +35,72 @@ pub(super) struct Window {
     mc_return_sum: f64,
     mc_return_count: u64,
     mc_return_max: Option<f64>,
+    /// Per training object of a run on several ([`TrainingObjects`]); empty, and left out of
+    /// the checkpoint, on one object.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    per_object: Vec<ObjectWindow>,
 }
+
+/// The finished episodes of one training object in the window.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+struct ObjectWindow {
+    episodes: u64,
+    ret: f64,
+    rotation: f64,
+    successes: u64,
+}
+
+/// The distinct objects of a run (`env.objects`, first appearance first), and which of them
+/// each env holds: env `i` holds `objects[i % objects.len()]`.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct TrainingObjects {
+    distinct: Vec<ObjectShape>,
+    of_env: Vec<usize>,
+}
+
+impl TrainingObjects {
+    pub fn new(objects: &[ObjectShape], num_envs: usize) -> Self {
+        let mut distinct: Vec<ObjectShape> = Vec::new();
+        for &o in objects {
+            if !distinct.contains(&o) {
+                distinct.push(o);
+            }
+        }
+        let of_env = (0..num_envs)
+            .map(|i| {
+                let shape = objects.get(i % objects.len().max(1)).copied();
+                shape.and_then(|s| distinct.iter().position(|&d| d == s)).unwrap_or(0)
+            })
+            .collect();
+        Self { distinct, of_env }
+    }
+
+    /// More than one object: the metrics gain per-object columns.
+    pub fn several(&self) -> bool {
+        self.distinct.len() > 1
+    }
+
+    /// The per-object columns of `metrics.csv` (none on one object): each object's success,
+    /// return and rotation per finished episode, `<object>_success` and so on.
+    pub fn columns(&self) -> Vec<String> {
+        if !self.several() {
+            return Vec::new();
+        }
+        self.distinct
+            .iter()
+            .flat_map(|o| OBJECT_FIGURES.map(|figure| format!("{}_{figure}", o.name())))
+            .collect()
+    }
+
+    /// `metrics.csv`'s header for this run.
+    pub fn metrics_header(&self) -> String {
+        std::iter::once(METRICS_HEADER.to_owned()).chain(self.columns()).collect::<Vec<_>>().join(",")
+    }
+}
+
+/// The figures of each object in a multi-object run's metrics, in column order.
+const OBJECT_FIGURES: [&str; 3] = ["success", "return", "rotation"];
 
 impl Window {
     /// A finished episode, with its rewards for the Monte-Carlo returns.
@@ -52,6 +117,38 @@ impl Window {
             (Some(a), Some(b)) => Some(a.max(b)),
             (a, b) => a.or(b),
         };
+    }
+
+    /// A finished episode of env `env`, counted for its object as well when the run has
+    /// several ([`Self::add_episode`] counts it overall).
+    pub fn add_object_episode(&mut self, objects: &TrainingObjects, env: usize, outcome: &EpisodeOutcome) {
+        if !objects.several() {
+            return;
+        }
+        if self.per_object.len() < objects.distinct.len() {
+            self.per_object.resize(objects.distinct.len(), ObjectWindow::default());
+        }
+        let slot = objects.of_env.get(env).copied().unwrap_or(0);
+        if let Some(w) = self.per_object.get_mut(slot) {
+            w.episodes += 1;
+            w.ret += outcome.episode_return;
+            w.rotation += outcome.rotation_rad;
+            w.successes += u64::from(outcome.success());
+        }
+    }
+
+    /// The per-object columns' values, in [`TrainingObjects::columns`] order; `None` for an
+    /// object with no finished episode in the window.
+    pub fn object_values(&self, objects: &TrainingObjects) -> Vec<(String, Option<f64>)> {
+        let columns = objects.columns();
+        let mut values = Vec::with_capacity(columns.len());
+        for (k, names) in columns.chunks(OBJECT_FIGURES.len()).enumerate() {
+            let w = self.per_object.get(k).cloned().unwrap_or_default();
+            let per_episode = |x: f64| (w.episodes > 0).then(|| x / w.episodes as f64);
+            let figures = [per_episode(w.successes as f64), per_episode(w.ret), per_episode(w.rotation)];
+            values.extend(names.iter().cloned().zip(figures));
+        }
+        values
     }
 
     /// One gradient update.
@@ -154,6 +251,42 @@ mod tests {
     fn metrics_columns_match_the_csv_header() {
         let names: Vec<&str> = Window::default().values(0, 0.0, 0, 0.0).iter().map(|(n, _)| *n).collect();
         assert_eq!(format!("step,{}", names.join(",")), METRICS_HEADER);
+    }
+
+    #[test]
+    fn a_run_on_several_objects_gets_each_objects_columns_and_figures() {
+        use ObjectShape::{Cube, Sphere};
+        let one = TrainingObjects::new(&[Cube, Cube], 4);
+        assert!(!one.several() && one.columns().is_empty());
+        assert_eq!(one.metrics_header(), METRICS_HEADER);
+        let mut w = Window::default();
+        let outcome = |ret: f64, rotation_rad: f64| EpisodeOutcome {
+            episode_return: ret,
+            rotation_rad,
+            ..EpisodeOutcome::default()
+        };
+        w.add_object_episode(&one, 1, &outcome(1.0, 7.0));
+        assert!(w.per_object.is_empty(), "one object: nothing per object");
+
+        // Envs 0, 2 hold the cube, 1, 3 the sphere.
+        let two = TrainingObjects::new(&[Cube, Sphere], 4);
+        assert_eq!(
+            two.metrics_header(),
+            format!(
+                "{METRICS_HEADER},cube_success,cube_return,cube_rotation,sphere_success,sphere_return,sphere_rotation"
+            )
+        );
+        w.add_object_episode(&two, 1, &outcome(2.0, 7.0));
+        w.add_object_episode(&two, 3, &outcome(4.0, 1.0));
+        let values = w.object_values(&two);
+        let names: Vec<&str> = values.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, two.columns());
+        // The cube had no episode; the sphere's two average (one turned 2 pi, one did not).
+        assert_eq!(values[0].1, None);
+        assert_eq!(
+            &values[3..].iter().map(|(_, v)| *v).collect::<Vec<_>>(),
+            &[Some(0.5), Some(3.0), Some(4.0)]
+        );
     }
 
     #[test]

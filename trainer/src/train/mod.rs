@@ -472,7 +472,18 @@ impl<'a> Trainer<'a> {
         let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
         let steps_per_s = (step - self.session_first_step) as f64 / self.cost.session_wall_s().max(1e-9);
         if crossed(config.run.log_interval) || step >= config.total_steps {
-            let values = self.c.window.values(self.c.episodes, self.beta(), self.sac.updates(), steps_per_s);
+            let mut values: Vec<(String, Option<f64>)> = self
+                .c
+                .window
+                .values(self.c.episodes, self.beta(), self.sac.updates(), steps_per_s)
+                .into_iter()
+                .map(|(name, v)| (name.to_owned(), v))
+                .collect();
+            if self.folder.object_columns() {
+                let objects = metrics::TrainingObjects::new(&config.env.objects, config.num_envs);
+                values.extend(self.c.window.object_values(&objects));
+            }
+            let values: Vec<(&str, Option<f64>)> = values.iter().map(|(n, v)| (n.as_str(), *v)).collect();
             self.folder.log(step, &values)?;
             self.c.last_window = std::mem::take(&mut self.c.window);
         }

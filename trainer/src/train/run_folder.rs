@@ -11,7 +11,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
-use super::metrics::{METRICS_HEADER, csv_fields};
+use super::metrics::{METRICS_HEADER, TrainingObjects, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
 use crate::checkpoint;
@@ -59,6 +59,9 @@ pub(super) struct RunFolder {
     metrics_path: PathBuf,
     metrics: csv::Writer<File>,
     events: EventWriter,
+    /// `metrics.csv` holds the per-object columns: a run on several objects does, unless it
+    /// was started by a vge that wrote none and goes on in its layout.
+    object_columns: bool,
     _lock: RunLock,
 }
 
@@ -78,9 +81,10 @@ impl RunFolder {
         let metrics_path = dir.join(vge_lab::run_dir::METRICS);
         let config_path = dir.join(vge_lab::run_dir::CONFIG);
         let effective = config.to_toml_string()?;
+        let header = TrainingObjects::new(&config.env.objects, config.num_envs).metrics_header();
         if resumed {
             if !resume_csv(&metrics_path, step)? {
-                atomic_file::write(&metrics_path, format!("{METRICS_HEADER}\n").as_bytes())
+                atomic_file::write(&metrics_path, format!("{header}\n").as_bytes())
                     .map_err(io_err(&metrics_path))?;
             }
             let eval_path = dir.join(vge_lab::run_dir::EVAL);
@@ -94,9 +98,12 @@ impl RunFolder {
             }
         } else {
             atomic_file::write(&config_path, effective.as_bytes()).map_err(io_err(&config_path))?;
-            atomic_file::write(&metrics_path, format!("{METRICS_HEADER}\n").as_bytes())
+            atomic_file::write(&metrics_path, format!("{header}\n").as_bytes())
                 .map_err(io_err(&metrics_path))?;
         }
+        // A resumed run keeps its file's layout: one started by a vge without the per-object
+        // columns goes on without them.
+        let object_columns = header != METRICS_HEADER && first_line(&metrics_path)? == header;
         // A new event file per session (named by its first step and its process: two resumes
         // from one checkpoint may start within a second); a resumed one starts with a
         // session-start marker so that TensorBoard drops the interrupted session's points
@@ -110,11 +117,16 @@ impl RunFolder {
         let file =
             File::options().append(true).create(true).open(&metrics_path).map_err(io_err(&metrics_path))?;
         let metrics = csv::WriterBuilder::new().has_headers(false).from_writer(file);
-        Ok(Self { dir: dir.to_owned(), metrics_path, metrics, events, _lock: lock })
+        Ok(Self { dir: dir.to_owned(), metrics_path, metrics, events, object_columns, _lock: lock })
     }
 
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Whether [`Self::log`]'s rows carry the per-object columns.
+    pub fn object_columns(&self) -> bool {
+        self.object_columns
     }
 
     /// One metrics row, to `metrics.csv` (flushed) and to TensorBoard as `train/<column>`
@@ -169,6 +181,12 @@ pub(super) fn load_checkpoint(
 /// that is not a header, or a row whose step is not a number, is refused with the file's name:
 /// appended to, it would not read as a table. Returns false when the file holds no complete
 /// line (missing, or a header cut short): it holds no row, and a new one must be started.
+/// The first line of the file at `path`, without its line end.
+fn first_line(path: &Path) -> Result<String, TrainError> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    Ok(text.lines().next().unwrap_or("").to_owned())
+}
+
 fn resume_csv(path: &Path, step: u64) -> Result<bool, TrainError> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
