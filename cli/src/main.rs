@@ -9,7 +9,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use commands::{
-    bench, compare, controller, eval, export, import, inspect, plot, robustness, score, sweep, train,
+    bench, compare, controller, eval, export, import, inspect, plot, robustness, score, screen, ship, sweep,
+    train,
 };
 
 /// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
@@ -31,6 +32,8 @@ enum Command {
     Compare(compare::CompareArgs),
     Eval(eval::EvalArgs),
     Robustness(robustness::RobustnessArgs),
+    Screen(screen::ScreenArgs),
+    Ship(ship::ShipArgs),
     Export(export::ExportArgs),
     Import(import::ImportArgs),
     Inspect(inspect::InspectArgs),
@@ -65,6 +68,8 @@ fn main() -> ExitCode {
         Command::Compare(args) => compare::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Robustness(args) => robustness::run(args),
+        Command::Screen(args) => screen::run(args),
+        Command::Ship(args) => ship::run(args),
         Command::Export(args) => export::run(args),
         Command::Import(args) => import::run(args),
         Command::Inspect(args) => inspect::run(args),

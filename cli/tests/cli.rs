@@ -505,7 +505,7 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
-/// `scripts/screen-snapshots.sh` screens the snapshots whose periodic test passed (and the
+/// `vge screen` screens the snapshots whose periodic test passed (and the
 /// final policy) on the success test and the two pushes, with the real vge.
 #[test]
 fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
@@ -526,15 +526,8 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
         "{header}\n100,20,1,1,0.9000,0,4,1\n200,20,1,1,0.1000,0,4,1\n300,20,1,1,1.0000,0,4,1\n400,20,1,1,0.8000,0,4,1\n"
     );
     std::fs::write(run.join("eval.csv"), eval_csv).expect("eval.csv");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/screen-snapshots.sh");
-    let screen = |dir: &Path| {
-        Command::new("bash")
-            .arg(&script)
-            .args([dir.display().to_string(), "11000".to_owned(), "1".to_owned()])
-            .env("VGE_BIN", env!("CARGO_BIN_EXE_vge"))
-            .output()
-            .expect("bash runs")
-    };
+    let screen =
+        |dir: &Path| vge(&["screen", "--seed", "11000", "--episodes", "1"], &[dir.display().to_string()]);
     let out = screen(&run);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let csv = std::fs::read_to_string(run.join("screen.csv")).expect("screen.csv");
@@ -550,7 +543,65 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
 
     let empty = common::temp_dir("screen-snapshots-empty");
     let refused = screen(&empty);
-    assert!(!refused.status.success() && text(&refused.stderr).contains("eval.csv is missing"));
+    let err = text(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("eval.csv") && err.contains("missing"), "{err}");
     let _ = std::fs::remove_dir_all(&run);
     let _ = std::fs::remove_dir_all(&empty);
+}
+
+/// `vge ship` copies the run's policy and config, measures the copy and writes its record and
+/// robustness figure; a run that is not finished is refused and nothing is written.
+#[test]
+fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfinished_one() {
+    let run = common::temp_dir("ship-run");
+    let export = vge(
+        &["export", "--init", "--seed", "3", "--out"],
+        &[run.join("policy-best.vgep").display().to_string()],
+    );
+    assert!(export.status.success(), "{}", text(&export.stderr));
+    std::fs::copy(common::config("cube-fg-rl.toml"), run.join("config.toml")).expect("config");
+    let policies = run.join("shipped");
+    let ship = || {
+        vge(
+            &[
+                "ship",
+                "--policy",
+                "policy-best.vgep",
+                "--name",
+                "trial",
+                "--episodes",
+                "1",
+                "--robustness-episodes",
+                "1",
+            ],
+            &[run.display().to_string(), "--policies".to_owned(), policies.display().to_string()],
+        )
+    };
+    // No final-eval.json: not a finished run.
+    let refused = ship();
+    let err = text(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("final-eval.json") && err.contains("not a finished"),
+        "{err}"
+    );
+    assert!(!policies.exists(), "a refused ship wrote files");
+
+    std::fs::write(run.join("final-eval.json"), r#"{"success_rate": 0.0, "env_steps": 1, "wall_s": 1.0}"#)
+        .expect("json");
+    let out = ship();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let read = |name: &str| std::fs::read(policies.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(read("trial.vgep") == std::fs::read(run.join("policy-best.vgep")).expect("policy"));
+    assert!(read("trial.toml") == std::fs::read(run.join("config.toml")).expect("config"));
+    assert!(read("trial-robustness.png").starts_with(b"\x89PNG"));
+    let record: serde_json::Value = serde_json::from_slice(&read("trial.json")).expect("trial.json");
+    assert_eq!(record["source_policy"], "policy-best.vgep");
+    assert!(record["provenance"].as_str().expect("provenance").contains("seed"), "{record}");
+    assert_eq!(record["success_test"]["episodes"], 1);
+    // An untrained actor turns nothing: the success goal fails, and says so.
+    assert_eq!(record["goals"]["success_rate >= 0.8"], false, "{record}");
+    let axes = record["return_fraction_at_paper_level"].as_object().expect("per axis");
+    assert_eq!(axes.len(), 5, "{record}");
+    assert!(text(&out.stdout).contains("FAILS  success_rate >= 0.8"), "{}", text(&out.stdout));
+    let _ = std::fs::remove_dir_all(&run);
 }

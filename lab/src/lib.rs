@@ -18,6 +18,7 @@ pub mod run_dir;
 pub mod run_eval;
 pub mod run_lock;
 pub mod score;
+pub mod ship;
 pub mod stats;
 pub mod sweep;
 pub mod table1;

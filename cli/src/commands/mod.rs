@@ -11,6 +11,8 @@ pub mod inspect;
 pub mod plot;
 pub mod robustness;
 pub mod score;
+pub mod screen;
+pub mod ship;
 pub mod sweep;
 pub mod train;
 

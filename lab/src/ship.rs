@@ -1,0 +1,357 @@
+//! Choosing and shipping a trained policy. [`screen`] (`vge screen`) tests a run's passing
+//! snapshots and its final policy on episodes the run never saw: the success test and the two
+//! pushes at the object's weight. [`ship`] (`vge ship`) copies one policy and its run's config
+//! to a policies folder and measures the copy (the success test, the robustness test on every
+//! axis), writing `NAME.json` with the goals and whether each holds, and
+//! `NAME-robustness.png`.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use thiserror::Error;
+use vge_sim::EnvConfig;
+
+use crate::eval::{self, EvalError, EvalReport};
+use crate::plot::PlotError;
+use crate::robustness::{self, Axis, RobustnessOptions, RobustnessReport};
+use crate::run_dir::{self, RunDir};
+
+#[derive(Debug, Error)]
+pub enum ShipError {
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("{path}: {message}")]
+    Run { path: String, message: String },
+    #[error("{path}: {message}")]
+    Json { path: String, message: String },
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+    #[error(transparent)]
+    Export(#[from] vge_export::ExportError),
+}
+
+fn io_err(path: &Path) -> impl Fn(std::io::Error) -> ShipError + '_ {
+    move |source| ShipError::Io { path: path.display().to_string(), source }
+}
+
+/// The success a policy needs in the success test to be shipped, and the share of its clean
+/// return it must keep at each robustness axis's paper level.
+pub const SHIP_MIN_SUCCESS: f64 = 0.8;
+pub const SHIP_MIN_RETURN_FRACTION: f64 = 0.75;
+
+/// The episodes [`screen`] runs per test, and their first seed: far from training's
+/// evaluation seeds, so that no screened policy was selected on them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScreenOptions {
+    pub episodes: usize,
+    pub seed: u64,
+    /// A snapshot is screened when its periodic test (eval.csv) reached this success.
+    pub min_success: f64,
+}
+
+impl Default for ScreenOptions {
+    fn default() -> Self {
+        Self { episodes: 20, seed: 11_000, min_success: SHIP_MIN_SUCCESS }
+    }
+}
+
+/// One screened policy: `step` is the snapshot's env step, or `None` for the final policy.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScreenRow {
+    pub step: Option<u64>,
+    pub policy: PathBuf,
+    pub success: EvalReport,
+    /// The push of the object's weight in size, random direction (`perturbation_magnitude_n`
+    /// at its paper level), and the Gaussian push with the weight as each component's std
+    /// (`perturbation_force_n`).
+    pub push_magnitude: PushFigures,
+    pub push_std: PushFigures,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PushFigures {
+    /// Mean return as a fraction of the undisturbed return (NaN when that is <= 0).
+    pub return_fraction: f64,
+    pub success_rate: f64,
+}
+
+/// The policies a screen tests: the snapshots whose periodic test passed, oldest first, then
+/// the final policy unless it is byte for byte one of them.
+pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64>, PathBuf)>, ShipError> {
+    let dir = RunDir::new(run);
+    let eval_csv = dir.eval_csv();
+    if !eval_csv.exists() {
+        return Err(ShipError::Run {
+            path: eval_csv.display().to_string(),
+            message: "missing: the run has no periodic tests to screen".into(),
+        });
+    }
+    let [steps, success]: [Vec<f64>; 2] = crate::plot::csv_columns(&eval_csv, &["step", "success"])?
+        .try_into()
+        .map_err(|_| ShipError::Run { path: eval_csv.display().to_string(), message: "columns".into() })?;
+    let mut out = Vec::new();
+    for (step, success) in steps.into_iter().zip(success) {
+        // eval.csv's steps are whole env steps written as integers.
+        let step = step as u64;
+        let path = dir.snapshot(step);
+        if success >= min_success && path.exists() {
+            out.push((Some(step), path));
+        }
+    }
+    let final_policy = dir.policy();
+    if final_policy.exists() {
+        let bytes = std::fs::read(&final_policy).map_err(io_err(&final_policy))?;
+        let mut same = false;
+        for (_, p) in &out {
+            same |= std::fs::read(p).map_err(io_err(p))? == bytes;
+        }
+        if !same {
+            out.push((None, final_policy));
+        }
+    }
+    Ok(out)
+}
+
+/// Screens `candidates` (from [`screen_candidates`]) on the run's object with the success
+/// test and the two pushes; `on_row` sees each row as it is measured.
+pub fn screen(
+    candidates: &[(Option<u64>, PathBuf)],
+    options: &ScreenOptions,
+    mut on_row: impl FnMut(&ScreenRow),
+) -> Result<Vec<ScreenRow>, ShipError> {
+    let base = EnvConfig::default();
+    let success_env =
+        eval::success_test_env(&base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
+    let pushes = RobustnessOptions {
+        episodes: options.episodes,
+        episode_s: eval::SUCCESS_TEST_EPISODE_S,
+        grasp_noise_rad: eval::SUCCESS_TEST_GRASP_NOISE_RAD,
+        seed: options.seed,
+        levels: 2,
+        axes: vec![Axis::PerturbationMagnitude, Axis::Perturbation],
+    };
+    let mut rows = Vec::with_capacity(candidates.len());
+    for (step, policy) in candidates {
+        let bytes = eval::read_policy_file(policy)?;
+        let success = eval::eval_policy_bytes(&bytes, &success_env, options.episodes, options.seed)?;
+        let report = robustness::run(&bytes, &base, &pushes, |_| {})?;
+        let at_paper_level = |axis: Axis| {
+            let r = report.rows.iter().find(|r| r.axis == axis.name() && r.fraction_of_max == 1.0);
+            r.map_or(PushFigures { return_fraction: f64::NAN, success_rate: f64::NAN }, |r| PushFigures {
+                return_fraction: r.return_fraction,
+                success_rate: r.success_rate,
+            })
+        };
+        let row = ScreenRow {
+            step: *step,
+            policy: policy.clone(),
+            success,
+            push_magnitude: at_paper_level(Axis::PerturbationMagnitude),
+            push_std: at_paper_level(Axis::Perturbation),
+        };
+        on_row(&row);
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// The file [`screen`]'s rows are written to in the run's folder.
+pub const SCREEN_CSV: &str = "screen.csv";
+
+/// `screen.csv`: one row per policy (`final` for the final policy's step).
+pub fn screen_csv(rows: &[ScreenRow]) -> String {
+    let mut text = String::from(
+        "step,success,drops,rotation_rad,push_magnitude_return_fraction,push_magnitude_success,\
+         push_std_return_fraction,push_std_success\n",
+    );
+    let frac = |f: f64| if f.is_finite() { format!("{f:.2}") } else { "nan".to_owned() };
+    for r in rows {
+        let step = r.step.map_or_else(|| "final".to_owned(), |s| s.to_string());
+        text.push_str(&format!(
+            "{step},{:.2},{:.2},{:.1},{},{:.2},{},{:.2}\n",
+            r.success.success_rate,
+            r.success.drop_rate,
+            r.success.mean_rotation_rad,
+            frac(r.push_magnitude.return_fraction),
+            r.push_magnitude.success_rate,
+            frac(r.push_std.return_fraction),
+            r.push_std.success_rate,
+        ));
+    }
+    text
+}
+
+/// What `vge ship` writes to `NAME.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct ShipRecord {
+    /// The run folder, as given.
+    pub source_run: String,
+    /// The shipped file, relative to the run folder.
+    pub source_policy: String,
+    /// The policy file's provenance, as `vge inspect` prints it.
+    pub provenance: String,
+    pub success_test: EvalReport,
+    pub robustness: RobustnessReport,
+    /// Per axis: the return at the paper's level as a fraction of the clean return.
+    pub return_fraction_at_paper_level: std::collections::BTreeMap<String, f64>,
+    /// The goals, each with whether it holds: success >= 0.8 in the success test, and >= 0.75
+    /// of the clean return at each axis's paper level; the push "at the object's weight" read
+    /// as the paper's, a force of that size in a random direction.
+    pub goals: std::collections::BTreeMap<String, bool>,
+    /// Measured beside the goals: the Gaussian push with the weight as each component's std
+    /// (1.6 times the weight on average).
+    pub beside_goals: std::collections::BTreeMap<String, bool>,
+}
+
+impl ShipRecord {
+    /// Every goal holds.
+    pub fn qualifies(&self) -> bool {
+        self.goals.values().all(|&ok| ok)
+    }
+}
+
+/// The files [`ship`] writes into the policies folder for `name`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShippedFiles {
+    pub policy: PathBuf,
+    pub config: PathBuf,
+    pub record: PathBuf,
+    pub robustness_png: PathBuf,
+}
+
+impl ShippedFiles {
+    pub fn new(policies: &Path, name: &str) -> Self {
+        Self {
+            policy: policies.join(format!("{name}.vgep")),
+            config: policies.join(format!("{name}.toml")),
+            record: policies.join(format!("{name}.json")),
+            robustness_png: policies.join(format!("{name}-robustness.png")),
+        }
+    }
+}
+
+/// What [`ship`] ships and how it measures it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShipOptions {
+    /// The policy file to ship, relative to the run folder: `policy.vgep` (the final policy),
+    /// `policy-best.vgep` (the snapshot the run's selection picked) or
+    /// `snapshots/policy-STEP.vgep`.
+    pub policy: String,
+    /// Episodes of the success test, and per robustness level.
+    pub success_episodes: usize,
+    pub robustness_episodes: usize,
+    pub robustness_levels: usize,
+}
+
+impl Default for ShipOptions {
+    fn default() -> Self {
+        Self {
+            policy: run_dir::POLICY.to_owned(),
+            success_episodes: eval::SUCCESS_TEST_EPISODES,
+            robustness_episodes: 10,
+            robustness_levels: 5,
+        }
+    }
+}
+
+/// Copies the run's policy and config to `files`, measures the copy and writes the record and
+/// the robustness figure. `on_row` sees each robustness row as it is measured.
+pub fn ship(
+    run: &Path,
+    files: &ShippedFiles,
+    options: &ShipOptions,
+    on_row: impl FnMut(&robustness::RobustnessRow),
+) -> Result<ShipRecord, ShipError> {
+    let dir = RunDir::new(run);
+    let source = run.join(&options.policy);
+    for needed in [source.clone(), dir.config(), dir.final_eval()] {
+        if !needed.exists() {
+            return Err(ShipError::Run {
+                path: needed.display().to_string(),
+                message: "missing: not a finished training run".into(),
+            });
+        }
+    }
+    // Measured before anything is written: a policy that cannot be read replaces nothing.
+    let bytes = eval::read_policy_file(&source)?;
+    let provenance = provenance_line(&source)?;
+    let base = EnvConfig::default();
+    let success_env =
+        eval::success_test_env(&base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
+    let success_test = eval::eval_policy_bytes(&bytes, &success_env, options.success_episodes, 0)?;
+    let robustness = robustness::run(
+        &bytes,
+        &base,
+        &RobustnessOptions {
+            episodes: options.robustness_episodes,
+            episode_s: eval::SUCCESS_TEST_EPISODE_S,
+            grasp_noise_rad: eval::SUCCESS_TEST_GRASP_NOISE_RAD,
+            seed: 0,
+            levels: options.robustness_levels,
+            axes: Axis::ALL.to_vec(),
+        },
+        on_row,
+    )?;
+    let record = record(run, options, provenance, success_test, robustness);
+
+    if let Some(parent) = files.policy.parent() {
+        std::fs::create_dir_all(parent).map_err(io_err(parent))?;
+    }
+    crate::atomic_file::write(&files.policy, &bytes).map_err(io_err(&files.policy))?;
+    let config = std::fs::read(dir.config()).map_err(io_err(&dir.config()))?;
+    crate::atomic_file::write(&files.config, &config).map_err(io_err(&files.config))?;
+    robustness::plot(&record.robustness, &files.robustness_png)?;
+    let mut json = serde_json::to_string_pretty(&record)
+        .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;
+    json.push('\n');
+    crate::atomic_file::write(&files.record, json.as_bytes()).map_err(io_err(&files.record))?;
+    Ok(record)
+}
+
+fn record(
+    run: &Path,
+    options: &ShipOptions,
+    provenance: String,
+    success_test: EvalReport,
+    robustness: RobustnessReport,
+) -> ShipRecord {
+    let at_paper_level: std::collections::BTreeMap<String, f64> = robustness
+        .rows
+        .iter()
+        .filter(|r| r.fraction_of_max == 1.0)
+        .map(|r| (r.axis.to_owned(), r.return_fraction))
+        .collect();
+    let mut goals = std::collections::BTreeMap::new();
+    goals
+        .insert(format!("success_rate >= {SHIP_MIN_SUCCESS}"), success_test.success_rate >= SHIP_MIN_SUCCESS);
+    let mut beside_goals = std::collections::BTreeMap::new();
+    for (axis, &fraction) in &at_paper_level {
+        let key = format!("{axis}: return at the paper's level >= {SHIP_MIN_RETURN_FRACTION} of clean");
+        // NaN (no clean return to compare with) holds nothing.
+        let holds = fraction >= SHIP_MIN_RETURN_FRACTION;
+        if axis == Axis::Perturbation.name() {
+            beside_goals.insert(key, holds);
+        } else {
+            goals.insert(key, holds);
+        }
+    }
+    ShipRecord {
+        source_run: run.display().to_string(),
+        source_policy: options.policy.clone(),
+        provenance,
+        success_test,
+        robustness,
+        return_fraction_at_paper_level: at_paper_level,
+        goals,
+        beside_goals,
+    }
+}
+
+/// The provenance line `vge inspect` prints for the file, without its label.
+fn provenance_line(path: &Path) -> Result<String, ShipError> {
+    let report = vge_export::inspect::report_file(path)?;
+    let pv = &report.policy.provenance;
+    Ok(format!("vge {}, config {}, seed {}, {} steps", pv.vge_version, pv.config_hash, pv.seed, pv.steps))
+}
