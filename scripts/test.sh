@@ -137,9 +137,10 @@ for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features";
   fi
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
-# Not compiled here: `cargo check -p vge-cli --no-default-features` resolves the dependencies'
-# features apart from the workspace's and checks all of them again (128 s of a 1,275 s fresh
-# run, for a build no test uses); docs/testing.md gives the command.
+# ...and that it compiles, linted (`cargo check` through the clippy wrapper: a build would
+# resolve the dependencies' features apart from the workspace's and compile rapier3d and
+# nalgebra a second time).
+cargo check --release -p vge-cli --no-default-features
 
 step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
 # Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
