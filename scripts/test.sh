@@ -25,7 +25,7 @@ breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
   local bg
-  for bg in ${python_build:-} ${hil_run:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
+  for bg in ${python_build:-} ${hil_run:-} ${slurm_run:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
   if [[ -n ${py_install:-} ]]; then kill "$py_install" 2>/dev/null || true; fi
   # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
   local verdict="all passed"
@@ -183,6 +183,12 @@ hil_run=$!
 cargo nextest run --release --workspace
 cargo test --release --workspace --doc
 
+# The Slurm test (step below) runs beside the Python step: each is mostly one process at a
+# time, and they share no build directory.
+slurm_log=$repo/target/slurm-test.log
+scripts/slurm/test.sh >"$slurm_log" 2>&1 &
+slurm_run=$!
+
 step "Python package (python/: pyo3 + numpy, built by maturin; pytest python/tests)"
 # A workspace of its own (python/Cargo.toml, target dir python/target) linking vge-sim,
 # vge-controllers and vge-runtime, never libtorch.
@@ -204,10 +210,13 @@ PATH="$repo/.deps/py/bin:$PATH" .deps/py/bin/python -m pip install --quiet --dis
 ls -l python/target/wheels/
 .deps/py/bin/python -m pytest -q python/tests
 
-step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost)"
+step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost; running since the Python step began)"
 # Installs slurmctld, slurmd, slurm-client and munge when missing, starts a throw-away
 # cluster, runs cli/tests/slurm.rs (vge sweep --slurm, scancel, resume) and stops it.
-scripts/slurm/test.sh
+slurm_status=0; wait "$slurm_run" || slurm_status=$?
+slurm_run=
+cat "$slurm_log"
+[[ $slurm_status == 0 ]] || { echo "the Slurm test failed (log: $slurm_log)"; exit 1; }
 
 step "hardware-in-the-loop tests on vcan0 (scripts/hil.sh, running since the workspace tests began)"
 waited=$SECONDS

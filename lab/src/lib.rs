@@ -3,8 +3,11 @@
 //! [`gait_diagram`]), a run's periodic and final tests and model selection ([`run_eval`]), a
 //! hand policy file's metadata ([`policy_meta`]), robustness ([`robustness`]), held-out scores ([`score`]) and their
 //! statistics ([`stats`], [`compare`]), sweeps and Slurm ([`sweep`]), plots ([`plot`]) and
-//! Table I ([`table1`]). It evaluates exported policies on vge-runtime, as a hand would run
+//! Table I ([`table1`]), screening and shipping a policy ([`ship`]). It evaluates exported policies on vge-runtime, as a hand would run
 //! them; vge-trainer trains them and uses this crate for its periodic tests.
+
+// Functions of at most 80 lines of code (clippy.toml).
+#![warn(clippy::too_many_lines)]
 
 pub mod atomic_file;
 pub mod compare;

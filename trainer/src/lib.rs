@@ -3,6 +3,9 @@
 //! ([`train`]) and its checkpoints ([`checkpoint`]). The only crate of vge that links
 //! libtorch; run configs, the success test and the rest of the lab are vge-lab's.
 
+// Functions of at most 80 lines of code (clippy.toml).
+#![warn(clippy::too_many_lines)]
+
 pub mod behaviour;
 pub mod bench_update;
 pub mod checkpoint;

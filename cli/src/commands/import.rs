@@ -62,39 +62,15 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
         max_layers: vge_runtime::policy::HAND_MAX_LAYERS,
         max_width: vge_runtime::policy::HAND_MAX_WIDTH,
     };
-    let numbers = |path: &Option<PathBuf>| -> anyhow::Result<Option<Vec<f32>>> {
-        let Some(path) = path else { return Ok(None) };
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let values = text
-            .split(|c: char| c.is_whitespace() || c == ',')
-            .filter(|t| !t.is_empty())
-            .map(|t| t.parse::<f32>().with_context(|| format!("{}: `{t}` is not a number", path.display())))
-            .collect::<anyhow::Result<Vec<f32>>>()?;
-        Ok(Some(values))
-    };
     let obs_dim = target.obs_dim();
-    let (mean, std) = (numbers(&args.obs_mean)?, numbers(&args.obs_std)?);
+    let (mean, std) = (read_numbers(args.obs_mean.as_deref())?, read_numbers(args.obs_std.as_deref())?);
     let given = mean.is_some() || std.is_some() || args.obs_clip.is_some();
     let obs_norm = given.then(|| vge_export::ObsNorm {
         mean: mean.unwrap_or(vec![0.0; obs_dim]),
         std: std.unwrap_or(vec![1.0; obs_dim]),
         clip: args.obs_clip,
     });
-    let obs_layout = args
-        .obs_layout
-        .as_deref()
-        .map(|text| {
-            text.split(',')
-                .map(|slice| {
-                    let parsed = slice.trim().rsplit_once(':').and_then(|(name, range)| {
-                        let (a, b) = range.split_once("..")?;
-                        Some(vge_export::ObsSlice::new(name, a.parse().ok()?..b.parse().ok()?))
-                    });
-                    parsed.with_context(|| format!("--obs-layout: `{slice}` is not name:start..end"))
-                })
-                .collect::<anyhow::Result<Vec<_>>>()
-        })
-        .transpose()?;
+    let obs_layout = args.obs_layout.as_deref().map(parse_obs_layout).transpose()?;
     let action_scale = match args.action_scale.as_deref() {
         None => None,
         Some("graph") => Some(ActionScale::Graph),
@@ -131,4 +107,29 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
         p.control_hz
     );
     Ok(())
+}
+
+/// The numbers of a file, separated by whitespace or commas (`--obs-mean`, `--obs-std`).
+fn read_numbers(path: Option<&std::path::Path>) -> anyhow::Result<Option<Vec<f32>>> {
+    let Some(path) = path else { return Ok(None) };
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let values = text
+        .split(|c: char| c.is_whitespace() || c == ',')
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse::<f32>().with_context(|| format!("{}: `{t}` is not a number", path.display())))
+        .collect::<anyhow::Result<Vec<f32>>>()?;
+    Ok(Some(values))
+}
+
+/// `--obs-layout`: comma-separated `name:start..end` slices.
+fn parse_obs_layout(text: &str) -> anyhow::Result<Vec<vge_export::ObsSlice>> {
+    text.split(',')
+        .map(|slice| {
+            let parsed = slice.trim().rsplit_once(':').and_then(|(name, range)| {
+                let (a, b) = range.split_once("..")?;
+                Some(vge_export::ObsSlice::new(name, a.parse().ok()?..b.parse().ok()?))
+            });
+            parsed.with_context(|| format!("--obs-layout: `{slice}` is not name:start..end"))
+        })
+        .collect()
 }
