@@ -6,8 +6,7 @@
 #   formatting, the dependency rules (no libtorch in the bridge or the controllers, no
 #   rapier3d in the CAN-only bridge), the no_std runtime built for a Cortex-M4F, the
 #   workspace tests in release with clippy (-D warnings) on every target as it compiles (run
-#   by cargo-nextest), the
-#   Python package, the hardware-in-the-loop tests on vcan0, and
+#   by cargo-nextest), the Python package, the hardware-in-the-loop tests on vcan0, and
 #   `vge sweep --slurm` on a one-node Slurm cluster started on localhost. It ends with each
 #   step's time.
 set -euo pipefail

@@ -114,8 +114,8 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
     Ok(out)
 }
 
-/// Screens `candidates` (from [`screen_candidates`]) on the run's object with the success
-/// test and the two pushes; `on_row` sees each row as it is measured.
+/// Screens `candidates` (from [`screen_candidates`]) on the default env (the cube, palm down)
+/// with the success test and the two pushes; `on_row` sees each row as it is measured.
 pub fn screen(
     candidates: &[(Option<u64>, PathBuf)],
     options: &ScreenOptions,

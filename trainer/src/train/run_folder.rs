@@ -174,6 +174,12 @@ pub(super) fn load_checkpoint(
     Ok(state)
 }
 
+/// The first line of the file at `path`, without its line end.
+fn first_line(path: &Path) -> Result<String, TrainError> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    Ok(text.lines().next().unwrap_or("").to_owned())
+}
+
 /// Checks the CSV file `path` (`metrics.csv`, `eval.csv`) of a run resumed at `step` before
 /// rows are appended to it, and keeps its header and the rows up to `step`, rewritten
 /// atomically when that drops any. A row cut short by a kill (no newline) is past the
@@ -181,12 +187,6 @@ pub(super) fn load_checkpoint(
 /// that is not a header, or a row whose step is not a number, is refused with the file's name:
 /// appended to, it would not read as a table. Returns false when the file holds no complete
 /// line (missing, or a header cut short): it holds no row, and a new one must be started.
-/// The first line of the file at `path`, without its line end.
-fn first_line(path: &Path) -> Result<String, TrainError> {
-    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
-    Ok(text.lines().next().unwrap_or("").to_owned())
-}
-
 fn resume_csv(path: &Path, step: u64) -> Result<bool, TrainError> {
     let text = match std::fs::read_to_string(path) {
         Ok(text) => text,
