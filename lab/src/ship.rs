@@ -276,7 +276,7 @@ pub fn ship(
     }
     // Measured before anything is written: a policy that cannot be read replaces nothing.
     let bytes = eval::read_policy_file(&source)?;
-    let provenance = provenance_line(&source)?;
+    let provenance = provenance_line(&bytes)?;
     let base = EnvConfig::default();
     let success_env =
         eval::success_test_env(&base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
@@ -349,9 +349,9 @@ fn record(
     }
 }
 
-/// The provenance line `vge inspect` prints for the file, without its label.
-fn provenance_line(path: &Path) -> Result<String, ShipError> {
-    let report = vge_export::inspect::report_file(path)?;
+/// The provenance line `vge inspect` prints for the policy file's bytes, without its label.
+fn provenance_line(bytes: &[u8]) -> Result<String, ShipError> {
+    let report = vge_export::inspect::report(bytes)?;
     let pv = &report.policy.provenance;
     Ok(format!("vge {}, config {}, seed {}, {} steps", pv.vge_version, pv.config_hash, pv.seed, pv.steps))
 }

@@ -131,6 +131,11 @@ impl Collector {
         self.envs.len()
     }
 
+    /// Which object each env holds.
+    pub fn objects(&self) -> &TrainingObjects {
+        &self.objects
+    }
+
     /// Tells the disturbance curricula how many env steps training has taken: episodes
     /// that start from now on get that step's levels.
     pub fn set_progress(&mut self, step: u64) {

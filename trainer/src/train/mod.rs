@@ -480,8 +480,7 @@ impl<'a> Trainer<'a> {
                 .map(|(name, v)| (name.to_owned(), v))
                 .collect();
             if self.folder.object_columns() {
-                let objects = metrics::TrainingObjects::new(&config.env.objects, config.num_envs);
-                values.extend(self.c.window.object_values(&objects));
+                values.extend(self.c.window.object_values(self.collector.objects()));
             }
             let values: Vec<(&str, Option<f64>)> = values.iter().map(|(n, v)| (n.as_str(), *v)).collect();
             self.folder.log(step, &values)?;
