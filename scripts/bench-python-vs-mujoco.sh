@@ -22,8 +22,8 @@ venv=.deps/py
 }
 # The model `vge bench sim --write-mjcf` writes, by the same call, from python/'s reference
 # binary: a Python bench needs no libtorch build.
-reference=python/target/release/vge-python-reference
-[ -x "$reference" ] || cargo build --release --manifest-path python/Cargo.toml --workspace >&2
+reference=target/release/vge-python-reference
+[ -x "$reference" ] || cargo build --release -p vge-python-reference >&2
 model=target/vge-hand.mjcf.xml
 mkdir -p target
 "$reference" write-mjcf "$model"

@@ -14,6 +14,8 @@ repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 
 t0=$SECONDS
+# Build outputs newer than this marker were made by this run (the rapier3d check at the end).
+mkdir -p target; started_marker=target/.test-run-started; touch "$started_marker"
 # Each step's name and start time; the breakdown is printed at the end, and on failure too.
 step_names=() step_starts=()
 step() {
@@ -24,7 +26,7 @@ breakdown() {
   local rc=$? end=$((SECONDS - t0)) i next
   # A step that failed leaves no background build behind.
   local bg
-  for bg in ${python_build:-} ${hil_run:-} ${slurm_run:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
+  for bg in ${hil_run:-} ${slurm_run:-}; do pkill -P "$bg" 2>/dev/null || true; kill "$bg" 2>/dev/null || true; done
   if [[ -n ${py_install:-} ]]; then kill "$py_install" 2>/dev/null || true; fi
   # Only a run that reached the end passed (one ended by a signal may leave $? at 0).
   local verdict="all passed"
@@ -109,25 +111,13 @@ RUSTC_WORKSPACE_WRAPPER="$(rustc --print sysroot)/bin/clippy-driver"
 export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
 [[ -x $RUSTC_WORKSPACE_WRAPPER ]] || { echo "clippy-driver not found at $RUSTC_WORKSPACE_WRAPPER"; exit 1; }
 
-# The Python package's workspace (its own target dir, python/target) builds in the background
-# from here, at low priority, on the CPU the main build and the tests leave idle (linking,
-# single-threaded tests, the pip download); its step below waits for it.
+# The Python package's build script (pyo3) asks this interpreter for its configuration.
 export PYO3_PYTHON=$repo/.deps/py/bin/python
-python_log=$repo/python/target/background-build.log
-mkdir -p python/target
-nice -n 10 cargo build --release --manifest-path python/Cargo.toml --workspace >"$python_log" 2>&1 &
-python_build=$!
-# Waits for background build $1 (pid), named $2, whose log is $3.
-background_ready() {
-  local waited=$SECONDS
-  if ! wait "$1"; then tail -n 60 "$3"; echo "the $2 build failed (log: $3)"; exit 1; fi
-  echo "$2 build ready (waited $((SECONDS - waited)) s for it)"
-}
 
-step "dependency rule: only the learner links libtorch (vge-lab, vge-controllers, vge-bridge and vge without training never do)"
+step "dependency rule: only the learner links libtorch (vge-lab, vge-controllers, vge-bridge, the Python package and vge without training never do)"
 # `vge-cli --no-default-features`: the vge command without its `train` feature (eval, score,
 # compare, plot, inspect, import, controller, ...).
-for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features"; do
+for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" vge-python vge-python-reference; do
   # shellcheck disable=SC2086
   tree=$(cargo tree -p $crate -e normal,build --prefix none)
   if grep -q '^torch-sys ' <<<"$tree"; then
@@ -136,10 +126,10 @@ for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features";
   fi
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
-# ...and that it compiles, linted (`cargo check` through the clippy wrapper: a build would
-# resolve the dependencies' features apart from the workspace's and compile rapier3d and
-# nalgebra a second time).
-cargo check --release -p vge-cli --no-default-features
+# ...and that it builds, linted through the clippy wrapper. The dependencies it compiles are
+# the workspace's own (vge-workspace-hack gives every build the same features), so the test
+# build below reuses them; its vge binary then replaces this one.
+cargo build --release -p vge-cli --no-default-features
 
 step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
 # Without its `sim` feature the bridge drives hands over CAN only and needs vge-sim's hand
@@ -153,6 +143,7 @@ for dep in rapier3d rayon; do
   fi
 done
 # Every target built (and linted, through the wrapper above); the binary is the CAN-only one.
+# Its dependencies are builds the workspace's tests reuse (vge-workspace-hack).
 cargo test --release "${can_only[@]}" --no-run
 ls -l target/release/vge-bridge
 # Its command line: hand files, and a clear refusal of the simulator it does not have.
@@ -189,25 +180,24 @@ scripts/slurm/test.sh >"$slurm_log" 2>&1 &
 slurm_run=$!
 
 step "Python package (python/: pyo3 + numpy, built by maturin; pytest python/tests)"
-# A workspace of its own (python/Cargo.toml, target dir python/target) linking vge-sim,
-# vge-controllers and vge-runtime, never libtorch.
-tree=$(cargo tree --manifest-path python/Cargo.toml --workspace -e normal,build --prefix none)
-if grep -q '^torch-sys ' <<<"$tree"; then
-  echo "python/ depends on torch-sys:"; cargo tree --manifest-path python/Cargo.toml --workspace -i torch-sys; exit 1
-fi
-echo "python/: $(wc -l <<<"$tree") dependency lines, no torch-sys"
-# The whole python workspace in one build (one feature resolution, so the dependencies are
-# built once; linted through the clippy wrapper above): the reference binary the tests compare
-# with and the [env] keys' unit tests. Then the package, built by pip through maturin in the
-# same target dir and installed into .deps/py.
-background_ready "$python_build" "Python workspace" "$python_log"
-python_build=
-cargo build --release --manifest-path python/Cargo.toml --workspace
-cargo test --release --manifest-path python/Cargo.toml --workspace
+# The reference binary the tests compare the package with; then the package, built by pip
+# through maturin in the workspace's target dir (reusing the workspace's dependency builds;
+# linted, as the environment's clippy wrapper reaches maturin's cargo) and installed into
+# .deps/py.
+cargo build --release -p vge-python-reference
 PATH="$repo/.deps/py/bin:$PATH" .deps/py/bin/python -m pip install --quiet --disable-pip-version-check \
   --no-build-isolation --no-deps --force-reinstall ./python
-ls -l python/target/wheels/
+ls -l target/wheels/
 .deps/py/bin/python -m pytest -q python/tests
+# Every build above shares one build of the simulator's physics: a second rapier3d means that
+# some build's dependency features differ from the others' (a dependency added without
+# `cargo hakari generate`), which costs minutes on a fresh machine.
+rapier_builds=$(find target/release/.fingerprint -maxdepth 1 -name 'rapier3d-*' -newer "$started_marker" | wc -l)
+echo "rapier3d compiled $rapier_builds time(s) in this run"
+if ((rapier_builds > 1)); then
+  echo "rapier3d was compiled $rapier_builds times: the builds' dependency features differ; regenerate workspace-hack/ (cargo hakari generate; docs/testing.md, "One build of each dependency")"
+  exit 1
+fi
 
 step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost; running since the Python step began)"
 # Installs slurmctld, slurmd, slurm-client and munge when missing, starts a throw-away

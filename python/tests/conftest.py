@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-REFERENCE = Path(os.environ.get("VGE_PYTHON_REFERENCE", REPO / "python/target/release/vge-python-reference"))
+REFERENCE = Path(os.environ.get("VGE_PYTHON_REFERENCE", REPO / "target/release/vge-python-reference"))
 VGE = Path(os.environ.get("VGE_BIN", REPO / "target/release/vge"))
 
 
@@ -24,11 +24,11 @@ def repo() -> Path:
 @pytest.fixture(scope="session")
 def reference() -> Path:
     """The reference binary; built by the test command
-    (`cargo build --release --manifest-path python/Cargo.toml -p vge-python-reference`)."""
+    (`cargo build --release -p vge-python-reference`)."""
     if not REFERENCE.is_file():
         pytest.fail(
             f"{REFERENCE} is missing: build it with "
-            "`cargo build --release --manifest-path python/Cargo.toml -p vge-python-reference`"
+            "`cargo build --release -p vge-python-reference`"
         )
     return REFERENCE
 

@@ -22,9 +22,10 @@ fn read_with_bases(path: &std::path::Path, depth: usize) -> Result<toml::Table, 
     let shown = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|source| EnvKeysError::Io { path: shown.clone(), source })?;
-    let mut table: toml::Table = text
-        .parse()
-        .map_err(|e: toml::de::Error| EnvKeysError::Parse { origin: shown.clone(), message: e.to_string() })?;
+    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| EnvKeysError::Parse {
+        origin: shown.clone(),
+        message: e.to_string(),
+    })?;
     let Some(base) = table.remove("base") else {
         return Ok(table);
     };
@@ -34,7 +35,8 @@ fn read_with_bases(path: &std::path::Path, depth: usize) -> Result<toml::Table, 
     if depth >= 8 {
         return Err(invalid("more than 8 bases in a chain (or a loop)".to_owned()));
     }
-    let mut merged = read_with_bases(&path.parent().unwrap_or(std::path::Path::new(".")).join(base), depth + 1)?;
+    let mut merged =
+        read_with_bases(&path.parent().unwrap_or(std::path::Path::new(".")).join(base), depth + 1)?;
     merge_table(&mut merged, table);
     Ok(merged)
 }
