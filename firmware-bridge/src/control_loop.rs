@@ -79,6 +79,10 @@ pub struct LoopConfig {
     pub rx_budget: usize,
 }
 
+/// Commands a node frame may lag behind the last one sent and still be the finger's state
+/// (0.15 s at 20 Hz): an older frame is stale.
+pub const DEFAULT_MAX_SEQ_LAG: u8 = 3;
+
 impl LoopConfig {
     /// The defaults the `vge-bridge` command line uses, at `rate_hz` with `limits`.
     pub fn new(rate_hz: f64, limits: [JointLimit; 15]) -> Self {
@@ -95,7 +99,7 @@ impl LoopConfig {
             // Five heartbeat periods: one late beat on a loaded host is not a lost node.
             heartbeat_timeout: Duration::from_millis(5 * u64::from(HEARTBEAT_PERIOD_MS)),
             plausibility_margin_rad: 0.1,
-            max_seq_lag: 3,
+            max_seq_lag: DEFAULT_MAX_SEQ_LAG,
             // Ten times a period's traffic (25 frames + heartbeats) at any rate.
             rx_budget: 256,
         }

@@ -117,6 +117,11 @@ struct LoopArgs {
     /// Seconds without a node's heartbeat before the loop halts (heartbeat_lost).
     #[arg(long, default_value_t = 0.5)]
     heartbeat_timeout_s: f64,
+    /// Commands a node's frame may lag behind the latest one (its seq) and still count as the
+    /// finger's state; an older frame is dropped and counted as stale (1-127). The default 3
+    /// is 0.15 s at 20 Hz; a slow link to the nodes may need more.
+    #[arg(long, default_value_t = control_loop::DEFAULT_MAX_SEQ_LAG, value_parser = clap::value_parser!(u8).range(1..=127))]
+    max_seq_lag: u8,
     /// Print one JSON line of statistics instead of a summary.
     #[arg(long)]
     json: bool,
@@ -348,6 +353,7 @@ fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::
         watchdog_periods: args.watchdog_periods.max(1),
         max_delta_rad: args.max_delta_rad,
         heartbeat_timeout,
+        max_seq_lag: args.max_seq_lag,
         ..LoopConfig::new(rate_hz, limits)
     })
 }
@@ -575,6 +581,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                 max_delta_rad: 0.05,
                 watchdog_periods: 50,
                 heartbeat_timeout_s: 0.5,
+                max_seq_lag: control_loop::DEFAULT_MAX_SEQ_LAG,
                 json,
                 realtime,
             };

@@ -96,3 +96,15 @@ fn run_record_is_refused_over_can_and_where_it_cannot_record() {
     assert!(stderr(&out).contains(expected), "{}", stderr(&out));
     assert!(!rrd.exists(), "nothing written");
 }
+
+#[test]
+fn run_refuses_a_seq_lag_outside_1_to_127_naming_the_flag() {
+    for bad in ["0", "128", "many"] {
+        let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--backend", "can", "--max-seq-lag", bad]);
+        assert_eq!(out.status.code(), Some(2), "clap's usage error for {bad}");
+        let err = stderr(&out);
+        assert!(err.contains("--max-seq-lag") && err.contains(bad), "{err}");
+    }
+    let help = bridge(&["run", "--help"]);
+    assert!(String::from_utf8_lossy(&help.stdout).contains("--max-seq-lag <MAX_SEQ_LAG>"));
+}
