@@ -498,10 +498,17 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
     // With the key written in, the config passes and the missing checkpoint is what stops it.
     let fixed = old.replacen("[env]\n", "[env]\ncharge_reverse_rotation = false\n", 1);
     assert_ne!(fixed, old);
-    std::fs::write(root.join("config.toml"), fixed).expect("write");
+    std::fs::write(root.join("config.toml"), &fixed).expect("write");
     let out = vge(&["train", "--resume", root.to_str().expect("utf-8")], &[]);
     let err = text(&out.stderr);
     assert!(!out.status.success() && !err.contains("predates") && err.contains("checkpoint"), "{err}");
+    // A run from before the learner could be chosen trained with SAC, the default then.
+    let sac_era = fixed.replacen("algorithm = \"td3\"\n", "", 1);
+    assert_ne!(sac_era, fixed);
+    std::fs::write(root.join("config.toml"), sac_era).expect("write");
+    let out = vge(&["train", "--resume", root.to_str().expect("utf-8")], &[]);
+    let err = text(&out.stderr);
+    assert!(err.contains("predates algorithm") && err.contains("algorithm = \"sac\""), "{err}");
     let _ = std::fs::remove_dir_all(&root);
 }
 

@@ -220,7 +220,9 @@ impl Default for EnvSection {
             charge_reverse_rotation: env.charge_reverse_rotation,
             reward_min_contacts: env.reward_min_contacts,
             randomize_fingers: env.grasp.randomize_fingers,
-            grasp_pose_noise_rad: env.grasp.pose_noise_rad,
+            // Training starts from grasps randomised as the success test's are (the shipped
+            // protocol), not from the sim's one exact grasp.
+            grasp_pose_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
             noise_q_std_rad: 0.0,
             noise_normal_std_frac: 0.0,
             noise_position_std_m: 0.0,
@@ -385,7 +387,7 @@ impl Default for SacSection {
             initial_alpha: 0.1,
             target_entropy: None,
             buffer_size: 1_000_000,
-            utd: 1.0,
+            utd: 0.25,
             warmup: 10_000,
             threads: 2,
             normalize_obs: true,
@@ -449,9 +451,10 @@ pub struct VgeSection {
 
 impl Default for VgeSection {
     fn default() -> Self {
-        // 50 steps (2.5 s at 20 Hz): the switch length at which CS broke and remade the
-        // contact most reliably (controllers::cs::CsConfig).
-        Self { horizon: 50, hard_stop: 4_000_000 }
+        // H is CS's switch length (`CsConfig::default`, 50 steps: the switch that broke and
+        // remade the contact most reliably); the hard stop at a fifth of the default budget,
+        // as the paper's 4M of 20M.
+        Self { horizon: CsConfig::default().horizon_steps, hard_stop: 200_000 }
     }
 }
 
@@ -524,9 +527,9 @@ impl Default for RunSection {
     fn default() -> Self {
         Self {
             log_interval: 10_000,
-            checkpoint_interval: 200_000,
+            checkpoint_interval: 100_000,
             save_replay: true,
-            eval_interval: 0,
+            eval_interval: 100_000,
             eval_episodes: crate::eval::SUCCESS_TEST_EPISODES,
             eval_episode_s: crate::eval::SUCCESS_TEST_EPISODE_S,
             eval_grasp_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
@@ -567,16 +570,19 @@ pub struct Config {
     pub run: RunSection,
 }
 
+/// The shipped protocol (`configs/cube-base.toml`'s settings, with VGE and the FG controller):
+/// TD3, 1M env steps, 0.25 updates per env step, the controllers stopped at 200k, randomised
+/// initial grasps, a success test every 100k steps. A config states only what differs.
 impl Default for Config {
     fn default() -> Self {
         Self {
             name: "run".to_owned(),
             seed: 0,
-            total_steps: 6_000_000,
+            total_steps: 1_000_000,
             num_envs: 8,
             method: Method::Vge,
             controller: Some(ControllerKind::Fg),
-            algorithm: AlgorithmName::Sac,
+            algorithm: AlgorithmName::Td3,
             init_from: None,
             env: EnvSection::default(),
             sac: SacSection::default(),
@@ -1024,6 +1030,7 @@ fn read_with_bases(path: &Path, chain: &mut Vec<PathBuf>) -> Result<toml::Table,
     let mut table: toml::Table = text
         .parse()
         .map_err(|e: toml::de::Error| ConfigError::Parse { path: shown.clone(), message: e.to_string() })?;
+    fold_learner_section(&mut table, &shown, false)?;
     let Some(base) = table.remove(BASE_KEY) else {
         return Ok(table);
     };
@@ -1061,14 +1068,24 @@ fn merge_table(base: &mut toml::Table, over: toml::Table) {
 }
 
 /// Keys whose default changed while runs were stored without them: resuming such a run
-/// would switch it to the new default mid-run. (section, key, what to do).
-const CHANGED_DEFAULTS: [(&str, &str, &str); 1] = [(
-    "env",
-    "charge_reverse_rotation",
-    "backward turns cost reward by default now, and this run was trained on the \
-     paper's reward, which pays only while >= 3 fingertips touch: add \
-     `charge_reverse_rotation = false` under [env] to continue it as it was",
-)];
+/// would switch it to the new default mid-run. (section, "" for the top level; key; what to
+/// do). The other defaults that became the shipped protocol's (steps, utd, hard stop,
+/// intervals, grasp noise) are in every run folder vge has written.
+const CHANGED_DEFAULTS: [(&str, &str, &str); 2] = [
+    (
+        "env",
+        "charge_reverse_rotation",
+        "backward turns cost reward by default now, and this run was trained on the \
+         paper's reward, which pays only while >= 3 fingertips touch: add \
+         `charge_reverse_rotation = false` under [env] to continue it as it was",
+    ),
+    (
+        "",
+        "algorithm",
+        "the learner is TD3 by default now, and this run predates the choice and trained \
+         with SAC: add `algorithm = \"sac\"` at the top to continue it as it was",
+    ),
+];
 
 /// Refuses a stored run's config (`text`, from `origin`) that lacks a key whose default
 /// has changed since ([`CHANGED_DEFAULTS`]): resumed, the run would silently train on.
@@ -1078,9 +1095,14 @@ pub fn check_resumable(text: &str, origin: &str) -> Result<(), ConfigError> {
         message: e.to_string(),
     })?;
     for (section, key, advice) in CHANGED_DEFAULTS {
-        let present = table.get(section).and_then(|s| s.as_table()).is_some_and(|s| s.contains_key(key));
+        let present = if section.is_empty() {
+            table.contains_key(key)
+        } else {
+            table.get(section).and_then(|s| s.as_table()).is_some_and(|s| s.contains_key(key))
+        };
         if !present {
-            return Err(invalid(format!("{origin} predates {section}.{key}: {advice}")));
+            let name = if section.is_empty() { key.to_owned() } else { format!("{section}.{key}") };
+            return Err(invalid(format!("{origin} predates {name}: {advice}")));
         }
     }
     Ok(())
@@ -1099,7 +1121,47 @@ pub fn parse_with_overrides(text: &str, origin: &str, overrides: &[String]) -> R
             message: format!("`{BASE_KEY}` is read only from a config file (vge train --config FILE)"),
         });
     }
+    let mut table = table;
+    fold_learner_section(&mut table, origin, false)?;
     config_from_table(table, origin, overrides)
+}
+
+/// The section of the learner's settings as configs may spell it, `[learner]` with
+/// `kind = "td3"` or `"sac"`; the canonical TOML (and so every stored config and its hash)
+/// keeps the older spelling, `[sac]` and the top-level `algorithm`.
+pub const LEARNER_KEY: &str = "learner";
+
+/// Moves `[learner]` (`kind` and the learner's settings) to its canonical place: `kind` to the
+/// top-level `algorithm`, the rest to `[sac]`. In a file the two spellings of one setting are
+/// refused (`overridable` false); `--set learner.KEY=...` overrides either (`overridable` true).
+fn fold_learner_section(table: &mut toml::Table, origin: &str, overridable: bool) -> Result<(), ConfigError> {
+    let Some(learner) = table.remove(LEARNER_KEY) else {
+        return Ok(());
+    };
+    let refuse = |message: String| ConfigError::Parse { path: origin.to_owned(), message };
+    let toml::Value::Table(mut learner) = learner else {
+        return Err(refuse(format!(
+            "[{LEARNER_KEY}] is the table of the learner's settings; got a {}",
+            learner.type_str()
+        )));
+    };
+    if let Some(kind) = learner.remove("kind") {
+        if !overridable && table.contains_key("algorithm") {
+            return Err(refuse(format!(
+                "`algorithm` is the older name of `{LEARNER_KEY}.kind`: set only `{LEARNER_KEY}.kind`"
+            )));
+        }
+        table.insert("algorithm".to_owned(), kind);
+    }
+    match table.entry("sac").or_insert_with(|| toml::Value::Table(toml::Table::new())) {
+        toml::Value::Table(sac) if overridable || sac.is_empty() => sac.extend(learner),
+        _ => {
+            return Err(refuse(format!(
+                "[sac] is the older name of [{LEARNER_KEY}]: put the learner's settings in [{LEARNER_KEY}] only"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// The overrides applied to `table`, deserialised (not validated).
@@ -1111,6 +1173,7 @@ fn config_from_table(
     for o in overrides {
         apply_override_table(&mut table, o)?;
     }
+    fold_learner_section(&mut table, origin, true)?;
     Config::deserialize(toml::Value::Table(table))
         .map_err(|e| ConfigError::Parse { path: origin.to_owned(), message: e.to_string() })
 }
@@ -1123,6 +1186,7 @@ pub fn apply_override(config: &mut Config, assignment: &str) -> Result<(), Confi
         return Err(invalid("config is not a table"));
     };
     apply_override_table(&mut table, assignment)?;
+    fold_learner_section(&mut table, "--set", true)?;
     *config = Config::deserialize(toml::Value::Table(table))
         .map_err(|e| ConfigError::Override { key: assignment.to_owned(), message: e.to_string() })?;
     Ok(())

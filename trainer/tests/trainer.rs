@@ -532,6 +532,9 @@ fn tempdir(name: &str) -> PathBuf {
 fn tiny_config_with(total: u64, extra: &[&str]) -> Config {
     let mut c = Config::default();
     for o in [
+        // SAC from the exact grasp: the settings the stored fingerprints were taken with.
+        "algorithm=\"sac\"",
+        "env.grasp_pose_noise_rad=0.0",
         "num_envs=2",
         "method=vge-bc",
         "controller=fg",

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-/// Train a policy with SAC (or TD3: `algorithm = "td3"`) and the configured behaviour
+/// Train a policy with TD3 (or SAC: `algorithm = "sac"`) and the configured behaviour
 /// policy (RL, RL+BC, FGE, VGE, VGE+BC) from a TOML config (see configs/).
 ///
 /// Writes DIR/config.toml, DIR/metrics.csv (step, return, rotation, contacts, controller
