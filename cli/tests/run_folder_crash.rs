@@ -46,10 +46,16 @@ fn s(p: &Path) -> &str {
 }
 
 /// `vge train --config CONFIG --out DIR`, under `strace` with `inject` on the syscalls of
-/// `paths` (`-P`): the fault lands on those files only.
+/// `paths` (`-P`): the fault lands on those files only. An injected error runs under
+/// `--seccomp-bpf`, which stops the tracee only at the traced syscalls (a traced run took
+/// 1.7 times as long without it); an injected signal does not, as strace 6.1 then let the
+/// killing call pass.
 fn train_under_strace(config: &Path, dir: &Path, extra: &[&str], paths: &[PathBuf], inject: &str) -> Output {
     let mut cmd = Command::new("strace");
     cmd.args(["-f", "-qq", "-o", "/dev/null"]);
+    if inject.contains(":error=") {
+        cmd.arg("--seccomp-bpf");
+    }
     for p in paths {
         cmd.arg("-P").arg(p);
     }
