@@ -102,6 +102,19 @@ struct Segment {
 
 const FRESH: Segment = Segment { source: Source::Learner, remaining: 0, controller_stale: true };
 
+/// One env's controller and the generator it draws from (reseeded at each of the env's
+/// episodes, so that a controller's choices do not depend on the other envs').
+pub struct EnvController {
+    pub controller: Box<dyn Controller + Send>,
+    pub rng: ChaCha8Rng,
+}
+
+impl std::fmt::Debug for EnvController {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EnvController").finish_non_exhaustive()
+    }
+}
+
 /// Min-twin Q-values of `(obs, action)` rows, one per row.
 pub type QFn<'a> = dyn FnMut(&[[f32; OBS_DIM]], &[[f32; NUM_JOINTS]]) -> Result<Vec<f32>, String> + 'a;
 
@@ -186,14 +199,13 @@ impl Behaviour {
 
     /// The decision of every env. `q(obs, actions)` returns min-twin Q-values row by row
     /// (only called by VGE, once per step, for the envs drawing a source, learner rows first
-    /// then controller rows). `ctl_rngs[i]` is controller `i`'s generator; every source draw
+    /// then controller rows). `controllers[i]` is env `i`'s (none for RL); every source draw
     /// comes from `rng`, env by env.
     #[allow(clippy::too_many_arguments)]
     pub fn act(
         &mut self,
         ctx: &StepContext<'_>,
-        controllers: &mut [Box<dyn Controller + Send>],
-        ctl_rngs: &mut [ChaCha8Rng],
+        controllers: &mut [EnvController],
         q: &mut QFn<'_>,
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<Decision>, BehaviourError> {
@@ -210,12 +222,12 @@ impl Behaviour {
         if self.method == Method::RlBc {
             // The learner acts; the controller only labels the visited states.
             for (i, d) in out.iter_mut().enumerate() {
-                d.bc_target = self.query(i, ctx, controllers, ctl_rngs);
+                d.bc_target = self.query(i, ctx, controllers);
             }
             return Ok(out);
         }
-        let drawn = self.draw_sources(ctx, controllers, ctl_rngs, q, rng, &mut out)?;
-        self.continue_segments(ctx, controllers, ctl_rngs, &drawn, &mut out);
+        let drawn = self.draw_sources(ctx, controllers, q, rng, &mut out)?;
+        self.continue_segments(ctx, controllers, &drawn, &mut out);
         let bc = self.method.uses_bc();
         for d in &mut out {
             if d.source == Source::Controller {
@@ -234,8 +246,7 @@ impl Behaviour {
     fn draw_sources(
         &mut self,
         ctx: &StepContext<'_>,
-        controllers: &mut [Box<dyn Controller + Send>],
-        ctl_rngs: &mut [ChaCha8Rng],
+        controllers: &mut [EnvController],
         q: &mut QFn<'_>,
         rng: &mut ChaCha8Rng,
         out: &mut [Decision],
@@ -251,7 +262,7 @@ impl Behaviour {
             let proposal = if vge {
                 // A draw starts a fresh controller segment (a whole switch of H steps).
                 self.segments[i].controller_stale = true;
-                self.query(i, ctx, controllers, ctl_rngs)
+                self.query(i, ctx, controllers)
             } else {
                 None
             };
@@ -279,7 +290,7 @@ impl Behaviour {
                     proposal
                 } else {
                     seg.controller_stale = true;
-                    self.query(i, ctx, controllers, ctl_rngs)
+                    self.query(i, ctx, controllers)
                 };
                 if let Some(a) = action {
                     out[i].action = a;
@@ -298,8 +309,7 @@ impl Behaviour {
     fn continue_segments(
         &mut self,
         ctx: &StepContext<'_>,
-        controllers: &mut [Box<dyn Controller + Send>],
-        ctl_rngs: &mut [ChaCha8Rng],
+        controllers: &mut [EnvController],
         drawn: &[usize],
         out: &mut [Decision],
     ) {
@@ -312,7 +322,7 @@ impl Behaviour {
             }
             let seg = self.segments[i];
             if seg.source == Source::Controller
-                && let Some(a) = self.query(i, ctx, controllers, ctl_rngs)
+                && let Some(a) = self.query(i, ctx, controllers)
             {
                 out[i].action = a;
                 out[i].source = Source::Controller;
@@ -363,20 +373,19 @@ impl Behaviour {
         &mut self,
         i: usize,
         ctx: &StepContext<'_>,
-        controllers: &mut [Box<dyn Controller + Send>],
-        ctl_rngs: &mut [ChaCha8Rng],
+        controllers: &mut [EnvController],
     ) -> Option<[f32; NUM_JOINTS]> {
-        let (Some(ctl), Some(r), Some(Some(input))) =
-            (controllers.get_mut(i), ctl_rngs.get_mut(i), ctx.inputs.get(i))
+        let (Some(EnvController { controller, rng }), Some(Some(input))) =
+            (controllers.get_mut(i), ctx.inputs.get(i))
         else {
             return None;
         };
         if self.segments[i].controller_stale {
-            ctl.reset(r);
+            controller.reset(rng);
             self.segments[i].controller_stale = false;
         }
         self.stats.controller_queries += 1;
-        match ctl.act(input, r) {
+        match controller.act(input, rng) {
             Ok(a) if a.iter().all(|v| v.is_finite()) => Some(a),
             _ => {
                 self.stats.controller_no_action += 1;

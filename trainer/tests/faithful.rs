@@ -11,12 +11,12 @@ use std::sync::atomic::AtomicBool;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
-use vge_controllers::{Controller, ControllerInput, IgmConfig};
+use vge_controllers::{ControllerInput, IgmConfig};
 use vge_lab::config::{Config, apply_override, load_config};
 use vge_lab::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
 use vge_sim::gait::ContactSwitches;
 use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
-use vge_trainer::behaviour::{Behaviour, BehaviourError, StepContext};
+use vge_trainer::behaviour::{Behaviour, BehaviourError, EnvController, StepContext};
 use vge_trainer::nets::{GaussianActor, NetSpec};
 use vge_trainer::replay::{ReplayBuffer, Source};
 use vge_trainer::train::train;
@@ -45,13 +45,14 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
         let mut env = Env::new(env_config.clone()).expect("env");
         let (mut obs, _) = env.reset(seed).expect("reset");
         let mut behaviour = Behaviour::new(config.method, h, config.vge.hard_stop, config.fge.clone(), 1);
-        let mut controllers: Vec<Box<dyn Controller + Send>> =
-            vec![vge_controllers::ControllerKind::Fg.build(
+        let mut controllers = vec![EnvController {
+            controller: vge_controllers::ControllerKind::Fg.build(
                 &env_config,
                 IgmConfig::default(),
                 config.cs_config(&env_config),
-            )];
-        let mut ctl_rngs = vec![ChaCha8Rng::seed_from_u64(seed + 100)];
+            ),
+            rng: ChaCha8Rng::seed_from_u64(seed + 100),
+        }];
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let start = env.privileged().expect("state");
         let mut switches = ContactSwitches::new(start.contacts.map(|c| c.is_some()));
@@ -59,9 +60,7 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
         for step in 0..h as u64 {
             let inputs = [env.privileged().map(ControllerInput::from_privileged)];
             let ctx = StepContext { step, obs: &[obs], learner: &learner, inputs: &inputs };
-            let d = behaviour
-                .act(&ctx, &mut controllers, &mut ctl_rngs, &mut prefer_controller, &mut rng)
-                .expect("decide");
+            let d = behaviour.act(&ctx, &mut controllers, &mut prefer_controller, &mut rng).expect("decide");
             assert_eq!(d[0].source, Source::Controller, "seed {seed} step {step}: the pick lasts H steps");
             let r = env.step(&d[0].action).expect("step");
             switches.update(r.info.tip_contacts);
@@ -85,20 +84,22 @@ fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
     let inputs = [env.privileged().map(ControllerInput::from_privileged)];
     let learner = [[0.0f32; NUM_JOINTS]];
     let ctx = StepContext { step: 7, obs: &[obs], learner: &learner, inputs: &inputs };
-    let mut controllers: Vec<Box<dyn Controller + Send>> = vec![vge_controllers::ControllerKind::Fg.build(
-        &env_config,
-        IgmConfig::default(),
-        config.cs_config(&env_config),
-    )];
-    let mut ctl_rngs = vec![ChaCha8Rng::seed_from_u64(1)];
+    let mut controllers = vec![EnvController {
+        controller: vge_controllers::ControllerKind::Fg.build(
+            &env_config,
+            IgmConfig::default(),
+            config.cs_config(&env_config),
+        ),
+        rng: ChaCha8Rng::seed_from_u64(1),
+    }];
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config.clone() });
     let mut failing = |_: &[[f32; OBS_DIM]], _: &[[f32; NUM_JOINTS]]| Err("critic gone".to_owned());
-    let e = b.act(&ctx, &mut controllers, &mut ctl_rngs, &mut failing, &mut rng).expect_err("failed query");
+    let e = b.act(&ctx, &mut controllers, &mut failing, &mut rng).expect_err("failed query");
     assert!(matches!(e, BehaviourError::QQuery { step: 7, .. }), "{e}");
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config });
     let mut nan = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| Ok(vec![f32::NAN; a.len()]);
-    let e = b.act(&ctx, &mut controllers, &mut ctl_rngs, &mut nan, &mut rng).expect_err("NaN Q");
+    let e = b.act(&ctx, &mut controllers, &mut nan, &mut rng).expect_err("NaN Q");
     assert!(matches!(e, BehaviourError::QNonFinite { step: 7, env: 0, .. }), "{e}");
 }
 

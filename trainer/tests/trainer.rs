@@ -10,7 +10,9 @@ use tch::{Device, Kind, Tensor};
 use vge_controllers::{Controller, ControllerError, ControllerInput};
 use vge_lab::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
 use vge_sim::{NUM_JOINTS, OBS_DIM};
-use vge_trainer::behaviour::{Behaviour, QFn, StepContext, bc_beta, fge_probability, p_controller};
+use vge_trainer::behaviour::{
+    Behaviour, EnvController, QFn, StepContext, bc_beta, fge_probability, p_controller,
+};
 use vge_trainer::nets::NetSpec;
 use vge_trainer::replay::{ReplayBuffer, Source};
 use vge_trainer::sac::{Algorithm, BcTerm, EntropyCoef, Sac, SacConfig};
@@ -80,17 +82,18 @@ fn dummy_input() -> ControllerInput {
 
 struct Rig {
     calls: Arc<AtomicUsize>,
-    controllers: Vec<Box<dyn Controller + Send>>,
-    ctl_rngs: Vec<ChaCha8Rng>,
+    controllers: Vec<EnvController>,
     rng: ChaCha8Rng,
 }
 
 fn rig() -> Rig {
     let calls = Arc::new(AtomicUsize::new(0));
     Rig {
-        controllers: vec![Box::new(Constant { calls: calls.clone() })],
+        controllers: vec![EnvController {
+            controller: Box::new(Constant { calls: calls.clone() }),
+            rng: ChaCha8Rng::seed_from_u64(1),
+        }],
         calls,
-        ctl_rngs: vec![ChaCha8Rng::seed_from_u64(1)],
         rng: ChaCha8Rng::seed_from_u64(2),
     }
 }
@@ -102,7 +105,7 @@ fn step_once(b: &mut Behaviour, r: &mut Rig, step: u64, q: &mut QFn<'_>) -> Sour
     let learner = [LEARNER];
     let inputs = [Some(dummy_input())];
     let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
-    let out = b.act(&ctx, &mut r.controllers, &mut r.ctl_rngs, q, &mut r.rng).expect("decide");
+    let out = b.act(&ctx, &mut r.controllers, q, &mut r.rng).expect("decide");
     assert_eq!(out.len(), 1);
     if out[0].source == Source::Controller {
         assert_eq!(out[0].action, [0.05; NUM_JOINTS]);

@@ -10,10 +10,10 @@ use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, Perturbatio
 
 use super::TrainError;
 use super::metrics::{TrainingObjects, Window};
-use crate::behaviour::{Behaviour, Decision, StepContext};
+use crate::behaviour::{Behaviour, Decision, EnvController, StepContext};
 use crate::replay::ReplayBuffer;
 use crate::sac::{Sac, mix_seed, standard_normal};
-use vge_controllers::{Controller, ControllerInput, IgmConfig};
+use vge_controllers::{ControllerInput, IgmConfig};
 use vge_lab::config::Config;
 
 /// Salt of the behaviour-noise seeds.
@@ -27,14 +27,28 @@ struct EnvEpisode {
     rewards: Vec<f32>,
 }
 
+/// An env's random force on the object, sensor noise and drop penalty.
+#[derive(Debug, Clone, Copy)]
+struct Disturbances {
+    noise: NoiseConfig,
+    push: PerturbationConfig,
+    drop_penalty: f32,
+}
+
+/// One training env and what the collector knows of it.
+struct EnvSlot {
+    env: Env,
+    /// Its current observation.
+    obs: [f32; OBS_DIM],
+    episode: EnvEpisode,
+    /// Its config's disturbances, which the curricula ramp up to.
+    full: Disturbances,
+}
+
 pub(super) struct Collector {
-    envs: Vec<Env>,
-    /// The current observation of each env.
-    obs: Vec<[f32; OBS_DIM]>,
-    episodes: Vec<EnvEpisode>,
-    /// One controller per env (none for RL), each with its own generator.
-    controllers: Vec<Box<dyn Controller + Send>>,
-    ctl_rngs: Vec<ChaCha8Rng>,
+    slots: Vec<EnvSlot>,
+    /// Env `i`'s controller, for the methods that query one (empty for RL).
+    controllers: Vec<EnvController>,
     max_action_rad: f32,
     seed: u64,
     /// The disturbance curricula (`env.perturb_ramp_steps`, `env.noise_ramp_steps`), when on.
@@ -53,8 +67,6 @@ struct DisturbanceRamp {
     perturb_ramp_steps: u64,
     perturb_ramp_start: u64,
     noise_ramp_steps: u64,
-    /// Each env's full levels: noise, force, drop penalty.
-    full: Vec<(NoiseConfig, PerturbationConfig, f32)>,
     /// Env steps taken so far.
     step: u64,
 }
@@ -69,26 +81,25 @@ impl DisturbanceRamp {
         }
     }
 
-    /// The noise, force and drop penalty (which ramps with the force) for an episode of env
-    /// `env` starting now.
-    fn levels(&self, env: usize) -> (NoiseConfig, PerturbationConfig, f32) {
-        let (noise, push, drop_penalty) = self.full[env];
+    /// The disturbances, out of `full`, for an episode starting now (the drop penalty ramps
+    /// with the force).
+    fn levels(&self, full: Disturbances) -> Disturbances {
+        let Disturbances { noise, push, drop_penalty } = full;
         let n = self.fraction(0, self.noise_ramp_steps);
         let p = self.fraction(self.perturb_ramp_start, self.perturb_ramp_steps);
-        let noise = NoiseConfig {
-            q_std_rad: noise.q_std_rad * n,
-            normal_std_frac: noise.normal_std_frac * n,
-            position_std_m: noise.position_std_m * n,
-        };
-        (
-            noise,
-            PerturbationConfig {
+        Disturbances {
+            noise: NoiseConfig {
+                q_std_rad: noise.q_std_rad * n,
+                normal_std_frac: noise.normal_std_frac * n,
+                position_std_m: noise.position_std_m * n,
+            },
+            push: PerturbationConfig {
                 force_std_n: push.force_std_n * p,
                 force_magnitude_n: push.force_magnitude_n * p,
                 ..push
             },
-            drop_penalty * p,
-        )
+            drop_penalty: drop_penalty * p,
+        }
     }
 }
 
@@ -98,29 +109,36 @@ impl Collector {
         let n = config.num_envs;
         let env_configs: Vec<_> = (0..n).map(|i| config.env.env_config(i)).collect();
         let controllers = match config.controller.filter(|_| config.method.queries_controller()) {
-            Some(kind) => {
-                env_configs.iter().map(|e| kind.build(e, IgmConfig::default(), config.cs_config(e))).collect()
-            }
+            Some(kind) => env_configs
+                .iter()
+                .map(|e| EnvController {
+                    controller: kind.build(e, IgmConfig::default(), config.cs_config(e)),
+                    // Reseeded at each episode's start (`reset`).
+                    rng: ChaCha8Rng::seed_from_u64(0),
+                })
+                .collect(),
             None => Vec::new(),
         };
         let e = &config.env;
-        let ramp =
-            (e.perturb_ramp_steps > 0 || e.perturb_ramp_start > 0 || e.noise_ramp_steps > 0).then(|| {
-                DisturbanceRamp {
-                    perturb_ramp_steps: e.perturb_ramp_steps,
-                    perturb_ramp_start: e.perturb_ramp_start,
-                    noise_ramp_steps: e.noise_ramp_steps,
-                    full: env_configs.iter().map(|e| (e.noise, e.perturbation, e.drop_penalty)).collect(),
-                    step: 0,
-                }
+        let ramp = (e.perturb_ramp_steps > 0 || e.perturb_ramp_start > 0 || e.noise_ramp_steps > 0)
+            .then_some(DisturbanceRamp {
+                perturb_ramp_steps: e.perturb_ramp_steps,
+                perturb_ramp_start: e.perturb_ramp_start,
+                noise_ramp_steps: e.noise_ramp_steps,
+                step: 0,
             });
+        let slots = env_configs
+            .into_iter()
+            .map(|c| {
+                let full =
+                    Disturbances { noise: c.noise, push: c.perturbation, drop_penalty: c.drop_penalty };
+                Ok(EnvSlot { env: Env::new(c)?, obs: [0.0; OBS_DIM], episode: EnvEpisode::default(), full })
+            })
+            .collect::<Result<_, SimError>>()?;
         Ok(Self {
             ramp,
-            envs: env_configs.into_iter().map(Env::new).collect::<Result<_, _>>()?,
-            obs: vec![[0.0; OBS_DIM]; n],
-            episodes: vec![EnvEpisode::default(); n],
+            slots,
             controllers,
-            ctl_rngs: (0..n).map(|_| ChaCha8Rng::seed_from_u64(0)).collect(),
             max_action_rad: config.env.max_action_rad,
             seed: config.seed,
             objects: TrainingObjects::new(&config.env.objects, n),
@@ -128,12 +146,17 @@ impl Collector {
     }
 
     pub fn len(&self) -> usize {
-        self.envs.len()
+        self.slots.len()
     }
 
     /// Which object each env holds.
     pub fn objects(&self) -> &TrainingObjects {
         &self.objects
+    }
+
+    /// Every env's current observation, env by env.
+    fn observations(&self) -> Vec<[f32; OBS_DIM]> {
+        self.slots.iter().map(|s| s.obs).collect()
     }
 
     /// Tells the disturbance curricula how many env steps training has taken: episodes
@@ -150,7 +173,8 @@ impl Collector {
     }
 
     /// Resets envs `which`, drawing each one's env seed and controller seed from `rng` in
-    /// order.
+    /// order (the controller seed is drawn for RL too, so that the env seeds are the same
+    /// for every method).
     fn reset(
         &mut self,
         which: &[usize],
@@ -160,27 +184,27 @@ impl Collector {
         let mut seeds = vec![None; self.len()];
         for &i in which {
             seeds[i] = Some(rng.next_u64());
-            self.ctl_rngs[i] = ChaCha8Rng::seed_from_u64(rng.next_u64());
+            let controller_seed = rng.next_u64();
+            if let Some(c) = self.controllers.get_mut(i) {
+                c.rng = ChaCha8Rng::seed_from_u64(controller_seed);
+            }
             behaviour.episode_reset(i);
             if let Some(ramp) = &self.ramp {
-                let (noise, push, drop_penalty) = ramp.levels(i);
-                self.envs[i].set_disturbances(noise, push)?;
-                self.envs[i].set_drop_penalty(drop_penalty)?;
+                let slot = &mut self.slots[i];
+                let d = ramp.levels(slot.full);
+                slot.env.set_disturbances(d.noise, d.push)?;
+                slot.env.set_drop_penalty(d.drop_penalty)?;
             }
         }
-        let resets: Vec<Option<[f32; OBS_DIM]>> = self
-            .envs
-            .par_iter_mut()
-            .zip(seeds.par_iter())
-            .map(|(env, s)| s.map(|s| env.reset(s).map(|(o, _)| o)).transpose())
-            .collect::<Result<_, SimError>>()?;
-        for (i, o) in resets.into_iter().enumerate() {
-            if let Some(o) = o {
-                self.obs[i] = o;
-                self.episodes[i] =
-                    EnvEpisode { tracker: self.envs[i].episode_tracker()?, rewards: Vec::new() };
-            }
-        }
+        self.slots.par_iter_mut().zip(seeds.par_iter()).try_for_each(
+            |(slot, seed)| -> Result<(), SimError> {
+                if let Some(seed) = seed {
+                    slot.obs = slot.env.reset(*seed)?.0;
+                    slot.episode = EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::new() };
+                }
+                Ok(())
+            },
+        )?;
         Ok(())
     }
 
@@ -200,7 +224,7 @@ impl Collector {
         }
         let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
         let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
-        let t = Tensor::from_slice(self.obs.as_flattened()).view([n as i64, OBS_DIM as i64]);
+        let t = Tensor::from_slice(self.observations().as_flattened()).view([n as i64, OBS_DIM as i64]);
         let v = Vec::<f32>::try_from(sac.behaviour_action(&t, &eps).contiguous().view(-1))?;
         Ok(v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect())
     }
@@ -217,18 +241,19 @@ impl Collector {
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<Decision>, TrainError> {
         let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
-            self.envs.iter().map(|e| e.privileged().map(ControllerInput::from_privileged)).collect()
+            self.slots.iter().map(|s| s.env.privileged().map(ControllerInput::from_privileged)).collect()
         } else {
             vec![None; self.len()]
         };
-        let ctx = StepContext { step, obs: &self.obs, learner, inputs: &inputs };
+        let obs = self.observations();
+        let ctx = StepContext { step, obs: &obs, learner, inputs: &inputs };
         let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
             let rows = o.len() as i64;
             let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
             let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
             Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
         };
-        let mut decisions = behaviour.act(&ctx, &mut self.controllers, &mut self.ctl_rngs, &mut q, rng)?;
+        let mut decisions = behaviour.act(&ctx, &mut self.controllers, &mut q, rng)?;
         for (env, d) in decisions.iter_mut().enumerate() {
             if let Some(&value) = d.action.iter().find(|v| !v.is_finite()) {
                 return Err(TrainError::NonFiniteAction { step, env, value });
@@ -253,23 +278,23 @@ impl Collector {
         rng: &mut ChaCha8Rng,
     ) -> Result<u64, TrainError> {
         let results: Vec<_> = self
-            .envs
+            .slots
             .par_iter_mut()
             .zip(decisions.par_iter())
-            .map(|(env, d)| env.step(&d.action))
+            .map(|(slot, d)| slot.env.step(&d.action))
             .collect::<Result<Vec<_>, SimError>>()?;
         let mut finished = Vec::new();
-        for (i, (r, d)) in results.iter().zip(decisions).enumerate() {
+        for (i, ((r, d), slot)) in results.iter().zip(decisions).zip(&mut self.slots).enumerate() {
             let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
-            replay.push(&self.obs[i], &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
-            let episode = &mut self.episodes[i];
+            replay.push(&slot.obs, &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
+            let episode = &mut slot.episode;
             window.switches += u64::from(episode.tracker.record(
                 r.reward,
                 r.info.object_rotation_z_rad,
                 r.info.tip_contacts,
             ));
             episode.rewards.push(r.reward);
-            self.obs[i] = r.obs;
+            slot.obs = r.obs;
             if r.terminated || r.truncated {
                 let outcome = episode.tracker.outcome(r.terminated);
                 window.add_episode(&outcome, &episode.rewards, gamma);
@@ -334,7 +359,7 @@ mod tests {
     #[test]
     fn the_push_curriculum_ramps_the_force_by_the_step_an_episode_starts() {
         let levels = |c: &Collector, i: usize| {
-            let e = c.envs[i].config();
+            let e = c.slots[i].env.config();
             (e.noise.q_std_rad, e.noise.normal_std_frac, e.noise.position_std_m, e.perturbation.force_std_n)
         };
         let mut config = Config::default();
@@ -374,7 +399,7 @@ mod tests {
         ramped.set_progress(5000);
         ramped.reset_all(&mut behaviour, &mut rng).expect("reset");
         assert_eq!(levels(&ramped, 0), full, "past the ramp: the full force");
-        assert_eq!(ramped.envs[0].config().perturbation.change_probability, 0.1);
+        assert_eq!(ramped.slots[0].env.config().perturbation.change_probability, 0.1);
 
         // A run from trained networks may ramp the sensor noise too, on its own schedule.
         config.init_from = Some("elsewhere".into());
@@ -402,7 +427,7 @@ mod tests {
             let mut behaviour = Behaviour::from_config(config);
             c.set_progress(step);
             c.reset_all(&mut behaviour, &mut ChaCha8Rng::seed_from_u64(0)).expect("reset");
-            let e = c.envs[0].config();
+            let e = c.slots[0].env.config();
             assert_eq!(e.noise.normal_std_frac, 0.4, "noise at its level at step {step}");
             e.perturbation.force_std_n
         };
@@ -433,7 +458,7 @@ mod tests {
             let mut behaviour = Behaviour::from_config(&config);
             c.set_progress(step);
             c.reset_all(&mut behaviour, &mut ChaCha8Rng::seed_from_u64(0)).expect("reset");
-            c.envs[0].config().drop_penalty
+            c.slots[0].env.config().drop_penalty
         };
         assert_eq!(penalty_at(999), 0.0);
         assert!((penalty_at(1100) - 10.0).abs() < 1e-5, "{}", penalty_at(1100));
