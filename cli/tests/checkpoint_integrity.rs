@@ -277,12 +277,13 @@ fn a_run_without_a_checkpoint_is_refused_with_a_typed_error() {
 fn measure_save_and_verify_with_a_full_replay_buffer() {
     use std::time::Instant;
     use vge_sim::{NUM_JOINTS, OBS_DIM};
+    use vge_trainer::learner;
     use vge_trainer::replay::{ReplayBuffer, Source};
-    use vge_trainer::sac::Sac;
 
     let c = Config::default();
     let n = c.sac.buffer_size;
-    let sac = Sac::new_seeded(vge_trainer::sac::SacConfig::for_hand(&c), tch::Device::Cpu, 0).expect("sac");
+    let sac = learner::build_seeded(vge_trainer::learner::LearnerConfig::for_hand(&c), tch::Device::Cpu, 0)
+        .expect("sac");
     let mut replay = ReplayBuffer::new(n, OBS_DIM, NUM_JOINTS).expect("replay");
     let mut obs = [0.0f32; OBS_DIM];
     let action = [0.1f32; NUM_JOINTS];
@@ -301,7 +302,7 @@ fn measure_save_and_verify_with_a_full_replay_buffer() {
     let mut saves = Vec::new();
     for _ in 0..3 {
         let t = Instant::now();
-        checkpoint::save(&root, &sac, Some(&replay), state).expect("checkpoint");
+        checkpoint::save(&root, sac.as_ref(), Some(&replay), state).expect("checkpoint");
         saves.push(t.elapsed().as_secs_f64());
     }
     let dir = root.join("checkpoint");
@@ -315,11 +316,12 @@ fn measure_save_and_verify_with_a_full_replay_buffer() {
     let bytes: u64 = manifest.expect("manifest").files.iter().map(|f| f.bytes).sum();
     let t = Instant::now();
     let mut sac2 =
-        Sac::new_seeded(vge_trainer::sac::SacConfig::for_hand(&c), tch::Device::Cpu, 1).expect("sac");
+        learner::build_seeded(vge_trainer::learner::LearnerConfig::for_hand(&c), tch::Device::Cpu, 1)
+            .expect("sac");
     let mut replay2 = ReplayBuffer::new(n, OBS_DIM, NUM_JOINTS).expect("replay");
     let ckpt = checkpoint::open(&root).expect("open");
     let open_s = t.elapsed().as_secs_f64();
-    ckpt.load(&mut sac2, Some(&mut replay2)).expect("load");
+    ckpt.load(sac2.as_mut(), Some(&mut replay2)).expect("load");
     let load_s = t.elapsed().as_secs_f64() - open_s;
     assert_eq!(replay2.len(), n);
     println!(

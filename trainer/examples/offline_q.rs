@@ -9,8 +9,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::Device;
 use vge_lab::config::{Config, apply_override};
+use vge_trainer::learner::{self, LearnerConfig};
 use vge_trainer::replay::ReplayBuffer;
-use vge_trainer::sac::{Sac, SacConfig};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -24,7 +24,7 @@ fn main() -> anyhow::Result<()> {
     tch::set_num_threads(2);
     let mut replay = ReplayBuffer::new(1_000_000, 65, 15)?;
     replay.load(&dir.join("checkpoint/replay.bin"))?;
-    let mut sac = Sac::new_seeded(SacConfig::for_hand(&config), Device::Cpu, 0)?;
+    let mut sac = learner::build_seeded(LearnerConfig::for_hand(&config), Device::Cpu, 0)?;
     if config.sac.normalize_obs {
         let (m, s) = replay.obs_stats(1e-2);
         sac.set_obs_normalisation(&m, &s);

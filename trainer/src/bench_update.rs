@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use tch::{Device, Kind, Tensor};
 
+use crate::learner::{self, Batch, LearnerConfig};
 use crate::nets::{NetSpec, TwinCritic};
-use crate::sac::{Batch, Sac, SacConfig};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct UpdateBench {
@@ -56,7 +56,7 @@ fn random_batch(spec: &NetSpec, batch: i64) -> Batch {
 /// Runs `warmup` then `updates` updates of the learner `config` on random batches. The
 /// FLOP count is SAC's; TD3's actor step every second update does less.
 pub fn run(
-    config: SacConfig,
+    config: LearnerConfig,
     batch: i64,
     warmup: usize,
     updates: usize,
@@ -64,14 +64,14 @@ pub fn run(
 ) -> Result<UpdateBench, tch::TchError> {
     tch::manual_seed(seed);
     let spec = config.net.clone();
-    let mut sac = Sac::new(config, Device::Cpu)?;
+    let mut learner = learner::build(config, Device::Cpu)?;
     let batches: Vec<Batch> = (0..8).map(|_| random_batch(&spec, batch)).collect();
     for i in 0..warmup {
-        sac.update(&batches[i % batches.len()]);
+        learner.update(&batches[i % batches.len()]);
     }
     let start = Instant::now();
     for i in 0..updates {
-        sac.update(&batches[i % batches.len()]);
+        learner.update(&batches[i % batches.len()]);
     }
     let updates_per_s = updates as f64 / start.elapsed().as_secs_f64();
 

@@ -2,7 +2,7 @@
 //! file before anything is resumed from it.
 //!
 //! `DIR/checkpoint/` holds `state.toml` (the training loop's counters, generator state and
-//! metric windows), the networks and optimiser state that [`Sac::save`] writes (`actor.ot`,
+//! metric windows), the networks and optimiser state that [`Learner::save`] writes (`actor.ot`,
 //! `critic.ot`, `target.ot`, `target_actor.ot` for TD3, `optim.ot`), `replay.bin` when the
 //! run keeps its replay buffer, and [`MANIFEST`] (`manifest.json`): every other file's name,
 //! length in bytes and CRC-32 (IEEE, `"0x%08x"`).
@@ -31,8 +31,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::learner::{ACTOR_FILE, CRITIC_FILE, Learner, OPTIM_FILE, TARGET_ACTOR_FILE, TARGET_FILE};
 use crate::replay::{ReplayBuffer, ReplayError};
-use crate::sac::{ACTOR_FILE, CRITIC_FILE, OPTIM_FILE, Sac, TARGET_ACTOR_FILE, TARGET_FILE};
 use vge_lab::atomic_file::sync_dir;
 use vge_lab::run_dir::RunDir;
 
@@ -208,19 +208,19 @@ pub fn crc_of_file(path: &Path) -> std::io::Result<(u64, u32)> {
     Ok((bytes, crc.finalize()))
 }
 
-/// Saves a checkpoint into `out_dir/checkpoint/`: the networks and optimiser state of `sac`,
+/// Saves a checkpoint into `out_dir/checkpoint/`: the networks and optimiser state of `learner`,
 /// `replay` when given, `state_toml` as `state.toml`, and the manifest (module docs). The
 /// previous checkpoint stays whole until the new one is complete; a write that fails (a full
 /// disk) is an error naming the file and the OS's error, and removes the incomplete
 /// `checkpoint.tmp/` so that the space it took is free again.
 pub fn save(
     out_dir: &Path,
-    sac: &Sac,
+    learner: &dyn Learner,
     replay: Option<&ReplayBuffer>,
     state_toml: &str,
 ) -> Result<(), CheckpointError> {
     let tmp = out_dir.join(TMP_DIR);
-    let written = write_tmp(&tmp, sac, replay, state_toml);
+    let written = write_tmp(&tmp, learner, replay, state_toml);
     if written.is_err() {
         // Best effort: the error that matters is the write's.
         let _ = std::fs::remove_dir_all(&tmp);
@@ -232,7 +232,7 @@ pub fn save(
 /// Writes the whole checkpoint into `tmp` (replacing what a killed save left there).
 fn write_tmp(
     tmp: &Path,
-    sac: &Sac,
+    learner: &dyn Learner,
     replay: Option<&ReplayBuffer>,
     state_toml: &str,
 ) -> Result<(), CheckpointError> {
@@ -245,8 +245,8 @@ fn write_tmp(
     }
     std::fs::create_dir_all(tmp).map_err(write_err(tmp))?;
     // Serialised in memory and written here, so that a full disk is the OS's error on a named
-    // file, not a libtorch abort ([`Sac::save_to_memory`]).
-    let networks = sac
+    // file, not a libtorch abort ([`Learner::save_to_memory`]).
+    let networks = learner
         .save_to_memory()
         .map_err(|source| CheckpointError::SaveNetworks { dir: tmp.to_owned(), source })?;
     let mut files = Vec::new();
@@ -425,14 +425,18 @@ impl Verified {
         }
     }
 
-    /// Restores the networks and optimiser state into `sac` (same configuration as the one
+    /// Restores the networks and optimiser state into `learner` (same configuration as the one
     /// that saved them) and, when given, the replay buffer.
-    pub fn load(&self, sac: &mut Sac, replay: Option<&mut ReplayBuffer>) -> Result<(), CheckpointError> {
-        for name in sac.checkpoint_files() {
+    pub fn load(
+        &self,
+        learner: &mut dyn Learner,
+        replay: Option<&mut ReplayBuffer>,
+    ) -> Result<(), CheckpointError> {
+        for name in learner.checkpoint_files() {
             self.require(name)?;
         }
         let replay_path = replay.as_ref().map(|_| self.require(REPLAY_FILE)).transpose()?;
-        sac.load(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
+        learner.load(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
             dir: self.dir.clone(),
             message: without_backtrace(&e.to_string()).to_owned(),
         })?;
@@ -442,13 +446,13 @@ impl Verified {
         Ok(())
     }
 
-    /// Restores only the networks into `sac` ([`Sac::load_networks`]): the start of a run
+    /// Restores only the networks into `learner` ([`Learner::load_networks`]): the start of a run
     /// that continues from another run's networks with fresh optimiser state and data.
-    pub fn load_networks(&self, sac: &mut Sac) -> Result<(), CheckpointError> {
-        for name in sac.checkpoint_files().into_iter().filter(|n| *n != crate::sac::OPTIM_FILE) {
+    pub fn load_networks(&self, learner: &mut dyn Learner) -> Result<(), CheckpointError> {
+        for name in learner.checkpoint_files().into_iter().filter(|n| *n != crate::learner::OPTIM_FILE) {
             self.require(name)?;
         }
-        sac.load_networks(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
+        learner.load_networks(&self.dir).map_err(|e| CheckpointError::LoadNetworks {
             dir: self.dir.clone(),
             message: without_backtrace(&e.to_string()).to_owned(),
         })

@@ -1,4 +1,4 @@
-//! vge-trainer: the learner. SAC and TD3 in tch ([`sac`]) with value-guided exploration
+//! vge-trainer: the learner. SAC and TD3 in tch behind one trait ([`learner`]) with value-guided exploration
 //! ([`behaviour`]) for finger-gaiting, the replay buffer ([`replay`]), the training loop
 //! ([`train`]) and its checkpoints ([`checkpoint`]). The only crate of vge that links
 //! libtorch; run configs, the success test and the rest of the lab are vge-lab's.
@@ -10,12 +10,12 @@ pub mod behaviour;
 pub mod bench_update;
 pub mod checkpoint;
 pub mod heap;
+pub mod learner;
 pub mod mkl;
 pub mod nets;
 pub mod optim;
 pub mod policy_export;
 pub mod replay;
-pub mod sac;
 pub mod tensorboard;
 pub mod toy;
 pub mod train;

@@ -8,12 +8,12 @@ pub use vge_lab::policy_meta::hand_policy_meta;
 use vge_sim::EnvConfig;
 use vge_sim::observation::OBS_DIM;
 
-use crate::sac::Sac;
+use crate::learner::Learner;
 use crate::train::TrainError;
 
-/// The actor of `sac` encoded as a policy file (hand metadata, provenance with the config
+/// The actor of `learner` encoded as a policy file (hand metadata, provenance with the config
 /// hash, seed and steps).
-pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, TrainError> {
+pub fn export_actor(config: &Config, learner: &dyn Learner, steps: u64) -> Result<Vec<u8>, TrainError> {
     let hidden: Vec<usize> = config.sac.hidden.iter().map(|&h| h as usize).collect();
     let provenance = Provenance {
         vge_version: env!("CARGO_PKG_VERSION").to_owned(),
@@ -21,7 +21,7 @@ pub fn export_actor(config: &Config, sac: &Sac, steps: u64) -> Result<Vec<u8>, T
         seed: config.seed,
         steps,
     };
-    Ok(export_hand_actor(&sac.actor_vs, &hidden, &config.env.env_config(0), provenance)?)
+    Ok(export_hand_actor(learner.actor_vs(), &hidden, &config.env.env_config(0), provenance)?)
 }
 
 /// Policy-file bytes of the actor in `actor_vs` (variables `actor.*`, as `nets::GaussianActor`

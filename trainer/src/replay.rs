@@ -11,7 +11,7 @@ use rand::RngExt;
 use tch::Tensor;
 use thiserror::Error;
 
-use crate::sac::{Batch, BcTerm};
+use crate::learner::{Batch, BcTerm};
 
 /// Who chose a transition's action.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

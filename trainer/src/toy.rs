@@ -9,9 +9,9 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Tensor};
 
+use crate::learner::{self, Algorithm, EntropyCoef, LearnerConfig, standard_normal};
 use crate::nets::NetSpec;
 use crate::replay::{ReplayBuffer, Source};
-use crate::sac::{Algorithm, EntropyCoef, Sac, SacConfig, standard_normal};
 
 pub const EPISODE_STEPS: usize = 20;
 
@@ -75,7 +75,7 @@ pub fn train_point_mass(
     seed: u64,
     env_steps: usize,
 ) -> Result<ToyResult, tch::TchError> {
-    let config = SacConfig {
+    let config = LearnerConfig {
         algorithm,
         net: NetSpec { obs_dim: 2, act_dim: 1, hidden: vec![64, 64] },
         action_scale: vec![1.0],
@@ -92,7 +92,7 @@ pub fn train_point_mass(
     // 64-wide layers gain nothing from a second intra-op thread, and a spinning pool thread
     // fighting another process (or test) for the core slows this loop several-fold.
     tch::set_num_threads(1);
-    let mut sac = Sac::new_seeded(config, Device::Cpu, seed)?;
+    let mut learner = learner::build_seeded(config, Device::Cpu, seed)?;
     let mut replay =
         ReplayBuffer::new(env_steps.max(1), 2, 1).map_err(|e| tch::TchError::Convert(e.to_string()))?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -105,7 +105,7 @@ pub fn train_point_mass(
         } else {
             let t = Tensor::from_slice(&obs).view([1, 2]);
             let eps = standard_normal(&mut rng, 1, 1);
-            sac.behaviour_action(&t, &eps).double_value(&[0, 0]) as f32
+            learner.behaviour_action(&t, &eps).double_value(&[0, 0]) as f32
         };
         let (r, done) = env.step(a);
         replay
@@ -117,16 +117,16 @@ pub fn train_point_mass(
         if step >= warmup {
             let batch =
                 replay.sample(64, &mut rng, None).map_err(|e| tch::TchError::Convert(e.to_string()))?;
-            sac.update(&batch);
+            learner.update(&batch);
         }
     }
     let eval_return = evaluate(
         &mut |o| {
             let t = Tensor::from_slice(o).view([1, 2]);
-            tch::no_grad(|| sac.actor.deterministic(&t)).double_value(&[0, 0]) as f32
+            tch::no_grad(|| learner.actor().deterministic(&t)).double_value(&[0, 0]) as f32
         },
         seed ^ 0xe7a1,
     );
     let zero_return = evaluate(&mut |_| 0.0, seed ^ 0xe7a1);
-    Ok(ToyResult { eval_return, zero_return, updates: sac.updates() })
+    Ok(ToyResult { eval_return, zero_return, updates: learner.updates() })
 }

@@ -163,7 +163,7 @@ fn bc_log_density_stays_finite_and_moderate_for_actions_at_the_bound() {
     let at_bound = Tensor::full([4, NUM_JOINTS as i64], 0.05, (Kind::Float, Device::Cpu));
     let scale = Tensor::full([NUM_JOINTS as i64], 0.05, (Kind::Float, Device::Cpu));
     let target = (&at_bound / &scale)
-        .clamp(-vge_trainer::sac::BC_TARGET_MAX_UNIT, vge_trainer::sac::BC_TARGET_MAX_UNIT)
+        .clamp(-vge_trainer::learner::BC_TARGET_MAX_UNIT, vge_trainer::learner::BC_TARGET_MAX_UNIT)
         * &scale;
     let (_, log_prob) = actor.sample_and_log_prob_of(&obs, &target, None, true);
     let lp = Vec::<f32>::try_from(log_prob.view(-1)).expect("log prob");

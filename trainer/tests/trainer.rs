@@ -13,9 +13,9 @@ use vge_sim::{NUM_JOINTS, OBS_DIM};
 use vge_trainer::behaviour::{
     Behaviour, EnvController, QFn, StepContext, bc_beta, fge_probability, p_controller,
 };
+use vge_trainer::learner::{self, Algorithm, BcTerm, EntropyCoef, Learner, LearnerConfig};
 use vge_trainer::nets::NetSpec;
 use vge_trainer::replay::{ReplayBuffer, Source};
-use vge_trainer::sac::{Algorithm, BcTerm, EntropyCoef, Sac, SacConfig};
 use vge_trainer::toy::train_point_mass;
 use vge_trainer::train::train;
 
@@ -213,13 +213,13 @@ fn bc_beta_decays_linearly_to_zero() {
     assert_eq!(bc_beta(&bc, 5000), 0.0);
 }
 
-fn small_sac() -> Sac {
+fn small_sac() -> Box<dyn Learner> {
     small_learner(Algorithm::Sac)
 }
 
-fn small_learner(algorithm: Algorithm) -> Sac {
+fn small_learner(algorithm: Algorithm) -> Box<dyn Learner> {
     tch::manual_seed(3);
-    let config = SacConfig {
+    let config = LearnerConfig {
         algorithm,
         net: NetSpec { obs_dim: 4, act_dim: 2, hidden: vec![16, 16] },
         action_scale: vec![0.5, 0.5],
@@ -233,7 +233,7 @@ fn small_learner(algorithm: Algorithm) -> Sac {
         actor_hold_updates: 0,
         matmul: vge_trainer::nets::MatmulPrecision::F32,
     };
-    Sac::new(config, Device::Cpu).expect("sac")
+    learner::build(config, Device::Cpu).expect("sac")
 }
 
 #[test]
@@ -259,7 +259,7 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     // Expected: -beta * mean(mask * minQ(s,a) * log pi(a|s)), with Q and pi before the step.
     let q = sac.q_of(&batch.obs, &batch.action);
     let (_, log_prob) =
-        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&batch.obs, &batch.action, None, false));
+        tch::no_grad(|| sac.actor().sample_and_log_prob_of(&batch.obs, &batch.action, None, false));
     let mask_t = Tensor::from_slice(&mask).view([8, 1]);
     let expected = (&q * &log_prob * &mask_t).mean(Kind::Float).double_value(&[]) * -beta;
     // The same rows with the learner's flags flipped give a different value: the weight is
@@ -292,7 +292,7 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     let mut td3 = small_learner(Algorithm::td3());
     assert_eq!(td3.update(&batch).bc_loss, 0.0, "no actor step on the first update");
     let q = td3.q_of(&batch.obs, &batch.action);
-    let mu = tch::no_grad(|| td3.actor.deterministic(&batch.obs));
+    let mu = tch::no_grad(|| td3.actor().deterministic(&batch.obs));
     let sq = ((&batch.action - mu) / 0.5).square().sum_dim_intlist(-1, true, Kind::Float);
     let expected = (&q * &sq * &mask_t).mean(Kind::Float).double_value(&[]) * beta;
     assert!(expected.abs() > 1e-6);
@@ -311,7 +311,7 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
     let mut sac = small_sac();
     let obs = Tensor::randn([64, 4], (Kind::Float, Device::Cpu));
     let action = Tensor::full([64, 2], 0.3, (Kind::Float, Device::Cpu));
-    let fit = vge_trainer::sac::Batch {
+    let fit = vge_trainer::learner::Batch {
         obs: obs.shallow_clone(),
         action: action.shallow_clone(),
         reward: Tensor::full([64, 1], 2.0, (Kind::Float, Device::Cpu)),
@@ -322,12 +322,12 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
     for _ in 0..200 {
         sac.update(&fit);
     }
-    let lp = |sac: &Sac| {
-        tch::no_grad(|| sac.actor.sample_and_log_prob_of(&obs, &action, None, false).1)
+    let lp = |sac: &dyn Learner| {
+        tch::no_grad(|| sac.actor().sample_and_log_prob_of(&obs, &action, None, false).1)
             .mean(Kind::Float)
             .double_value(&[])
     };
-    let before = lp(&sac);
+    let before = lp(sac.as_ref());
     let mut bc_batch = fit;
     bc_batch.bc = Some(BcTerm {
         beta: 5.0,
@@ -337,7 +337,7 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
     for _ in 0..50 {
         sac.update(&bc_batch);
     }
-    let after = lp(&sac);
+    let after = lp(sac.as_ref());
     assert!(after > before + 0.5, "log pi of the cloned actions {before} -> {after}");
 }
 
@@ -454,7 +454,7 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     assert_eq!(c.sac.batch, 128);
     assert_eq!(c.method, Method::Fge);
     assert_eq!(c.sac.hidden, vec![64, 64]);
-    assert!(matches!(vge_trainer::sac::SacConfig::for_hand(&c).entropy, EntropyCoef::Auto { .. }));
+    assert!(matches!(vge_trainer::learner::LearnerConfig::for_hand(&c).entropy, EntropyCoef::Auto { .. }));
     let mut d = Config::default();
     apply_override(&mut d, "vge.horizon=3").expect("override");
     assert_eq!(d.vge.horizon, 3);
@@ -508,7 +508,10 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     // bf16 matmuls: named in lower case, left out of the serialised config at f32 (so the
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
-    assert_eq!(vge_trainer::sac::SacConfig::for_hand(&bf16).matmul, vge_trainer::nets::MatmulPrecision::Bf16);
+    assert_eq!(
+        vge_trainer::learner::LearnerConfig::for_hand(&bf16).matmul,
+        vge_trainer::nets::MatmulPrecision::Bf16
+    );
     assert!(bf16.to_toml_string().expect("toml").contains("matmul = \"bf16\""));
     assert!(!Config::default().to_toml_string().expect("toml").contains("matmul"));
     refuse("sac.matmul=\"f16\"", "matmul");

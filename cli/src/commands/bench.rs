@@ -225,14 +225,14 @@ mod libtorch {
     ) -> anyhow::Result<()> {
         anyhow::ensure!(updates > 0, "--updates must be at least 1");
         anyhow::ensure!(batch > 0, "--batch must be at least 1");
-        let mut config = vge_trainer::sac::SacConfig::hand_default(0.05);
-        config.entropy = vge_trainer::sac::EntropyCoef::Fixed(0.0);
+        let mut config = vge_trainer::learner::LearnerConfig::hand_default(0.05);
+        config.entropy = vge_trainer::learner::EntropyCoef::Fixed(0.0);
         config.critic_layer_norm = layer_norm;
         if matmul == "bf16" {
             config.matmul = vge_trainer::nets::MatmulPrecision::Bf16;
         }
         if algorithm == "td3" {
-            config.algorithm = vge_trainer::sac::Algorithm::td3();
+            config.algorithm = vge_trainer::learner::Algorithm::td3();
         }
         let r = vge_trainer::bench_update::run(config, batch, 20, updates, seed)?;
         if json {

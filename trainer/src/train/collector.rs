@@ -11,8 +11,8 @@ use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, Perturbatio
 use super::TrainError;
 use super::metrics::{TrainingObjects, Window};
 use crate::behaviour::{Behaviour, Decision, EnvController, StepContext};
+use crate::learner::{Learner, mix_seed, standard_normal};
 use crate::replay::ReplayBuffer;
-use crate::sac::{Sac, mix_seed, standard_normal};
 use vge_controllers::{ControllerInput, IgmConfig};
 use vge_lab::config::Config;
 
@@ -213,7 +213,7 @@ impl Collector {
     /// from (seed, step).
     pub fn learner_actions(
         &self,
-        sac: &Sac,
+        learner: &dyn Learner,
         step: u64,
         random_steps: u64,
         rng: &mut ChaCha8Rng,
@@ -225,19 +225,19 @@ impl Collector {
         let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
         let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
         let t = Tensor::from_slice(self.observations().as_flattened()).view([n as i64, OBS_DIM as i64]);
-        let v = Vec::<f32>::try_from(sac.behaviour_action(&t, &eps).contiguous().view(-1))?;
+        let v = Vec::<f32>::try_from(learner.behaviour_action(&t, &eps).contiguous().view(-1))?;
         Ok(v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect())
     }
 
     /// The executed action of every env: the behaviour policy's choice between the learner's
-    /// action and the controller's (Q from `sac`'s critic), clipped to the action bound. A
+    /// action and the controller's (Q from `learner`'s critic), clipped to the action bound. A
     /// non-finite action stops the run.
     pub fn behaviour_actions(
         &mut self,
         behaviour: &mut Behaviour,
-        sac: &Sac,
+        learner: &dyn Learner,
         step: u64,
-        learner: &[[f32; NUM_JOINTS]],
+        proposals: &[[f32; NUM_JOINTS]],
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<Decision>, TrainError> {
         let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
@@ -246,12 +246,12 @@ impl Collector {
             vec![None; self.len()]
         };
         let obs = self.observations();
-        let ctx = StepContext { step, obs: &obs, learner, inputs: &inputs };
+        let ctx = StepContext { step, obs: &obs, learner: proposals, inputs: &inputs };
         let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
             let rows = o.len() as i64;
             let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
             let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
-            Vec::<f32>::try_from(sac.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
+            Vec::<f32>::try_from(learner.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
         };
         let mut decisions = behaviour.act(&ctx, &mut self.controllers, &mut q, rng)?;
         for (env, d) in decisions.iter_mut().enumerate() {
@@ -313,7 +313,7 @@ impl Collector {
 mod tests {
     use tch::Device;
 
-    use crate::sac::SacConfig;
+    use crate::learner::{self, LearnerConfig};
 
     use super::*;
     use vge_lab::config::apply_override;
@@ -327,9 +327,10 @@ mod tests {
             apply_override(&mut config, o).expect(o);
         }
         config.validate().expect("valid");
-        let sac = Sac::new_seeded(SacConfig::for_hand(&config), Device::Cpu, 0).expect("learner");
+        let learner =
+            learner::build_seeded(LearnerConfig::for_hand(&config), Device::Cpu, 0).expect("learner");
         tch::no_grad(|| {
-            for (_, mut t) in sac.actor_vs.variables() {
+            for (_, mut t) in learner.actor_vs().variables() {
                 let _ = t.fill_(f64::NAN);
             }
         });
@@ -338,9 +339,9 @@ mod tests {
         let mut collector = Collector::new(&config).expect("envs");
         collector.reset_all(&mut behaviour, &mut rng).expect("reset");
         let step = 12_345;
-        let learner = collector.learner_actions(&sac, step, 0, &mut rng).expect("forward");
-        assert!(learner.iter().flatten().all(|v| v.is_nan()), "the poisoned actor outputs NaN");
-        let err = collector.behaviour_actions(&mut behaviour, &sac, step, &learner, &mut rng);
+        let proposals = collector.learner_actions(learner.as_ref(), step, 0, &mut rng).expect("forward");
+        assert!(proposals.iter().flatten().all(|v| v.is_nan()), "the poisoned actor outputs NaN");
+        let err = collector.behaviour_actions(&mut behaviour, learner.as_ref(), step, &proposals, &mut rng);
         match err {
             Err(TrainError::NonFiniteAction { step: s, env: 0, value }) => {
                 assert_eq!(s, step);

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use vge_sim::{EpisodeOutcome, ObjectShape};
 
 use crate::behaviour::BehaviourStats;
-use crate::sac::UpdateStats;
+use crate::learner::UpdateStats;
 
 pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,beta,updates,steps_per_s";
 

@@ -64,9 +64,9 @@ use vge_sim::{NUM_JOINTS, OBS_DIM, SimError};
 
 use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, bc_beta};
 use crate::checkpoint::CheckpointError;
+use crate::learner::{self, Learner, LearnerConfig};
 pub use crate::policy_export::export_actor;
 use crate::replay::{ReplayBuffer, ReplayError};
-use crate::sac::{Sac, SacConfig};
 use clock::{RunClock, RunCost};
 use collector::Collector;
 use run_folder::RunFolder;
@@ -232,11 +232,17 @@ impl Trainer<'_> {
                 return Ok(true);
             }
             t.collector.set_progress(t.c.step);
-            let learner = t.collector.learner_actions(&t.sac, t.c.step, random_steps, &mut t.rng)?;
+            let proposals =
+                t.collector.learner_actions(t.learner.as_ref(), t.c.step, random_steps, &mut t.rng)?;
             t.lap(Phase::Learner);
             let stats_before = t.behaviour.stats;
-            let decisions =
-                t.collector.behaviour_actions(&mut t.behaviour, &t.sac, t.c.step, &learner, &mut t.rng)?;
+            let decisions = t.collector.behaviour_actions(
+                &mut t.behaviour,
+                t.learner.as_ref(),
+                t.c.step,
+                &proposals,
+                &mut t.rng,
+            )?;
             t.lap(Phase::Behaviour);
             let (replay, window) = (&mut t.replay, &mut t.c.window);
             let finished = t.collector.step(
@@ -269,9 +275,9 @@ impl Trainer<'_> {
     }
 }
 
-/// Loads the networks of the run folder `source` into `sac` ([`Config::init_from`]), after
+/// Loads the networks of the run folder `source` into `learner` ([`Config::init_from`]), after
 /// checking that its algorithm and network sizes are this run's.
-fn init_networks(config: &Config, source: &Path, sac: &mut Sac) -> Result<(), TrainError> {
+fn init_networks(config: &Config, source: &Path, learner: &mut dyn Learner) -> Result<(), TrainError> {
     let theirs = run_config(source).map_err(|e| TrainError::InitFrom {
         path: source.display().to_string(),
         what: format!("its config.toml: {e}"),
@@ -293,7 +299,7 @@ fn init_networks(config: &Config, source: &Path, sac: &mut Sac) -> Result<(), Tr
             });
         }
     }
-    Ok(crate::checkpoint::open(source)?.load_networks(sac)?)
+    Ok(crate::checkpoint::open(source)?.load_networks(learner)?)
 }
 
 /// A phase of [`PhaseTimes`].
@@ -310,7 +316,7 @@ enum Phase {
 /// A training session: the learner, its data, the envs and the run's folder.
 struct Trainer<'a> {
     config: &'a Config,
-    sac: Sac,
+    learner: Box<dyn Learner>,
     replay: ReplayBuffer,
     behaviour: Behaviour,
     collector: Collector,
@@ -358,7 +364,7 @@ impl<'a> Trainer<'a> {
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
         }
-        let mut sac = Sac::new_seeded(SacConfig::for_hand(config), Device::Cpu, config.seed)?;
+        let mut learner = learner::build_seeded(LearnerConfig::for_hand(config), Device::Cpu, config.seed)?;
         let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
         let mut behaviour = Behaviour::from_config(config);
         let mut collector = Collector::new(config)?;
@@ -366,13 +372,13 @@ impl<'a> Trainer<'a> {
         let (mut c, mut before) = (Counters::default(), RunCost { wall_s: 0.0, cpu_s: Some(0.0) });
         if resume {
             // Every file is checked against the manifest before any is read.
-            let state = run_folder::load_checkpoint(out_dir, &mut sac, &mut replay)?;
+            let state = run_folder::load_checkpoint(out_dir, learner.as_mut(), &mut replay)?;
             rng = state.rng()?;
             c = state.counters();
             behaviour.stats = state.behaviour_stats();
             before = state.cost();
         } else if let Some(source) = config.init_from_dir() {
-            init_networks(config, &source, &mut sac)?;
+            init_networks(config, &source, learner.as_mut())?;
         }
         // Only now: a run refused above (a bad init_from, say) leaves no folder behind.
         std::fs::create_dir_all(out_dir).map_err(io_err(out_dir))?;
@@ -401,7 +407,7 @@ impl<'a> Trainer<'a> {
         let now = Instant::now();
         Ok(Self {
             config,
-            sac,
+            learner,
             replay,
             behaviour,
             collector,
@@ -443,18 +449,18 @@ impl<'a> Trainer<'a> {
         if self.c.step < config.sac.warmup || self.replay.len() < batch_size {
             return Ok(());
         }
-        if self.sac.updates() == 0 && config.sac.normalize_obs && config.init_from.is_none() {
+        if self.learner.updates() == 0 && config.sac.normalize_obs && config.init_from.is_none() {
             // Once; afterwards the statistics live in the networks' var stores and come back
             // with a checkpoint.
             let (mean, std) = self.replay.obs_stats(OBS_MIN_STD);
-            self.sac.set_obs_normalisation(&mean, &std);
+            self.learner.set_obs_normalisation(&mean, &std);
         }
         let beta = self.beta();
         self.c.updates_due += self.collector.len() as f64 * config.sac.utd;
         while self.c.updates_due >= 1.0 {
             self.c.updates_due -= 1.0;
             let batch = self.replay.sample(batch_size, &mut self.rng, (beta > 0.0).then_some(beta))?;
-            let st = self.sac.update(&batch);
+            let st = self.learner.update(&batch);
             self.c.window.add_update(&st);
         }
         Ok(())
@@ -475,7 +481,7 @@ impl<'a> Trainer<'a> {
             let mut values: Vec<(String, Option<f64>)> = self
                 .c
                 .window
-                .values(self.c.episodes, self.beta(), self.sac.updates(), steps_per_s)
+                .values(self.c.episodes, self.beta(), self.learner.updates(), steps_per_s)
                 .into_iter()
                 .map(|(name, v)| (name.to_owned(), v))
                 .collect();
@@ -488,7 +494,7 @@ impl<'a> Trainer<'a> {
         }
         if crossed(config.run.eval_interval) {
             self.lap(Phase::Sim);
-            let bytes = export_actor(config, &self.sac, step)?;
+            let bytes = export_actor(config, self.learner.as_ref(), step)?;
             let report = evaluation::periodic(self.folder.dir(), config, step, &bytes)?;
             self.last_evaluation = Some((step, report));
             self.lap(Phase::Eval);
@@ -503,7 +509,7 @@ impl<'a> Trainer<'a> {
             mean_return,
             mean_rotation_rad,
             controller_share: last.controller_share(),
-            updates: self.sac.updates(),
+            updates: self.learner.updates(),
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
             self.lap(Phase::Sim);
@@ -526,7 +532,7 @@ impl<'a> Trainer<'a> {
             self.config.run.save_replay,
             self.cost.now(),
         );
-        self.folder.checkpoint(&self.sac, &self.replay, &state)?;
+        self.folder.checkpoint(self.learner.as_ref(), &self.replay, &state)?;
         self.checkpointed_at = Some(self.c.step);
         Ok(())
     }
@@ -546,7 +552,7 @@ impl<'a> Trainer<'a> {
             None
         } else {
             let eval_start = Instant::now();
-            let bytes = export_actor(self.config, &self.sac, self.c.step)?;
+            let bytes = export_actor(self.config, self.learner.as_ref(), self.c.step)?;
             let cost = self.cost.now();
             // The periodic evaluation at this very step ran the same actor on the same episodes.
             let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
@@ -566,7 +572,7 @@ impl<'a> Trainer<'a> {
         };
         Ok(TrainSummary {
             steps: self.c.step,
-            updates: self.sac.updates(),
+            updates: self.learner.updates(),
             episodes: self.c.episodes,
             stopped,
             policy,

@@ -15,8 +15,8 @@ use super::metrics::{METRICS_HEADER, TrainingObjects, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
 use crate::checkpoint;
+use crate::learner::Learner;
 use crate::replay::ReplayBuffer;
-use crate::sac::Sac;
 use crate::tensorboard::EventWriter;
 use vge_lab::atomic_file;
 use vge_lab::config::Config;
@@ -141,10 +141,15 @@ impl RunFolder {
         self.events.scalars(step, &scalars).map_err(io_err(self.events.path()))
     }
 
-    /// Saves a checkpoint ([`crate::checkpoint::save`]) of `sac`, `state` and, when
+    /// Saves a checkpoint ([`crate::checkpoint::save`]) of `learner`, `state` and, when
     /// `state.has_replay`, `replay`. The rows logged up to it are synced to disk first: a
     /// resume from it keeps them.
-    pub fn checkpoint(&self, sac: &Sac, replay: &ReplayBuffer, state: &TrainState) -> Result<(), TrainError> {
+    pub fn checkpoint(
+        &self,
+        learner: &dyn Learner,
+        replay: &ReplayBuffer,
+        state: &TrainState,
+    ) -> Result<(), TrainError> {
         let path = &self.metrics_path;
         self.metrics.get_ref().sync_data().map_err(io_err(path))?;
         let eval = self.dir.join(vge_lab::run_dir::EVAL);
@@ -155,22 +160,22 @@ impl RunFolder {
         }
         let text =
             toml::to_string(state).map_err(|e| TrainError::Resume(format!("serialising state: {e}")))?;
-        Ok(checkpoint::save(&self.dir, sac, state.has_replay.then_some(replay), &text)?)
+        Ok(checkpoint::save(&self.dir, learner, state.has_replay.then_some(replay), &text)?)
     }
 }
 
-/// The checkpoint of `dir`, verified ([`crate::checkpoint::open`]), loaded into `sac` and
+/// The checkpoint of `dir`, verified ([`crate::checkpoint::open`]), loaded into `learner` and
 /// `replay`; returns its state.
 pub(super) fn load_checkpoint(
     dir: &Path,
-    sac: &mut Sac,
+    learner: &mut dyn Learner,
     replay: &mut ReplayBuffer,
 ) -> Result<TrainState, TrainError> {
     let ckpt = checkpoint::open(dir)?;
     let state: TrainState = toml::from_str(ckpt.state_toml()).map_err(|e| {
         TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::STATE_FILE).display()))
     })?;
-    ckpt.load(sac, state.has_replay.then_some(replay))?;
+    ckpt.load(learner, state.has_replay.then_some(replay))?;
     Ok(state)
 }
 

@@ -1,8 +1,8 @@
-//! SAC networks and update on real tch tensors.
+//! The learners (SAC and TD3 behind `Learner`): networks and updates on real tch tensors.
 
 use tch::{Device, Kind, Tensor, nn};
+use vge_trainer::learner::{self, Algorithm, Batch, EntropyCoef, Learner, LearnerConfig};
 use vge_trainer::nets::{GaussianActor, NetSpec, TwinCritic};
-use vge_trainer::sac::{Algorithm, Batch, EntropyCoef, Sac, SacConfig};
 
 fn small_spec() -> NetSpec {
     NetSpec { obs_dim: 6, act_dim: 3, hidden: vec![32, 32] }
@@ -117,8 +117,8 @@ fn fixed_batch(spec: &NetSpec) -> Batch {
     }
 }
 
-fn config(entropy: EntropyCoef) -> SacConfig {
-    SacConfig {
+fn config(entropy: EntropyCoef) -> LearnerConfig {
+    LearnerConfig {
         algorithm: Algorithm::Sac,
         net: small_spec(),
         action_scale: vec![1.0; 3],
@@ -136,8 +136,8 @@ fn config(entropy: EntropyCoef) -> SacConfig {
 
 #[test]
 fn critic_fits_terminal_rewards_and_fixed_alpha_stays_put() {
-    let mut sac = Sac::new(config(EntropyCoef::Fixed(0.0)), Device::Cpu).expect("sac");
-    let batch = fixed_batch(&sac.config.net);
+    let mut sac = learner::build(config(EntropyCoef::Fixed(0.0)), Device::Cpu).expect("sac");
+    let batch = fixed_batch(&sac.config().net);
     let first = sac.update(&batch);
     let mut last = first;
     for _ in 0..300 {
@@ -153,8 +153,9 @@ fn critic_fits_terminal_rewards_and_fixed_alpha_stays_put() {
 #[test]
 fn auto_alpha_moves_and_target_critic_trails_the_critic() {
     let mut sac =
-        Sac::new(config(EntropyCoef::Auto { target_entropy: 10.0, initial: 0.1 }), Device::Cpu).expect("sac");
-    let batch = fixed_batch(&sac.config.net);
+        learner::build(config(EntropyCoef::Auto { target_entropy: 10.0, initial: 0.1 }), Device::Cpu)
+            .expect("sac");
+    let batch = fixed_batch(&sac.config().net);
     for _ in 0..50 {
         sac.update(&batch);
     }
@@ -193,21 +194,21 @@ fn a_held_actor_stays_put_while_the_critics_learn() {
     let td3 =
         Algorithm::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 1 };
     for algorithm in [Algorithm::Sac, td3] {
-        let held = SacConfig { algorithm, actor_hold_updates: 3, ..config(EntropyCoef::Fixed(0.0)) };
-        let mut sac = Sac::new_seeded(held, Device::Cpu, 1).expect("sac");
-        let batch = fixed_batch(&sac.config.net);
+        let held = LearnerConfig { algorithm, actor_hold_updates: 3, ..config(EntropyCoef::Fixed(0.0)) };
+        let mut sac = learner::build_seeded(held, Device::Cpu, 1).expect("sac");
+        let batch = fixed_batch(&sac.config().net);
         let probe = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
         let zeros = Tensor::zeros([16, 3], (Kind::Float, Device::Cpu));
-        let action = |s: &Sac| s.behaviour_action(&probe, &zeros);
-        let q = |s: &Sac| s.q_of(&probe, &zeros);
-        let (action_0, q_0) = (action(&sac), q(&sac));
+        let action = |s: &dyn Learner| s.behaviour_action(&probe, &zeros);
+        let q = |s: &dyn Learner| s.q_of(&probe, &zeros);
+        let (action_0, q_0) = (action(sac.as_ref()), q(sac.as_ref()));
         for _ in 0..3 {
             sac.update(&batch);
         }
-        assert_eq!(max_abs(&(action(&sac) - &action_0)), 0.0, "{algorithm:?}: the held actor moved");
-        assert!(max_abs(&(q(&sac) - &q_0)) > 0.0, "{algorithm:?}: the critics did not learn");
+        assert_eq!(max_abs(&(action(sac.as_ref()) - &action_0)), 0.0, "{algorithm:?}: the held actor moved");
+        assert!(max_abs(&(q(sac.as_ref()) - &q_0)) > 0.0, "{algorithm:?}: the critics did not learn");
         sac.update(&batch);
-        assert!(max_abs(&(action(&sac) - &action_0)) > 0.0, "{algorithm:?}: the actor never learned");
+        assert!(max_abs(&(action(sac.as_ref()) - &action_0)) > 0.0, "{algorithm:?}: the actor never learned");
     }
 }
 
@@ -221,9 +222,10 @@ fn updates_after_load_networks_start_from_the_loaded_weights() {
     let td3 =
         Algorithm::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 1 };
     for algorithm in [Algorithm::Sac, td3] {
-        let cfg = SacConfig { algorithm, actor_lr: 1e-6, critic_lr: 1e-6, ..config(EntropyCoef::Fixed(0.0)) };
-        let mut source = Sac::new_seeded(cfg.clone(), Device::Cpu, 1).expect("sac");
-        let batch = fixed_batch(&source.config.net);
+        let cfg =
+            LearnerConfig { algorithm, actor_lr: 1e-6, critic_lr: 1e-6, ..config(EntropyCoef::Fixed(0.0)) };
+        let mut source = learner::build_seeded(cfg.clone(), Device::Cpu, 1).expect("sac");
+        let batch = fixed_batch(&source.config().net);
         for _ in 0..5 {
             source.update(&batch);
         }
@@ -231,7 +233,7 @@ fn updates_after_load_networks_start_from_the_loaded_weights() {
         let probe = Tensor::randn([16, 6], (Kind::Float, Device::Cpu));
         let zeros = Tensor::zeros([16, 3], (Kind::Float, Device::Cpu));
         let loaded_action = source.behaviour_action(&probe, &zeros);
-        let mut fresh = Sac::new_seeded(cfg, Device::Cpu, 2).expect("sac");
+        let mut fresh = learner::build_seeded(cfg, Device::Cpu, 2).expect("sac");
         let own_action = fresh.behaviour_action(&probe, &zeros);
         assert!(max_abs(&(&own_action - &loaded_action)) > 1e-3, "the two learners start alike");
         fresh.load_networks(&dir).expect("load");
@@ -267,17 +269,17 @@ fn bf16_updates_track_f32_ones_and_acting_stays_f32(algorithm: Algorithm) {
     use vge_trainer::nets::MatmulPrecision;
     {
         let learner = |matmul| {
-            let config = SacConfig {
+            let config = LearnerConfig {
                 algorithm,
                 matmul,
                 entropy: EntropyCoef::Fixed(0.0),
-                ..SacConfig::hand_default(0.05)
+                ..LearnerConfig::hand_default(0.05)
             };
-            Sac::new_seeded(config, Device::Cpu, 3).expect("learner")
+            learner::build_seeded(config, Device::Cpu, 3).expect("learner")
         };
         let (mut f32_learner, mut bf16_learner) =
             (learner(MatmulPrecision::F32), learner(MatmulPrecision::Bf16));
-        let spec = f32_learner.config.net.clone();
+        let spec = f32_learner.config().net.clone();
         tch::manual_seed(11);
         let batches: Vec<Batch> = (0..4)
             .map(|_| {
@@ -316,14 +318,14 @@ fn bf16_updates_track_f32_ones_and_acting_stays_f32(algorithm: Algorithm) {
         // not of a bf16 one.
         let zero = Tensor::zeros([256, spec.act_dim], (Kind::Float, Device::Cpu));
         let acted = bf16_learner.behaviour_action(obs, &zero);
-        let deterministic = |learner: &mut Sac, precision| {
-            learner.actor.set_matmul_precision(precision);
-            let out = tch::no_grad(|| learner.actor.deterministic(obs));
-            learner.actor.set_matmul_precision(MatmulPrecision::F32);
+        let deterministic = |learner: &mut dyn Learner, precision| {
+            learner.core_mut().actor.set_matmul_precision(precision);
+            let out = tch::no_grad(|| learner.actor().deterministic(obs));
+            learner.core_mut().actor.set_matmul_precision(MatmulPrecision::F32);
             out
         };
-        let f32_out = deterministic(&mut bf16_learner, MatmulPrecision::F32);
-        let bf16_out = deterministic(&mut bf16_learner, MatmulPrecision::Bf16);
+        let f32_out = deterministic(bf16_learner.as_mut(), MatmulPrecision::F32);
+        let bf16_out = deterministic(bf16_learner.as_mut(), MatmulPrecision::Bf16);
         assert!(max_abs(&(&f32_out - &bf16_out)) > 0.0, "{algorithm:?}");
         assert_eq!(max_abs(&(acted - f32_out)), 0.0, "{algorithm:?}");
     }

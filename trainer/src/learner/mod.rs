@@ -1,14 +1,18 @@
-//! The learner's update step. Soft Actor-Critic (Haarnoja et al. 2018; CleanRL's
-//! `sac_continuous_action` layout): twin critics with a Polyak-averaged target, a
-//! reparameterised actor, and an entropy coefficient α that is either fixed (0 allowed, as
-//! VGE uses) or tuned to a target entropy. Or TD3 (Fujimoto et al. 2018; CleanRL's
-//! `td3_continuous_action`), the paper's second learner: the same twin critics, a
-//! deterministic actor (the mean head), target-policy smoothing and delayed actor updates.
+//! The learner: an off-policy actor-critic behind the [`Learner`] trait, with its two
+//! implementations, each read top to bottom in its own file:
+//! - [`SoftActorCritic`] (`soft_actor_critic.rs`; Haarnoja et al. 2018, CleanRL's
+//!   `sac_continuous_action`): twin critics with a Polyak-averaged target, a
+//!   reparameterised actor, and an entropy coefficient α that is either fixed (0 allowed, as
+//!   VGE uses) or tuned to a target entropy;
+//! - [`Td3`] (`td3.rs`; Fujimoto et al. 2018, CleanRL's `td3_continuous_action`), the paper's
+//!   second learner: the same twin critics, a deterministic actor (the mean head),
+//!   target-policy smoothing and delayed actor updates.
 //!
-//! This module holds what both share (the learner's networks and optimisers, the critic
-//! step, the BC weights, the target updates, checkpoints); each algorithm's update reads in
-//! its own file: `soft_actor_critic.rs` and `td3.rs`.
+//! This module holds what both share ([`ActorCritic`]: the networks and optimisers, the
+//! critic step, the BC weights, the target updates, checkpoints) and [`build`], which makes
+//! the learner a [`LearnerConfig`] names.
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use rand::{RngExt, SeedableRng};
@@ -22,7 +26,8 @@ use crate::optim::{Adam, flatten_storage};
 mod soft_actor_critic;
 mod td3;
 
-use td3::TargetActor;
+pub use soft_actor_critic::SoftActorCritic;
+pub use td3::Td3;
 
 /// How the entropy coefficient α is set.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,7 +73,7 @@ impl Algorithm {
 
 /// The learner's configuration (SAC or TD3, see [`Algorithm`]).
 #[derive(Debug, Clone, PartialEq)]
-pub struct SacConfig {
+pub struct LearnerConfig {
     pub algorithm: Algorithm,
     pub net: NetSpec,
     pub action_scale: Vec<f32>,
@@ -89,7 +94,7 @@ pub struct SacConfig {
     pub matmul: MatmulPrecision,
 }
 
-impl SacConfig {
+impl LearnerConfig {
     /// The learner of a run config, for the hand (obs 65, action 15): the `[sac]` section's
     /// sizes and rates, `algorithm`, and `[td3]` for TD3.
     pub fn for_hand(config: &vge_lab::config::Config) -> Self {
@@ -124,7 +129,7 @@ impl SacConfig {
     }
 }
 
-impl SacConfig {
+impl LearnerConfig {
     /// The paper's sizes for the hand: obs 65, action 15, 256x256 networks.
     pub fn hand_default(max_delta_rad: f32) -> Self {
         Self {
@@ -205,7 +210,7 @@ pub struct UpdateStats {
     pub mean_q: f64,
 }
 
-// The files of a checkpoint that [`Sac::save`] writes (checkpoint.rs lists them in its manifest).
+// The files of a checkpoint that [`Learner::save`] writes (checkpoint.rs lists them in its manifest).
 pub const ACTOR_FILE: &str = "actor.ot";
 pub const CRITIC_FILE: &str = "critic.ot";
 pub const TARGET_FILE: &str = "target.ot";
@@ -213,9 +218,11 @@ pub const TARGET_FILE: &str = "target.ot";
 pub const TARGET_ACTOR_FILE: &str = "target_actor.ot";
 pub const OPTIM_FILE: &str = "optim.ot";
 
+/// What both learners share: the actor, the twin critics and their target, the optimisers,
+/// the update counter and the seed of the updates' noise.
 #[derive(Debug)]
-pub struct Sac {
-    pub config: SacConfig,
+pub struct ActorCritic {
+    pub config: LearnerConfig,
     pub actor_vs: nn::VarStore,
     pub actor: GaussianActor,
     critic_vs: nn::VarStore,
@@ -226,15 +233,11 @@ pub struct Sac {
     target_flat: Tensor,
     actor_opt: Adam,
     critic_opt: Adam,
-    log_alpha: Option<(Tensor, Adam, f64)>,
-    alpha: f64,
-    /// TD3's target actor (Polyak-averaged like the target critics); None for SAC.
-    target_actor: Option<TargetActor>,
-    /// The last actor loss, reported on TD3's updates that skip the actor.
+    /// The last actor loss, reported on updates that skip the actor.
     last_actor_loss: f64,
-    /// Updates done; with [`Self::set_seed`], update `k` draws its noise from a generator
-    /// seeded by (seed, k), so a run is reproducible and resumable without any RNG state
-    /// of libtorch's, and independent of other threads using libtorch.
+    /// Updates done; with a seed ([`Learner::set_seed`]), update `k` draws its noise from a
+    /// generator seeded by (seed, k), so a run is reproducible and resumable without any RNG
+    /// state of libtorch's, and independent of other threads using libtorch.
     updates: u64,
     seed: Option<u64>,
 }
@@ -265,8 +268,11 @@ pub fn mix_seed(seed: u64, counter: u64, salt: u64) -> i64 {
     (z >> 1) as i64
 }
 
-impl Sac {
-    pub fn new(config: SacConfig, device: Device) -> Result<Self, tch::TchError> {
+impl ActorCritic {
+    /// The actor, the critics and the target critics (a copy of the critics), with their
+    /// optimisers. Parameters come from libtorch's generator; [`Self::seed_parameters`]
+    /// redraws them from a seed.
+    fn new(config: LearnerConfig, device: Device) -> Result<Self, tch::TchError> {
         let actor_vs = nn::VarStore::new(device);
         let actor = GaussianActor::new(&actor_vs.root(), &config.net, &config.action_scale)
             .with_min_std(config.min_policy_std);
@@ -279,21 +285,8 @@ impl Sac {
         target_vs.copy(&critic_vs)?;
         target_vs.freeze();
         let target_flat = flatten_storage(&target.parameters().collect::<Vec<_>>());
-        let target_actor = match config.algorithm {
-            Algorithm::Sac => None,
-            Algorithm::Td3 { .. } => Some(TargetActor::new(&actor_vs, &config)?),
-        };
         let actor_opt = Adam::new(sorted_trainables(&actor_vs), config.actor_lr);
         let critic_opt = Adam::new(critic.parameters().collect(), config.critic_lr);
-        let (log_alpha, alpha) = match config.entropy {
-            EntropyCoef::Fixed(alpha) => (None, alpha),
-            EntropyCoef::Auto { target_entropy, initial } => {
-                let log_alpha =
-                    Tensor::from_slice(&[initial.ln() as f32]).to_device(device).set_requires_grad(true);
-                let opt = Adam::new(vec![log_alpha.shallow_clone()], config.critic_lr);
-                (Some((log_alpha, opt, target_entropy)), initial)
-            }
-        };
         Ok(Self {
             config,
             actor_vs,
@@ -305,22 +298,19 @@ impl Sac {
             target_flat,
             actor_opt,
             critic_opt,
-            log_alpha,
-            alpha,
-            target_actor,
             last_actor_loss: 0.0,
             updates: 0,
             seed: None,
         })
     }
 
-    /// [`Self::new`] with every network parameter drawn from a generator seeded by `seed`
-    /// (PyTorch's `nn.Linear` bounds, U(±1/√fan_in)), not from libtorch's global generator,
-    /// and with [`Self::set_seed`] applied: the whole learner is a function of `seed`.
-    pub fn new_seeded(config: SacConfig, device: Device, seed: u64) -> Result<Self, tch::TchError> {
-        let mut sac = Self::new(config, device)?;
+    /// Redraws every network parameter from a generator seeded by `seed` (PyTorch's
+    /// `nn.Linear` bounds, U(±1/√fan_in)), copies the critics into their target, and seeds
+    /// the updates' noise: the networks are then a function of `seed`.
+    fn seed_parameters(&mut self, seed: u64) -> Result<(), tch::TchError> {
+        let device = self.actor_vs.device();
         let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0, 0x1417) as u64);
-        for vs in [&sac.actor_vs, &sac.critic_vs] {
+        for vs in [&self.actor_vs, &self.critic_vs] {
             // Trainable parameters only: the normalisers' statistics keep their identity start.
             let mut named: Vec<(String, Tensor)> =
                 vs.variables().into_iter().filter(|(_, t)| t.requires_grad()).collect();
@@ -346,92 +336,33 @@ impl Sac {
                 tch::no_grad(|| t.f_copy_(&src))?;
             }
         }
-        sac.target_vs.copy(&sac.critic_vs)?;
-        if let Some(target) = &mut sac.target_actor {
-            target.vs.copy(&sac.actor_vs)?;
-        }
-        sac.set_seed(seed);
-        Ok(sac)
-    }
-
-    pub fn alpha(&self) -> f64 {
-        self.alpha
-    }
-
-    /// Sets the observation normalisation of the actor, the critics and the target critics
-    /// to `(obs - mean) / std`. Each slice has `obs_dim` entries; `std` entries must be > 0.
-    pub fn set_obs_normalisation(&mut self, mean: &[f32], std: &[f32]) {
-        let dim = self.config.net.obs_dim as usize;
-        assert!(mean.len() == dim && std.len() == dim, "normalisation of {dim} observations");
-        assert!(std.iter().all(|&s| s > 0.0 && s.is_finite()), "std must be positive and finite");
-        let device = self.actor_vs.device();
-        let (m, s) = (Tensor::from_slice(mean).to_device(device), Tensor::from_slice(std).to_device(device));
-        self.actor.obs_norm.set(&m, &s);
-        self.critic.obs_norm.set(&m, &s);
-        self.target.obs_norm.set(&m, &s);
-        if let Some(target) = &mut self.target_actor {
-            target.actor.obs_norm.set(&m, &s);
-        }
-    }
-
-    /// The learner's exploratory actions for `obs` given standard-normal noise `eps`
-    /// (`[rows, act_dim]`): SAC samples its policy; TD3 adds `explore_std`-scaled noise to
-    /// its deterministic action and clips to the action range.
-    pub fn behaviour_action(&self, obs: &Tensor, eps: &Tensor) -> Tensor {
-        tch::no_grad(|| match self.config.algorithm {
-            Algorithm::Sac => self.actor.sample_with(obs, Some(eps)).action,
-            Algorithm::Td3 { explore_std, .. } => {
-                let scale = self.actor.action_scale();
-                let unit = self.actor.deterministic(obs) / scale + eps * explore_std;
-                unit.clamp(-1.0, 1.0) * scale
-            }
-        })
-    }
-
-    /// Updates done so far.
-    pub fn updates(&self) -> u64 {
-        self.updates
+        self.target_vs.copy(&self.critic_vs)?;
+        self.seed = Some(seed);
+        Ok(())
     }
 
     /// Whether the current update (counted) steps the actor: not while it is held
-    /// ([`SacConfig::actor_hold_updates`]).
+    /// ([`LearnerConfig::actor_hold_updates`]).
     fn actor_learns(&self) -> bool {
         self.updates > self.config.actor_hold_updates
     }
 
-    /// Makes every later update draw its noise from a generator seeded by
-    /// `(seed, update index)` instead of libtorch's global one.
-    pub fn set_seed(&mut self, seed: u64) {
-        self.seed = Some(seed);
-    }
-
-    /// Q-values min(Q₁, Q₂) of given actions, without gradients (for behaviour-policy choice).
-    pub fn q_of(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+    /// Q-values min(Q₁, Q₂) of given actions, without gradients.
+    fn q_of(&self, obs: &Tensor, action: &Tensor) -> Tensor {
         tch::no_grad(|| self.critic.min_q(obs, action))
-    }
-
-    /// One update of the configured algorithm (see [`Self::update_sac`], [`Self::update_td3`]).
-    pub fn update(&mut self, batch: &Batch) -> UpdateStats {
-        // Only the update's matmuls take the configured precision: acting and evaluation
-        // compute in f32, as the deployed runtime does.
-        self.set_matmul_precision(self.config.matmul);
-        let stats = match self.config.algorithm {
-            Algorithm::Sac => self.update_sac(batch),
-            Algorithm::Td3 { target_noise_std, target_noise_clip, policy_delay, .. } => {
-                self.update_td3(batch, target_noise_std, target_noise_clip, policy_delay)
-            }
-        };
-        self.set_matmul_precision(MatmulPrecision::F32);
-        stats
     }
 
     fn set_matmul_precision(&mut self, precision: MatmulPrecision) {
         self.actor.set_matmul_precision(precision);
         self.critic.set_matmul_precision(precision);
         self.target.set_matmul_precision(precision);
-        if let Some(target) = &mut self.target_actor {
-            target.actor.set_matmul_precision(precision);
-        }
+    }
+
+    /// `(obs - mean) / std` in the actor, the critics and the target critics.
+    fn set_obs_normalisation(&mut self, mean: &Tensor, std: &Tensor) {
+        self.actor.obs_norm.set(mean, std);
+        self.critic.obs_norm.set(mean, std);
+        self.target.obs_norm.set(mean, std);
     }
 
     /// One gradient step of both critics towards `r + γ (1 − done) q_next`; returns the
@@ -453,31 +384,155 @@ impl Sac {
     }
 
     /// target ← target + τ (online − target), in place: one lerp over the critics' flat
-    /// buffers, and one over TD3's actors'.
+    /// buffers.
     fn soft_update_target(&mut self) {
         let tau = self.config.tau;
         tch::no_grad(|| {
             let _ = self.target_flat.lerp_(self.critic_opt.flat(), tau);
-            if let Some(target) = &mut self.target_actor {
-                let _ = target.flat.lerp_(self.actor_opt.flat(), tau);
-            }
         });
     }
 
+    /// The var stores a checkpoint holds, with their file names, in writing order.
+    fn stores(&self) -> Vec<(&'static str, &nn::VarStore)> {
+        vec![(ACTOR_FILE, &self.actor_vs), (CRITIC_FILE, &self.critic_vs), (TARGET_FILE, &self.target_vs)]
+    }
+
+    fn load_stores(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+        self.actor_vs.load(dir.join(ACTOR_FILE))?;
+        self.critic_vs.load(dir.join(CRITIC_FILE))?;
+        self.target_vs.load(dir.join(TARGET_FILE))
+    }
+
+    /// The optimisers' state, the update counter and the last actor loss, by name.
+    fn state(&self) -> Vec<(String, Tensor)> {
+        let mut named = self.actor_opt.state("actor_opt");
+        named.extend(self.critic_opt.state("critic_opt"));
+        named.push(("updates".to_owned(), Tensor::from_slice(&[self.updates as i64])));
+        named.push(("last_actor_loss".to_owned(), Tensor::from_slice(&[self.last_actor_loss])));
+        named
+    }
+
+    fn restore_state(&mut self, named: &HashMap<String, Tensor>) -> Result<(), tch::TchError> {
+        self.actor_opt.restore("actor_opt", named)?;
+        self.critic_opt.restore("critic_opt", named)?;
+        let updates = named
+            .get("updates")
+            .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks updates".to_owned()))?;
+        self.updates = updates.int64_value(&[0]) as u64;
+        // Absent in checkpoints from before TD3; only a logged number depends on it.
+        self.last_actor_loss = named.get("last_actor_loss").map_or(0.0, |t| t.double_value(&[0]));
+        Ok(())
+    }
+}
+
+/// An off-policy learner: how it explores, how it updates from a batch, and what its
+/// checkpoint holds. [`SoftActorCritic`] and [`Td3`] implement it; the rest is shared
+/// ([`ActorCritic`]).
+pub trait Learner: Send + std::fmt::Debug {
+    /// The shared networks and optimisers.
+    fn core(&self) -> &ActorCritic;
+    fn core_mut(&mut self) -> &mut ActorCritic;
+
+    /// The learner's exploratory actions for `obs` given standard-normal noise `eps`
+    /// (`[rows, act_dim]`).
+    fn behaviour_action(&self, obs: &Tensor, eps: &Tensor) -> Tensor;
+
+    /// One update from `batch`, its matmuls at the configured precision.
+    fn update_step(&mut self, batch: &Batch) -> UpdateStats;
+
+    /// The entropy coefficient α (0 for a learner without one).
+    fn alpha(&self) -> f64;
+
+    /// Sets the matmul precision of the networks beyond the shared ones.
+    fn set_own_matmul_precision(&mut self, _precision: MatmulPrecision) {}
+
+    /// Sets the observation normalisation of the networks beyond the shared ones.
+    fn set_own_obs_normalisation(&mut self, _mean: &Tensor, _std: &Tensor) {}
+
+    /// The var stores beyond the shared ones that a checkpoint holds, with their file names.
+    fn own_stores(&self) -> Vec<(&'static str, &nn::VarStore)> {
+        Vec::new()
+    }
+
+    /// Loads [`Self::own_stores`] from `dir`.
+    fn load_own_stores(&mut self, _dir: &Path) -> Result<(), tch::TchError> {
+        Ok(())
+    }
+
+    /// The learner's own optimiser state (beyond the shared optimisers'), by name.
+    fn own_state(&self) -> Vec<(String, Tensor)> {
+        Vec::new()
+    }
+
+    /// Restores [`Self::own_state`].
+    fn restore_own_state(&mut self, _named: &HashMap<String, Tensor>) -> Result<(), tch::TchError> {
+        Ok(())
+    }
+
+    fn config(&self) -> &LearnerConfig {
+        &self.core().config
+    }
+
+    fn actor(&self) -> &GaussianActor {
+        &self.core().actor
+    }
+
+    fn actor_vs(&self) -> &nn::VarStore {
+        &self.core().actor_vs
+    }
+
+    /// Updates done so far.
+    fn updates(&self) -> u64 {
+        self.core().updates
+    }
+
+    /// Makes every later update draw its noise from a generator seeded by
+    /// `(seed, update index)` instead of libtorch's global one.
+    fn set_seed(&mut self, seed: u64) {
+        self.core_mut().seed = Some(seed);
+    }
+
+    /// Q-values min(Q₁, Q₂) of given actions, without gradients (for behaviour-policy choice).
+    fn q_of(&self, obs: &Tensor, action: &Tensor) -> Tensor {
+        self.core().q_of(obs, action)
+    }
+
+    /// One update of the learner's algorithm. Only the update's matmuls take the configured
+    /// precision: acting and evaluation compute in f32, as the deployed runtime does.
+    fn update(&mut self, batch: &Batch) -> UpdateStats {
+        let precision = self.config().matmul;
+        self.core_mut().set_matmul_precision(precision);
+        self.set_own_matmul_precision(precision);
+        let stats = self.update_step(batch);
+        self.core_mut().set_matmul_precision(MatmulPrecision::F32);
+        self.set_own_matmul_precision(MatmulPrecision::F32);
+        stats
+    }
+
+    /// Sets the observation normalisation of every network to `(obs - mean) / std`. Each
+    /// slice has `obs_dim` entries; `std` entries must be > 0.
+    fn set_obs_normalisation(&mut self, mean: &[f32], std: &[f32]) {
+        let dim = self.config().net.obs_dim as usize;
+        assert!(mean.len() == dim && std.len() == dim, "normalisation of {dim} observations");
+        assert!(std.iter().all(|&s| s > 0.0 && s.is_finite()), "std must be positive and finite");
+        let device = self.actor_vs().device();
+        let (m, s) = (Tensor::from_slice(mean).to_device(device), Tensor::from_slice(std).to_device(device));
+        self.core_mut().set_obs_normalisation(&m, &s);
+        self.set_own_obs_normalisation(&m, &s);
+    }
+
     /// The files [`Self::save`] writes into a checkpoint folder, in the order it writes them.
-    pub fn checkpoint_files(&self) -> Vec<&'static str> {
-        let mut files = vec![ACTOR_FILE, CRITIC_FILE, TARGET_FILE];
-        if self.target_actor.is_some() {
-            files.push(TARGET_ACTOR_FILE);
-        }
+    fn checkpoint_files(&self) -> Vec<&'static str> {
+        let mut files: Vec<&'static str> = self.core().stores().into_iter().map(|(name, _)| name).collect();
+        files.extend(self.own_stores().into_iter().map(|(name, _)| name));
         files.push(OPTIM_FILE);
         files
     }
 
-    /// Saves networks, optimiser states, α and the update counter under `dir`
+    /// Saves networks, optimiser states and the update counter under `dir`
     /// ([`Self::checkpoint_files`]: `actor.ot`, `critic.ot`, `target.ot`, `target_actor.ot`
     /// for TD3, `optim.ot`), as [`Self::save_to_memory`] serialises them.
-    pub fn save(&self, dir: &Path) -> Result<(), tch::TchError> {
+    fn save(&self, dir: &Path) -> Result<(), tch::TchError> {
         for (name, bytes) in self.save_to_memory()? {
             std::fs::write(dir.join(name), bytes)?;
         }
@@ -488,29 +543,15 @@ impl Sac {
     /// [`Self::checkpoint_files`] order. libtorch then writes no file itself: writing one,
     /// it aborts the process on a full disk (a C++ exception through the FFI) instead of
     /// returning the OS's error.
-    pub fn save_to_memory(&self) -> Result<Vec<(&'static str, Vec<u8>)>, tch::TchError> {
+    fn save_to_memory(&self) -> Result<Vec<(&'static str, Vec<u8>)>, tch::TchError> {
         let mut files = Vec::new();
-        let mut stores = vec![
-            (ACTOR_FILE, &self.actor_vs),
-            (CRITIC_FILE, &self.critic_vs),
-            (TARGET_FILE, &self.target_vs),
-        ];
-        if let Some(target) = &self.target_actor {
-            stores.push((TARGET_ACTOR_FILE, &target.vs));
-        }
-        for (name, vs) in stores {
+        for (name, vs) in self.core().stores().into_iter().chain(self.own_stores()) {
             let mut bytes = Vec::new();
             vs.save_to_stream(&mut bytes)?;
             files.push((name, bytes));
         }
-        let mut named = self.actor_opt.state("actor_opt");
-        named.extend(self.critic_opt.state("critic_opt"));
-        named.push(("updates".to_owned(), Tensor::from_slice(&[self.updates as i64])));
-        named.push(("last_actor_loss".to_owned(), Tensor::from_slice(&[self.last_actor_loss])));
-        if let Some((log_alpha, opt, _)) = &self.log_alpha {
-            named.push(("log_alpha".to_owned(), log_alpha.detach()));
-            named.extend(opt.state("alpha_opt"));
-        }
+        let mut named = self.core().state();
+        named.extend(self.own_state());
         let mut bytes = Vec::new();
         Tensor::save_multi_to_stream(&named, &mut bytes)?;
         files.push((OPTIM_FILE, bytes));
@@ -520,39 +561,45 @@ impl Sac {
     /// Restores the networks [`Self::save`] wrote (actor, critics, targets, with the
     /// observation normalisers they hold), leaving the optimiser state and the update
     /// counter as they are: a run that starts from another run's networks.
-    pub fn load_networks(&mut self, dir: &Path) -> Result<(), tch::TchError> {
-        self.actor_vs.load(dir.join(ACTOR_FILE))?;
-        self.critic_vs.load(dir.join(CRITIC_FILE))?;
-        self.target_vs.load(dir.join(TARGET_FILE))?;
-        if let Some(target) = &mut self.target_actor {
-            target.vs.load(dir.join(TARGET_ACTOR_FILE))?;
-        }
-        Ok(())
+    fn load_networks(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+        self.core_mut().load_stores(dir)?;
+        self.load_own_stores(dir)
     }
 
     /// Restores what [`Self::save`] wrote (same configuration).
-    pub fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
+    fn load(&mut self, dir: &Path) -> Result<(), tch::TchError> {
         self.load_networks(dir)?;
-        let named: std::collections::HashMap<String, Tensor> =
-            Tensor::load_multi(dir.join(OPTIM_FILE))?.into_iter().collect();
-        self.actor_opt.restore("actor_opt", &named)?;
-        self.critic_opt.restore("critic_opt", &named)?;
-        let updates = named
-            .get("updates")
-            .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks updates".to_owned()))?;
-        self.updates = updates.int64_value(&[0]) as u64;
-        // Absent in checkpoints from before TD3; only a logged number depends on it.
-        self.last_actor_loss = named.get("last_actor_loss").map_or(0.0, |t| t.double_value(&[0]));
-        if let Some((log_alpha, opt, _)) = &mut self.log_alpha {
-            let saved = named
-                .get("log_alpha")
-                .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks log_alpha".to_owned()))?;
-            tch::no_grad(|| log_alpha.f_copy_(saved))?;
-            opt.restore("alpha_opt", &named)?;
-            self.alpha = log_alpha.exp().double_value(&[0]);
-        }
-        Ok(())
+        let named: HashMap<String, Tensor> = Tensor::load_multi(dir.join(OPTIM_FILE))?.into_iter().collect();
+        self.core_mut().restore_state(&named)?;
+        self.restore_own_state(&named)
     }
+}
+
+/// The learner `config.algorithm` names, its parameters from libtorch's generator.
+pub fn build(config: LearnerConfig, device: Device) -> Result<Box<dyn Learner>, tch::TchError> {
+    build_with(config, device, None)
+}
+
+/// [`build`] with every network parameter drawn from a generator seeded by `seed`, not from
+/// libtorch's global generator, and the updates' noise seeded too
+/// ([`Learner::set_seed`]): the whole learner is a function of `seed`.
+pub fn build_seeded(
+    config: LearnerConfig,
+    device: Device,
+    seed: u64,
+) -> Result<Box<dyn Learner>, tch::TchError> {
+    build_with(config, device, Some(seed))
+}
+
+fn build_with(
+    config: LearnerConfig,
+    device: Device,
+    seed: Option<u64>,
+) -> Result<Box<dyn Learner>, tch::TchError> {
+    Ok(match config.algorithm {
+        Algorithm::Sac => Box::new(SoftActorCritic::new(config, device, seed)?),
+        Algorithm::Td3 { .. } => Box::new(Td3::new(config, device, seed)?),
+    })
 }
 
 /// A var store's trainable variables in name order (HashMap order is not stable, and the
