@@ -9,10 +9,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use vge_sim::{
-    DomainRandomization, EnvConfig, HandOrientation, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape,
-    PerturbationConfig,
-};
+use vge_sim::EnvConfig;
+pub use vge_sim::env_keys::EnvSection;
 
 use vge_controllers::{ControllerKind, CsConfig};
 
@@ -78,223 +76,6 @@ impl Method {
     }
 }
 
-/// The environment. Env `i` of the vector gets `objects[i % objects.len()]`, each spelt as
-/// [`ObjectShape::name`] gives it (`"cube"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct EnvSection {
-    pub objects: Vec<ObjectShape>,
-    pub control_hz: f32,
-    pub episode_length: usize,
-    pub max_action_rad: f32,
-    /// End an episode as soon as fewer than this many fingertips touch the object (0: never).
-    /// The paper ends episodes only on a drop or at the time limit, which is the default;
-    /// the reward is paid only while >= 3 fingertips touch the object either way.
-    pub terminate_below_contacts: usize,
-    /// Charge a backward turn about z even while fewer than 3 fingertips touch (default),
-    /// so a back-and-forth earns nothing; `false` is the paper's reward, which one VGE seed
-    /// gamed that way (see `vge_sim::EnvConfig::charge_reverse_rotation`).
-    pub charge_reverse_rotation: bool,
-    /// The rotation about z is paid only while at least this many fingertips touch the
-    /// object (the paper's 3, the default). 4 asks for gaits that keep four fingertips on:
-    /// under pushes of the cube's weight a frozen grasp on five fingertips holds for 30 s,
-    /// one on three drops within seconds however hard it squeezes
-    /// (`sim/examples/hold_under_push.rs`).
-    #[serde(skip_serializing_if = "is_paper_reward_min_contacts")]
-    pub reward_min_contacts: usize,
-    /// Randomise the initial grasp (one non-thumb finger open with probability 0.5).
-    pub randomize_fingers: bool,
-    /// Uniform noise on the initial grasp pose (rad).
-    pub grasp_pose_noise_rad: f32,
-    pub noise_q_std_rad: f32,
-    pub noise_normal_std_frac: f32,
-    pub noise_position_std_m: f32,
-    /// Random force on the object, Gaussian per component with this std (N).
-    pub perturb_force_std_n: f32,
-    /// Or a force of this magnitude (N) in a random direction, as the robustness test's
-    /// `perturbation_magnitude_n` axis; at most one of the two is set.
-    #[serde(skip_serializing_if = "is_zero_f32")]
-    pub perturb_force_magnitude_n: f32,
-    /// Probability per control step that a new force is drawn.
-    pub perturb_change_probability: f32,
-    /// Domain randomisation: the object's mass times a factor drawn per episode from
-    /// `[lo, hi]` (`[1.0, 1.0]`: off).
-    pub mass_scale: [f32; 2],
-    /// Likewise the object's friction coefficient.
-    pub friction_scale: [f32; 2],
-    /// Control steps between an action and its effect (a real hand's bus and motor delay).
-    pub action_latency_steps: usize,
-    /// Subtracted from the reward of the step on which the object drops (reward units,
-    /// rad/s; 0: the paper's reward, where a drop costs only the turn it ends). For gaits
-    /// that must hold under pushes: at gamma 0.99 a gait turning 0.33 rad/s is worth about
-    /// 33, which is all a drop costs without it. With the force's ramp on
-    /// (`perturb_ramp_start`, `perturb_ramp_steps`) it ramps with the force. The success
-    /// and robustness tests run without it.
-    #[serde(skip_serializing_if = "is_zero_f32")]
-    pub drop_penalty: f32,
-    /// Curriculum: the force on the object (`perturb_force_std_n`) grows linearly from 0
-    /// to its level over the first this-many env steps, set at each episode's start (0:
-    /// full from the start). Sensor noise is not ramped: the observation normaliser is
-    /// fixed from the warm-up's data, which should hold the noise the policy will meet (at
-    /// 50% normal error a policy trained without it kept 8% of its return, one trained
-    /// with 25% from the start 85%).
-    pub perturb_ramp_steps: u64,
-    /// The step the force's ramp starts at: no force on the object before it, then
-    /// `perturb_ramp_steps` of linear growth (0: from the first step). Lets the gait be
-    /// learned undisturbed first: a run whose pushes grew from step 0 was at half force by
-    /// 300k, before any gait (`docs/results/cube-fg-vge-robust/`).
-    #[serde(skip_serializing_if = "is_zero")]
-    pub perturb_ramp_start: u64,
-    /// Curriculum for a run that starts from trained networks ([`Config::init_from`]): the
-    /// sensor noise (`noise_*`) grows linearly from 0 to its level over the first this-many
-    /// env steps, set at each episode's start (0: full from the start). Refused for a run
-    /// that fits its observation normaliser, whose warm-up data would then hold no noise.
-    #[serde(skip_serializing_if = "is_zero")]
-    pub noise_ramp_steps: u64,
-    /// Task variant: the object's mass (kg), absolute, in place of the object's default
-    /// (0.15 kg). It stays in the success test (it is the object, not a disturbance);
-    /// `mass_scale` multiplies it per episode. Absent: the default.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub object_mass_kg: Option<f32>,
-    /// Task variant: the object's Coulomb friction coefficient, absolute, in place of the
-    /// default 0.8 (combined with the fingers' 0.8 by average); `friction_scale` multiplies
-    /// it per episode. Absent: the default.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub object_friction: Option<f32>,
-    /// Task variant: the finger motors' torque cap (N m) on the four fingers, the thumb's 1.5
-    /// times it as by default (it opposes two fingers). The cap sets the grip force: by
-    /// default (0.3 N m) the motors saturate about 0.015 rad past contact. Absent: 0.3.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub motor_torque_cap_nm: Option<f32>,
-    /// Task variant: the finger motors' position stiffness (N m/rad, every joint). Absent:
-    /// the default 20.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub motor_stiffness_nm_per_rad: Option<f32>,
-    /// Task variant: the hand's orientation to gravity, `"palm_down"` (default: gravity along
-    /// the rotation axis) or `"side_on"` (gravity along the hand's +x, from the thumb towards
-    /// the middle and ring fingers; see `vge_sim::HandOrientation`).
-    #[serde(skip_serializing_if = "is_palm_down")]
-    pub hand_orientation: HandOrientation,
-    /// Task variant: whether the fingers collide with each other (default false: the hand
-    /// touches the object only, and fingers can pass through each other).
-    #[serde(skip_serializing_if = "is_false")]
-    pub finger_collisions: bool,
-}
-
-/// Keeps the default orientation out of the serialised config, as [`is_zero`] does.
-fn is_palm_down(o: &HandOrientation) -> bool {
-    *o == HandOrientation::PalmDown
-}
-
-/// Keeps a switch that is off out of the serialised config, as [`is_zero`] does.
-fn is_false(v: &bool) -> bool {
-    !*v
-}
-
-/// Keeps a key that is off out of the serialised config, so that configs from before it
-/// existed keep their hash.
-fn is_zero(v: &u64) -> bool {
-    *v == 0
-}
-
-/// [`is_zero`] for a level.
-fn is_zero_f32(v: &f32) -> bool {
-    *v == 0.0
-}
-
-/// Keeps the paper's reward threshold (the default) out of the serialised config, as
-/// [`is_zero`] does.
-fn is_paper_reward_min_contacts(v: &usize) -> bool {
-    *v == EnvConfig::default().reward_min_contacts
-}
-
-impl Default for EnvSection {
-    fn default() -> Self {
-        let env = EnvConfig::default();
-        Self {
-            objects: vec![ObjectShape::Cube],
-            control_hz: env.control_hz,
-            episode_length: env.episode_length_steps,
-            max_action_rad: env.max_action_rad,
-            terminate_below_contacts: env.min_contacts,
-            charge_reverse_rotation: env.charge_reverse_rotation,
-            reward_min_contacts: env.reward_min_contacts,
-            randomize_fingers: env.grasp.randomize_fingers,
-            // Training starts from grasps randomised as the success test's are (the shipped
-            // protocol), not from the sim's one exact grasp.
-            grasp_pose_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
-            noise_q_std_rad: 0.0,
-            noise_normal_std_frac: 0.0,
-            noise_position_std_m: 0.0,
-            perturb_force_std_n: 0.0,
-            perturb_force_magnitude_n: 0.0,
-            perturb_change_probability: 0.0,
-            mass_scale: env.randomization.mass_scale,
-            friction_scale: env.randomization.friction_scale,
-            action_latency_steps: env.randomization.action_latency_steps,
-            drop_penalty: env.drop_penalty,
-            perturb_ramp_steps: 0,
-            perturb_ramp_start: 0,
-            noise_ramp_steps: 0,
-            object_mass_kg: None,
-            object_friction: None,
-            motor_torque_cap_nm: None,
-            motor_stiffness_nm_per_rad: None,
-            hand_orientation: env.physics.hand_orientation,
-            finger_collisions: env.physics.finger_collisions,
-        }
-    }
-}
-
-impl EnvSection {
-    /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length).
-    pub fn env_config(&self, index: usize) -> EnvConfig {
-        let mut env = EnvConfig::default();
-        let object =
-            self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectShape::Cube);
-        env.object = ObjectConfig::of(object);
-        env.control_hz = self.control_hz;
-        env.episode_length_steps = self.episode_length;
-        env.max_action_rad = self.max_action_rad;
-        env.min_contacts = self.terminate_below_contacts;
-        env.charge_reverse_rotation = self.charge_reverse_rotation;
-        env.reward_min_contacts = self.reward_min_contacts;
-        env.drop_penalty = self.drop_penalty;
-        env.grasp.randomize_fingers = self.randomize_fingers;
-        env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
-        env.noise = NoiseConfig {
-            q_std_rad: self.noise_q_std_rad,
-            normal_std_frac: self.noise_normal_std_frac,
-            position_std_m: self.noise_position_std_m,
-        };
-        env.perturbation = PerturbationConfig {
-            force_std_n: self.perturb_force_std_n,
-            force_magnitude_n: self.perturb_force_magnitude_n,
-            change_probability: self.perturb_change_probability,
-        };
-        env.randomization = DomainRandomization {
-            mass_scale: self.mass_scale,
-            friction_scale: self.friction_scale,
-            action_latency_steps: self.action_latency_steps,
-        };
-        if let Some(mass_kg) = self.object_mass_kg {
-            env.object.mass_kg = mass_kg;
-        }
-        if let Some(friction) = self.object_friction {
-            env.object.friction = friction;
-        }
-        if let Some(cap_nm) = self.motor_torque_cap_nm {
-            env.hand.set_finger_torque_cap_nm(cap_nm);
-        }
-        if let Some(kp) = self.motor_stiffness_nm_per_rad {
-            env.physics.motor_stiffness_nm_per_rad = kp;
-        }
-        env.physics.hand_orientation = self.hand_orientation;
-        env.physics.finger_collisions = self.finger_collisions;
-        env
-    }
-}
-
 /// SAC. `alpha = "auto"` tunes α to `target_entropy` (default -act_dim); a number fixes it
 /// (the paper: 0).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -352,6 +133,12 @@ pub enum MatmulPrecision {
     /// (`examples/matmul_dtypes` of vge-trainer); the 1- and 15-wide heads would run slower,
     /// so stay f32.
     Bf16,
+}
+
+/// Keeps a key that is off out of the serialised config, so that configs from before it
+/// existed keep their hash.
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Keeps the key out of serialised configs at its default, so their hashes stay those of
@@ -677,7 +464,7 @@ impl Config {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.validate_finite()?;
         self.validate_top_level()?;
-        self.env.validate()?;
+        self.env.validate().map_err(|e| invalid(e.to_string()))?;
         self.sac.validate()?;
         if self.algorithm == AlgorithmName::Td3 {
             self.td3.validate()?;
@@ -808,60 +595,6 @@ impl Config {
                 "method {:?} queries a controller: set controller = \"igm\" | \"cs\" | \"fg\"",
                 self.method.name()
             )));
-        }
-        Ok(())
-    }
-}
-
-impl EnvSection {
-    /// `[env]`: every object's sim configuration must be valid.
-    fn validate(&self) -> Result<(), ConfigError> {
-        if self.objects.is_empty() {
-            return Err(invalid("env.objects must name at least one object"));
-        }
-        // Checked here, before the sim's own check, so the message names the key the user wrote.
-        for (key, n) in [
-            ("env.terminate_below_contacts", self.terminate_below_contacts),
-            ("env.reward_min_contacts", self.reward_min_contacts),
-        ] {
-            if n > NUM_FINGERS {
-                return Err(invalid(format!("{key} = {n}: the hand has {NUM_FINGERS} fingertips")));
-            }
-        }
-        if self.perturb_force_std_n > 0.0 && self.perturb_force_magnitude_n > 0.0 {
-            return Err(invalid(
-                "env.perturb_force_std_n and env.perturb_force_magnitude_n are two ways to draw the \
-                 force on the object: set one",
-            ));
-        }
-        // The task variants, named here before the sim's own check sees them unnamed.
-        for (key, value, zero_ok) in [
-            ("env.object_mass_kg", self.object_mass_kg, false),
-            ("env.object_friction", self.object_friction, true),
-            ("env.motor_torque_cap_nm", self.motor_torque_cap_nm, false),
-            ("env.motor_stiffness_nm_per_rad", self.motor_stiffness_nm_per_rad, false),
-        ] {
-            if let Some(v) = value
-                && !(v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0)))
-            {
-                let need = if zero_ok { ">= 0" } else { "> 0" };
-                return Err(invalid(format!("{key} must be a finite number {need}, got {v}")));
-            }
-        }
-        for i in 0..self.objects.len() {
-            self.env_config(i).validate().map_err(|e| invalid(format!("env: {e}")))?;
-        }
-        if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
-            return Err(invalid("env.max_action_rad must be > 0"));
-        }
-        if (self.perturb_ramp_steps > 0 || self.perturb_ramp_start > 0)
-            && self.perturb_force_std_n == 0.0
-            && self.perturb_force_magnitude_n == 0.0
-        {
-            return Err(invalid(
-                "env.perturb_ramp_steps / env.perturb_ramp_start ramp the force on the object, but \
-                 env.perturb_force_std_n and env.perturb_force_magnitude_n are 0: set the force to ramp to",
-            ));
         }
         Ok(())
     }

@@ -24,8 +24,9 @@ use vge_sim::{Env, EnvConfig, EpisodeTracker, NUM_JOINTS, OBS_DIM, ObjectShape, 
 pub const SUCCESS_TEST_EPISODES: usize = 20;
 /// Length of a success-test episode (s).
 pub const SUCCESS_TEST_EPISODE_S: f32 = 30.0;
-/// Uniform noise (±rad) on the roll and closing angles of the initial grasp.
-pub const SUCCESS_TEST_GRASP_NOISE_RAD: f32 = 0.02;
+/// Uniform noise (±rad) on the roll and closing angles of the initial grasp: the training
+/// protocol's, so that a policy is judged on the grasps it trained from.
+pub const SUCCESS_TEST_GRASP_NOISE_RAD: f32 = vge_sim::env_keys::PROTOCOL_GRASP_POSE_NOISE_RAD;
 /// Success rate of a final policy at which its seed counts as having learned.
 pub const LEARNED_SUCCESS_RATE: f64 = 0.5;
 

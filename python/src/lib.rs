@@ -29,7 +29,7 @@ fn _vge(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("OBS_DIM", vge_sim::OBS_DIM)?;
     m.add("NUM_JOINTS", vge_sim::NUM_JOINTS)?;
     m.add("NUM_FINGERS", vge_sim::NUM_FINGERS)?;
-    m.add("ENV_KEYS", vge_env_keys::KEYS.to_vec())?;
+    m.add("ENV_KEYS", vge_sim::EnvSection::keys().to_vec())?;
     let objects: Vec<&str> = vge_sim::ObjectShape::ALL.iter().map(|o| o.name()).collect();
     m.add("OBJECTS", objects)?;
     let layout: Vec<(&str, usize, usize)> =

@@ -85,16 +85,20 @@ def test_bad_keys_name_the_key(repo):
         vge.HandEnv("cubee")
     with pytest.raises(FileNotFoundError, match="nope.toml"):
         vge.HandEnv.from_config(repo / "configs/nope.toml")
-    with pytest.warns(UserWarning, match="perturb_ramp_steps"):
+    # The lab's checks of the section: a ramp needs a force to ramp to.
+    with pytest.raises(ValueError, match="env.perturb_ramp_steps"):
         vge.HandEnv(perturb_ramp_steps=1000)
+    with pytest.warns(UserWarning, match="perturb_ramp_steps"):
+        vge.HandEnv(perturb_ramp_steps=1000, perturb_force_std_n=0.5)
 
 
 def test_env_keys_are_the_trainers(repo):
-    """Every key of the lab's EnvSection (lab/src/config.rs) is one HandEnv reads."""
+    """Every key of the [env] section (sim/src/env_keys.rs, which the lab's configs read) is
+    in ENV_KEYS, in declaration order."""
     import re
 
-    src = (repo / "lab/src/config.rs").read_text()
+    src = (repo / "sim/src/env_keys.rs").read_text()
     body = src[src.index("pub struct EnvSection {") :]
     body = body[: body.index("\n}\n")]
     trainer_keys = re.findall(r"^\s*pub (\w+):", body, flags=re.M)
-    assert sorted(trainer_keys) == sorted(vge.ENV_KEYS)
+    assert trainer_keys == list(vge.ENV_KEYS)

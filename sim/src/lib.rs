@@ -22,6 +22,7 @@ pub mod angle;
 pub mod bench;
 #[cfg(feature = "physics")]
 pub mod env;
+pub mod env_keys;
 pub mod episode;
 pub mod error;
 pub mod gait;
@@ -44,6 +45,7 @@ pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
     ResetInfo, StepInfo, StepResult,
 };
+pub use env_keys::EnvSection;
 pub use episode::{EpisodeOutcome, EpisodeTracker};
 pub use error::SimError;
 pub use kinematics::{
