@@ -7,7 +7,7 @@
 //!
 //! # Features
 //! - `physics` (default): the rapier3d world and everything built on it ([`world`],
-//!   [`objects`], [`env`], [`vec_env`], [`bench`]). Without it the crate is the hand
+//!   [`objects`], [`env`], [`env_keys`], [`vec_env`], [`bench`]). Without it the crate is the hand
 //!   description alone, with no rapier3d or rayon: [`kinematics`] (geometry, joint limits),
 //!   the observation layout and its builder ([`observation`]), the action's default step
 //!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
@@ -22,6 +22,7 @@ pub mod angle;
 pub mod bench;
 #[cfg(feature = "physics")]
 pub mod env;
+#[cfg(feature = "physics")]
 pub mod env_keys;
 pub mod episode;
 pub mod error;
@@ -45,6 +46,7 @@ pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
     ResetInfo, StepInfo, StepResult,
 };
+#[cfg(feature = "physics")]
 pub use env_keys::EnvSection;
 pub use episode::{EpisodeOutcome, EpisodeTracker};
 pub use error::SimError;
