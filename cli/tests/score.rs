@@ -22,7 +22,12 @@ fn vge(args: &[&str]) -> Output {
 /// A finished tiny run with periodic evaluations every 100 steps (snapshots at 100..400),
 /// trained once per test binary.
 fn trained() -> &'static Path {
-    static RUN: OnceLock<PathBuf> = OnceLock::new();
+    &trained_run().0
+}
+
+/// The tiny run and what its training printed to stderr (a pipe here, not a terminal).
+fn trained_run() -> &'static (PathBuf, String) {
+    static RUN: OnceLock<(PathBuf, String)> = OnceLock::new();
     RUN.get_or_init(|| {
         let dir = common::temp_dir("score-run").join("run");
         let mut args: Vec<String> = [
@@ -48,8 +53,9 @@ fn trained() -> &'static Path {
             args.extend(["--set".to_owned(), o]);
         }
         let out = Command::new(env!("CARGO_BIN_EXE_vge")).args(&args).output().expect("vge train");
-        assert!(out.status.success(), "training failed: {}", String::from_utf8_lossy(&out.stderr));
-        dir
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "training failed: {stderr}");
+        (dir, stderr)
     })
 }
 
@@ -80,6 +86,46 @@ fn read_score(dir: &Path) -> Score {
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Without a terminal, training prints a line per metrics row (TINY's `run.log_interval` of
+/// 50, so 8 over 400 steps) and one per periodic test (every 100 steps), each test's line
+/// with the figures `eval.csv` recorded.
+#[test]
+fn training_without_a_terminal_prints_a_line_per_metrics_row_and_per_test() {
+    let (dir, stderr) = trained_run();
+    let steps: Vec<&str> = stderr.lines().filter(|l| l.starts_with("step ")).collect();
+    assert_eq!(steps.len(), 8, "progress lines: {stderr}");
+    for (k, line) in (1..).zip(&steps) {
+        let start = format!("step {}/{STEPS} (", 50 * k);
+        assert!(
+            line.starts_with(&start) && line.contains(" steps/s, ") && line.contains(" left, return "),
+            "{line}"
+        );
+    }
+    let tests: Vec<&str> = stderr.lines().filter(|l| l.starts_with("test at step ")).collect();
+    let eval_csv = std::fs::read_to_string(dir.join("eval.csv")).expect("eval.csv");
+    let rows: Vec<Vec<&str>> = eval_csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(tests.len(), 4, "one line per periodic test: {stderr}");
+    assert_eq!(tests.len(), rows.len(), "one line per eval.csv row: {eval_csv}");
+    // eval.csv: step, episodes, return, rotation, success, drops, ...; the line rounds to 0.01.
+    for (line, row) in tests.iter().zip(&rows) {
+        let figure = |name: &str| -> f64 {
+            let rest = &line[line.find(&format!(" {name} ")).unwrap_or_else(|| panic!("{name} in {line}"))
+                + name.len()
+                + 2..];
+            rest.split([',', ' '])
+                .next()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or_else(|| panic!("{name} in {line}"))
+        };
+        let column = |i: usize| row[i].parse::<f64>().expect("a number");
+        assert!(line.starts_with(&format!("test at step {}: ", row[0])), "{line}");
+        assert!(line.ends_with(&format!(" rad ({} episodes)", row[1])), "{line}");
+        for (name, i) in [("success", 4), ("drops", 5), ("return", 2), ("rotation", 3)] {
+            assert!((figure(name) - column(i)).abs() <= 0.0051, "{name}: {line} against {row:?}");
+        }
+    }
 }
 
 #[test]

@@ -1,5 +1,5 @@
-//! `vge train`: one run, new or resumed, with a progress bar; Ctrl-C or SIGTERM saves a
-//! checkpoint and stops it.
+//! `vge train`: one run, new or resumed, with a progress bar on a terminal (a line per metrics
+//! row and per success test elsewhere); Ctrl-C or SIGTERM saves a checkpoint and stops it.
 
 use std::path::PathBuf;
 
@@ -15,6 +15,11 @@ use clap::Args;
 /// --logdir DIR`), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
 /// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues, also
 /// after a kill (from the last periodic checkpoint).
+///
+/// Progress: a bar on a terminal; where stderr is a file or a pipe (nohup, a batch job),
+/// one line per metrics row (`step 20000/1000000 (2%), 151 steps/s, 1h48m left, return
+/// ...`) and one per periodic success test (`test at step 100000: success 0.45, drops
+/// ...`), so that a log shows how a run of hours goes.
 ///
 /// A run can start from another run's networks (actor, critics, observation
 /// normaliser) with the config key `init_from = "DIR"` or `--set init_from=DIR`: a
@@ -97,6 +102,55 @@ fn progress_bar(total_steps: u64) -> indicatif::ProgressBar {
     bar
 }
 
+/// One line of progress where no bar is drawn: `step 20000/1000000 (2%), 151 steps/s, 1h48m
+/// left, return 15.78, rotation 0.99 rad, controller 31%, 96 episodes`.
+#[cfg(feature = "train")]
+fn progress_line(p: &vge_trainer::train::Progress<'_>) -> String {
+    let left_s =
+        if p.steps_per_s > 0.0 { p.total_steps.saturating_sub(p.step) as f64 / p.steps_per_s } else { 0.0 };
+    format!(
+        "step {}/{} ({:.0}%), {:.0} steps/s, {} left, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
+        p.step,
+        p.total_steps,
+        100.0 * p.step as f64 / p.total_steps.max(1) as f64,
+        p.steps_per_s,
+        duration_text(left_s),
+        p.mean_return,
+        p.mean_rotation_rad,
+        100.0 * p.controller_share,
+        p.episodes
+    )
+}
+
+/// `1h48m`, `4m05s`, `12s`.
+#[cfg(feature = "train")]
+fn duration_text(seconds: f64) -> String {
+    let s = seconds.max(0.0).round() as u64;
+    match (s / 3600, s % 3600 / 60, s % 60) {
+        (0, 0, s) => format!("{s}s"),
+        (0, m, s) => format!("{m}m{s:02}s"),
+        (h, m, _) => format!("{h}h{m:02}m"),
+    }
+}
+
+/// The periodic success test's result, as `eval.csv` records it: `test at step 100000:
+/// success 0.00, drops 1.00, return 15.78, rotation 0.99 rad (20 episodes)`, and for a run on
+/// several objects its worst object.
+#[cfg(feature = "train")]
+fn evaluation_line(step: u64, report: &vge_lab::eval::ObjectsReport) -> String {
+    let r = &report.overall;
+    let mut line = format!(
+        "test at step {step}: success {:.2}, drops {:.2}, return {:.2}, rotation {:.2} rad ({} episodes)",
+        r.success_rate, r.drop_rate, r.mean_return, r.mean_rotation_rad, r.episodes
+    );
+    if report.per_object.len() > 1
+        && let Some((object, success)) = report.worst_object()
+    {
+        line.push_str(&format!("; worst object: {object} {success:.2}"));
+    }
+    line
+}
+
 #[cfg(feature = "train")]
 pub(crate) fn train(
     config: Option<PathBuf>,
@@ -107,6 +161,7 @@ pub(crate) fn train(
     overrides: &[String],
     stop: &std::sync::atomic::AtomicBool,
 ) -> anyhow::Result<bool> {
+    use std::io::IsTerminal;
     use vge_trainer::train as tr;
     let mut overrides = overrides.to_vec();
     if let Some(seed) = seed {
@@ -135,16 +190,27 @@ pub(crate) fn train(
             _ => String::new(),
         }
     );
-    let summary = tr::train(&config, &out_dir, resuming, stop, &mut |p: &tr::Progress| {
-        bar.set_position(p.step);
-        bar.set_message(format!(
-            "{:.0} steps/s, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
-            p.steps_per_s,
-            p.mean_return,
-            p.mean_rotation_rad,
-            100.0 * p.controller_share,
-            p.episodes
-        ));
+    // On a terminal a bar; elsewhere (a log file, a batch job) a line per metrics row, since
+    // a bar is not drawn there and a run of hours would otherwise print nothing.
+    let terminal = std::io::stderr().is_terminal();
+    let summary = tr::train(&config, &out_dir, resuming, stop, &mut |p: &tr::Progress<'_>| {
+        if let Some(report) = p.evaluation {
+            let line = evaluation_line(p.step, report);
+            if terminal { bar.println(line) } else { eprintln!("{line}") }
+        }
+        if terminal {
+            bar.set_position(p.step);
+            bar.set_message(format!(
+                "{:.0} steps/s, return {:.2}, rotation {:.2} rad, controller {:.0}%, {} episodes",
+                p.steps_per_s,
+                p.mean_return,
+                p.mean_rotation_rad,
+                100.0 * p.controller_share,
+                p.episodes
+            ));
+        } else if p.logged {
+            eprintln!("{}", progress_line(p));
+        }
     })?;
     bar.finish();
     println!("time this session: {}", summary.times);

@@ -122,7 +122,7 @@ fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
 
 /// What the progress callback sees (every loop iteration, i.e. every `num_envs` steps).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Progress {
+pub struct Progress<'a> {
     pub step: u64,
     pub total_steps: u64,
     /// Env steps per second since this session (start or resume) began.
@@ -133,6 +133,11 @@ pub struct Progress {
     pub mean_rotation_rad: f64,
     pub controller_share: f64,
     pub updates: u64,
+    /// A `metrics.csv` row was written at this step (every `run.log_interval`): where no
+    /// progress bar can be drawn (a log file, a batch job), this is when to print a line.
+    pub logged: bool,
+    /// The periodic success test that ran at this step, if one did (`eval.csv`'s new row).
+    pub evaluation: Option<&'a vge_lab::eval::ObjectsReport>,
 }
 
 /// How a call of [`train`] ended.
@@ -208,7 +213,7 @@ pub fn train(
     out_dir: &Path,
     resume: bool,
     stop: &AtomicBool,
-    progress: &mut dyn FnMut(&Progress),
+    progress: &mut dyn FnMut(&Progress<'_>),
 ) -> Result<TrainSummary, TrainError> {
     let mut t = Trainer::new(config, out_dir, resume)?;
     match t.run(stop, progress) {
@@ -222,7 +227,11 @@ pub fn train(
 
 impl Trainer<'_> {
     /// The training loop to `total_steps` or a stop; whether the stop flag ended it.
-    fn run(&mut self, stop: &AtomicBool, progress: &mut dyn FnMut(&Progress)) -> Result<bool, TrainError> {
+    fn run(
+        &mut self,
+        stop: &AtomicBool,
+        progress: &mut dyn FnMut(&Progress<'_>),
+    ) -> Result<bool, TrainError> {
         let t = self;
         let config = t.config;
         // Uniform random actions fill the warm-up, unless the run starts from trained networks.
@@ -473,11 +482,16 @@ impl<'a> Trainer<'a> {
 
     /// What happens on intervals of env steps, after the step from `prev_step`: a metrics
     /// row, an evaluation, progress, a checkpoint.
-    fn periodic(&mut self, prev_step: u64, progress: &mut dyn FnMut(&Progress)) -> Result<(), TrainError> {
+    fn periodic(
+        &mut self,
+        prev_step: u64,
+        progress: &mut dyn FnMut(&Progress<'_>),
+    ) -> Result<(), TrainError> {
         let (config, step) = (self.config, self.c.step);
         let crossed = |interval: u64| interval > 0 && prev_step / interval != step / interval;
         let steps_per_s = (step - self.session_first_step) as f64 / self.cost.session_wall_s().max(1e-9);
-        if crossed(config.run.log_interval) || step >= config.total_steps {
+        let logged = crossed(config.run.log_interval) || step >= config.total_steps;
+        if logged {
             let mut values: Vec<(String, Option<f64>)> = self
                 .c
                 .window
@@ -492,7 +506,8 @@ impl<'a> Trainer<'a> {
             self.folder.log(step, &values)?;
             self.c.last_window = std::mem::take(&mut self.c.window);
         }
-        if crossed(config.run.eval_interval) {
+        let evaluated = crossed(config.run.eval_interval);
+        if evaluated {
             self.lap(Phase::Sim);
             let bytes = export_actor(config, self.learner.as_ref(), step)?;
             let report = evaluation::periodic(self.folder.dir(), config, step, &bytes)?;
@@ -510,6 +525,8 @@ impl<'a> Trainer<'a> {
             mean_rotation_rad,
             controller_share: last.controller_share(),
             updates: self.learner.updates(),
+            logged,
+            evaluation: self.last_evaluation.as_ref().filter(|_| evaluated).map(|(_, report)| report),
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
             self.lap(Phase::Sim);
