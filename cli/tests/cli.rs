@@ -556,8 +556,10 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
     let _ = std::fs::remove_dir_all(&empty);
 }
 
-/// `vge ship` copies the run's policy and config, measures the copy and writes its record and
-/// robustness figure; a run that is not finished is refused and nothing is written.
+/// `vge ship` copies the run's policy and config, measures the copy on the run's own task (here
+/// the 0.4 kg cube of a task variant, whose paper-level push is its own weight) and writes its
+/// record, robustness figure and gait diagram; a run that is not finished is refused and
+/// nothing is written.
 #[test]
 fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfinished_one() {
     let run = common::temp_dir("ship-run");
@@ -566,7 +568,10 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
         &[run.join("policy-best.vgep").display().to_string()],
     );
     assert!(export.status.success(), "{}", text(&export.stderr));
-    std::fs::copy(common::config("cube-fg-rl.toml"), run.join("config.toml")).expect("config");
+    // A run folder stores its config whole (its base merged in).
+    let variant =
+        vge_lab::config::load_config(&common::config("variants/heavy-cube.toml"), &[]).expect("config");
+    std::fs::write(run.join("config.toml"), variant.to_toml_string().expect("toml")).expect("config");
     let policies = run.join("shipped");
     let ship = || {
         vge(
@@ -601,6 +606,7 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
     assert!(read("trial.vgep") == std::fs::read(run.join("policy-best.vgep")).expect("policy"));
     assert!(read("trial.toml") == std::fs::read(run.join("config.toml")).expect("config"));
     assert!(read("trial-robustness.png").starts_with(b"\x89PNG"));
+    assert!(read("trial-gait.png").starts_with(b"\x89PNG"));
     let record: serde_json::Value = serde_json::from_slice(&read("trial.json")).expect("trial.json");
     assert_eq!(record["source_policy"], "policy-best.vgep");
     assert!(record["provenance"].as_str().expect("provenance").contains("seed"), "{record}");
@@ -609,6 +615,15 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
     assert_eq!(record["goals"]["success_rate >= 0.8"], false, "{record}");
     let axes = record["return_fraction_at_paper_level"].as_object().expect("per axis");
     assert_eq!(axes.len(), 5, "{record}");
+    // The pushes at the paper's level weigh what the run's cube weighs: 0.4 kg, not 0.15.
+    let rows = record["robustness"]["rows"].as_array().expect("rows");
+    let push = rows
+        .iter()
+        .find(|r| r["axis"] == "perturbation_magnitude_n" && r["fraction_of_max"] == 1.0)
+        .expect("the paper-level push");
+    let level_n = push["level"].as_f64().expect("level");
+    assert!((level_n - 0.4 * 9.81).abs() < 1e-3, "{push}");
+    assert!(record.get("per_object").is_none(), "one object, no per_object: {record}");
     assert!(text(&out.stdout).contains("FAILS  success_rate >= 0.8"), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&run);
 }

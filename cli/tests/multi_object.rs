@@ -1,7 +1,8 @@
 //! One policy for several objects: a run on two objects tests each of them (eval.csv's
 //! per-object columns, `per_object` in final-eval.json, best-eval.json and `vge score`'s
-//! score.json, the per-object curves of `vge plot`), and `vge eval --objects` gives one row per object whose figures are
-//! those of `vge eval --object` on the same episodes.
+//! score.json, the per-object curves of `vge plot`, `vge screen` and `vge ship`'s per-object
+//! record), and `vge eval --objects` gives one row per object whose figures are those of
+//! `vge eval --object` on the same episodes.
 
 mod common;
 
@@ -160,6 +161,49 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert!(text_order.find("\"cube\"") < text_order.find("\"sphere\""), "the config's order");
     let again = vge(&["score", "--episodes", "3"], &[run.display().to_string()]);
     assert!(text(&again.stdout).contains("already scored, skipped"), "{}", text(&again.stdout));
+
+    // vge screen and vge ship measure the policy on each object.
+    let screen = vge(&["screen", "--episodes", "1", "--min-success", "0"], &[run.display().to_string()]);
+    assert!(screen.status.success(), "{}", text(&screen.stderr));
+    assert!(run.join("screen.csv").exists());
+    let policies = dir.join("shipped");
+    let ship = vge(
+        &[
+            "ship",
+            "--policy",
+            "policy-best.vgep",
+            "--name",
+            "both",
+            "--episodes",
+            "2",
+            "--robustness-episodes",
+            "1",
+        ],
+        &[run.display().to_string(), "--policies".to_owned(), policies.display().to_string()],
+    );
+    assert!(ship.status.success(), "{}", text(&ship.stderr));
+    let record = json(&policies.join("both.json"));
+    let objects = record["per_object"].as_array().unwrap_or_else(|| panic!("per_object in {record}"));
+    let names: Vec<&str> = objects.iter().map(|o| o["object"].as_str().expect("object")).collect();
+    assert_eq!(names, ["cube", "sphere"], "the run's objects in its order");
+    for (o, min) in objects.iter().zip([0.8, 0.5]) {
+        let name = o["object"].as_str().expect("object");
+        assert_eq!(o["success_test"]["episodes"].as_u64(), Some(2), "{o}");
+        for key in ["return_fraction_at_paper_level", "success_at_paper_level"] {
+            assert_eq!(o[key].as_object().map(|m| m.len()), Some(5), "{name}: {key} per axis: {o}");
+        }
+        let success = o["success_test"]["success_rate"].as_f64().expect("success_rate");
+        let goal = format!("{name}: success_rate >= {min}");
+        assert_eq!(record["goals"][&goal].as_bool(), Some(success >= min), "{goal} in {record}");
+    }
+    assert_eq!(record["success_test"]["episodes"].as_u64(), Some(4), "both objects' episodes pooled");
+    assert!(record["goals"].get("success_rate >= 0.8").is_none(), "no pooled success goal: {record}");
+    for object in ["cube", "sphere"] {
+        let png = std::fs::read(policies.join(format!("both-gait-{object}.png")))
+            .expect("a gait diagram per object");
+        assert!(png.starts_with(b"\x89PNG"));
+    }
+    assert!(!policies.join("both-gait.png").exists());
 
     // vge plot draws the per-object curves beside the usual figure.
     let png = dir.join("curves.png");

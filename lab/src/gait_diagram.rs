@@ -7,7 +7,7 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::eval::GaitTrace;
+use crate::eval::{EvalError, GaitTrace};
 use crate::plot::{PlotError, draw_err};
 
 use vge_sim::kinematics::FINGER_NAMES as FINGERS;
@@ -121,4 +121,37 @@ fn draw_rotation(area: &Area, trace: &GaitTrace, t_end: f64) -> Result<(), PlotE
         .border_style(BLACK)
         .draw()
         .map_err(draw_err)
+}
+
+/// Why one episode's gait diagram could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum DrawEpisodeError {
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}
+
+/// Runs the episode with env seed `seed` of the policy in `bytes` on `env` and draws its gait
+/// diagram into `out`, titled with `label` (the policy's file), the object and what the
+/// episode did.
+pub fn draw_episode(
+    bytes: &[u8],
+    env: &vge_sim::EnvConfig,
+    seed: u64,
+    label: &str,
+    out: &Path,
+) -> Result<(), DrawEpisodeError> {
+    let trace = crate::eval::trace_policy_bytes(bytes, env, seed)?;
+    let o = &trace.outcome;
+    let title = format!(
+        "{label}: the {}, episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+        env.object.shape,
+        o.rotation_rad,
+        o.length as f32 * trace.dt_s,
+        o.contact_switches,
+        if o.terminated { ", dropped" } else { "" }
+    );
+    plot(&trace, &title, out)?;
+    Ok(())
 }

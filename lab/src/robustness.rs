@@ -155,14 +155,7 @@ fn row(axis: Axis, level: f32, max: f32, r: &EvalReport, clean_return: f64) -> R
     }
 }
 
-/// Runs the test of the policy in `policy_bytes` on `base` (the object and hand; its noise
-/// and perturbation settings are replaced); `on_row` sees each row as it is measured.
-pub fn run(
-    policy_bytes: &[u8],
-    base: &EnvConfig,
-    options: &RobustnessOptions,
-    mut on_row: impl FnMut(&RobustnessRow),
-) -> Result<RobustnessReport, EvalError> {
+fn check(options: &RobustnessOptions) -> Result<(), EvalError> {
     if options.levels < 2 {
         return Err(EvalError::InvalidOption(
             "the robustness test needs at least 2 levels per axis".to_owned(),
@@ -171,6 +164,18 @@ pub fn run(
     if options.axes.is_empty() {
         return Err(EvalError::InvalidOption("the robustness test needs at least one axis".to_owned()));
     }
+    Ok(())
+}
+
+/// Runs the test of the policy in `policy_bytes` on `base` (the object and hand; its noise
+/// and perturbation settings are replaced); `on_row` sees each row as it is measured.
+pub fn run(
+    policy_bytes: &[u8],
+    base: &EnvConfig,
+    options: &RobustnessOptions,
+    mut on_row: impl FnMut(&RobustnessRow),
+) -> Result<RobustnessReport, EvalError> {
+    check(options)?;
     let mut clean_env = success_test_env(base, options.episode_s, options.grasp_noise_rad);
     for axis in Axis::ALL {
         axis.apply(&mut clean_env, 0.0);
@@ -196,6 +201,71 @@ pub fn run(
     }
     Ok(RobustnessReport {
         episodes: options.episodes,
+        episode_s: options.episode_s,
+        grasp_noise_rad: options.grasp_noise_rad,
+        seed: options.seed,
+        clean_return: clean.mean_return,
+        rows,
+    })
+}
+
+/// [`run`] on several objects at once (a policy trained on several): each level's episodes
+/// run on every env of `bases`, on the same seeds, and pooled; a push's level is a fraction of
+/// each object's own weight. The rows' `level` is the first object's. One base is [`run`].
+pub fn run_objects(
+    policy_bytes: &[u8],
+    bases: &[EnvConfig],
+    options: &RobustnessOptions,
+    mut on_row: impl FnMut(&RobustnessRow),
+) -> Result<RobustnessReport, EvalError> {
+    let [first, ..] = bases else {
+        return Err(EvalError::NoEpisodes);
+    };
+    if bases.len() == 1 {
+        return run(policy_bytes, first, options, on_row);
+    }
+    check(options)?;
+    let clean_envs: Vec<EnvConfig> = bases
+        .iter()
+        .map(|b| {
+            let mut env = success_test_env(b, options.episode_s, options.grasp_noise_rad);
+            for axis in Axis::ALL {
+                axis.apply(&mut env, 0.0);
+            }
+            env
+        })
+        .collect();
+    let eval = |envs: &[EnvConfig]| {
+        crate::eval::eval_policy_bytes_per_object(policy_bytes, envs, options.episodes, options.seed)
+            .map(|r| r.overall)
+    };
+    let clean = eval(&clean_envs)?;
+    let mut rows = Vec::with_capacity(options.axes.len() * options.levels);
+    for &axis in &options.axes {
+        for i in 0..options.levels {
+            let fraction = i as f32 / (options.levels - 1) as f32;
+            let report = if i == 0 {
+                clean.clone()
+            } else {
+                let envs: Vec<EnvConfig> = clean_envs
+                    .iter()
+                    .zip(bases)
+                    .map(|(clean_env, base)| {
+                        let mut env = clean_env.clone();
+                        axis.apply(&mut env, axis.max_level(base) * fraction);
+                        env
+                    })
+                    .collect();
+                eval(&envs)?
+            };
+            let max = axis.max_level(first);
+            let r = row(axis, max * fraction, max, &report, clean.mean_return);
+            on_row(&r);
+            rows.push(r);
+        }
+    }
+    Ok(RobustnessReport {
+        episodes: options.episodes * bases.len(),
         episode_s: options.episode_s,
         grasp_noise_rad: options.grasp_noise_rad,
         seed: options.seed,

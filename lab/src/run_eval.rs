@@ -73,6 +73,16 @@ pub(crate) fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
     )
 }
 
+/// The task a run's policies are judged on, one env per object it trains on (in the order of
+/// [`training_objects`]): its object, hand, physics and reward, without the disturbances it
+/// may train with. `vge ship` and `vge screen` measure policies on these.
+pub fn task_envs(config: &Config) -> Vec<EnvConfig> {
+    training_objects(config)
+        .into_iter()
+        .map(|(index, _)| crate::eval::without_training_disturbances(&config.env.env_config(index)))
+        .collect()
+}
+
 /// The objects a run trains on, each once, in the order of `env.objects` (a list may name
 /// one twice to give it more envs), with the index of its first place there.
 pub(crate) fn training_objects(config: &Config) -> Vec<(usize, ObjectShape)> {

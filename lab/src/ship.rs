@@ -2,8 +2,14 @@
 //! snapshots and its final policy on episodes the run never saw: the success test and the two
 //! pushes at the object's weight. [`ship`] (`vge ship`) copies one policy and its run's config
 //! to a policies folder and measures the copy (the success test, the robustness test on every
-//! axis), writing `NAME.json` with the goals and whether each holds, and
-//! `NAME-robustness.png`.
+//! axis), writing `NAME.json` with the goals and whether each holds, `NAME-robustness.png`
+//! and the gait diagram of one episode.
+//!
+//! Both measure on the run's own task ([`crate::run_eval::task_envs`]): its object, hand,
+//! physics and reward, without its training disturbances, so that a policy trained on a
+//! task variant (a heavier cube, the hand on its side) is judged on that variant. A policy
+//! trained on several objects is measured on each: the success test and the pushes pooled
+//! over them, and `vge ship` records every object's figures (`per_object`).
 
 use std::path::{Path, PathBuf};
 
@@ -11,7 +17,7 @@ use serde::Serialize;
 use thiserror::Error;
 use vge_sim::EnvConfig;
 
-use crate::eval::{self, EvalError, EvalReport};
+use crate::eval::{self, EvalError, EvalReport, ObjectFigures};
 use crate::plot::PlotError;
 use crate::robustness::{self, Axis, RobustnessOptions, RobustnessReport};
 use crate::run_dir::{self, RunDir};
@@ -30,6 +36,10 @@ pub enum ShipError {
     Plot(#[from] PlotError),
     #[error(transparent)]
     Export(#[from] vge_export::ExportError),
+    #[error(transparent)]
+    RunConfig(#[from] crate::run_eval::RunEvalError),
+    #[error(transparent)]
+    Gait(#[from] crate::gait_diagram::DrawEpisodeError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> ShipError + '_ {
@@ -39,6 +49,9 @@ fn io_err(path: &Path) -> impl Fn(std::io::Error) -> ShipError + '_ {
 /// The success a policy needs in the success test to be shipped, and the share of its clean
 /// return it must keep at each robustness axis's paper level.
 pub const SHIP_MIN_SUCCESS: f64 = 0.8;
+/// A policy for several objects: the success it needs on each object after the first (the
+/// first, the cube in the multi-object configs, needs [`SHIP_MIN_SUCCESS`]).
+pub const SHIP_MIN_SUCCESS_OTHER_OBJECTS: f64 = 0.5;
 pub const SHIP_MIN_RETURN_FRACTION: f64 = 0.75;
 
 /// The episodes [`screen`] runs per test, and their first seed: far from training's
@@ -114,16 +127,17 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
     Ok(out)
 }
 
-/// Screens `candidates` (from [`screen_candidates`]) on the default env (the cube, palm down)
-/// with the success test and the two pushes; `on_row` sees each row as it is measured.
+/// Screens `candidates` (from [`screen_candidates`]) of the run in `run` on its task
+/// ([`crate::run_eval::task_envs`]) with the success test and the two pushes, each pooled over
+/// the run's objects; `on_row` sees each row as it is measured.
 pub fn screen(
+    run: &Path,
     candidates: &[(Option<u64>, PathBuf)],
     options: &ScreenOptions,
     mut on_row: impl FnMut(&ScreenRow),
 ) -> Result<Vec<ScreenRow>, ShipError> {
-    let base = EnvConfig::default();
-    let success_env =
-        eval::success_test_env(&base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
+    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?);
+    let success_envs = success_test_envs(&bases);
     let pushes = RobustnessOptions {
         episodes: options.episodes,
         episode_s: eval::SUCCESS_TEST_EPISODE_S,
@@ -135,8 +149,10 @@ pub fn screen(
     let mut rows = Vec::with_capacity(candidates.len());
     for (step, policy) in candidates {
         let bytes = eval::read_policy_file(policy)?;
-        let success = eval::eval_policy_bytes(&bytes, &success_env, options.episodes, options.seed)?;
-        let report = robustness::run(&bytes, &base, &pushes, |_| {})?;
+        let success =
+            eval::eval_policy_bytes_per_object(&bytes, &success_envs, options.episodes, options.seed)?
+                .overall;
+        let report = robustness::run_objects(&bytes, &bases, &pushes, |_| {})?;
         let at_paper_level = |axis: Axis| {
             let r = report.rows.iter().find(|r| r.axis == axis.name() && r.fraction_of_max == 1.0);
             r.map_or(PushFigures { return_fraction: f64::NAN, success_rate: f64::NAN }, |r| PushFigures {
@@ -201,8 +217,26 @@ pub struct ShipRecord {
     /// as the paper's, a force of that size in a random direction.
     pub goals: std::collections::BTreeMap<String, bool>,
     /// Measured beside the goals: the Gaussian push with the weight as each component's std
-    /// (1.6 times the weight on average).
+    /// (1.6 times the weight on average), and for a policy of several objects the other
+    /// objects' returns at the paper's levels.
     pub beside_goals: std::collections::BTreeMap<String, bool>,
+    /// A policy trained on several objects: each object's success test and its robustness at
+    /// the paper's level of every axis, in the order the run trained them. `success_test`,
+    /// above, pools their episodes; `robustness` (all levels, and the figure) is the first
+    /// object's. Absent for a single object.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub per_object: Vec<ShippedObject>,
+}
+
+/// One object of a policy trained on several: what `vge ship` measured on it.
+#[derive(Debug, Clone, Serialize)]
+pub struct ShippedObject {
+    pub object: String,
+    pub success_test: ObjectFigures,
+    /// Per axis, at the paper's level: the return as a fraction of this object's clean
+    /// return, and the success rate.
+    pub return_fraction_at_paper_level: std::collections::BTreeMap<String, f64>,
+    pub success_at_paper_level: std::collections::BTreeMap<String, f64>,
 }
 
 impl ShipRecord {
@@ -219,6 +253,9 @@ pub struct ShippedFiles {
     pub config: PathBuf,
     pub record: PathBuf,
     pub robustness_png: PathBuf,
+    /// The gait diagram of the success test's first episode; for a policy of several objects
+    /// one per object, [`ShippedFiles::gait_png_of`].
+    pub gait_png: PathBuf,
 }
 
 impl ShippedFiles {
@@ -228,6 +265,21 @@ impl ShippedFiles {
             config: policies.join(format!("{name}.toml")),
             record: policies.join(format!("{name}.json")),
             robustness_png: policies.join(format!("{name}-robustness.png")),
+            gait_png: policies.join(format!("{name}-gait.png")),
+        }
+    }
+
+    /// `NAME-gait-OBJECT.png`: the gait diagram on one object of a policy of several.
+    pub fn gait_png_of(&self, object: vge_sim::ObjectShape) -> PathBuf {
+        let stem = self.gait_png.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        self.gait_png.with_file_name(format!("{stem}-{}.png", object.name()))
+    }
+
+    /// The gait diagrams [`ship`] writes for a run trained on `objects`.
+    pub fn gait_pngs(&self, objects: &[vge_sim::ObjectShape]) -> Vec<PathBuf> {
+        match objects {
+            [_] => vec![self.gait_png.clone()],
+            many => many.iter().map(|&o| self.gait_png_of(o)).collect(),
         }
     }
 }
@@ -256,14 +308,15 @@ impl Default for ShipOptions {
     }
 }
 
-/// Copies the run's policy and config to `files`, measures the copy and writes the record and
-/// the robustness figure. `on_row` sees each robustness row as it is measured.
+/// Copies the run's policy and config to `files`, measures the copy and writes the record,
+/// the robustness figure and the gait diagrams, whose paths it returns beside the record.
+/// `on_row` sees each robustness row of the first object as it is measured.
 pub fn ship(
     run: &Path,
     files: &ShippedFiles,
     options: &ShipOptions,
     on_row: impl FnMut(&robustness::RobustnessRow),
-) -> Result<ShipRecord, ShipError> {
+) -> Result<(ShipRecord, Vec<PathBuf>), ShipError> {
     let dir = RunDir::new(run);
     let source = run.join(&options.policy);
     for needed in [source.clone(), dir.config(), dir.final_eval()] {
@@ -277,24 +330,20 @@ pub fn ship(
     // Measured before anything is written: a policy that cannot be read replaces nothing.
     let bytes = eval::read_policy_file(&source)?;
     let provenance = provenance_line(&bytes)?;
-    let base = EnvConfig::default();
-    let success_env =
-        eval::success_test_env(&base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
-    let success_test = eval::eval_policy_bytes(&bytes, &success_env, options.success_episodes, 0)?;
-    let robustness = robustness::run(
-        &bytes,
-        &base,
-        &RobustnessOptions {
-            episodes: options.robustness_episodes,
-            episode_s: eval::SUCCESS_TEST_EPISODE_S,
-            grasp_noise_rad: eval::SUCCESS_TEST_GRASP_NOISE_RAD,
-            seed: 0,
-            levels: options.robustness_levels,
-            axes: Axis::ALL.to_vec(),
-        },
-        on_row,
-    )?;
-    let record = record(run, options, provenance, success_test, robustness);
+    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?);
+    let success_test =
+        eval::eval_policy_bytes_per_object(&bytes, &success_test_envs(&bases), options.success_episodes, 0)?;
+    let robustness =
+        robustness::run(&bytes, &bases[0], &robustness_options(options, options.robustness_levels), on_row)?;
+    // Every object at the paper's levels; the first object's full test already holds them.
+    let mut at_paper_level = Vec::new();
+    if bases.len() > 1 {
+        at_paper_level.push(robustness.clone());
+        for base in &bases[1..] {
+            at_paper_level.push(robustness::run(&bytes, base, &robustness_options(options, 2), |_| {})?);
+        }
+    }
+    let record = record(run, options, provenance, &success_test, robustness, &at_paper_level);
 
     if let Some(parent) = files.policy.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
@@ -303,49 +352,116 @@ pub fn ship(
     let config = std::fs::read(dir.config()).map_err(io_err(&dir.config()))?;
     crate::atomic_file::write(&files.config, &config).map_err(io_err(&files.config))?;
     robustness::plot(&record.robustness, &files.robustness_png)?;
+    let objects: Vec<_> = bases.iter().map(|b| b.object.shape).collect();
+    let label = files.policy.display().to_string();
+    let gait_pngs = files.gait_pngs(&objects);
+    for (base, png) in bases.iter().zip(&gait_pngs) {
+        let env =
+            eval::success_test_env(base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
+        crate::gait_diagram::draw_episode(&bytes, &env, 0, &label, png)?;
+    }
     let mut json = serde_json::to_string_pretty(&record)
         .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;
     json.push('\n');
     crate::atomic_file::write(&files.record, json.as_bytes()).map_err(io_err(&files.record))?;
-    Ok(record)
+    Ok((record, gait_pngs))
+}
+
+/// The success test's env on each of `bases`.
+fn success_test_envs(bases: &[EnvConfig]) -> Vec<EnvConfig> {
+    bases
+        .iter()
+        .map(|b| eval::success_test_env(b, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD))
+        .collect()
+}
+
+/// The robustness test `vge ship` runs: every axis, `levels` levels up to the paper's.
+fn robustness_options(options: &ShipOptions, levels: usize) -> RobustnessOptions {
+    RobustnessOptions {
+        episodes: options.robustness_episodes,
+        episode_s: eval::SUCCESS_TEST_EPISODE_S,
+        grasp_noise_rad: eval::SUCCESS_TEST_GRASP_NOISE_RAD,
+        seed: 0,
+        levels,
+        axes: Axis::ALL.to_vec(),
+    }
+}
+
+/// Per axis, at the paper's level: the return as a fraction of the clean one, and the success.
+fn paper_level(report: &RobustnessReport) -> [std::collections::BTreeMap<String, f64>; 2] {
+    let rows = report.rows.iter().filter(|r| r.fraction_of_max == 1.0);
+    [
+        rows.clone().map(|r| (r.axis.to_owned(), r.return_fraction)).collect(),
+        rows.map(|r| (r.axis.to_owned(), r.success_rate)).collect(),
+    ]
 }
 
 fn record(
     run: &Path,
     options: &ShipOptions,
     provenance: String,
-    success_test: EvalReport,
+    success_test: &eval::ObjectsReport,
     robustness: RobustnessReport,
+    per_object_robustness: &[RobustnessReport],
 ) -> ShipRecord {
-    let at_paper_level: std::collections::BTreeMap<String, f64> = robustness
-        .rows
-        .iter()
-        .filter(|r| r.fraction_of_max == 1.0)
-        .map(|r| (r.axis.to_owned(), r.return_fraction))
-        .collect();
+    let [at_paper_level, _] = paper_level(&robustness);
+    // Goal names carry the object where there are several: `cube: success_rate >= 0.8`.
+    let several = success_test.per_object.len() > 1;
+    let named = |object: vge_sim::ObjectShape, goal: String| {
+        if several { format!("{}: {goal}", object.name()) } else { goal }
+    };
+    let first = success_test.per_object.first().map_or(vge_sim::ObjectShape::Cube, |(o, _)| *o);
     let mut goals = std::collections::BTreeMap::new();
-    goals
-        .insert(format!("success_rate >= {SHIP_MIN_SUCCESS}"), success_test.success_rate >= SHIP_MIN_SUCCESS);
     let mut beside_goals = std::collections::BTreeMap::new();
+    if several {
+        for (k, (object, report)) in success_test.per_object.iter().enumerate() {
+            let min = if k == 0 { SHIP_MIN_SUCCESS } else { SHIP_MIN_SUCCESS_OTHER_OBJECTS };
+            goals.insert(named(*object, format!("success_rate >= {min}")), report.success_rate >= min);
+        }
+    } else {
+        goals.insert(
+            format!("success_rate >= {SHIP_MIN_SUCCESS}"),
+            success_test.overall.success_rate >= SHIP_MIN_SUCCESS,
+        );
+    }
+    let return_goal =
+        |axis: &str| format!("{axis}: return at the paper's level >= {SHIP_MIN_RETURN_FRACTION} of clean");
     for (axis, &fraction) in &at_paper_level {
-        let key = format!("{axis}: return at the paper's level >= {SHIP_MIN_RETURN_FRACTION} of clean");
         // NaN (no clean return to compare with) holds nothing.
         let holds = fraction >= SHIP_MIN_RETURN_FRACTION;
         if axis == Axis::Perturbation.name() {
-            beside_goals.insert(key, holds);
+            beside_goals.insert(named(first, return_goal(axis)), holds);
         } else {
-            goals.insert(key, holds);
+            goals.insert(named(first, return_goal(axis)), holds);
         }
+    }
+    let mut per_object = Vec::new();
+    for (k, ((object, report), robustness)) in
+        success_test.per_object.iter().zip(per_object_robustness).enumerate()
+    {
+        let [return_fraction_at_paper_level, success_at_paper_level] = paper_level(robustness);
+        if k > 0 {
+            for (axis, &fraction) in &return_fraction_at_paper_level {
+                beside_goals.insert(named(*object, return_goal(axis)), fraction >= SHIP_MIN_RETURN_FRACTION);
+            }
+        }
+        per_object.push(ShippedObject {
+            object: object.name().to_owned(),
+            success_test: ObjectFigures::of(report),
+            return_fraction_at_paper_level,
+            success_at_paper_level,
+        });
     }
     ShipRecord {
         source_run: run.display().to_string(),
         source_policy: options.policy.clone(),
         provenance,
-        success_test,
+        success_test: success_test.overall.clone(),
         robustness,
         return_fraction_at_paper_level: at_paper_level,
         goals,
         beside_goals,
+        per_object,
     }
 }
 

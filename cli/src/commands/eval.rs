@@ -291,19 +291,9 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
 /// `vge eval --plot`: the gait diagram of the episode with seed `seed`.
 fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> anyhow::Result<()> {
     let bytes = vge_lab::eval::read_policy_file(policy)?;
-    let trace = vge_lab::eval::trace_policy_bytes(&bytes, env, seed)
-        .with_context(|| format!("tracing {}", policy.display()))?;
-    let o = &trace.outcome;
-    let title = format!(
-        "{}: the {}, episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
-        policy.display(),
-        env.object.shape,
-        o.rotation_rad,
-        o.length as f32 * trace.dt_s,
-        o.contact_switches,
-        if o.terminated { ", dropped" } else { "" }
-    );
-    vge_lab::gait_diagram::plot(&trace, &title, png).with_context(|| format!("drawing {}", png.display()))?;
+    vge_lab::gait_diagram::draw_episode(&bytes, env, seed, &policy.display().to_string(), png).with_context(
+        || format!("drawing the gait diagram of {} into {}", policy.display(), png.display()),
+    )?;
     eprintln!("vge eval: gait diagram of episode seed {seed} in {}", png.display());
     Ok(())
 }

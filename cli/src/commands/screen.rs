@@ -11,7 +11,9 @@ use vge_lab::ship::{self, ScreenOptions};
 /// test passed (success >= --min-success in DIR/eval.csv), and the final policy, runs the
 /// success test and the two pushes at the object's weight (the robustness test's
 /// perturbation_magnitude_n and perturbation_force_n at their paper levels), all on episodes
-/// from --seed, which training's tests never use.
+/// from --seed, which training's tests never use. Everything runs on the run's own task (its
+/// config.toml: object, hand, physics, reward; not its training disturbances), on each of its
+/// objects for a run on several, pooled.
 ///
 /// Writes DIR/screen.csv, one row per policy: step (`final` for the final policy), success,
 /// drops, rotation_rad, and per push the return as a fraction of the clean return and the
@@ -47,7 +49,7 @@ pub fn run(args: ScreenArgs) -> anyhow::Result<()> {
     eprintln!("vge screen: {} policies, {episodes} episodes per test from seed {seed}", candidates.len());
     println!("step      success  drops  rotation_rad  push (size) return/success  push (std) return/success");
     let options = ScreenOptions { episodes, seed, min_success };
-    let rows = ship::screen(&candidates, &options, |r| {
+    let rows = ship::screen(&run, &candidates, &options, |r| {
         let step = r.step.map_or_else(|| "final".to_owned(), |s| s.to_string());
         println!(
             "{step:<9} {:>7.2} {:>6.2} {:>13.1} {:>14.2}/{:.2} {:>19.2}/{:.2}",

@@ -11,14 +11,22 @@ use vge_lab::ship::{self, ShipOptions, ShippedFiles};
 /// with vge, measured: copies it and the run's config.toml to DIR/NAME.vgep and NAME.toml,
 /// then measures the copy with the success test (20 randomised 30 s episodes) and the
 /// robustness test (10 episodes per level, 5 levels per axis up to the paper's), and writes
-/// both, the run it came from and the goals with whether each holds to DIR/NAME.json, and the
-/// robustness figure to DIR/NAME-robustness.png.
+/// both, the run it came from and the goals with whether each holds to DIR/NAME.json, the
+/// robustness figure to DIR/NAME-robustness.png and the gait diagram of the success test's
+/// first episode to DIR/NAME-gait.png.
 ///
-/// The goals: success >= 0.8, and >= 0.75 of the clean return at each axis's paper level, the
-/// push at the object's weight read as the paper's (a force of its size in a random
-/// direction). The Gaussian push with the weight as each component's std (1.6 times the
-/// weight on average) is measured beside them. Nothing is written if the policy cannot be
-/// read or measured. About 5 min on 2 cores. `vge screen` chooses among a run's snapshots.
+/// Measured on the run's own task (its config.toml: object, hand, physics, reward; not its
+/// training disturbances). The goals: success >= 0.8, and >= 0.75 of the clean return at each
+/// axis's paper level, the push at the object's weight read as the paper's (a force of its
+/// size in a random direction). The Gaussian push with the weight as each component's std
+/// (1.6 times the weight on average) is measured beside them.
+///
+/// A run on several objects (configs/multi-object-*.toml) is measured on each: the success
+/// test per object (--episodes each; the goals: >= 0.8 on the first object, >= 0.5 on every
+/// other), the robustness test on the first object (all levels; its goals as above) and on
+/// the others at the paper's levels (beside the goals); NAME.json gains `per_object`, and the
+/// gait diagrams are NAME-gait-OBJECT.png. Nothing is written if the policy cannot be read or
+/// measured. About 5 min on 2 cores per object. `vge screen` chooses among a run's snapshots.
 ///
 /// Example: vge ship runs/robust/seed-0 --policy policy-best.vgep --name cube
 #[derive(Debug, Args)]
@@ -30,8 +38,8 @@ pub struct ShipArgs {
     /// snapshots/policy-STEP.vgep.
     #[arg(long, default_value = vge_lab::run_dir::POLICY)]
     policy: String,
-    /// The shipped gait's name: its files are NAME.vgep, NAME.toml, NAME.json and
-    /// NAME-robustness.png.
+    /// The shipped gait's name: its files are NAME.vgep, NAME.toml, NAME.json,
+    /// NAME-robustness.png and NAME-gait.png (NAME-gait-OBJECT.png for several objects).
     #[arg(long, default_value = "cube")]
     name: String,
     /// The folder the files go to.
@@ -59,7 +67,7 @@ pub fn run(args: ShipArgs) -> anyhow::Result<()> {
     let options =
         ShipOptions { policy, success_episodes: episodes, robustness_episodes, ..ShipOptions::default() };
     eprintln!("vge ship: measuring {} (success test, then robustness)", run.join(&options.policy).display());
-    let record = ship::ship(&run, &files, &options, |r| {
+    let (record, gait_pngs) = ship::ship(&run, &files, &options, |r| {
         eprintln!(
             "  {:<24} {:>9.4}  return {:>5.1}% of clean  success {:.2}",
             r.axis,
@@ -75,18 +83,26 @@ pub fn run(args: ShipArgs) -> anyhow::Result<()> {
         record.success_test.drop_rate,
         record.success_test.mean_rotation_rad
     );
+    for o in &record.per_object {
+        println!(
+            "  {:<16} {:.2} success, {:.2} drops, {:.1} rad per episode",
+            o.object, o.success_test.success_rate, o.success_test.drop_rate, o.success_test.mean_rotation_rad
+        );
+    }
     for (goal, ok) in &record.goals {
         println!("  {}  {goal}", if *ok { "holds" } else { "FAILS" });
     }
     for (goal, ok) in &record.beside_goals {
         println!("  ({}, beside the goals)  {goal}", if *ok { "holds" } else { "fails" });
     }
+    let gaits: Vec<String> = gait_pngs.iter().map(|p| p.display().to_string()).collect();
     println!(
-        "wrote {}, {}, {} and {}",
+        "wrote {}, {}, {}, {} and {}",
         files.policy.display(),
         files.config.display(),
         files.record.display(),
-        files.robustness_png.display()
+        files.robustness_png.display(),
+        gaits.join(", ")
     );
     Ok(())
 }
