@@ -80,8 +80,22 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // Not eprintln!: with stderr closed the failure must still exit 1, not 0.
-            let _ = writeln!(std::io::stderr(), "vge: {e:#}");
+            let _ = writeln!(std::io::stderr(), "vge: {}", error_text(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes, `: `-joined as anyhow's `{:#}`, without the repeats: the
+/// libraries' errors name their source in their own message (`PATH: No such file ...`), so a
+/// cause that the message before it already ends with is left out.
+fn error_text(e: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !parts.last().is_some_and(|previous| previous.ends_with(&text)) {
+            parts.push(text);
+        }
+    }
+    parts.join(": ")
 }

@@ -535,6 +535,14 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
     std::fs::write(run.join("eval.csv"), eval_csv).expect("eval.csv");
     let screen =
         |dir: &Path| vge(&["screen", "--seed", "11000", "--episodes", "1"], &[dir.display().to_string()]);
+    // The policies are measured on the run's task, which its config.toml holds: without it,
+    // the screen is refused naming the file (and the OS's error once).
+    let refused = screen(&run);
+    let err = text(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("config.toml"), "{err}");
+    assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
+    let config = vge_lab::config::load_config(&common::config("cube-fg-rl.toml"), &[]).expect("config");
+    std::fs::write(run.join("config.toml"), config.to_toml_string().expect("toml")).expect("config.toml");
     let out = screen(&run);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let csv = std::fs::read_to_string(run.join("screen.csv")).expect("screen.csv");

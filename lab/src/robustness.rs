@@ -15,7 +15,7 @@ use plotters::prelude::*;
 use serde::Serialize;
 use vge_sim::EnvConfig;
 
-use crate::eval::{EvalError, EvalReport, eval_policy_bytes, success_test_env};
+use crate::eval::{EvalError, EvalReport, eval_policy_bytes_per_object, success_test_env};
 use crate::plot::PlotError;
 
 /// Standard gravity, for the object's weight (N).
@@ -173,45 +173,14 @@ pub fn run(
     policy_bytes: &[u8],
     base: &EnvConfig,
     options: &RobustnessOptions,
-    mut on_row: impl FnMut(&RobustnessRow),
+    on_row: impl FnMut(&RobustnessRow),
 ) -> Result<RobustnessReport, EvalError> {
-    check(options)?;
-    let mut clean_env = success_test_env(base, options.episode_s, options.grasp_noise_rad);
-    for axis in Axis::ALL {
-        axis.apply(&mut clean_env, 0.0);
-    }
-    let eval = |env: &EnvConfig| eval_policy_bytes(policy_bytes, env, options.episodes, options.seed);
-    let clean = eval(&clean_env)?;
-    let mut rows = Vec::with_capacity(options.axes.len() * options.levels);
-    for &axis in &options.axes {
-        let max = axis.max_level(base);
-        for i in 0..options.levels {
-            let level = max * i as f32 / (options.levels - 1) as f32;
-            let report = if i == 0 {
-                clean.clone()
-            } else {
-                let mut env = clean_env.clone();
-                axis.apply(&mut env, level);
-                eval(&env)?
-            };
-            let r = row(axis, level, max, &report, clean.mean_return);
-            on_row(&r);
-            rows.push(r);
-        }
-    }
-    Ok(RobustnessReport {
-        episodes: options.episodes,
-        episode_s: options.episode_s,
-        grasp_noise_rad: options.grasp_noise_rad,
-        seed: options.seed,
-        clean_return: clean.mean_return,
-        rows,
-    })
+    run_objects(policy_bytes, std::slice::from_ref(base), options, on_row)
 }
 
 /// [`run`] on several objects at once (a policy trained on several): each level's episodes
-/// run on every env of `bases`, on the same seeds, and pooled; a push's level is a fraction of
-/// each object's own weight. The rows' `level` is the first object's. One base is [`run`].
+/// run on every env of `bases`, on the same seeds, and are pooled; a push's level is the same
+/// fraction of each object's own weight. The rows' `level` is the first object's.
 pub fn run_objects(
     policy_bytes: &[u8],
     bases: &[EnvConfig],
@@ -221,9 +190,6 @@ pub fn run_objects(
     let [first, ..] = bases else {
         return Err(EvalError::NoEpisodes);
     };
-    if bases.len() == 1 {
-        return run(policy_bytes, first, options, on_row);
-    }
     check(options)?;
     let clean_envs: Vec<EnvConfig> = bases
         .iter()
@@ -236,8 +202,7 @@ pub fn run_objects(
         })
         .collect();
     let eval = |envs: &[EnvConfig]| {
-        crate::eval::eval_policy_bytes_per_object(policy_bytes, envs, options.episodes, options.seed)
-            .map(|r| r.overall)
+        eval_policy_bytes_per_object(policy_bytes, envs, options.episodes, options.seed).map(|r| r.overall)
     };
     let clean = eval(&clean_envs)?;
     let mut rows = Vec::with_capacity(options.axes.len() * options.levels);
