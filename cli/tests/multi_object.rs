@@ -1,7 +1,7 @@
 //! One policy for several objects: a run on two objects tests each of them (eval.csv's
 //! per-object columns, `per_object` in final-eval.json, best-eval.json and `vge score`'s
 //! score.json, the per-object curves of `vge plot`, `vge screen` and `vge ship`'s per-object
-//! record), and `vge eval --objects` gives one row per object whose figures are those of
+//! record, `vge compare` with each object as a task), and `vge eval --objects` gives one row per object whose figures are those of
 //! `vge eval --object` on the same episodes.
 
 mod common;
@@ -17,6 +17,19 @@ fn vge(args: &[&str], extra: &[String]) -> Output {
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).expect("dir");
+    for entry in std::fs::read_dir(from).expect("read_dir") {
+        let path = entry.expect("entry").path();
+        let target = to.join(path.file_name().expect("name"));
+        if path.is_dir() {
+            copy_dir(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).expect("copy");
+        }
+    }
 }
 
 fn json(path: &Path) -> Value {
@@ -161,6 +174,37 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert!(text_order.find("\"cube\"") < text_order.find("\"sphere\""), "the config's order");
     let again = vge(&["score", "--episodes", "3"], &[run.display().to_string()]);
     assert!(text(&again.stdout).contains("already scored, skipped"), "{}", text(&again.stdout));
+
+    // vge compare takes each object as a task (rliable's runs x tasks): three copies of the
+    // run with set per-object scores, whose IQM over runs x objects (0.575) differs from the
+    // IQM of their pooled success (0.55).
+    let per_run = [(1.0, 0.0), (0.9, 0.5), (0.8, 0.1)];
+    let mut copies = Vec::new();
+    for (k, (cube, sphere)) in per_run.into_iter().enumerate() {
+        let copy = dir.join(format!("copy-{k}"));
+        copy_dir(&run, &copy);
+        let mut score = json(&copy.join("score.json"));
+        score["selected"]["per_object"]["cube"]["success_rate"] = cube.into();
+        score["selected"]["per_object"]["sphere"]["success_rate"] = sphere.into();
+        score["selected"]["success_rate"] = ((cube + sphere) / 2.0).into();
+        std::fs::write(copy.join("score.json"), score.to_string()).expect("score.json");
+        copies.push(copy.display().to_string());
+    }
+    let compared = dir.join("compare");
+    let compare = vge(
+        &["compare", "--out", &compared.display().to_string(), "--resamples", "2000"],
+        &[format!("vge={}", copies.join(",")), format!("one={}", run.display())],
+    );
+    assert!(compare.status.success(), "{}", text(&compare.stderr));
+    let csv = std::fs::read_to_string(compared.join("compare.csv")).expect("compare.csv");
+    let selected: Vec<&str> =
+        csv.lines().find(|l| l.starts_with("vge,selected,")).expect("vge's row").split(',').collect();
+    let figure = |i: usize| selected[i].parse::<f64>().expect("a number");
+    assert_eq!(selected[2], "3", "{csv}");
+    assert!((figure(3) - 0.575).abs() < 1e-4, "IQM over runs x objects: {csv}");
+    assert!((figure(6) - 0.55).abs() < 1e-4, "mean over objects of their means: {csv}");
+    let md = std::fs::read_to_string(compared.join("compare.md")).expect("compare.md");
+    assert!(md.contains("| group | cube | sphere |") && md.contains("each object is a task"), "{md}");
 
     // vge screen and vge ship measure the policy on each object.
     let screen = vge(&["screen", "--episodes", "1", "--min-success", "0"], &[run.display().to_string()]);

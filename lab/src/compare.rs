@@ -108,6 +108,55 @@ pub fn success_rates(runs: &[&RunCurves], judged: Judged) -> Vec<f64> {
     runs.iter().filter_map(|r| r.score.as_ref().and_then(|s| judged.success(s))).collect()
 }
 
+/// The objects of a run on several, as its score names them for `judged`'s policy (the
+/// last snapshots are pooled only, so they have none).
+fn judged_objects(score: &Score, judged: Judged) -> Option<&crate::eval::PerObjectFigures> {
+    match judged {
+        Judged::Selected => score.selected.as_ref().and_then(|s| s.per_object.as_ref()),
+        Judged::Final => score.final_policy.per_object.as_ref(),
+        Judged::LastSnapshots => None,
+    }
+}
+
+/// The statistics' tasks: for runs on several objects, every object is a task (rliable's
+/// runs x tasks, resampled within each object), when every run of every group was scored on
+/// the same objects in the same order; otherwise None and the runs' pooled success is one task.
+fn object_tasks(groups: &[(&str, Vec<&RunCurves>)], judged: Judged) -> Option<Vec<vge_sim::ObjectShape>> {
+    let mut scores = groups.iter().flat_map(|(_, runs)| runs.iter().filter_map(|r| r.score.as_ref()));
+    let objects = judged_objects(scores.next()?, judged)?.objects();
+    let same = scores.all(|s| judged_objects(s, judged).is_some_and(|p| p.objects() == objects));
+    (same && objects.len() > 1).then_some(objects)
+}
+
+/// The scores of `runs` for `judged`: runs x objects where `objects` are the tasks, else
+/// one task of their pooled success. None for no scored run.
+fn judged_scores(
+    runs: &[&RunCurves],
+    judged: Judged,
+    objects: Option<&[vge_sim::ObjectShape]>,
+) -> Result<Option<Scores>, StatsError> {
+    let scored: Vec<&Score> =
+        runs.iter().filter_map(|r| r.score.as_ref()).filter(|s| judged.success(s).is_some()).collect();
+    if scored.is_empty() {
+        return Ok(None);
+    }
+    let Some(objects) = objects else {
+        return Scores::one_task(&scored.iter().filter_map(|s| judged.success(s)).collect::<Vec<_>>())
+            .map(Some);
+    };
+    let by_task = objects
+        .iter()
+        .map(|object| {
+            scored
+                .iter()
+                .filter_map(|s| judged_objects(s, judged))
+                .filter_map(|p| p.0.iter().find(|(o, _)| o == object).map(|(_, f)| f.success_rate))
+                .collect()
+        })
+        .collect();
+    Scores::by_task(by_task).map(Some)
+}
+
 /// The generator of the intervals of `label` (a group, or a pair `a > b`) under `seed`.
 #[must_use]
 pub fn rng_for(seed: u64, label: &str) -> ChaCha8Rng {
@@ -151,14 +200,13 @@ pub fn profile_thresholds() -> Vec<f64> {
 /// The performance profile of `values` at [`profile_thresholds`] with its band, as points
 /// for [`crate::plot::draw_panels`].
 pub(crate) fn profile(
-    values: &[f64],
+    scores: &Scores,
     bootstrap: &Bootstrap,
     seed: u64,
     label: &str,
 ) -> Result<Vec<crate::plot::SpreadPoint>, StatsError> {
     let taus = profile_thresholds();
-    let estimates =
-        bootstrap.performance_profile(&Scores::one_task(values)?, &taus, &mut rng_for(seed, label))?;
+    let estimates = bootstrap.performance_profile(scores, &taus, &mut rng_for(seed, label))?;
     Ok(taus
         .iter()
         .zip(estimates)
@@ -263,6 +311,8 @@ pub fn draw_profiles(
 ) -> Result<(), CompareError> {
     let mut scored: Groups = BTreeMap::new();
     let mut curves = Vec::new();
+    let listed: Vec<(&str, Vec<&RunCurves>)> = groups.iter().map(|(n, rs)| (*n, rs.clone())).collect();
+    let objects = object_tasks(&listed, judged);
     for (name, runs) in groups {
         let with: Vec<&RunCurves> = runs
             .iter()
@@ -272,7 +322,8 @@ pub fn draw_profiles(
         if with.is_empty() {
             continue;
         }
-        curves.push((*name, profile(&success_rates(&with, judged), bootstrap, seed, name)?, false));
+        let Some(scores) = judged_scores(&with, judged, objects.as_deref())? else { continue };
+        curves.push((*name, profile(&scores, bootstrap, seed, name)?, false));
         scored.insert(*name, with);
     }
     let title = match judged {
@@ -373,22 +424,28 @@ pub fn write(
         groups.iter().map(|(n, rs)| (n.as_str(), rs.iter().collect())).collect();
     let pairs = checked_pairs(pairs, &names)?;
     let mut rows = Vec::new();
-    for (name, runs) in &refs {
-        for judged in Judged::ALL {
+    for judged in Judged::ALL {
+        let objects = object_tasks(&refs, judged);
+        for (name, runs) in &refs {
             let label = format!("{name} {}", judged.name());
-            if let Some(aggregates) = aggregates(&success_rates(runs, judged), bootstrap, seed, &label)? {
+            if let Some(scores) = judged_scores(runs, judged, objects.as_deref())? {
+                let aggregates = bootstrap.aggregates(&scores, &mut rng_for(seed, &label))?;
                 rows.push(CompareRow { group: (*name).to_owned(), judged, aggregates });
             }
         }
     }
+    rows.sort_by_key(|r| {
+        (names.iter().position(|n| *n == r.group), Judged::ALL.iter().position(|j| *j == r.judged))
+    });
     let by_name: BTreeMap<&str, &Vec<&RunCurves>> = refs.iter().map(|(n, rs)| (*n, rs)).collect();
+    let selected_objects = object_tasks(&refs, Judged::Selected);
     let mut improvements = Vec::new();
     for (a, b) in &pairs {
-        let (x, y) = (
-            success_rates(by_name[a.as_str()], Judged::Selected),
-            success_rates(by_name[b.as_str()], Judged::Selected),
-        );
-        if let Some(estimate) = improvement(&x, &y, bootstrap, seed, &format!("{a} > {b}"))? {
+        let x = judged_scores(by_name[a.as_str()], Judged::Selected, selected_objects.as_deref())?;
+        let y = judged_scores(by_name[b.as_str()], Judged::Selected, selected_objects.as_deref())?;
+        if let (Some(x), Some(y)) = (x, y) {
+            let estimate =
+                bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, &format!("{a} > {b}")))?;
             improvements.push(Improvement { a: a.clone(), b: b.clone(), estimate });
         }
     }
@@ -398,7 +455,10 @@ pub fn write(
         refs.iter().flat_map(|(_, rs)| rs.iter().filter_map(|r| r.score.as_ref())).collect();
     for (name, text) in [
         ("compare.csv", compare_csv(&rows)),
-        ("compare.md", markdown(&refs, &rows, &improvements, &scores, bootstrap)),
+        (
+            "compare.md",
+            markdown(&refs, &rows, &improvements, &scores, bootstrap, selected_objects.as_deref(), seed)?,
+        ),
         ("improvement.csv", improvement_csv(&improvements)),
     ] {
         let path = out.join(name);
@@ -465,7 +525,9 @@ fn markdown(
     improvements: &[Improvement],
     scores: &[&Score],
     bootstrap: &Bootstrap,
-) -> String {
+    objects: Option<&[vge_sim::ObjectShape]>,
+    seed: u64,
+) -> Result<String, StatsError> {
     let mut text = String::from(
         "| group | runs | policy | success IQM [95% CI] | success mean [95% CI] |\n|---|---|---|---|---|\n",
     );
@@ -485,6 +547,25 @@ fn markdown(
         text.push_str("\nProbability of improvement (selected policy's success):\n\n");
         text.push_str(&improvement_markdown(improvements));
     }
+    if let Some(objects) = objects {
+        // Each object's mean over runs, with its interval: where a group's score comes from.
+        let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();
+        text.push_str(&format!(
+            "\nSelected policy's success per object, mean over runs [95% CI]:\n\n| group | {} |\n|---|{}\n",
+            names.join(" | "),
+            "---|".repeat(names.len())
+        ));
+        for (name, runs) in groups {
+            let Some(scores) = judged_scores(runs, Judged::Selected, Some(objects))? else { continue };
+            let mut cells = Vec::new();
+            for (object, runs) in names.iter().zip(scores.task_scores()) {
+                let label = format!("{name} selected {object}");
+                let a = bootstrap.aggregates(&Scores::one_task(runs)?, &mut rng_for(seed, &label))?;
+                cells.push(with_interval(&a.mean));
+            }
+            text.push_str(&format!("| {name} | {} |\n", cells.join(" | ")));
+        }
+    }
     let mut episodes: Vec<usize> = scores.iter().map(|s| s.episodes).collect();
     episodes.sort_unstable();
     episodes.dedup();
@@ -503,7 +584,18 @@ fn markdown(
         100.0 * bootstrap.confidence,
         bootstrap.resamples
     ));
-    text
+    if let Some(objects) = objects {
+        let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();
+        text.push_str(&format!(
+            "\nThe runs were scored on {} objects ({}), and each object is a task, as in rliable: a \
+             run's success on each object is one score, the IQM is over runs x objects, the mean is \
+             the mean over objects of each object's mean over runs, resamples draw runs within each \
+             object, and P(A > B) is the mean over objects. The last snapshots are pooled over objects.\n",
+            names.len(),
+            names.join(", ")
+        ));
+    }
+    Ok(text)
 }
 
 #[cfg(test)]

@@ -85,6 +85,11 @@ impl Scores {
         self.by_task.len()
     }
 
+    /// Each task's scores, one per run.
+    pub fn task_scores(&self) -> &[Vec<f64>] {
+        &self.by_task
+    }
+
     /// Every score, tasks after one another.
     fn flat(&self) -> Vec<f64> {
         self.by_task.iter().flatten().copied().collect()
