@@ -19,19 +19,6 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("dir");
-    for entry in std::fs::read_dir(from).expect("read_dir") {
-        let path = entry.expect("entry").path();
-        let target = to.join(path.file_name().expect("name"));
-        if path.is_dir() {
-            copy_dir(&path, &target);
-        } else {
-            std::fs::copy(&path, &target).expect("copy");
-        }
-    }
-}
-
 fn json(path: &Path) -> Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -182,7 +169,7 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     let mut copies = Vec::new();
     for (k, (cube, sphere)) in per_run.into_iter().enumerate() {
         let copy = dir.join(format!("copy-{k}"));
-        copy_dir(&run, &copy);
+        common::copy_dir(&run, &copy);
         let mut score = json(&copy.join("score.json"));
         score["selected"]["per_object"]["cube"]["success_rate"] = cube.into();
         score["selected"]["per_object"]["sphere"]["success_rate"] = sphere.into();

@@ -62,21 +62,8 @@ fn trained_run() -> &'static (PathBuf, String) {
 /// A copy of the trained run in a folder of its own.
 fn copy_of_run(name: &str) -> PathBuf {
     let dir = common::temp_dir(name).join("run");
-    copy_dir(trained(), &dir);
+    common::copy_dir(trained(), &dir);
     dir
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).expect("dir");
-    for entry in std::fs::read_dir(from).expect("read_dir") {
-        let path = entry.expect("entry").path();
-        let target = to.join(path.file_name().expect("name"));
-        if path.is_dir() {
-            copy_dir(&path, &target);
-        } else {
-            std::fs::copy(&path, &target).expect("copy");
-        }
-    }
 }
 
 fn read_score(dir: &Path) -> Score {

@@ -67,3 +67,17 @@ pub fn temp_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&root).expect("temp dir");
     root
 }
+
+/// A copy of the folder `from` (a run, with its subfolders) at `to`.
+pub fn copy_dir(from: &std::path::Path, to: &std::path::Path) {
+    std::fs::create_dir_all(to).expect("dir");
+    for entry in std::fs::read_dir(from).expect("read_dir") {
+        let path = entry.expect("entry").path();
+        let target = to.join(path.file_name().expect("name"));
+        if path.is_dir() {
+            copy_dir(&path, &target);
+        } else {
+            std::fs::copy(&path, &target).expect("copy");
+        }
+    }
+}
