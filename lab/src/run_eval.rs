@@ -66,21 +66,19 @@ pub fn run_config(dir: &Path) -> Result<Config, RunEvalError> {
 /// `run.eval_grasp_noise_rad`.
 pub(crate) fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
     let run = &config.run;
-    crate::eval::success_test_env(
-        &crate::eval::without_training_disturbances(&config.env.env_config(index)),
-        run.eval_episode_s,
-        run.eval_grasp_noise_rad,
-    )
+    crate::eval::success_test_env(&task_env(config, index), run.eval_episode_s, run.eval_grasp_noise_rad)
+}
+
+/// The task of a run's object `index` (of `env.objects`): its object, hand, physics and reward,
+/// without the disturbances it may train with.
+fn task_env(config: &Config, index: usize) -> EnvConfig {
+    crate::eval::without_training_disturbances(&config.env.env_config(index))
 }
 
 /// The task a run's policies are judged on, one env per object it trains on (in the order of
-/// [`training_objects`]): its object, hand, physics and reward, without the disturbances it
-/// may train with. `vge ship` and `vge screen` measure policies on these.
+/// [`training_objects`], [`task_env`] each). `vge ship` and `vge screen` measure policies on these.
 pub fn task_envs(config: &Config) -> Vec<EnvConfig> {
-    training_objects(config)
-        .into_iter()
-        .map(|(index, _)| crate::eval::without_training_disturbances(&config.env.env_config(index)))
-        .collect()
+    training_objects(config).into_iter().map(|(index, _)| task_env(config, index)).collect()
 }
 
 /// The objects a run trains on, each once, in the order of `env.objects` (a list may name

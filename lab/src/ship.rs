@@ -331,8 +331,9 @@ pub fn ship(
     let bytes = eval::read_policy_file(&source)?;
     let provenance = provenance_line(&bytes)?;
     let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?);
+    let success_envs = success_test_envs(&bases);
     let success_test =
-        eval::eval_policy_bytes_per_object(&bytes, &success_test_envs(&bases), options.success_episodes, 0)?;
+        eval::eval_policy_bytes_per_object(&bytes, &success_envs, options.success_episodes, 0)?;
     let robustness =
         robustness::run(&bytes, &bases[0], &robustness_options(options, options.robustness_levels), on_row)?;
     // Every object at the paper's levels; the first object's full test already holds them.
@@ -355,10 +356,9 @@ pub fn ship(
     let objects: Vec<_> = bases.iter().map(|b| b.object.shape).collect();
     let label = files.policy.display().to_string();
     let gait_pngs = files.gait_pngs(&objects);
-    for (base, png) in bases.iter().zip(&gait_pngs) {
-        let env =
-            eval::success_test_env(base, eval::SUCCESS_TEST_EPISODE_S, eval::SUCCESS_TEST_GRASP_NOISE_RAD);
-        crate::gait_diagram::draw_episode(&bytes, &env, 0, &label, png)?;
+    // The success test's first episode on each object.
+    for (env, png) in success_envs.iter().zip(&gait_pngs) {
+        crate::gait_diagram::draw_episode(&bytes, env, 0, &label, png)?;
     }
     let mut json = serde_json::to_string_pretty(&record)
         .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;
