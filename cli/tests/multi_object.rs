@@ -10,6 +10,7 @@ use std::path::Path;
 use std::process::Output;
 
 use serde_json::Value;
+use vge_lab::gait_diagram::{DIAGRAM_PX, STACKED_PANEL_PX};
 
 fn vge(args: &[&str], extra: &[String]) -> Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_vge")).args(args).args(extra).output().expect("vge runs")
@@ -22,6 +23,14 @@ fn text(bytes: &[u8]) -> String {
 fn json(path: &Path) -> Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// A PNG's width and height in pixels, from its header.
+fn png_size_px(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 24, "{} is no PNG", path.display());
+    let be = |at: usize| u32::from_be_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    (be(16), be(20))
 }
 
 const FIGURES: [&str; 6] =
@@ -230,11 +239,13 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert_eq!(record["success_test"]["episodes"].as_u64(), Some(4), "both objects' episodes pooled");
     assert!(record["goals"].get("success_rate >= 0.8").is_none(), "no pooled success goal: {record}");
     for object in ["cube", "sphere"] {
-        let png = std::fs::read(policies.join(format!("both-gait-{object}.png")))
-            .expect("a gait diagram per object");
-        assert!(png.starts_with(b"\x89PNG"));
+        assert_eq!(png_size_px(&policies.join(format!("both-gait-{object}.png"))), DIAGRAM_PX, "{object}");
     }
-    assert!(!policies.join("both-gait.png").exists());
+    assert_eq!(
+        png_size_px(&policies.join("both-gait.png")),
+        (STACKED_PANEL_PX.0, 2 * STACKED_PANEL_PX.1),
+        "both objects' diagrams, one panel each, in NAME-gait.png"
+    );
 
     // vge plot draws the per-object curves beside the usual figure.
     let png = dir.join("curves.png");
@@ -322,10 +333,13 @@ fn eval_objects_gives_one_row_per_object_on_the_episodes_of_eval_object() {
         for key in FIGURES {
             assert_eq!(doc["per_object"][object][key], single[key], "{object}: {key}");
         }
-        let diagram =
-            std::fs::read(dir.join(format!("gait-{object}.png"))).expect("a gait diagram per object");
-        assert!(diagram.starts_with(b"\x89PNG"));
+        assert_eq!(
+            png_size_px(&dir.join(format!("gait-{object}.png"))),
+            DIAGRAM_PX,
+            "a gait diagram per object"
+        );
     }
+    assert_eq!(png_size_px(&png), (STACKED_PANEL_PX.0, 2 * STACKED_PANEL_PX.1), "and both in one figure");
 
     // A name twice, an unknown name, or both --object and --objects: refused, naming it.
     for (args, says) in [

@@ -15,17 +15,42 @@ use vge_sim::kinematics::FINGER_NAMES as FINGERS;
 /// The area one chart is drawn on.
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
+/// One episode's diagram: 1400 x 700 pixels.
+pub const DIAGRAM_PX: (u32, u32) = (1400, 700);
+/// One object's panel in [`plot_stacked`]: 1400 x 560 pixels, so five fit a page.
+pub const STACKED_PANEL_PX: (u32, u32) = (1400, 560);
+
 /// Draws `trace` into a PNG at `out`; `title` goes above the contacts.
 pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError> {
     crate::plot::load_font()?;
-    let root = BitMapBackend::new(out, (1400, 700)).into_drawing_area();
+    let root = BitMapBackend::new(out, DIAGRAM_PX).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    let (top, bottom) = root.split_vertically(330);
+    draw_panel(&root, trace, title)?;
+    root.present().map_err(draw_err)
+}
+
+/// Draws several episodes into one PNG at `out`, one panel under the other (a policy of
+/// several objects: its gait on each).
+pub fn plot_stacked(episodes: &[Episode], out: &Path) -> Result<(), PlotError> {
+    crate::plot::load_font()?;
+    let (width, height) = STACKED_PANEL_PX;
+    let panels = u32::try_from(episodes.len()).unwrap_or(u32::MAX).max(1);
+    let root = BitMapBackend::new(out, (width, height.saturating_mul(panels))).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+    for (area, episode) in root.split_evenly((episodes.len().max(1), 1)).iter().zip(episodes) {
+        draw_panel(area, &episode.trace, &episode.title)?;
+    }
+    root.present().map_err(draw_err)
+}
+
+/// Contacts above rotation, on the upper 47% and the rest of `area`.
+fn draw_panel(area: &Area, trace: &GaitTrace, title: &str) -> Result<(), PlotError> {
+    let (_, height) = area.dim_in_pixel();
+    let (top, bottom) = area.split_vertically(height * 47 / 100);
     let dt = f64::from(trace.dt_s);
     let t_end = (trace.tip_contacts.len() as f64 * dt).max(dt);
     draw_contacts(&top, trace, title, t_end)?;
-    draw_rotation(&bottom, trace, t_end)?;
-    root.present().map_err(draw_err)
+    draw_rotation(&bottom, trace, t_end)
 }
 
 /// Contacts: finger f's bar spans [f + 0.15, f + 0.85] wherever it touches.
@@ -132,16 +157,21 @@ pub enum DrawEpisodeError {
     Plot(#[from] PlotError),
 }
 
-/// Runs the episode with env seed `seed` of the policy in `bytes` on `env` and draws its gait
-/// diagram into `out`, titled with `label` (the policy's file), the object and what the
-/// episode did.
-pub fn draw_episode(
+/// One episode traced for a diagram, with its title.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Episode {
+    pub trace: GaitTrace,
+    pub title: String,
+}
+
+/// Runs the episode with env seed `seed` of the policy in `bytes` on `env`, titled with
+/// `label` (the policy's file), the object and what the episode did.
+pub fn trace_episode(
     bytes: &[u8],
     env: &vge_sim::EnvConfig,
     seed: u64,
     label: &str,
-    out: &Path,
-) -> Result<(), DrawEpisodeError> {
+) -> Result<Episode, EvalError> {
     let trace = crate::eval::trace_policy_bytes(bytes, env, seed)?;
     let o = &trace.outcome;
     let title = format!(
@@ -152,6 +182,40 @@ pub fn draw_episode(
         o.contact_switches,
         if o.terminated { ", dropped" } else { "" }
     );
-    plot(&trace, &title, out)?;
+    Ok(Episode { trace, title })
+}
+
+/// [`trace_episode`] and its diagram into `out`.
+pub fn draw_episode(
+    bytes: &[u8],
+    env: &vge_sim::EnvConfig,
+    seed: u64,
+    label: &str,
+    out: &Path,
+) -> Result<(), DrawEpisodeError> {
+    let episode = trace_episode(bytes, env, seed, label)?;
+    plot(&episode.trace, &episode.title, out)?;
+    Ok(())
+}
+
+/// The episode with env seed `seed` on each of `envs`: one diagram per env at `outs[i]` and,
+/// for more than one env, all of them stacked in `stacked`.
+pub fn draw_episodes(
+    bytes: &[u8],
+    envs: &[vge_sim::EnvConfig],
+    seed: u64,
+    label: &str,
+    outs: &[&Path],
+    stacked: &Path,
+) -> Result<(), DrawEpisodeError> {
+    let mut episodes = Vec::with_capacity(envs.len());
+    for (env, out) in envs.iter().zip(outs) {
+        let episode = trace_episode(bytes, env, seed, label)?;
+        plot(&episode.trace, &episode.title, out)?;
+        episodes.push(episode);
+    }
+    if episodes.len() > 1 {
+        plot_stacked(&episodes, stacked)?;
+    }
     Ok(())
 }

@@ -254,7 +254,8 @@ pub struct ShippedFiles {
     pub record: PathBuf,
     pub robustness_png: PathBuf,
     /// The gait diagram of the success test's first episode; for a policy of several objects
-    /// one per object, [`ShippedFiles::gait_png_of`].
+    /// all of them, one panel per object, beside one file per object
+    /// ([`ShippedFiles::gait_png_of`]).
     pub gait_png: PathBuf,
 }
 
@@ -275,12 +276,23 @@ impl ShippedFiles {
         self.gait_png.with_file_name(format!("{stem}-{}.png", object.name()))
     }
 
-    /// The gait diagrams [`ship`] writes for a run trained on `objects`.
-    pub fn gait_pngs(&self, objects: &[vge_sim::ObjectShape]) -> Vec<PathBuf> {
+    /// The gait diagram of each of `objects`: `NAME-gait.png` for one object, else one
+    /// `NAME-gait-OBJECT.png` per object.
+    fn gait_png_per_object(&self, objects: &[vge_sim::ObjectShape]) -> Vec<PathBuf> {
         match objects {
             [_] => vec![self.gait_png.clone()],
             many => many.iter().map(|&o| self.gait_png_of(o)).collect(),
         }
+    }
+
+    /// The gait diagrams [`ship`] writes for a run trained on `objects`: the per-object
+    /// files and, for several objects, `NAME-gait.png` with all of them.
+    pub fn gait_pngs(&self, objects: &[vge_sim::ObjectShape]) -> Vec<PathBuf> {
+        let mut pngs = self.gait_png_per_object(objects);
+        if objects.len() > 1 {
+            pngs.push(self.gait_png.clone());
+        }
+        pngs
     }
 }
 
@@ -355,11 +367,11 @@ pub fn ship(
     robustness::plot(&record.robustness, &files.robustness_png)?;
     let objects: Vec<_> = bases.iter().map(|b| b.object.shape).collect();
     let label = files.policy.display().to_string();
-    let gait_pngs = files.gait_pngs(&objects);
     // The success test's first episode on each object.
-    for (env, png) in success_envs.iter().zip(&gait_pngs) {
-        crate::gait_diagram::draw_episode(&bytes, env, 0, &label, png)?;
-    }
+    let per_object = files.gait_png_per_object(&objects);
+    let outs: Vec<&Path> = per_object.iter().map(PathBuf::as_path).collect();
+    crate::gait_diagram::draw_episodes(&bytes, &success_envs, 0, &label, &outs, &files.gait_png)?;
+    let gait_pngs = files.gait_pngs(&objects);
     let mut json = serde_json::to_string_pretty(&record)
         .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;
     json.push('\n');

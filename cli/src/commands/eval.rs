@@ -57,7 +57,7 @@ pub struct EvalArgs {
     /// (e.g. `cube,hexagonal-prism`, the prism being no training object): --episodes episodes
     /// per object, every object on the same seeds; one row per object and the overall
     /// figures (all episodes pooled). With --plot F.png: one gait diagram per object,
-    /// F-<object>.png.
+    /// F-<object>.png, and all of them, one under the other, in F.png.
     #[arg(long, value_name = "all|NAME,NAME,...", value_parser = parse_object_list, conflicts_with_all = ["object", "record"])]
     objects: Option<ObjectList>,
     /// Gaussian noise on observed joint positions (rad).
@@ -187,8 +187,18 @@ fn eval_objects(
     let report = vge_lab::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
     if let Some(png) = plot {
-        for env in envs {
-            draw_gait_diagram(policy, env, seed, &per_object_path(png, env.object.shape))?;
+        let per_object: Vec<PathBuf> =
+            envs.iter().map(|env| per_object_path(png, env.object.shape)).collect();
+        let outs: Vec<&Path> = per_object.iter().map(PathBuf::as_path).collect();
+        vge_lab::gait_diagram::draw_episodes(&bytes, envs, seed, &policy.display().to_string(), &outs, png)
+            .with_context(|| {
+            format!("drawing the gait diagrams of {} beside {}", policy.display(), png.display())
+        })?;
+        for out in &outs {
+            eprintln!("vge eval: gait diagram of episode seed {seed} in {}", out.display());
+        }
+        if envs.len() > 1 {
+            eprintln!("vge eval: all {} objects' gait diagrams in {}", envs.len(), png.display());
         }
     }
     if json {
