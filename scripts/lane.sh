@@ -1,0 +1,144 @@
+#!/usr/bin/env bash
+# A training lane: the runs of a queue file, one after another, each on one libtorch thread,
+# each trained by a fixed binary built from a named commit. Two lanes side by side use the
+# two cores of a working machine; a lane started again skips what is done and resumes what
+# was interrupted, so the same command continues a queue.
+#
+#   scripts/lane.sh run QUEUE         train the queue's runs (log: runs/lanes/QUEUE-NAME.log)
+#   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL
+#   scripts/lane.sh status QUEUE      each run's state and latest step
+#   scripts/lane.sh check QUEUE       check every line (run does this first)
+#
+# A queue line is `REL COMMIT CONFIG SEED [--set KEY=VALUE ...]` (`#` starts a comment):
+# the run trains into runs/REL with runs/bin/vge-COMMIT, built once from a git worktree of
+# COMMIT (runs/src/COMMIT), and CONFIG is read from that commit, so a queue keeps training
+# the same program and the same config whatever the checkout has become since. A run is
+# skipped when docs/results/REL/score.json or runs/REL/score.json exists; a run with a
+# checkpoint resumes (bit for bit on the same binary, thread count and CPU model); a run
+# that finished training without its score is scored.
+#
+# `collect` copies what a result needs (config, metrics, evaluations, scores, plots, the final
+# and selected policies, the lane's training log) and never checkpoints, replay buffers,
+# snapshots or TensorBoard files.
+set -euo pipefail
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$repo"
+unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
+
+usage() { sed -n '7,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+
+# runs/bin/vge-COMMIT, built from a worktree of COMMIT under a lock (two lanes may ask at once).
+binary_of() {
+  local commit full bin src
+  commit=$1
+  full=$(git rev-parse --verify --quiet "$commit^{commit}") || { echo "lane: no commit $commit in this repository" >&2; return 1; }
+  bin=runs/bin/vge-$commit
+  mkdir -p runs/bin runs/src
+  (
+    flock 9
+    if [ ! -x "$bin" ]; then
+      [ -e .deps/libtorch ] || scripts/setup-libtorch.sh >&2
+      src=runs/src/$commit
+      [ -d "$src" ] || git worktree add --detach "$src" "$full" >&2
+      mkdir -p "$src/.deps"
+      ln -sfn "$(readlink -f .deps/libtorch)" "$src/.deps/libtorch"
+      echo "lane: building vge at $commit (once)" >&2
+      (cd "$src" && cargo build --release --bin vge >&2)
+      cp "$src/target/release/vge" "$bin.tmp" && mv "$bin.tmp" "$bin"
+    fi
+  ) 9>"runs/bin/.build-$commit.lock"
+  echo "$bin"
+}
+
+# Every line well formed, its commit and config present, no run twice: a typo found when the
+# lane reaches its line would cost the hours before it.
+check() {
+  local queue=$1 n=0 bad=0 rel commit config seed rest
+  local -A line_of=()
+  [ -f "$queue" ] || { echo "lane: no queue file $queue" >&2; return 1; }
+  while read -r rel commit config seed rest <&3; do
+    n=$((n + 1))
+    case $rel in ''|\#*) continue ;; esac
+    if [ -z "$seed" ]; then
+      echo "$queue:$n: expected REL COMMIT CONFIG SEED [--set KEY=VALUE ...]" >&2; bad=1; continue
+    fi
+    if ! git rev-parse --verify --quiet "$commit^{commit}" >/dev/null; then
+      echo "$queue:$n: no commit $commit in this repository" >&2; bad=1
+    elif ! git cat-file -e "$commit:$config" 2>/dev/null; then
+      echo "$queue:$n: $config does not exist at commit $commit" >&2; bad=1
+    fi
+    [[ $seed =~ ^[0-9]+$ ]] || { echo "$queue:$n: seed '$seed' is not a whole number" >&2; bad=1; }
+    [[ -z $rest || $rest =~ ^(--set\ [^\ ]+=[^\ ]+\ ?)+$ ]] || { echo "$queue:$n: after the seed only --set KEY=VALUE words: $rest" >&2; bad=1; }
+    if [ -n "${line_of[$rel]:-}" ]; then echo "$queue:$n: $rel is also on line ${line_of[$rel]}" >&2; bad=1; fi
+    line_of[$rel]=$n
+  done 3<"$queue"
+  return $bad
+}
+
+run_queue() {
+  local queue log rel commit config seed rest dir bin
+  queue=$1
+  check "$queue" || { echo "lane: $queue has errors (above); nothing started" >&2; exit 1; }
+  mkdir -p runs/lanes
+  log=runs/lanes/$(basename "$queue" .txt).log
+  echo "lane: $queue, log $log"
+  # The queue is read line by line as the lane goes, so lines appended later are run too.
+  while read -r rel commit config seed rest <&3; do
+    case $rel in ''|\#*) continue ;; esac
+    dir=runs/$rel
+    if [ -f "docs/results/$rel/score.json" ] || [ -f "$dir/score.json" ]; then
+      echo "$(date -u +%FT%TZ) skip $rel (done)" >>"$log"; continue
+    fi
+    bin=$(binary_of "$commit") || { echo "$(date -u +%FT%TZ) fail $rel (no binary for $commit)" >>"$log"; continue; }
+    echo "$(date -u +%FT%TZ) start $rel with vge-$commit" >>"$log"
+    set +e
+    if [ -f "$dir/final-eval.json" ]; then
+      RAYON_NUM_THREADS=1 "$bin" score --threads 1 "$dir" >>"$dir.log" 2>&1
+    elif [ -d "$dir/checkpoint" ]; then
+      RAYON_NUM_THREADS=1 "$bin" train --resume "$dir" >>"$dir.log" 2>&1
+    else
+      mkdir -p "$(dirname "$dir")"
+      # shellcheck disable=SC2086 # the --set words are meant to split
+      RAYON_NUM_THREADS=1 "$bin" train --config "runs/src/$commit/$config" --seed "$seed" --out "$dir" $rest >>"$dir.log" 2>&1
+    fi
+    echo "$(date -u +%FT%TZ) end $rel (exit $?)" >>"$log"
+    set -e
+  done 3<"$queue"
+  echo "$(date -u +%FT%TZ) queue done" >>"$log"
+}
+
+collect() {
+  local rel dir out f
+  for rel in "$@"; do
+    dir=runs/$rel
+    out=docs/results/$rel
+    [ -f "$dir/score.json" ] || { echo "lane: $dir has no score.json: not finished" >&2; exit 1; }
+    mkdir -p "$out"
+    for f in config.toml metrics.csv eval.csv final-eval.json best-eval.json score.json policy.vgep policy-best.vgep; do
+      [ -f "$dir/$f" ] && cp "$dir/$f" "$out/$f"
+    done
+    for f in "$dir"/*.png; do [ -f "$f" ] && cp "$f" "$out/"; done
+    [ -f "$dir.log" ] && cp "$dir.log" "$out/train.log"
+    echo "collected $out: $(ls "$out" | tr '\n' ' ')"
+  done
+}
+
+status() {
+  local rel state
+  while read -r rel _ <&3; do
+    case $rel in ''|\#*) continue ;; esac
+    if [ -f "docs/results/$rel/score.json" ]; then state="collected"
+    elif [ -f "runs/$rel/score.json" ]; then state="finished, not collected"
+    elif [ -f "runs/$rel/metrics.csv" ]; then state="at step $(tail -1 "runs/$rel/metrics.csv" | cut -d, -f1)"
+    else state="not started"; fi
+    printf '%-50s %s\n' "$rel" "$state"
+  done 3<"$1"
+}
+
+case ${1:-} in
+  run) [ $# -eq 2 ] || usage; run_queue "$2" ;;
+  collect) [ $# -ge 2 ] || usage; shift; collect "$@" ;;
+  status) [ $# -eq 2 ] || usage; status "$2" ;;
+  check) [ $# -eq 2 ] || usage; check "$2" && echo "$2: every line checks" ;;
+  *) usage ;;
+esac; exit # on the esac line: a lane reads no further, so editing this file cannot reach it
