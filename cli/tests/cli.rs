@@ -425,7 +425,8 @@ fn eval_plot_draws_the_gait_diagram_of_one_episode() {
     let policy = dir.join("init.vgep");
     let export = vge(&["export", "--init", "--seed", "3", "--out"], &[policy.display().to_string()]);
     assert!(export.status.success(), "{}", text(&export.stderr));
-    let png = dir.join("gait.png");
+    // Into a folder that does not exist yet: it is made.
+    let png = dir.join("figures/new").join("gait.png");
     let run = vge(
         &["eval", "--episodes", "1", "--episode-s", "1", "--json", "--policy"],
         &[policy.display().to_string(), "--plot".to_owned(), png.display().to_string()],
@@ -434,6 +435,16 @@ fn eval_plot_draws_the_gait_diagram_of_one_episode() {
     assert!(text(&run.stderr).contains("gait diagram"), "{}", text(&run.stderr));
     let bytes = std::fs::read(&png).expect("the PNG");
     assert!(bytes.len() > 10_000 && bytes.starts_with(b"\x89PNG"), "{} bytes", bytes.len());
+
+    // A folder that cannot be made (a file stands in its place) is named.
+    let blocked = dir.join("a-file");
+    std::fs::write(&blocked, b"").expect("a file");
+    let refused = vge(
+        &["eval", "--episodes", "1", "--episode-s", "1", "--policy"],
+        &[policy.display().to_string(), "--plot".to_owned(), blocked.join("gait.png").display().to_string()],
+    );
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains(&blocked.display().to_string()), "{}", text(&refused.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -22,33 +22,38 @@ pub const STACKED_PANEL_PX: (u32, u32) = (1400, 560);
 
 /// Draws `trace` into a PNG at `out`; `title` goes above the contacts.
 pub fn plot(trace: &GaitTrace, title: &str, out: &Path) -> Result<(), PlotError> {
-    crate::plot::load_font()?;
+    crate::plot::prepare_png(out)?;
     let root = BitMapBackend::new(out, DIAGRAM_PX).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    draw_panel(&root, trace, title)?;
+    draw_panel(&root, trace, title, duration_s(trace))?;
     root.present().map_err(draw_err)
 }
 
 /// Draws several episodes into one PNG at `out`, one panel under the other (a policy of
-/// several objects: its gait on each).
+/// several objects: its gait on each), on one time axis: an early drop shows as short.
 pub fn plot_stacked(episodes: &[Episode], out: &Path) -> Result<(), PlotError> {
-    crate::plot::load_font()?;
+    crate::plot::prepare_png(out)?;
     let (width, height) = STACKED_PANEL_PX;
     let panels = u32::try_from(episodes.len()).unwrap_or(u32::MAX).max(1);
     let root = BitMapBackend::new(out, (width, height.saturating_mul(panels))).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
+    let t_end = episodes.iter().map(|e| duration_s(&e.trace)).fold(0.0, f64::max);
     for (area, episode) in root.split_evenly((episodes.len().max(1), 1)).iter().zip(episodes) {
-        draw_panel(area, &episode.trace, &episode.title)?;
+        draw_panel(area, &episode.trace, &episode.title, t_end)?;
     }
     root.present().map_err(draw_err)
 }
 
-/// Contacts above rotation, on the upper 47% and the rest of `area`.
-fn draw_panel(area: &Area, trace: &GaitTrace, title: &str) -> Result<(), PlotError> {
+/// The episode's length in seconds (at least one step).
+fn duration_s(trace: &GaitTrace) -> f64 {
+    let dt = f64::from(trace.dt_s);
+    (trace.tip_contacts.len() as f64 * dt).max(dt)
+}
+
+/// Contacts above rotation, on the upper 47% and the rest of `area`, from 0 to `t_end` s.
+fn draw_panel(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Result<(), PlotError> {
     let (_, height) = area.dim_in_pixel();
     let (top, bottom) = area.split_vertically(height * 47 / 100);
-    let dt = f64::from(trace.dt_s);
-    let t_end = (trace.tip_contacts.len() as f64 * dt).max(dt);
     draw_contacts(&top, trace, title, t_end)?;
     draw_rotation(&bottom, trace, t_end)
 }
@@ -175,7 +180,7 @@ pub fn trace_episode(
     let trace = crate::eval::trace_policy_bytes(bytes, env, seed)?;
     let o = &trace.outcome;
     let title = format!(
-        "{label}: the {}, episode seed {seed}, {:.1} rad in {:.0} s, {} contact switches{}",
+        "{label}: the {}, episode seed {seed}, {:.1} rad in {:.1} s, {} contact switches{}",
         env.object.shape,
         o.rotation_rad,
         o.length as f32 * trace.dt_s,

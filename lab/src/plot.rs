@@ -325,6 +325,17 @@ pub(crate) fn load_font() -> Result<(), PlotError> {
         .map_err(|_| PlotError::Font("DejaVuSans.ttf is not a usable font".into()))
 }
 
+/// Ready to draw a PNG at `out`: the font registered and `out`'s folder created, so that a
+/// new folder in `--plot`'s path works and a folder that cannot be made is named.
+pub(crate) fn prepare_png(out: &Path) -> Result<(), PlotError> {
+    load_font()?;
+    match out.parent() {
+        Some(folder) if !folder.as_os_str().is_empty() => std::fs::create_dir_all(folder)
+            .map_err(|source| PlotError::Io { path: folder.to_owned(), source }),
+        _ => Ok(()),
+    }
+}
+
 /// Runs grouped by a label (the experiment, or the method in Table I), in label order.
 pub(crate) type Groups<'a> = BTreeMap<&'a str, Vec<&'a RunCurves>>;
 
@@ -416,7 +427,7 @@ pub(crate) fn draw_panels(
     palette: &[&str],
     out: &Path,
 ) -> Result<(), PlotError> {
-    load_font()?;
+    prepare_png(out)?;
     let width = 500 * panels.len().max(1) as u32;
     let height = if caption.is_empty() { 450 } else { 490 };
     let mut root = BitMapBackend::new(out, (width, height)).into_drawing_area();
@@ -502,7 +513,7 @@ pub(crate) fn draw_intervals(
     palette: &[&str],
     out: &Path,
 ) -> Result<(), PlotError> {
-    load_font()?;
+    prepare_png(out)?;
     let n = rows.len().max(1);
     let width = 450 * titles.len().max(1) as u32;
     let height = 120 + 45 * n as u32;
@@ -698,7 +709,7 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
     }
     // The drawing borrows the path: it ends before the path is returned.
     {
-        load_font()?;
+        prepare_png(&path)?;
         let width = 420 * objects.len() as u32;
         let root = BitMapBackend::new(&path, (width, 800)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err)?;

@@ -264,7 +264,7 @@ pub fn to_csv(report: &RobustnessReport) -> String {
 /// `robustness.png`: one panel per axis tested, return fraction (solid) and success rate
 /// (dashed) against the level.
 pub fn plot(report: &RobustnessReport, out: &Path) -> Result<(), PlotError> {
-    crate::plot::load_font()?;
+    crate::plot::prepare_png(out)?;
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw(e.to_string());
     let axes: Vec<Axis> =
         Axis::ALL.into_iter().filter(|a| report.rows.iter().any(|r| r.axis == a.name())).collect();
