@@ -25,8 +25,9 @@ use vge_lab::ship::{self, ShipOptions, ShippedFiles};
 /// test per object (--episodes each; the goals: >= 0.8 on the first object, >= 0.5 on every
 /// other), the robustness test on the first object (all levels; its goals as above) and on
 /// the others at the paper's levels (beside the goals); NAME.json gains `per_object`, and the
-/// gait diagrams are NAME-gait-OBJECT.png, with all of them in NAME-gait.png. Nothing is written if the policy cannot be read or
-/// measured. About 5 min on 2 cores per object. `vge screen` chooses among a run's snapshots.
+/// gait diagrams are NAME-gait-OBJECT.png, with all of them in NAME-gait.png. Nothing is
+/// written if the policy cannot be read or measured. About 5 min on 2 cores per object.
+/// `vge screen` chooses among a run's snapshots.
 ///
 /// Example: vge ship runs/robust/seed-0 --policy policy-best.vgep --name cube
 #[derive(Debug, Args)]
