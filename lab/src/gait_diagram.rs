@@ -2,7 +2,7 @@
 //! object as bars over time, above the object's rotation about z. Finger gaiting shows as
 //! fingers taking turns to let go while the rotation keeps climbing.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -203,18 +203,27 @@ pub fn draw_episode(
     Ok(())
 }
 
-/// The episode with env seed `seed` on each of `envs`: one diagram per env at `outs[i]` and,
-/// for more than one env, all of them stacked in `stacked`.
+/// `F.png` -> `F-<object>.png`: one object's diagram beside the figure of all of them.
+pub fn per_object_png(stacked: &Path, object: vge_sim::ObjectShape) -> PathBuf {
+    let stem = stacked.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    let name = match stacked.extension() {
+        Some(ext) => format!("{stem}-{}.{}", object.name(), ext.to_string_lossy()),
+        None => format!("{stem}-{}", object.name()),
+    };
+    stacked.with_file_name(name)
+}
+
+/// The episode with env seed `seed` on each panel's env: one diagram per panel at its path
+/// and, for more than one panel, all of them stacked in `stacked`.
 pub fn draw_episodes(
     bytes: &[u8],
-    envs: &[vge_sim::EnvConfig],
+    panels: &[(&vge_sim::EnvConfig, &Path)],
     seed: u64,
     label: &str,
-    outs: &[&Path],
     stacked: &Path,
 ) -> Result<(), DrawEpisodeError> {
-    let mut episodes = Vec::with_capacity(envs.len());
-    for (env, out) in envs.iter().zip(outs) {
+    let mut episodes = Vec::with_capacity(panels.len());
+    for &(env, out) in panels {
         let episode = trace_episode(bytes, env, seed, label)?;
         plot(&episode.trace, &episode.title, out)?;
         episodes.push(episode);

@@ -272,8 +272,7 @@ impl ShippedFiles {
 
     /// `NAME-gait-OBJECT.png`: the gait diagram on one object of a policy of several.
     pub fn gait_png_of(&self, object: vge_sim::ObjectShape) -> PathBuf {
-        let stem = self.gait_png.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-        self.gait_png.with_file_name(format!("{stem}-{}.png", object.name()))
+        crate::gait_diagram::per_object_png(&self.gait_png, object)
     }
 
     /// The gait diagram of each of `objects`: `NAME-gait.png` for one object, else one
@@ -369,8 +368,9 @@ pub fn ship(
     let label = files.policy.display().to_string();
     // The success test's first episode on each object.
     let per_object = files.gait_png_per_object(&objects);
-    let outs: Vec<&Path> = per_object.iter().map(PathBuf::as_path).collect();
-    crate::gait_diagram::draw_episodes(&bytes, &success_envs, 0, &label, &outs, &files.gait_png)?;
+    let panels: Vec<(&vge_sim::EnvConfig, &Path)> =
+        success_envs.iter().zip(per_object.iter().map(PathBuf::as_path)).collect();
+    crate::gait_diagram::draw_episodes(&bytes, &panels, 0, &label, &files.gait_png)?;
     let gait_pngs = files.gait_pngs(&objects);
     let mut json = serde_json::to_string_pretty(&record)
         .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;

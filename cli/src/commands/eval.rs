@@ -187,13 +187,13 @@ fn eval_objects(
     let report = vge_lab::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
     if let Some(png) = plot {
-        let per_object: Vec<PathBuf> =
-            envs.iter().map(|env| per_object_path(png, env.object.shape)).collect();
-        let outs: Vec<&Path> = per_object.iter().map(PathBuf::as_path).collect();
-        vge_lab::gait_diagram::draw_episodes(&bytes, envs, seed, &policy.display().to_string(), &outs, png)
+        let outs: Vec<PathBuf> =
+            envs.iter().map(|env| vge_lab::gait_diagram::per_object_png(png, env.object.shape)).collect();
+        let panels: Vec<(&EnvConfig, &Path)> = envs.iter().zip(outs.iter().map(PathBuf::as_path)).collect();
+        vge_lab::gait_diagram::draw_episodes(&bytes, &panels, seed, &policy.display().to_string(), png)
             .with_context(|| {
-            format!("drawing the gait diagrams of {} beside {}", policy.display(), png.display())
-        })?;
+                format!("drawing the gait diagrams of {} beside {}", policy.display(), png.display())
+            })?;
         for out in &outs {
             eprintln!("vge eval: gait diagram of episode seed {seed} in {}", out.display());
         }
@@ -251,16 +251,6 @@ fn print_objects_table(
         row(object.name(), r);
     }
     row("overall", overall);
-}
-
-/// `F.png` -> `F-<object>.png`: an object's file beside the others.
-fn per_object_path(path: &Path, object: ObjectShape) -> PathBuf {
-    let stem = path.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-    let name = match path.extension() {
-        Some(ext) => format!("{stem}-{}.{}", object.name(), ext.to_string_lossy()),
-        None => format!("{stem}-{}", object.name()),
-    };
-    path.with_file_name(name)
 }
 
 /// `vge eval --run DIR [--write]`.
