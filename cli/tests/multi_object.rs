@@ -201,6 +201,16 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert!((figure(6) - 0.55).abs() < 1e-4, "mean over objects of their means: {csv}");
     let md = std::fs::read_to_string(compared.join("compare.md")).expect("compare.md");
     assert!(md.contains("| group | cube | sphere |") && md.contains("each object is a task"), "{md}");
+    // Each run on each object: 4 runs x 2 objects, the set selected success on its object.
+    let per_object = std::fs::read_to_string(compared.join("per-object.csv")).expect("per-object.csv");
+    let lines: Vec<Vec<&str>> = per_object.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(lines.len(), 8, "{per_object}");
+    let copy_1_sphere = lines
+        .iter()
+        .find(|l| l[0] == "vge" && l[1].ends_with("copy-1") && l[3] == "sphere")
+        .unwrap_or_else(|| panic!("copy-1's sphere row: {per_object}"));
+    assert_eq!(copy_1_sphere[6], "0.5000", "selected success: {per_object}");
+    assert!(md.contains("| first pass |"), "{md}");
 
     // vge screen and vge ship measure the policy on each object.
     let screen = vge(&["screen", "--episodes", "1", "--min-success", "0"], &[run.display().to_string()]);

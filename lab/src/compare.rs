@@ -410,7 +410,8 @@ fn read_groups(specs: &[GroupSpec]) -> Result<Vec<(String, Vec<RunCurves>)>, Com
 
 /// Writes `out/compare.csv`, `compare.md`, `improvement.csv`, `aggregates.png`,
 /// `profiles.png` and `curves.png` for `specs`, with P(A > B) for `pairs` (every ordered pair
-/// when None).
+/// when None); for runs scored object by object also `per-object.csv`
+/// ([`crate::object_rows`]).
 pub fn write(
     specs: &[GroupSpec],
     pairs: Option<&[(String, String)]>,
@@ -453,14 +454,22 @@ pub fn write(
     let mut files = Vec::new();
     let scores: Vec<&Score> =
         refs.iter().flat_map(|(_, rs)| rs.iter().filter_map(|r| r.score.as_ref())).collect();
-    for (name, text) in [
-        ("compare.csv", compare_csv(&rows)),
-        (
-            "compare.md",
-            markdown(&refs, &rows, &improvements, &scores, bootstrap, selected_objects.as_deref(), seed)?,
-        ),
-        ("improvement.csv", improvement_csv(&improvements)),
-    ] {
+    let mut md =
+        markdown(&refs, &rows, &improvements, &scores, bootstrap, selected_objects.as_deref(), seed)?;
+    let mut texts =
+        vec![("compare.csv", compare_csv(&rows)), ("improvement.csv", improvement_csv(&improvements))];
+    if let Some(objects) = selected_objects.as_deref() {
+        let object_rows = crate::object_rows::rows(&refs, objects)?;
+        md.push_str(&format!(
+            "\nEach run on each object (per-object.csv): the first periodic test at which the object's \
+             success reached {:.0}%, and the held-out figures of the selected and final policies.\n\n",
+            100.0 * crate::eval::LEARNED_SUCCESS_RATE
+        ));
+        md.push_str(&crate::object_rows::to_markdown(&object_rows));
+        texts.push(("per-object.csv", crate::object_rows::to_csv(&object_rows)));
+    }
+    texts.insert(1, ("compare.md", md));
+    for (name, text) in texts {
         let path = out.join(name);
         std::fs::write(&path, text).map_err(|source| CompareError::Io { path: path.clone(), source })?;
         files.push(path);

@@ -14,6 +14,7 @@ pub mod compare;
 pub mod config;
 pub mod eval;
 pub mod gait_diagram;
+pub mod object_rows;
 pub mod plot;
 pub mod policy_meta;
 pub mod robustness;

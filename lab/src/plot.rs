@@ -739,7 +739,7 @@ type StepsAndValues = (Vec<f64>, Vec<f64>);
 
 /// `(step, success)` of a CSV's `column`; `None` when the file or the column is missing (a
 /// run from before the per-object columns, or without periodic evaluations).
-fn object_success(path: &Path, column: &str) -> Result<Option<StepsAndValues>, PlotError> {
+pub(crate) fn object_success(path: &Path, column: &str) -> Result<Option<StepsAndValues>, PlotError> {
     if !path.exists() {
         return Ok(None);
     }

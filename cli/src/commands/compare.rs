@@ -17,6 +17,11 @@ use clap::Args;
 /// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
 /// env steps, with 95% bands). Definitions: docs/scoring.md.
 ///
+/// Runs trained and scored on several objects are compared with each object a task, and
+/// OUT/per-object.csv (also a table in compare.md) lists each run on each object: the step
+/// of its first periodic test at 50% success on that object, and the selected and final
+/// policies' success, drops, rotation and contact switches there, with the run's wall time.
+///
 /// Example:
 ///   vge compare fge=docs/results/table1/cube-fg-fge vge=docs/results/cube-fg-vge-seeds
 ///       --out cmp/ --pairs vge:fge
