@@ -279,13 +279,17 @@ pub struct LoopReport {
     pub final_targets_rad: [f32; 15],
 }
 
+/// The slowest loop [`run`] accepts: one step in 1000 s. Its period and watchdog (up to
+/// `u32::MAX` periods) then fit a [`Duration`], which panics on larger values.
+pub const MIN_RATE_HZ: f64 = 1e-3;
+
 #[derive(Debug, Error)]
 pub enum LoopError {
     #[error("transport: {0}")]
     Transport(#[from] TransportError),
     #[error("no {missing} within {timeout:?} of start (is the hand powered and on the bus?)")]
     StartupTimeout { timeout: Duration, missing: String },
-    #[error("rate must be a positive finite number of Hz, got {0}")]
+    #[error("rate must be a finite number of Hz, at least {MIN_RATE_HZ}, got {0}")]
     BadRate(f64),
 }
 
@@ -488,7 +492,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
     config: &LoopConfig,
     stop: &AtomicBool,
 ) -> Result<LoopReport, LoopError> {
-    if !(config.rate_hz.is_finite() && config.rate_hz > 0.0) {
+    if !(config.rate_hz.is_finite() && config.rate_hz >= MIN_RATE_HZ) {
         return Err(LoopError::BadRate(config.rate_hz));
     }
     let period = Duration::from_secs_f64(1.0 / config.rate_hz);

@@ -332,12 +332,19 @@ fn positive_seconds(name: &str, s: f64, zero_ok: bool) -> anyhow::Result<Option<
     if !s.is_finite() || s < 0.0 || (s == 0.0 && !zero_ok) {
         bail!("--{name} must be a positive number of seconds, got {s}");
     }
-    Ok((s > 0.0).then(|| Duration::from_secs_f64(s)))
+    if s == 0.0 {
+        return Ok(None);
+    }
+    Duration::try_from_secs_f64(s).map(Some).map_err(|_| anyhow::anyhow!("--{name} = {s} s is too long"))
 }
 
 fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::Result<LoopConfig> {
     let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
-    anyhow::ensure!(rate_hz.is_finite() && rate_hz > 0.0, "--rate must be a positive number of Hz");
+    anyhow::ensure!(
+        rate_hz.is_finite() && rate_hz >= vge_bridge::control_loop::MIN_RATE_HZ,
+        "--rate must be a number of Hz, at least {}, got {rate_hz}",
+        vge_bridge::control_loop::MIN_RATE_HZ
+    );
     if (rate_hz - f64::from(policy_hz)).abs() > 1e-3 {
         note!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
     }

@@ -239,10 +239,13 @@ impl Transport for FdSocketCanTransport {
         let received = match frame {
             CanAnyFrame::Fd(fd) => match (fd.id(), FdMessage::decode(standard_raw(&fd), fd.data())) {
                 (socketcan::Id::Standard(_), Ok(message)) => {
+                    // Decoded counts always encode again (the fields' ranges are the whole
+                    // integer ranges); were one not to, the frame is counted, not lost.
                     for m in message.to_classic() {
-                        if let Ok(raw) = m.encode() {
-                            self.inbox.push_back(Received::Frame(raw));
-                        }
+                        self.inbox.push_back(match m.encode() {
+                            Ok(raw) => Received::Frame(raw),
+                            Err(_) => Received::Malformed { id: fd.raw_id(), len: fd.data().len() },
+                        });
                     }
                     return Ok(self.inbox.pop_front());
                 }

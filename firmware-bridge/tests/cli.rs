@@ -108,3 +108,15 @@ fn run_refuses_a_seq_lag_outside_1_to_127_naming_the_flag() {
     let help = bridge(&["run", "--help"]);
     assert!(String::from_utf8_lossy(&help.stdout).contains("--max-seq-lag <MAX_SEQ_LAG>"));
 }
+
+#[test]
+fn run_refuses_times_and_rates_no_clock_holds_with_an_error_naming_the_flag_not_a_panic() {
+    let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
+    for (flag, value) in [("--duration", "1e20"), ("--heartbeat-timeout-s", "1e300"), ("--rate", "1e-20")] {
+        let out =
+            bridge(&["run", "--policy", policy, "--backend", "can", "--iface", "vcan-absent", flag, value]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{flag} {value}: an error, not a panic (101): {err}");
+        assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+}

@@ -344,6 +344,32 @@ mod tests {
     }
 
     #[test]
+    fn every_classic_message_of_a_received_frame_encodes_even_at_the_fields_extremes() {
+        // Each i16 field at i16::MIN (bytes 00 80), each u16 at its maximum: the FD transport
+        // hands these on as classic frames, so none may fail to encode and vanish.
+        for fill in [[0x00, 0x80], [0xff, 0x7f], [0xff, 0xff]] {
+            let mut state = [0u8; FD_NODE_STATE_LEN];
+            for pair in state[..32].chunks_exact_mut(2) {
+                pair.copy_from_slice(&fill);
+            }
+            let mut command = [0u8; FD_HAND_COMMAND_LEN];
+            for pair in command[..30].chunks_exact_mut(2) {
+                pair.copy_from_slice(&fill);
+            }
+            for (id, payload) in [(FD_NODE_STATE_BASE_ID + 2, &state[..]), (FD_HAND_COMMAND_ID, &command[..])]
+            {
+                let message = FdMessage::decode(id, payload).expect("decodes");
+                let classic = message.to_classic();
+                assert!(!classic.is_empty());
+                for m in classic {
+                    let raw = m.encode().unwrap_or_else(|e| panic!("{fill:?} {id:#x}: {m:?}: {e}"));
+                    assert_eq!(Message::decode_frame(&raw), Ok(m), "{fill:?} {id:#x}: the same message back");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn fd_decoding_rejects_wrong_lengths_and_ids() {
         assert_eq!(FdMessage::decode(0x0F0, &[0; 31]), Err(ProtocolError::BadLength { id: 0x0F0, len: 31 }));
         assert_eq!(FdMessage::decode(0x485, &[0; 48]), Err(ProtocolError::UnknownId(0x485)));

@@ -2,23 +2,25 @@
 
 use super::ProtocolError;
 
-/// One count of a joint angle: 1e-4 rad (range ±3.2767 rad).
+/// One count of a joint angle: 1e-4 rad (range -3.2768 to 3.2767 rad).
 pub const ANGLE_RAD_PER_COUNT: f32 = 1e-4;
-/// One count of a joint velocity: 1e-3 rad/s (range ±32.767 rad/s).
+/// One count of a joint velocity: 1e-3 rad/s (range -32.768 to 32.767 rad/s).
 pub const VELOCITY_RADPS_PER_COUNT: f32 = 1e-3;
-/// One count of a joint torque: 1e-4 N·m (range ±3.2767 N·m; the motors cap at 0.45 N·m).
+/// One count of a joint torque: 1e-4 N·m (range -3.2768 to 3.2767 N·m; the motors cap at 0.45 N·m).
 pub const EFFORT_NM_PER_COUNT: f32 = 1e-4;
-/// One count of a contact position: 1e-4 m (range ±3.2767 m in the hand frame).
+/// One count of a contact position: 1e-4 m (range -3.2768 to 3.2767 m in the hand frame).
 pub const POSITION_M_PER_COUNT: f32 = 1e-4;
 /// One count of a contact force magnitude: 1e-3 N (range 0..65.535 N).
 pub const FORCE_N_PER_COUNT: f32 = 1e-3;
 /// One count of a unit-normal component: 1/32767.
 pub const NORMAL_PER_COUNT: f32 = 1.0 / 32767.0;
 
+/// The whole i16 range, i16::MIN included: every count a decoder reads must encode again
+/// (the FD transport splits a received frame into classic messages by re-encoding them).
 pub(crate) fn to_i16(what: &'static str, value: f32, scale: f32) -> Result<i16, ProtocolError> {
-    let max = f32::from(i16::MAX) * scale;
-    if !value.is_finite() || value.abs() > max {
-        return Err(ProtocolError::OutOfRange { what, value, max });
+    let (min, max) = (f32::from(i16::MIN) * scale, f32::from(i16::MAX) * scale);
+    if !value.is_finite() || !(min..=max).contains(&value) {
+        return Err(ProtocolError::OutOfRange { what, value, min, max });
     }
     Ok(libm_round(value / scale) as i16)
 }
@@ -26,7 +28,7 @@ pub(crate) fn to_i16(what: &'static str, value: f32, scale: f32) -> Result<i16, 
 pub(crate) fn to_u16(what: &'static str, value: f32, scale: f32) -> Result<u16, ProtocolError> {
     let max = f32::from(u16::MAX) * scale;
     if !value.is_finite() || !(0.0..=max).contains(&value) {
-        return Err(ProtocolError::OutOfRange { what, value, max });
+        return Err(ProtocolError::OutOfRange { what, value, min: 0.0, max });
     }
     Ok(libm_round(value / scale) as u16)
 }
@@ -78,5 +80,12 @@ mod tests {
         assert_eq!(to_u16("f", 65.535, 1e-3), Ok(65535));
         assert!(to_u16("f", -0.1, 1e-3).is_err());
         assert!(to_i16("x", f32::INFINITY, 1e-4).is_err());
+        // Every count decodes to a value that encodes to the same count, the extremes too.
+        for count in [i16::MIN, -1, 0, 1, i16::MAX] {
+            for scale in [ANGLE_RAD_PER_COUNT, VELOCITY_RADPS_PER_COUNT, NORMAL_PER_COUNT] {
+                assert_eq!(to_i16("x", f32::from(count) * scale, scale), Ok(count), "{count} x {scale}");
+            }
+        }
+        assert!(to_i16("x", (f32::from(i16::MIN) - 1.0) * 1e-4, 1e-4).is_err());
     }
 }

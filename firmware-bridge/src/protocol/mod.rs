@@ -107,8 +107,8 @@ pub enum ProtocolError {
     UnknownId(u16),
     #[error("frame id {id:#05x} has {len} data bytes, expected 8")]
     BadLength { id: u16, len: usize },
-    #[error("{what} = {value} is not finite or outside ±{max} (the field's range)")]
-    OutOfRange { what: &'static str, value: f32, max: f32 },
+    #[error("{what} = {value} is not finite or outside {min}..={max} (the field's range)")]
+    OutOfRange { what: &'static str, value: f32, min: f32, max: f32 },
 }
 
 /// A finger node on the bus.
