@@ -724,8 +724,18 @@ impl RunSection {
         if self.log_interval == 0 {
             return Err(invalid("run.log_interval must be at least 1"));
         }
-        if self.eval_episode_s <= 0.0 {
+        if !(self.eval_episode_s.is_finite() && self.eval_episode_s > 0.0) {
             return Err(invalid(format!("run.eval_episode_s must be > 0, got {}", self.eval_episode_s)));
+        }
+        // Every success test (periodic, final, selection) is a rate over these episodes.
+        if self.eval_episodes == 0 {
+            return Err(invalid("run.eval_episodes must be at least 1 (the success test's episodes)"));
+        }
+        if !(self.eval_grasp_noise_rad.is_finite() && self.eval_grasp_noise_rad >= 0.0) {
+            return Err(invalid(format!(
+                "run.eval_grasp_noise_rad must be >= 0, got {}",
+                self.eval_grasp_noise_rad
+            )));
         }
         Ok(())
     }

@@ -105,7 +105,7 @@ fn is_multi_object(config: &Config) -> bool {
 fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<ObjectsReport, RunEvalError> {
     let run = &config.run;
     let eval_seed = set.first_seed(config);
-    let episodes = run.eval_episodes.max(1);
+    let episodes = run.eval_episodes;
     let objects = training_objects(config);
     if let [(index, object)] = objects.as_slice() {
         // One object: the single-object test as it always ran.

@@ -118,6 +118,12 @@ fn bad_values_are_refused_naming_the_key() {
         ("env.motor_stiffness_nm_per_rad=inf", "env.motor_stiffness_nm_per_rad"),
         ("env.hand_orientation=upside_down", "hand_orientation"),
         ("env.finger_collisions=1", "finger_collisions"),
+        ("env.action_latency_steps=1000000000000", "env.action_latency_steps"),
+        ("env.episode_length=0", "env.episode_length"),
+        ("env.episode_length=1000000000000", "env.episode_length"),
+        ("run.eval_episodes=0", "run.eval_episodes"),
+        ("run.eval_episode_s=nan", "run.eval_episode_s"),
+        ("run.eval_grasp_noise_rad=-0.1", "run.eval_grasp_noise_rad"),
     ] {
         let err = load("configs/cube-fg-rl.toml", &[set]).expect_err(set);
         assert!(err.contains(key), "{set}: {err}");

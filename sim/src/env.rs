@@ -105,6 +105,11 @@ impl PerturbationConfig {
     }
 }
 
+/// The longest episode an env runs: 1,000,000 control steps, about 14 h at the default
+/// 20 Hz. Episode traces are reserved up front, so an absurd length would abort on the
+/// allocation instead of failing with a message.
+pub const MAX_EPISODE_STEPS: usize = 1_000_000;
+
 /// Everything that defines an environment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnvConfig {
@@ -120,7 +125,7 @@ pub struct EnvConfig {
     pub control_hz: f32,
     /// Largest joint-target change per control step (rad).
     pub max_action_rad: f32,
-    /// Episode length in control steps (truncation).
+    /// Episode length in control steps (truncation), at most [`MAX_EPISODE_STEPS`].
     pub episode_length_steps: usize,
     /// Terminate when fewer fingertips than this touch the object (0: never; the paper ends
     /// episodes on a drop or the time limit only).
@@ -296,8 +301,19 @@ impl EnvConfig {
                 )));
             }
         }
-        if self.episode_length_steps == 0 {
-            return Err(SimError::InvalidConfig("episode length 0".to_owned()));
+        let steps = self.episode_length_steps;
+        if steps == 0 || steps > MAX_EPISODE_STEPS {
+            return Err(SimError::InvalidConfig(format!(
+                "episode length {steps} control steps ({} s at {} Hz): needs 1 to {MAX_EPISODE_STEPS} steps",
+                steps as f64 / f64::from(self.control_hz),
+                self.control_hz
+            )));
+        }
+        let latency = self.randomization.action_latency_steps;
+        if latency >= steps {
+            return Err(SimError::InvalidConfig(format!(
+                "action latency {latency} control steps: needs fewer than the episode's {steps}"
+            )));
         }
         Ok(())
     }

@@ -287,6 +287,19 @@ impl EnvSection {
                 return Err(InvalidEnvSection::new(format!("{key} must be a finite number {need}, got {v}")));
             }
         }
+        if !(1..=crate::env::MAX_EPISODE_STEPS).contains(&self.episode_length) {
+            return Err(InvalidEnvSection::new(format!(
+                "env.episode_length = {}: needs 1 to {} control steps",
+                self.episode_length,
+                crate::env::MAX_EPISODE_STEPS
+            )));
+        }
+        if self.action_latency_steps >= self.episode_length {
+            return Err(InvalidEnvSection::new(format!(
+                "env.action_latency_steps = {}: needs fewer than env.episode_length ({})",
+                self.action_latency_steps, self.episode_length
+            )));
+        }
         for i in 0..self.objects.len() {
             self.env_config(i).validate().map_err(|e| InvalidEnvSection::new(format!("env: {e}")))?;
         }
