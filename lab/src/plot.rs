@@ -119,34 +119,68 @@ fn read(path: &Path) -> Result<String, PlotError> {
     std::fs::read_to_string(path).map_err(|source| PlotError::Io { path: path.to_owned(), source })
 }
 
-/// Columns of a CSV with a header row, by name. An empty field (a metrics window in which
-/// no episode ended) repeats the column's previous value (0 before any).
+/// Columns of a CSV with a header row, by name; a name the header lacks is an error naming
+/// it. An empty field (a metrics window in which no episode ended) repeats the column's
+/// previous value (0 before any).
 pub(crate) fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
+    let columns = columns_by_name(path, names)?;
+    names
+        .iter()
+        .zip(columns)
+        .map(|(n, c)| {
+            c.ok_or_else(|| PlotError::Csv { path: path.to_owned(), message: format!("no column `{n}`") })
+        })
+        .collect()
+}
+
+/// [`csv_columns`], or None when the file or one of the columns is missing (a run from
+/// before the column existed, or without periodic evaluations).
+pub(crate) fn csv_columns_if_present(
+    path: &Path,
+    names: &[&str],
+) -> Result<Option<Vec<Vec<f64>>>, PlotError> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    Ok(columns_by_name(path, names)?.into_iter().collect())
+}
+
+/// Each of `names`' column, None where the header lacks it. A last line without its newline
+/// is a row still being written (or cut short by a kill, which a resume drops too) and is
+/// not read; a complete row without a field of a named column is an error naming the row.
+fn columns_by_name(path: &Path, names: &[&str]) -> Result<Vec<Option<Vec<f64>>>, PlotError> {
     let bad = |message: String| PlotError::Csv { path: path.to_owned(), message };
     let text = read(path)?;
+    let complete = text.rfind('\n').map_or("", |end| &text[..=end]);
     let mut reader =
-        csv::ReaderBuilder::new().flexible(true).trim(csv::Trim::All).from_reader(text.as_bytes());
+        csv::ReaderBuilder::new().flexible(true).trim(csv::Trim::All).from_reader(complete.as_bytes());
     let header = reader.headers().map_err(|e| bad(e.to_string()))?.clone();
-    let index: Vec<usize> = names
-        .iter()
-        .map(|n| header.iter().position(|h| h == *n).ok_or_else(|| bad(format!("no column `{n}`"))))
-        .collect::<Result<_, _>>()?;
-    let mut columns = vec![Vec::new(); names.len()];
+    let index: Vec<Option<usize>> = names.iter().map(|n| header.iter().position(|h| h == *n)).collect();
+    let mut columns: Vec<Option<Vec<f64>>> = index.iter().map(|i| i.map(|_| Vec::new())).collect();
     for (row, record) in reader.records().enumerate() {
         let record = record.map_err(|e| bad(e.to_string()))?;
         if record.iter().all(str::is_empty) {
             continue;
         }
-        for (col, &i) in index.iter().enumerate() {
-            let field = record.get(i).unwrap_or("");
+        for (col, i) in index.iter().enumerate() {
+            let (Some(i), Some(values)) = (i, columns[col].as_mut()) else { continue };
+            let field = record.get(*i).ok_or_else(|| {
+                bad(format!(
+                    "row {} has {} fields, the header {}: no `{}`",
+                    row + 2,
+                    record.len(),
+                    header.len(),
+                    names[col]
+                ))
+            })?;
             let value = if field.is_empty() {
-                columns[col].last().copied().unwrap_or(0.0)
+                values.last().copied().unwrap_or(0.0)
             } else {
                 field.parse::<f64>().map_err(|_| {
                     bad(format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]))
                 })?
             };
-            columns[col].push(value);
+            values.push(value);
         }
     }
     Ok(columns)
@@ -160,9 +194,12 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
     let cols = csv_columns(&metrics, &["step", "return", "rotation", "controller_share"])?;
     let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] =
         cols.try_into().map_err(|_| PlotError::Csv { path: metrics.clone(), message: "columns".into() })?;
-    let optional = |name: &str| csv_columns(&metrics, &[name]).ok().and_then(|c| c.into_iter().next());
-    let (mean_q, mc_return) =
-        (optional("mean_q").unwrap_or_default(), optional("mc_return").unwrap_or_default());
+    // Columns later vge versions added: empty for the runs from before them.
+    let optional = |name: &str| {
+        csv_columns_if_present(&metrics, &[name])
+            .map(|c| c.and_then(|c| c.into_iter().next()).unwrap_or_default())
+    };
+    let (mean_q, mc_return) = (optional("mean_q")?, optional("mc_return")?);
     let final_eval = read_final_eval(dir)?;
     let eval = dir.join(crate::run_dir::EVAL);
     let [eval_step, eval_return, eval_success]: [Vec<f64>; 3] = if eval.exists() {
@@ -740,14 +777,7 @@ type StepsAndValues = (Vec<f64>, Vec<f64>);
 /// `(step, success)` of a CSV's `column`; `None` when the file or the column is missing (a
 /// run from before the per-object columns, or without periodic evaluations).
 pub(crate) fn object_success(path: &Path, column: &str) -> Result<Option<StepsAndValues>, PlotError> {
-    if !path.exists() {
-        return Ok(None);
-    }
-    let columns = match csv_columns(path, &["step", column]) {
-        Ok(c) => c,
-        Err(PlotError::Csv { message, .. }) if message.starts_with("no column") => return Ok(None),
-        Err(e) => return Err(e),
-    };
+    let Some(columns) = csv_columns_if_present(path, &["step", column])? else { return Ok(None) };
     let [step, success]: [Vec<f64>; 2] = columns
         .try_into()
         .map_err(|_| PlotError::Csv { path: path.to_owned(), message: "columns".into() })?;
@@ -757,6 +787,26 @@ pub(crate) fn object_success(path: &Path, column: &str) -> Result<Option<StepsAn
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_row_being_written_is_not_read_and_a_short_complete_row_is_refused_naming_it() {
+        let dir = std::env::temp_dir().join(format!("vge-plot-csv-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let csv = dir.join("eval.csv");
+        // The last row has no newline yet: the writer is still at it.
+        std::fs::write(&csv, "step,success,return\n100,0.5,3\n200,,4\n300,0.").expect("write");
+        let columns = csv_columns(&csv, &["step", "success"]).expect("reads the complete rows");
+        assert_eq!(columns, vec![vec![100.0, 200.0], vec![0.5, 0.5]], "an empty field repeats");
+        assert_eq!(csv_columns_if_present(&csv, &["step", "mean_q"]).expect("reads"), None);
+        assert_eq!(csv_columns_if_present(&dir.join("absent.csv"), &["step"]).expect("no file"), None);
+        let err = csv_columns(&csv, &["step", "mean_q"]).expect_err("no such column").to_string();
+        assert!(err.contains("no column `mean_q`"), "{err}");
+        std::fs::write(&csv, "step,success,return\n100,0.5,3\n200,0.7\n").expect("write");
+        let err = csv_columns(&csv, &["return"]).expect_err("a short row").to_string();
+        assert!(err.contains("row 3 has 2 fields, the header 3: no `return`"), "{err}");
+        assert_eq!(csv_columns(&csv, &["success"]).expect("the fields it has"), vec![vec![0.5, 0.7]]);
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn interpolates_between_logged_steps_and_clamps_outside() {
