@@ -646,3 +646,15 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
     assert!(text(&out.stdout).contains("FAILS  success_rate >= 0.8"), "{}", text(&out.stdout));
     let _ = std::fs::remove_dir_all(&run);
 }
+
+#[test]
+fn export_init_refuses_a_network_the_runtime_cannot_run_before_building_it() {
+    let out = std::env::temp_dir().join(format!("vge-export-too-big-{}.vgep", std::process::id()));
+    for hidden in ["100000000000", "64,64,64,64", "0"] {
+        let export = vge(&["export", "--init", "--hidden", hidden, "--out"], &[out.display().to_string()]);
+        let err = text(&export.stderr);
+        assert_eq!(export.status.code(), Some(1), "--hidden {hidden}: an error, not a panic: {err}");
+        assert!(err.contains("at most 3 hidden layers of 1 to 256 units"), "--hidden {hidden}: {err}");
+        assert!(!out.exists(), "--hidden {hidden}: nothing written");
+    }
+}

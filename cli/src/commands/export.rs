@@ -126,7 +126,14 @@ fn export_onnx(args: &ExportArgs, vgep: &[u8]) -> anyhow::Result<()> {
 /// The policy file of a saved (`--actor`) or fresh (`--init`) actor.
 #[cfg(feature = "train")]
 fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::Result<Vec<u8>> {
-    anyhow::ensure!(args.hidden.iter().all(|&h| h > 0), "--hidden widths must be positive");
+    // Checked before libtorch allocates the layers: the runtime runs at most these.
+    let (max_layers, max_width) = (vge_runtime::policy::HAND_MAX_LAYERS, vge_runtime::policy::HAND_MAX_WIDTH);
+    anyhow::ensure!(
+        args.hidden.iter().all(|&h| (1..=max_width).contains(&h)) && args.hidden.len() < max_layers,
+        "--hidden {:?}: the runtime runs at most {} hidden layers of 1 to {max_width} units",
+        args.hidden,
+        max_layers - 1
+    );
     let env = EnvConfig::default();
     let mut vs = nn::VarStore::new(Device::Cpu);
     let spec = vge_trainer::nets::NetSpec {
