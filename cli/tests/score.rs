@@ -187,7 +187,7 @@ fn assert_refused(dir: &Path, file: &str, why: &str) {
 }
 
 #[test]
-fn a_damaged_missing_or_other_layout_policy_file_fails_naming_the_file() {
+fn a_damaged_missing_other_layout_or_other_joints_policy_file_fails_naming_the_file() {
     let damaged = copy_of_run("score-damaged");
     let path = damaged.join("policy.vgep");
     let mut bytes = std::fs::read(&path).expect("policy");
@@ -208,6 +208,20 @@ fn a_damaged_missing_or_other_layout_policy_file_fails_naming_the_file() {
     file.obs_layout = vec![vge_export::ObsSlice::new("q", 0..15), vge_export::ObsSlice::new("rest", 15..65)];
     std::fs::write(&snapshot, file.to_bytes().expect("encode")).expect("write");
     assert_refused(&other, "snapshots/policy-400.vgep", "another observation layout");
+
+    // A valid policy file whose outputs name the thumb's two flexion joints the other way
+    // round: run as it is, it would drive the wrong joints.
+    let swapped = copy_of_run("score-actions");
+    let snapshot = swapped.join("snapshots/policy-400.vgep");
+    let mut file =
+        vge_export::PolicyFile::from_bytes(&std::fs::read(&snapshot).expect("snapshot")).expect("decode");
+    file.action_names.swap(1, 2);
+    std::fs::write(&snapshot, file.to_bytes().expect("encode")).expect("write");
+    assert_refused(
+        &swapped,
+        "snapshots/policy-400.vgep",
+        "other actions: the policy's actions are [thumb.roll, thumb.flex_dist",
+    );
 }
 
 #[test]

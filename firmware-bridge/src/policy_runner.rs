@@ -11,21 +11,24 @@ use crate::control_loop::PolicyRunner;
 pub enum LoadError {
     #[error("invalid policy file")]
     Invalid(#[from] PolicyError),
-    #[error("the policy maps {obs} observations to {act} actions; the hand needs {OBS_DIM} -> {NUM_JOINTS}")]
-    WrongDims { obs: usize, act: usize },
-    #[error("observation layout: {0}")]
-    WrongLayout(String),
+    /// Other sizes, observation slices or joints than the hand's
+    /// ([`vge_sim::check_policy_interface`]).
+    #[error("{0}")]
+    OtherHand(String),
 }
 
 /// Weight storage for a policy file: the runtime decodes weights into caller memory.
 pub fn storage_for(bytes: &[u8]) -> Result<Vec<f32>, LoadError> {
     let info = policy::inspect(bytes)?;
-    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
-        return Err(LoadError::WrongDims { obs: info.obs_dim, act: info.act_dim });
-    }
-    // Same size is not same meaning: the slices must be the ones the bridge fills.
-    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
-        .map_err(LoadError::WrongLayout)?;
+    // Same size is not same meaning: the slices must be the ones the bridge fills, the
+    // actions the joints it commands, in its order.
+    vge_sim::check_policy_interface(
+        info.obs_dim,
+        info.act_dim,
+        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
+        info.action_names.iter(),
+    )
+    .map_err(LoadError::OtherHand)?;
     Ok(vec![0.0; info.storage_len])
 }
 

@@ -407,14 +407,13 @@ fn with_runtime_policy<T>(
     f: impl FnOnce(&EnvConfig, &PolicyFn<'_>) -> Result<T, EvalError>,
 ) -> Result<T, EvalError> {
     let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
-    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
-        return Err(EvalError::Policy(format!(
-            "policy maps {} observations to {} actions, the hand needs {OBS_DIM} -> {NUM_JOINTS}",
-            info.obs_dim, info.act_dim
-        )));
-    }
-    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
-        .map_err(EvalError::Policy)?;
+    vge_sim::check_policy_interface(
+        info.obs_dim,
+        info.act_dim,
+        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
+        info.action_names.iter(),
+    )
+    .map_err(EvalError::Policy)?;
     let env = at_control_rate(env, info.control_hz);
     // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
     let aligned = vge_runtime::AlignedBytes::new(bytes);

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use vge_sim::{EnvConfig, NUM_JOINTS, OBS_DIM};
+use vge_sim::EnvConfig;
 
 use crate::config::Config;
 use crate::eval::{EpisodeOutcome, EvalError, ObjectFigures, PerObjectFigures};
@@ -192,14 +192,13 @@ fn check_policy(path: &Path, bytes: &[u8]) -> Result<(), ScoreError> {
     let bad = |message: String| ScoreError::Policy { path: path.to_owned(), message };
     let info =
         vge_runtime::policy::inspect(bytes).map_err(|e| bad(format!("not a valid policy file: {e}")))?;
-    if info.obs_dim != OBS_DIM || info.act_dim != NUM_JOINTS {
-        return Err(bad(format!(
-            "another layout: it maps {} observations to {} actions, the hand needs {OBS_DIM} -> {NUM_JOINTS}",
-            info.obs_dim, info.act_dim
-        )));
-    }
-    vge_sim::observation::check_layout(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
-        .map_err(|e| bad(format!("another observation layout: {e}")))
+    vge_sim::check_policy_interface(
+        info.obs_dim,
+        info.act_dim,
+        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
+        info.action_names.iter(),
+    )
+    .map_err(bad)
 }
 
 /// The fields of `best-eval.json` and `final-eval.json` the score reads.
@@ -242,7 +241,7 @@ fn score_envs(config: &Config) -> Vec<EnvConfig> {
 /// Refuses held-out episodes that would meet the validation or test episodes training drew
 /// ([`crate::run_eval::EpisodeSet`], `run.eval_episodes` each).
 pub fn check_held_out(config: &Config, first: u64, episodes: usize) -> Result<(), ScoreError> {
-    let n = config.run.eval_episodes.max(1) as u64;
+    let n = config.run.eval_episodes as u64;
     let end = first.saturating_add(episodes as u64);
     for (episode_set, set) in crate::run_eval::EpisodeSet::ALL {
         let theirs = episode_set.first_seed(config);

@@ -69,11 +69,10 @@ impl EnvCore {
     /// truncated, info)`.
     fn step<'py>(&mut self, py: Python<'py>, action: PyReadonlyArray1<'py, f32>) -> PyResult<StepTuple<'py>> {
         let got = action.len();
+        let action = action.as_slice().map_err(|e| errors::value(format!("action: {e}")))?;
         let action: [f32; NUM_JOINTS] = action
-            .as_slice()
-            .ok()
-            .and_then(|s| s.try_into().ok())
-            .ok_or_else(|| errors::sim(vge_sim::SimError::ActionLength { got, expected: NUM_JOINTS }))?;
+            .try_into()
+            .map_err(|_| errors::sim(vge_sim::SimError::ActionLength { got, expected: NUM_JOINTS }))?;
         let env = &mut self.env;
         let r = py.detach(|| env.step(&action)).map_err(errors::sim)?;
         let info = PyDict::new(py);

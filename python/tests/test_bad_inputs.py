@@ -43,6 +43,9 @@ def test_the_rust_side_checks_too(env):
         env._core.step(np.zeros(14, np.float32))
     with pytest.raises(TypeError):
         env._core.step(np.zeros(15, np.float64))
+    # Every other entry of 30: 15 entries, not contiguous; said so, not "15 expected 15".
+    with pytest.raises(ValueError, match="action: .*contiguous"):
+        env._core.step(np.zeros(30, np.float32)[::2])
 
 
 def test_step_before_reset_is_a_runtime_error():

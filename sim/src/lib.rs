@@ -33,6 +33,7 @@ pub mod mjcf;
 #[cfg(feature = "physics")]
 pub mod objects;
 pub mod observation;
+pub mod policy_interface;
 #[cfg(feature = "physics")]
 pub mod recording;
 #[cfg(feature = "physics")]
@@ -57,6 +58,7 @@ pub use kinematics::{
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{FingertipReading, OBS_DIM, build_observation};
+pub use policy_interface::check_policy_interface;
 #[cfg(feature = "physics")]
 pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
