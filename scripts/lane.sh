@@ -8,6 +8,7 @@
 #   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL
 #   scripts/lane.sh status QUEUE      each run's state and latest step
 #   scripts/lane.sh check QUEUE       check every line (run does this first)
+#   scripts/lane.sh stop QUEUE        end the lane: its run checkpoints; `run` resumes it
 #
 # A queue line is `REL COMMIT CONFIG SEED [--set KEY=VALUE ...]` (`#` starts a comment):
 # the run trains into runs/REL with runs/bin/vge-COMMIT, built once from a git worktree of
@@ -25,7 +26,7 @@ repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
 
-usage() { sed -n '7,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '7,11p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 
 # runs/bin/vge-COMMIT, built from a worktree of COMMIT under a lock (two lanes may ask at once).
 binary_of() {
@@ -135,10 +136,30 @@ status() {
   done 3<"$1"
 }
 
+# Ends the lane running QUEUE: its shell first, so that it starts no further run, then
+# SIGTERM to its vge, which saves a checkpoint and exits; returns once it has.
+stop() {
+  local queue=$1 lane kids
+  lane=$(pgrep -f "lane.sh run $queue\$" || true)
+  [ -n "$lane" ] || { echo "lane: no lane is running $queue" >&2; return 1; }
+  kids=$(pgrep -P "$lane" -d ' ' || true)
+  # shellcheck disable=SC2086 # lists of pids
+  kill $lane
+  if [ -n "$kids" ]; then
+    # shellcheck disable=SC2086
+    kill -TERM $kids
+    # shellcheck disable=SC2086
+    while kill -0 $kids 2>/dev/null; do sleep 1; done
+  fi
+  echo "$(date -u +%FT%TZ) stopped by lane.sh stop" >>"runs/lanes/$(basename "$queue" .txt).log"
+  echo "lane: stopped $queue"
+}
+
 case ${1:-} in
   run) [ $# -eq 2 ] || usage; run_queue "$2" ;;
   collect) [ $# -ge 2 ] || usage; shift; collect "$@" ;;
   status) [ $# -eq 2 ] || usage; status "$2" ;;
   check) [ $# -eq 2 ] || usage; check "$2" && echo "$2: every line checks" ;;
+  stop) [ $# -eq 2 ] || usage; stop "$2" ;;
   *) usage ;;
 esac; exit # on the esac line: a lane reads no further, so editing this file cannot reach it
