@@ -341,9 +341,9 @@ fn positive_seconds(name: &str, s: f64, zero_ok: bool) -> anyhow::Result<Option<
 fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::Result<LoopConfig> {
     let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
     anyhow::ensure!(
-        rate_hz.is_finite() && rate_hz >= vge_bridge::control_loop::MIN_RATE_HZ,
+        rate_hz.is_finite() && rate_hz >= control_loop::MIN_RATE_HZ,
         "--rate must be a number of Hz, at least {}, got {rate_hz}",
-        vge_bridge::control_loop::MIN_RATE_HZ
+        control_loop::MIN_RATE_HZ
     );
     if (rate_hz - f64::from(policy_hz)).abs() > 1e-3 {
         note!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
