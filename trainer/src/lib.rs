@@ -16,6 +16,7 @@ pub mod nets;
 pub mod optim;
 pub mod policy_export;
 pub mod replay;
+mod saved_state;
 pub mod tensorboard;
 pub mod toy;
 pub mod train;

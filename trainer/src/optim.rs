@@ -104,14 +104,9 @@ impl Adam {
         prefix: &str,
         named: &std::collections::HashMap<String, Tensor>,
     ) -> Result<(), tch::TchError> {
-        let get = |k: String| {
-            named.get(&k).ok_or_else(|| tch::TchError::FileFormat(format!("optimiser state lacks {k}")))
-        };
-        self.step = get(format!("{prefix}.step"))?.int64_value(&[0]);
-        tch::no_grad(|| -> Result<(), tch::TchError> {
-            self.m.f_copy_(get(format!("{prefix}.m"))?)?;
-            self.v.f_copy_(get(format!("{prefix}.v"))?)?;
-            Ok(())
-        })
+        use crate::saved_state::{restore_into, saved_i64};
+        self.step = saved_i64(named, &format!("{prefix}.step"))?;
+        restore_into(&mut self.m, named, &format!("{prefix}.m"))?;
+        restore_into(&mut self.v, named, &format!("{prefix}.v"))
     }
 }

@@ -162,6 +162,17 @@ fn auto_alpha_moves_and_target_critic_trails_the_critic() {
     // A target entropy far above what the policy has drives α up.
     assert!(sac.alpha() > 0.1, "alpha {}", sac.alpha());
     assert!(sac.alpha().is_finite());
+
+    // Saved and loaded into a fresh learner, α and the update count come back.
+    let dir = std::env::temp_dir().join(format!("vge-auto-alpha-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    sac.save(&dir).expect("save");
+    let mut again =
+        learner::build(config(EntropyCoef::Auto { target_entropy: 10.0, initial: 0.1 }), Device::Cpu)
+            .expect("sac");
+    again.load(&dir).expect("load");
+    assert_eq!((again.alpha(), again.updates()), (sac.alpha(), sac.updates()));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

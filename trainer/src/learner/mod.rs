@@ -415,12 +415,15 @@ impl ActorCritic {
     fn restore_state(&mut self, named: &HashMap<String, Tensor>) -> Result<(), tch::TchError> {
         self.actor_opt.restore("actor_opt", named)?;
         self.critic_opt.restore("critic_opt", named)?;
-        let updates = named
-            .get("updates")
-            .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks updates".to_owned()))?;
-        self.updates = updates.int64_value(&[0]) as u64;
+        let updates = crate::saved_state::saved_i64(named, "updates")?;
+        self.updates = u64::try_from(updates)
+            .map_err(|_| tch::TchError::FileFormat(format!("the checkpoint's updates is {updates}")))?;
         // Absent in checkpoints from before TD3; only a logged number depends on it.
-        self.last_actor_loss = named.get("last_actor_loss").map_or(0.0, |t| t.double_value(&[0]));
+        self.last_actor_loss = if named.contains_key("last_actor_loss") {
+            crate::saved_state::saved_f64(named, "last_actor_loss")?
+        } else {
+            0.0
+        };
         Ok(())
     }
 }

@@ -156,12 +156,9 @@ impl Learner for SoftActorCritic {
 
     fn restore_own_state(&mut self, named: &HashMap<String, Tensor>) -> Result<(), tch::TchError> {
         if let Some((log_alpha, opt, _)) = &mut self.log_alpha {
-            let saved = named
-                .get("log_alpha")
-                .ok_or_else(|| tch::TchError::FileFormat("optimiser state lacks log_alpha".to_owned()))?;
-            tch::no_grad(|| log_alpha.f_copy_(saved))?;
+            crate::saved_state::restore_into(log_alpha, named, "log_alpha")?;
             opt.restore("alpha_opt", named)?;
-            self.alpha = log_alpha.exp().double_value(&[0]);
+            self.alpha = log_alpha.exp().f_double_value(&[0])?;
         }
         Ok(())
     }
