@@ -135,10 +135,13 @@ pub fn to_markdown(rows: &[ObjectRow]) -> String {
     text
 }
 
-/// 250000 -> "250k", 2000000 -> "2M", other steps as they are.
+/// 250000 -> "250k", 2000000 -> "2M", 1250000 -> "1.25M", other steps as they are.
 fn steps_label(step: u64) -> String {
     match step {
-        s if s >= 1_000_000 && s % 1_000_000 == 0 => format!("{}M", s / 1_000_000),
+        s if s >= 1_000_000 && s % 10_000 == 0 => {
+            let m = format!("{:.2}", s as f64 / 1e6);
+            format!("{}M", m.trim_end_matches('0').trim_end_matches('.'))
+        }
         s if s >= 1_000 && s % 1_000 == 0 => format!("{}k", s / 1_000),
         s => s.to_string(),
     }
@@ -152,7 +155,9 @@ mod tests {
     fn steps_read_as_people_write_them() {
         assert_eq!(steps_label(250_000), "250k");
         assert_eq!(steps_label(2_000_000), "2M");
-        assert_eq!(steps_label(2_500_000), "2500k");
+        assert_eq!(steps_label(2_500_000), "2.5M");
+        assert_eq!(steps_label(1_250_000), "1.25M");
+        assert_eq!(steps_label(1_001_000), "1001k");
         assert_eq!(steps_label(4_720), "4720");
     }
 

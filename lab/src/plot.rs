@@ -62,6 +62,8 @@ pub struct RunCurves {
     /// Success rate of the final evaluation (`final-eval.json`), else of the last periodic
     /// one, if any.
     pub final_success: Option<f64>,
+    /// For a run on several objects, its worst object's success in the final evaluation.
+    pub final_worst_object_success: Option<f64>,
     /// Mean return and contact switches per episode of the final evaluation
     /// (`final-eval.json`).
     pub final_return: Option<f64>,
@@ -79,22 +81,56 @@ pub struct RunCurves {
 
 /// The fields of `best-eval.json` that the plot reads.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(from = "SelectedFields")]
 pub struct Selected {
     pub selected_step: u64,
     /// On the test grasps, which the selection never saw.
     pub success_rate: f64,
+    /// For a run on several objects, its worst object's success on those grasps.
+    pub worst_object_success_rate: Option<f64>,
+}
+
+#[derive(serde::Deserialize)]
+struct SelectedFields {
+    selected_step: u64,
+    success_rate: f64,
+    #[serde(default)]
+    per_object: Option<crate::eval::PerObjectFigures>,
+}
+
+impl From<SelectedFields> for Selected {
+    fn from(f: SelectedFields) -> Self {
+        Self {
+            selected_step: f.selected_step,
+            success_rate: f.success_rate,
+            worst_object_success_rate: f.per_object.as_ref().and_then(worst_object_success),
+        }
+    }
+}
+
+/// The lowest success rate of a per-object report (None for none).
+fn worst_object_success(p: &crate::eval::PerObjectFigures) -> Option<f64> {
+    p.0.iter().map(|(_, f)| f.success_rate).reduce(f64::min)
+}
+
+/// The success test's verdict: the pooled success and, on several objects, every object's
+/// reach [`crate::eval::LEARNED_SUCCESS_RATE`] (a policy for five objects that drops one
+/// has not learned the task).
+fn learned(success: f64, worst_object: Option<f64>) -> bool {
+    let pass = |s: f64| s >= crate::eval::LEARNED_SUCCESS_RATE;
+    pass(success) && worst_object.is_none_or(pass)
 }
 
 impl Selected {
     pub fn learned(&self) -> bool {
-        self.success_rate >= crate::eval::LEARNED_SUCCESS_RATE
+        learned(self.success_rate, self.worst_object_success_rate)
     }
 }
 
 impl RunCurves {
     /// Whether the run learned by the success test's definition (None: not evaluated).
     pub fn learned(&self) -> Option<bool> {
-        self.final_success.map(|s| s >= crate::eval::LEARNED_SUCCESS_RATE)
+        self.final_success.map(|s| learned(s, self.final_worst_object_success))
     }
 }
 
@@ -113,6 +149,8 @@ pub(crate) struct FinalEvalFields {
     pub(crate) wall_s: f64,
     #[serde(default)]
     pub(crate) cpu_s: Option<f64>,
+    #[serde(default)]
+    pub(crate) per_object: Option<crate::eval::PerObjectFigures>,
 }
 
 fn read(path: &Path) -> Result<String, PlotError> {
@@ -213,6 +251,8 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         Some(f) => Some(f.success_rate),
         None => eval_success.last().copied(),
     };
+    let final_worst_object_success =
+        final_eval.as_ref().and_then(|f| f.per_object.as_ref()).and_then(worst_object_success);
     Ok(RunCurves {
         dir: dir.to_owned(),
         experiment,
@@ -230,6 +270,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         eval_return,
         eval_success,
         final_success,
+        final_worst_object_success,
         final_return: final_eval.as_ref().and_then(|f| f.mean_return),
         final_contact_switches: final_eval.as_ref().and_then(|f| f.mean_contact_switches),
         env_steps: final_eval.as_ref().map(|f| f.env_steps),
@@ -806,6 +847,33 @@ mod tests {
         assert!(err.contains("row 3 has 2 fields, the header 3: no `return`"), "{err}");
         assert_eq!(csv_columns(&csv, &["success"]).expect("the fields it has"), vec![vec![0.5, 0.7]]);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_selection_on_several_objects_learned_only_if_every_object_passed() {
+        let figures = |s: f64| {
+            format!(
+                r#"{{"success_rate": {s}, "drop_rate": 0, "mean_return": 0, "mean_rotation_rad": 0,
+                   "mean_contact_switches": 0, "episodes": 20}}"#
+            )
+        };
+        let selected = |cube: f64, sphere: f64| -> Selected {
+            let json = format!(
+                r#"{{"selected_step": 1500000, "success_rate": {}, "per_object":
+                   {{"cube": {}, "sphere": {}}}}}"#,
+                (cube + sphere) / 2.0,
+                figures(cube),
+                figures(sphere)
+            );
+            serde_json::from_str(&json).expect("best-eval.json")
+        };
+        // Pooled 0.6, but the sphere at 0.2: not learned.
+        assert_eq!(selected(1.0, 0.2).worst_object_success_rate, Some(0.2));
+        assert!(!selected(1.0, 0.2).learned());
+        assert!(selected(1.0, 0.5).learned());
+        let one: Selected =
+            serde_json::from_str(r#"{"selected_step": 5, "success_rate": 0.5}"#).expect("one object");
+        assert!(one.learned() && one.worst_object_success_rate.is_none());
     }
 
     #[test]
