@@ -261,8 +261,32 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     let png = dir.join("curves.png");
     let plot = vge(&["plot", "--out", &png.display().to_string()], &[run.display().to_string()]);
     assert!(plot.status.success(), "{}", text(&plot.stderr));
-    let per_object = std::fs::read(dir.join("curves-per-object.png")).expect("curves-per-object.png");
-    assert!(per_object.starts_with(b"\x89PNG"), "a PNG");
+    // Two objects' columns: periodic evaluations above training episodes, 420 x 400 each.
+    assert_eq!(png_size_px(&dir.join("curves-per-object.png")), (840, 800));
+    // A run from a vge without the training episodes' per-object columns: one row, not an
+    // empty one.
+    let metrics = run.join("metrics.csv");
+    let text_before = std::fs::read_to_string(&metrics).expect("metrics.csv");
+    let keep: Vec<usize> = text_before
+        .lines()
+        .next()
+        .expect("header")
+        .split(',')
+        .enumerate()
+        .filter(|(_, c)| !c.starts_with("cube_") && !c.starts_with("sphere_"))
+        .map(|(i, _)| i)
+        .collect();
+    let without: String = text_before
+        .lines()
+        .map(|l| {
+            let fields: Vec<&str> = l.split(',').collect();
+            keep.iter().map(|&i| fields[i]).collect::<Vec<_>>().join(",") + "\n"
+        })
+        .collect();
+    std::fs::write(&metrics, without).expect("metrics.csv");
+    let plot = vge(&["plot", "--out", &png.display().to_string()], &[run.display().to_string()]);
+    assert!(plot.status.success(), "{}", text(&plot.stderr));
+    assert_eq!(png_size_px(&dir.join("curves-per-object.png")), (840, 400));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -752,8 +752,9 @@ fn multi_object_objects(runs: &[RunCurves]) -> Vec<vge_sim::ObjectShape> {
 /// Per-object curves of the runs trained on several objects, one column of panels per
 /// object: each experiment's success on that object in the periodic evaluations (`eval.csv`'s
 /// `<object>_success`) above its success in the training episodes (`metrics.csv`'s), mean and
-/// min-max over seeds, into `<out stem>-per-object.png` beside `out`. Returns the file
-/// written, or `None` when no run trained on several objects.
+/// min-max over seeds, into `<out stem>-per-object.png` beside `out` (a row no run has the
+/// columns for is left out). Returns the file written, or `None` when no run trained on
+/// several objects or none has per-object columns.
 pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>, PlotError> {
     let objects = multi_object_objects(runs);
     if objects.is_empty() {
@@ -773,7 +774,7 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
     let rows =
         [(crate::run_dir::EVAL, "periodic evaluations"), (crate::run_dir::METRICS, "training episodes")];
     let mut per_panel: Vec<Vec<RunCurves>> = Vec::new();
-    for (file, _) in rows {
+    for (file, _) in &rows {
         for &object in &objects {
             let column = format!("{}_success", object.name());
             let mut curves = Vec::new();
@@ -785,11 +786,23 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
             per_panel.push(curves);
         }
     }
+    // A row no run has columns for (runs from a vge without per-object training columns)
+    // is left out, not drawn empty.
+    let (rows, per_row): (Vec<_>, Vec<_>) = rows
+        .iter()
+        .zip(per_panel.chunks(objects.len()))
+        .filter(|(_, panels)| panels.iter().any(|c| !c.is_empty()))
+        .map(|(row, panels)| (*row, panels.to_vec()))
+        .unzip();
+    let per_panel: Vec<Vec<RunCurves>> = per_row.concat();
+    if rows.is_empty() {
+        return Ok(None);
+    }
     // The drawing borrows the path: it ends before the path is returned.
     {
         prepare_png(&path)?;
         let width = 420 * objects.len() as u32;
-        let root = BitMapBackend::new(&path, (width, 800)).into_drawing_area();
+        let root = BitMapBackend::new(&path, (width, 400 * rows.len() as u32)).into_drawing_area();
         root.fill(&WHITE).map_err(draw_err)?;
         let root = root.titled("success per object", ("sans-serif", 20)).map_err(draw_err)?;
         let panels = root.split_evenly((rows.len(), objects.len()));
