@@ -150,7 +150,7 @@ fn judged_scores(
             scored
                 .iter()
                 .filter_map(|s| judged_objects(s, judged))
-                .filter_map(|p| p.0.iter().find(|(o, _)| o == object).map(|(_, f)| f.success_rate))
+                .filter_map(|p| p.of(*object).map(|f| f.success_rate))
                 .collect()
         })
         .collect();

@@ -284,6 +284,16 @@ impl PerObjectFigures {
     pub fn objects(&self) -> Vec<ObjectShape> {
         self.0.iter().map(|(o, _)| *o).collect()
     }
+
+    /// `object`'s figures, if it is one of these.
+    pub fn of(&self, object: ObjectShape) -> Option<&ObjectFigures> {
+        self.0.iter().find(|(o, _)| *o == object).map(|(_, f)| f)
+    }
+
+    /// The lowest success rate among the objects (None for none).
+    pub fn worst_success_rate(&self) -> Option<f64> {
+        self.0.iter().map(|(_, f)| f.success_rate).reduce(f64::min)
+    }
 }
 
 impl<'de> serde::Deserialize<'de> for PerObjectFigures {

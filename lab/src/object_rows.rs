@@ -42,7 +42,7 @@ pub fn rows(
             let eval_csv = crate::run_dir::RunDir::new(&run.dir).eval_csv();
             for &object in objects {
                 let figures = |per_object: Option<&crate::eval::PerObjectFigures>| {
-                    per_object.and_then(|p| p.0.iter().find(|(o, _)| *o == object).map(|(_, f)| *f))
+                    per_object.and_then(|p| p.of(object).copied())
                 };
                 let score = run.score.as_ref();
                 rows.push(ObjectRow {

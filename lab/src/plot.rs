@@ -103,14 +103,12 @@ impl From<SelectedFields> for Selected {
         Self {
             selected_step: f.selected_step,
             success_rate: f.success_rate,
-            worst_object_success_rate: f.per_object.as_ref().and_then(worst_object_success),
+            worst_object_success_rate: f
+                .per_object
+                .as_ref()
+                .and_then(crate::eval::PerObjectFigures::worst_success_rate),
         }
     }
-}
-
-/// The lowest success rate of a per-object report (None for none).
-fn worst_object_success(p: &crate::eval::PerObjectFigures) -> Option<f64> {
-    p.0.iter().map(|(_, f)| f.success_rate).reduce(f64::min)
 }
 
 /// The success test's verdict: the pooled success and, on several objects, every object's
@@ -251,8 +249,10 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
         Some(f) => Some(f.success_rate),
         None => eval_success.last().copied(),
     };
-    let final_worst_object_success =
-        final_eval.as_ref().and_then(|f| f.per_object.as_ref()).and_then(worst_object_success);
+    let final_worst_object_success = final_eval
+        .as_ref()
+        .and_then(|f| f.per_object.as_ref())
+        .and_then(crate::eval::PerObjectFigures::worst_success_rate);
     Ok(RunCurves {
         dir: dir.to_owned(),
         experiment,
