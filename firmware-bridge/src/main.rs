@@ -41,7 +41,7 @@ type ObjectArg = String;
 
 /// Exit status of `emulate` when a node faulted (e.g. the bridge stopped sending commands
 /// while the fingers were enabled): the summary is printed, and scripts see the fault.
-const EXIT_NODE_FAULT: u8 = 2;
+const EXIT_NODE_FAULT: u8 = 3;
 
 /// A line to stdout. A reader that has gone (EPIPE: `vge-bridge ... | head -1`) ends the
 /// output, not the command, which runs on and exits with its own status (a safety halt's
@@ -179,7 +179,7 @@ enum Command {
     /// it could not run (a bad file, no answer from the hand at start-up, a transport error);
     /// 2 for a bad command line.
     Run {
-        /// Policy file written by `vge export` or `vge train`.
+        /// Policy file written by `vge train`, `vge export` or `vge import`.
         #[arg(long)]
         policy: PathBuf,
         /// The hand to drive. `sim` needs a vge-bridge built with the `sim` cargo feature (the
@@ -200,7 +200,8 @@ enum Command {
         /// frame for the hand; the interface needs an FD MTU (72).
         #[arg(long)]
         fd: bool,
-        /// Object in the simulated hand (backend sim).
+        /// Object in the simulated hand (backend sim): cube, sphere, cylinder, dodecahedron,
+        /// icosahedron or hexagonal-prism.
         #[arg(long, default_value = "cube")]
         object: ObjectArg,
         /// Seed of the simulated episode (backend sim).
@@ -225,10 +226,12 @@ enum Command {
     /// nodes send heartbeats at 10 Hz and report their enable state; an enabled finger that
     /// gets no command for --command-timeout-s holds and reports fault command_timeout.
     /// Stops when no frame arrived for --idle-timeout-s or on Ctrl-C, printing a summary.
-    /// Exit status 0, or 2 when a node faulted during the run. --restart-node reboots one
+    /// Exit status 0, 3 when a node faulted during the run, 1 when it could not run, 2 for a
+    /// bad command line. --restart-node reboots one
     /// node mid-run, as a joint controller that resets: it sends its boot-up heartbeat and
     /// counts its heartbeats from 0 again, disabled (the bridge halts: node_restarted).
     Emulate {
+        /// CAN interface the nodes speak on.
         #[arg(long, default_value = "vcan0")]
         iface: String,
         /// What the nodes are. `sim` needs a vge-bridge built with the `sim` cargo feature (the
@@ -238,8 +241,11 @@ enum Command {
         /// Speak the CAN FD option (model sim): node states and hand commands as FD frames.
         #[arg(long)]
         fd: bool,
+        /// Object in the simulated hand (model sim): cube, sphere, cylinder, dodecahedron,
+        /// icosahedron or hexagonal-prism.
         #[arg(long, default_value = "cube")]
         object: ObjectArg,
+        /// Seed of the simulated episode (model sim).
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Stop after this many seconds without a frame.
@@ -267,10 +273,13 @@ enum Command {
         /// Policy file to run each period (default: hold, i.e. zero change).
         #[arg(long)]
         policy: Option<PathBuf>,
+        /// Control rate in Hz.
         #[arg(long, default_value_t = 1000.0)]
         rate: f64,
+        /// Seconds to run.
         #[arg(long, default_value_t = 60.0)]
         duration: f64,
+        /// Print one JSON line of statistics instead of a summary.
         #[arg(long)]
         json: bool,
         #[command(flatten)]

@@ -951,7 +951,7 @@ fn a_killed_bridge_leaves_the_nodes_holding_with_fault_command_timeout() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     eprintln!("{summary}\n{stderr}");
 
-    assert_eq!(out.status.code(), Some(2), "the emulator says a node faulted: {stderr}");
+    assert_eq!(out.status.code(), Some(3), "the emulator says a node faulted: {stderr}");
     assert!(stderr.contains("command_timeout"), "{stderr}");
     assert_eq!(json_f64(&summary, "command_timeouts"), 5.0, "{summary}");
     let faults: Vec<_> = seen

@@ -12,7 +12,8 @@ use vge_sim::{EnvConfig, ObjectShape};
 pub enum Bench {
     /// Full SAC updates per second: batch 256, 256x256 actor and twin critics, obs 65,
     /// action 15, alpha 0, critics with layer norm (the training defaults); also the
-    /// achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison.
+    /// achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison. Threads: libtorch's
+    /// default; set them with `OMP_NUM_THREADS=N` (training uses `sac.threads`).
     Update {
         /// Print one JSON line instead of a table.
         #[arg(long)]
@@ -81,8 +82,8 @@ pub enum Bench {
         /// Seed of the untrained actor and of the observations.
         #[arg(long, default_value_t = 0)]
         seed: i64,
-        /// The firmware's optimisation level: 3 (default, fastest) or s / z (smaller flash,
-        /// more instructions).
+        /// The firmware's optimisation level: 3 (default, fastest), 2, or s / z (smaller
+        /// flash, more instructions).
         #[arg(long, value_parser = ["3", "2", "s", "z"])]
         opt_level: Option<String>,
     },

@@ -4,8 +4,9 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-/// Compare groups of scored runs the way the field reports them (rliable's statistics):
-/// per group the IQM and mean of the runs' held-out success (score.json) with 95%
+/// Compare groups of scored runs with rliable's statistics (IQM, intervals, P(improvement))
+///
+/// Per group the IQM and mean of the runs' held-out success (score.json) with 95%
 /// stratified bootstrap intervals, the probability that a run of one group beats a run
 /// of another with its interval, performance profiles and IQM learning curves.
 ///

@@ -11,17 +11,20 @@ use vge_sim::ObjectShape;
 /// IGM (in-grasp manipulation: contact-force QP + rotation), CS (contact switching: a
 /// detach/re-attach trajectory of one finger) or FG (both). Prints mean return,
 /// mean_rotation_rad (object rotation about z per episode), mean fingertip contacts,
-/// drops (episodes ended early) and the controller's cost per call.
+/// drops (episodes ended early), the success rate and the controller's cost per call.
 #[derive(Debug, Args)]
 pub struct ControllerArgs {
-    #[arg(long, value_parser = parse_controller_kind)]
+    /// The controller: igm, cs or fg.
+    #[arg(long, value_name = "igm|cs|fg", value_parser = parse_controller_kind)]
     kind: ControllerKind,
+    /// The object in the hand: cube, sphere, cylinder, dodecahedron, icosahedron or
+    /// hexagonal-prism.
     #[arg(long, default_value_t = ObjectShape::Cube)]
     object: ObjectShape,
+    /// Episodes to roll out.
     #[arg(long, default_value_t = 10)]
     episodes: usize,
-    /// Seed of the noise and perturbation draws. The grasp itself is not randomised, so
-    /// without noise or perturbation every episode (and every seed) is the same.
+    /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Episode length in seconds of sim time [default: 10, or with --config the success

@@ -11,6 +11,8 @@ use vge_sim::{EnvConfig, ObjectShape};
 /// The episodes of the success test (`vge eval`, `vge robustness`).
 #[derive(Debug, Clone, Copy, Args)]
 pub struct EpisodeArgs {
+    /// The object in the hand: cube, sphere, cylinder, dodecahedron, icosahedron or
+    /// hexagonal-prism (no training object: it tests a policy on a shape it never saw).
     #[arg(long, default_value_t = ObjectShape::Cube)]
     pub object: ObjectShape,
     /// Seed of the grasp, noise and perturbation draws (episode k uses seed + k).
@@ -86,6 +88,8 @@ pub struct EvalArgs {
     /// `pip install ./python rerun-sdk`).
     #[arg(long, value_name = "F.jsonl")]
     record: Option<PathBuf>,
+    /// Print the report as one JSON object (the fields of `final-eval.json`) instead of a
+    /// summary.
     #[arg(long)]
     json: bool,
 }

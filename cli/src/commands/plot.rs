@@ -5,9 +5,11 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-/// Plot training curves of run directories (mean and min-max over runs of the same
-/// experiment) into a PNG, and print a markdown table of final success rates; or, with
-/// --table1, the paper's Table I and Fig. 3 from all runs below the given folders.
+/// Plot training curves of runs, or with --table1 the paper's Table I and Fig. 3
+///
+/// Curves of run directories (mean and min-max over runs of the same experiment) go into a
+/// PNG, with a markdown table of final success rates printed; --table1 builds Table I and
+/// Fig. 3 from all runs below the given folders.
 ///
 /// Panels: episode return, rotation, controller share, and the critic's mean Q beside the
 /// discounted Monte-Carlo returns of its data (a sound critic stays within them). A run
@@ -17,9 +19,13 @@ use clap::Args;
 ///
 /// --table1 DIR places every run by its config's controller and method and writes
 /// DIR/table1.csv (controller,method,seeds,learned,success_rate_mean,return_mean,
-/// return_std,env_steps), DIR/table1.md (beside the paper's numbers) and
-/// DIR/curves-fg.png, DIR/curves-cs.png (periodic success rate and return against env
-/// steps, one band per method). Runs without final-eval.json are counted as running.
+/// return_std,env_steps; once runs are scored also scored and the IQM and mean of their
+/// held-out success with 95% intervals, selected and final: iqm, iqm_ci_low, ...,
+/// final_iqm_ci_high), DIR/table1.md (beside the paper's numbers), DIR/curves-fg.png,
+/// DIR/curves-cs.png (periodic success rate and return against env steps, one band per
+/// method) and, once runs are scored, DIR/improvement.csv (VGE and FGE against RL, VGE
+/// against FGE, VGE + BC against VGE) and DIR/profiles-fg.png, DIR/profiles-cs.png. Runs without final-eval.json are counted as
+/// running.
 /// The controllers alone come from DIR/controllers/{fg,cs,igm}.json when present
 /// (`vge controller --kind fg --episodes 20 --episode-s 30 --json`).
 ///

@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 
-/// Score finished runs on many held-out episodes and write DIR/score.json (training
-/// writes it at its end too): the run's selected policy (its own model selection on
+/// Score finished runs on held-out episodes into DIR/score.json
+///
+/// Training writes it at its end too. Scored: the run's selected policy (its own model selection on
 /// validation grasps, policy-best.vgep), its final policy (policy.vgep) and, where the
 /// last 3 periodic snapshots are kept, their mean, all on the same episodes.
 ///

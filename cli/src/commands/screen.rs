@@ -7,8 +7,9 @@ use anyhow::Context;
 use clap::Args;
 use vge_lab::ship::{self, ScreenOptions};
 
-/// Screen a training run's snapshots for the policy to ship: each snapshot whose periodic
-/// test passed (success >= --min-success in DIR/eval.csv), and the final policy, runs the
+/// Screen a run's snapshots for the policy to ship (`vge ship`).
+///
+/// Each snapshot whose periodic test passed (success >= --min-success in DIR/eval.csv), and the final policy, runs the
 /// success test and the two pushes at the object's weight (the robustness test's
 /// perturbation_magnitude_n and perturbation_force_n at their paper levels), all on episodes
 /// from --seed, which training's tests never use. Everything runs on the run's own task (its

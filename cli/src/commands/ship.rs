@@ -7,13 +7,15 @@ use anyhow::Context;
 use clap::Args;
 use vge_lab::ship::{self, ShipOptions, ShippedFiles};
 
-/// Ship a policy of a finished training run (its final one unless told) as a gait that comes
-/// with vge, measured: copies it and the run's config.toml to DIR/NAME.vgep and NAME.toml,
-/// then measures the copy with the success test (20 randomised 30 s episodes) and the
-/// robustness test (10 episodes per level, 5 levels per axis up to the paper's), and writes
-/// both, the run it came from and the goals with whether each holds to DIR/NAME.json, the
-/// robustness figure to DIR/NAME-robustness.png and the gait diagram of the success test's
-/// first episode to DIR/NAME-gait.png.
+/// Ship a run's policy as a measured gait that comes with vge (policies/NAME.*).
+///
+/// Takes the run's final policy unless told, copies it and the run's config.toml to the
+/// --policies folder (DIR, default policies/) as NAME.vgep and NAME.toml, then measures the
+/// copy with the success test (20 randomised 30 s episodes) and the robustness test (10
+/// episodes per level, 5 levels per axis up to the paper's), and writes both, the run it
+/// came from and the goals with whether each holds to DIR/NAME.json, the robustness figure
+/// to DIR/NAME-robustness.png and the gait diagram of the success test's first episode to
+/// DIR/NAME-gait.png.
 ///
 /// Measured on the run's own task (its config.toml: object, hand, physics, reward; not its
 /// training disturbances). The goals: success >= 0.8, and >= 0.75 of the clean return at each

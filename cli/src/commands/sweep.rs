@@ -10,8 +10,9 @@ use clap::Args;
 #[cfg(feature = "train")]
 use super::train::{stop_on_signal, train};
 
-/// Train one config for several seeds, one run directory each (DIR/seed-N). A finished
-/// seed (DIR/seed-N/policy.vgep) is skipped and an interrupted one resumed, so the same
+/// Train one config for several seeds, one run directory each (DIR/seed-N)
+///
+/// A finished seed (DIR/seed-N/policy.vgep) is skipped and an interrupted one resumed, so the same
 /// command again continues a sweep.
 ///
 /// Three ways to run the seeds: one after the other in this process (the default);

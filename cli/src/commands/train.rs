@@ -12,9 +12,12 @@ use clap::Args;
 ///
 /// Writes DIR/config.toml, DIR/metrics.csv (step, return, rotation, contacts, controller
 /// share, losses), the same curves for TensorBoard in DIR/tensorboard (`tensorboard
-/// --logdir DIR`), DIR/eval.csv, checkpoints in DIR/checkpoint and, when done, the actor
-/// as DIR/policy.vgep. Ctrl-C saves a checkpoint and exits; `--resume` continues, also
-/// after a kill (from the last periodic checkpoint).
+/// --logdir DIR`), DIR/eval.csv (the periodic success tests), DIR/snapshots/ (the policy at
+/// each test), checkpoints in DIR/checkpoint and, when done, the actor as DIR/policy.vgep
+/// with DIR/final-eval.json, the snapshot picked on validation grasps as
+/// DIR/policy-best.vgep with DIR/best-eval.json, and DIR/score.json (`vge score`). Ctrl-C
+/// saves a checkpoint and exits; `--resume` continues, also after a kill (from the last
+/// periodic checkpoint), with the run's own config.
 ///
 /// Progress: a bar on a terminal; where stderr is a file or a pipe (nohup, a batch job),
 /// one line per metrics row (`step 20000/1000000 (2%), 151 steps/s, 1h48m left, return
@@ -38,13 +41,15 @@ pub struct TrainArgs {
     /// older vge's checkpoint is refused, naming the file.
     #[arg(long, conflicts_with_all = ["config", "out"])]
     resume: Option<PathBuf>,
-    /// Override the config's seed.
+    /// Override the config's seed (refused with --resume unless it is the run's own).
     #[arg(long)]
     seed: Option<u64>,
-    /// Override the config's total env steps.
+    /// Override the config's total env steps; with --resume, continue the run to this many.
     #[arg(long)]
     steps: Option<u64>,
-    /// Override any config field, e.g. `--set sac.batch=128 --set vge.horizon=20`.
+    /// Override any config field, e.g. `--set sac.batch=128 --set vge.horizon=20`. With
+    /// --resume only `sac.threads` may change (another thread count can round differently, so
+    /// the run need not continue bit for bit); any other change is refused, naming the key.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
 }
@@ -79,8 +84,12 @@ fn train_target(
                 .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
             let origin = dir.join(vge_lab::run_dir::CONFIG).display().to_string();
             cfg::check_resumable(&text, &origin)?;
+            let stored = cfg::parse_with_overrides(&text, &origin, &[])?;
             let config = cfg::parse_with_overrides(&text, &origin, overrides)?;
             config.validate()?;
+            for note in cfg::check_resume(&stored, &config, &origin)? {
+                eprintln!("vge train: {note}");
+            }
             (config, dir, true)
         }
         // A folder holding a run, or being written, is refused by `train` (naming what it found).
