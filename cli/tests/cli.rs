@@ -523,6 +523,42 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// A resume keeps the run's config: `--seed` or a `--set` that changes it is refused naming the
+/// key, while `--steps` passes that check (and here stops at the missing checkpoint).
+#[test]
+fn resuming_with_another_config_is_refused_naming_the_key() {
+    let root = std::env::temp_dir().join(format!("vge-cli-resume-change-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    std::fs::create_dir_all(&root).expect("temp dir");
+    let stored =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/configs/paper-reward-vge-seed-0.toml");
+    let config = std::fs::read_to_string(stored).expect("stored config").replacen(
+        "[env]\n",
+        "[env]\ncharge_reverse_rotation = false\n",
+        1,
+    );
+    std::fs::write(root.join("config.toml"), &config).expect("write");
+    let dir = root.to_str().expect("utf-8");
+    let out = vge(&["train", "--resume", dir, "--seed", "7"], &[]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success() && err.contains("seed = 0 -> 7") && err.contains("--resume"), "{err}");
+    let out = vge(&["train", "--resume", dir, "--set", "vge.horizon=3"], &[]);
+    let err = text(&out.stderr);
+    assert!(!out.status.success() && err.contains("vge.horizon = ") && err.contains("-> 3"), "{err}");
+    let out = vge(&["train", "--resume", dir, "--steps", "123456"], &[]);
+    let err = text(&out.stderr);
+    assert!(
+        !out.status.success() && !err.contains("keeps the config") && err.contains("checkpoint"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(root.join("config.toml")).expect("read"),
+        config,
+        "the stored config is kept"
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 /// `vge screen` screens the snapshots whose periodic test passed (and the
 /// final policy) on the success test and the two pushes, with the real vge.
 #[test]

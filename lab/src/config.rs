@@ -486,7 +486,28 @@ impl Config {
         self.fge.validate()?;
         self.bc.validate()?;
         self.run.validate()?;
+        self.validate_episode_sets()?;
         self.validate_sizes()
+    }
+
+    /// Refuses a seed whose validation and test episodes would share env seeds (both sets
+    /// start at a fixed function of the seed, and a few seeds bring them within
+    /// `run.eval_episodes` of each other): the selected snapshot's test score would then rest
+    /// partly on episodes it was picked on.
+    fn validate_episode_sets(&self) -> Result<(), ConfigError> {
+        use crate::run_eval::EpisodeSet;
+        let n = self.run.eval_episodes as u64;
+        let (validation, test) = (EpisodeSet::Validation.first_seed(self), EpisodeSet::Test.first_seed(self));
+        if test.wrapping_sub(validation) < n || validation.wrapping_sub(test) < n {
+            return Err(invalid(format!(
+                "seed = {} with run.eval_episodes = {n}: the validation episodes (env seeds from \
+                 {validation}) and the test episodes (from {test}) would share seeds, so the \
+                 selected snapshot would be reported on episodes it was picked on; choose another \
+                 seed or fewer episodes",
+                self.seed
+            )));
+        }
+        Ok(())
     }
 
     /// Refuses a NaN or infinite float anywhere in the config, naming its key. The floats are
@@ -849,6 +870,82 @@ pub fn check_resumable(text: &str, origin: &str) -> Result<(), ConfigError> {
         }
     }
     Ok(())
+}
+
+/// The keys a resumed run may change: its budget (`--steps`), and libtorch's thread count,
+/// which can change the rounding, so that the run no longer continues bit for bit
+/// ([`check_resume`] says so). Any other change would make the folder claim a config that only
+/// part of the run trained with.
+pub const RESUME_MAY_CHANGE: [&str; 2] = ["total_steps", "sac.threads"];
+
+/// One key whose value differs between two configs: dotted name, the value before and after
+/// (as TOML; `-` where absent).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KeyChange {
+    pub key: String,
+    pub before: String,
+    pub after: String,
+}
+
+impl std::fmt::Display for KeyChange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} = {} -> {}", self.key, self.before, self.after)
+    }
+}
+
+/// The keys whose values differ between `a` and `b`, in key order.
+pub fn changed_keys(a: &Config, b: &Config) -> Result<Vec<KeyChange>, ConfigError> {
+    fn table(config: &Config) -> Result<toml::Table, ConfigError> {
+        config.to_toml_string()?.parse().map_err(|e: toml::de::Error| invalid(format!("cannot re-read: {e}")))
+    }
+    fn walk(prefix: &str, a: Option<&toml::Value>, b: Option<&toml::Value>, out: &mut Vec<KeyChange>) {
+        if let (Some(toml::Value::Table(ta)), Some(toml::Value::Table(tb))) = (a, b) {
+            let keys: std::collections::BTreeSet<&String> = ta.keys().chain(tb.keys()).collect();
+            for key in keys {
+                let name = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
+                walk(&name, ta.get(key), tb.get(key), out);
+            }
+        } else if a != b {
+            let text = |v: Option<&toml::Value>| v.map_or_else(|| "-".to_owned(), ToString::to_string);
+            out.push(KeyChange { key: prefix.to_owned(), before: text(a), after: text(b) });
+        }
+    }
+    let (a, b) = (toml::Value::Table(table(a)?), toml::Value::Table(table(b)?));
+    let mut out = Vec::new();
+    walk("", Some(&a), Some(&b), &mut out);
+    Ok(out)
+}
+
+/// Checks a resume's overrides: `resumed` (the stored config with them applied) may differ
+/// from `stored` (`origin`) only in [`RESUME_MAY_CHANGE`]; any other change is refused,
+/// naming each key with both values. Returns a note for each allowed change that costs the
+/// bit-for-bit continuation (the thread count), for the caller to print.
+pub fn check_resume(stored: &Config, resumed: &Config, origin: &str) -> Result<Vec<String>, ConfigError> {
+    let changes = changed_keys(stored, resumed)?;
+    let refused: Vec<String> = changes
+        .iter()
+        .filter(|c| !RESUME_MAY_CHANGE.contains(&c.key.as_str()))
+        .map(ToString::to_string)
+        .collect();
+    if !refused.is_empty() {
+        return Err(invalid(format!(
+            "a resumed run keeps the config it started with ({origin}), but the command line changes {}; \
+             only {} may change on --resume. To train with the change, start a new run from that \
+             config (--config with --set) or from its networks (--set init_from=DIR)",
+            refused.join(", "),
+            RESUME_MAY_CHANGE.join(" and ")
+        )));
+    }
+    Ok(changes
+        .iter()
+        .filter(|c| c.key == "sac.threads")
+        .map(|c| {
+            format!(
+                "{c}: libtorch can round differently on another thread count, so the run need not \
+                 continue bit for bit"
+            )
+        })
+        .collect())
 }
 
 /// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
