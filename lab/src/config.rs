@@ -486,8 +486,9 @@ impl Config {
         self.fge.validate()?;
         self.bc.validate()?;
         self.run.validate()?;
-        self.validate_episode_sets()?;
-        self.validate_sizes()
+        // Sizes first: an episode count no machine holds is that, whatever the seeds.
+        self.validate_sizes()?;
+        self.validate_episode_sets()
     }
 
     /// Refuses a seed whose validation and test episodes would share env seeds (both sets
