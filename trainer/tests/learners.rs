@@ -1,7 +1,7 @@
 //! The learners (SAC and TD3 behind `Learner`): networks and updates on real tch tensors.
 
 use tch::{Device, Kind, Tensor, nn};
-use vge_trainer::learner::{self, Algorithm, Batch, EntropyCoef, Learner, LearnerConfig};
+use vge_trainer::learner::{self, Algorithm, Batch, BcTerm, EntropyCoef, Learner, LearnerConfig};
 use vge_trainer::nets::{GaussianActor, NetSpec, TwinCritic};
 
 fn small_spec() -> NetSpec {
@@ -339,5 +339,66 @@ fn bf16_updates_track_f32_ones_and_acting_stays_f32(algorithm: Algorithm) {
         let bf16_out = deterministic(bf16_learner.as_mut(), MatmulPrecision::Bf16);
         assert!(max_abs(&(&f32_out - &bf16_out)) > 0.0, "{algorithm:?}");
         assert_eq!(max_abs(&(acted - f32_out)), 0.0, "{algorithm:?}");
+    }
+}
+
+/// A batch of terminal transitions with reward `reward` and a BC term (beta 1) cloning one
+/// fixed controller action per row.
+fn bc_batch(spec: &NetSpec, reward: f64) -> Batch {
+    let opts = (Kind::Float, Device::Cpu);
+    let mut batch = fixed_batch(spec);
+    batch.reward = Tensor::full([128, 1], reward, opts);
+    batch.bc = Some(BcTerm {
+        beta: 1.0,
+        mask: Tensor::ones([128, 1], opts),
+        action: Tensor::rand([128, spec.act_dim], opts) * 1.6 - 0.8,
+    });
+    batch
+}
+
+/// Mean squared distance of the deployed actions from the batch's controller actions.
+fn distance_to_controller(learner: &dyn Learner, batch: &Batch) -> f64 {
+    let bc = batch.bc.as_ref().expect("bc term");
+    (learner.actor().deterministic(&batch.obs) - &bc.action).square().mean(Kind::Float).double_value(&[])
+}
+
+/// Value-weighted BC clones controller actions the critic values (the actor moves towards
+/// them) and leaves alone those it values below 0: a negative weight would push the policy
+/// away without bound (SAC's log-likelihood has none) or to the action bound (TD3's).
+#[test]
+fn value_weighted_bc_clones_valued_actions_and_ignores_negative_ones() {
+    // TD3 as the configs run it: the actor learns every second update.
+    let td3 =
+        Algorithm::Td3 { explore_std: 0.1, target_noise_std: 0.2, target_noise_clip: 0.5, policy_delay: 2 };
+    for algorithm in [Algorithm::Sac, td3] {
+        tch::manual_seed(7);
+        let mut cfg = config(EntropyCoef::Fixed(0.0));
+        cfg.algorithm = algorithm;
+        // Valued: terminal rewards of +1, so Q(s, a_controller) -> 1 > 0.
+        let mut valued = learner::build(cfg.clone(), Device::Cpu).expect("learner");
+        let batch = bc_batch(&valued.config().net, 1.0);
+        let before = distance_to_controller(valued.as_ref(), &batch);
+        for _ in 0..400 {
+            valued.update(&batch);
+        }
+        let after = distance_to_controller(valued.as_ref(), &batch);
+        assert!(after < 0.7 * before, "{algorithm:?}: cloning valued actions, distance {before} -> {after}");
+
+        // Unvalued: rewards of -1, so Q -> -1 < 0 and the BC term weighs nothing.
+        let mut unvalued = learner::build(cfg, Device::Cpu).expect("learner");
+        let batch = bc_batch(&unvalued.config().net, -1.0);
+        let mut lowest_bc_loss = f64::INFINITY;
+        let mut last = None;
+        for _ in 0..400 {
+            let stats = unvalued.update(&batch);
+            lowest_bc_loss = lowest_bc_loss.min(stats.bc_loss);
+            last = Some(stats);
+        }
+        let last = last.expect("updates ran");
+        assert!(last.critic_loss < 0.1, "{algorithm:?}: the critic fits Q = -1 ({})", last.critic_loss);
+        assert!(lowest_bc_loss > -1.0, "{algorithm:?}: BC loss fell to {lowest_bc_loss}");
+        assert_eq!(last.bc_loss, 0.0, "{algorithm:?}: negative values weigh nothing");
+        let actions = unvalued.actor().deterministic(&batch.obs);
+        assert!(max_abs(&actions) < 0.999, "{algorithm:?}: actions pushed to the bound");
     }
 }

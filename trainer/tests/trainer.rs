@@ -256,8 +256,19 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     let _ = replay.sample(4, &mut rng, None).expect("sample");
 
     let mut sac = small_sac();
-    // Expected: -beta * mean(mask * minQ(s,a) * log pi(a|s)), with Q and pi before the step.
-    let q = sac.q_of(&batch.obs, &batch.action);
+    // At initialisation Q is below 0 on the cloned rows, where the weight is 0: fit the
+    // critics to the (positive) rewards first.
+    let plain = replay.gather(&idx, None);
+    for _ in 0..50 {
+        sac.update(&plain);
+    }
+    // Expected: -beta * mean(mask * max(minQ(s,a), 0) * log pi(a|s)), with Q and pi before
+    // the step.
+    let q_raw = sac.q_of(&batch.obs, &batch.action);
+    let q = q_raw.clamp_min(0.0);
+    let masked_q =
+        Vec::<f32>::try_from((&q_raw * Tensor::from_slice(&mask).view([8, 1])).view(-1)).expect("q");
+    assert!(masked_q.iter().any(|&v| v > 0.0), "{masked_q:?}");
     let (_, log_prob) =
         tch::no_grad(|| sac.actor().sample_and_log_prob_of(&batch.obs, &batch.action, None, false));
     let mask_t = Tensor::from_slice(&mask).view([8, 1]);
@@ -287,11 +298,15 @@ fn bc_loss_is_value_weighted_and_only_on_non_learner_actions() {
     });
     assert_eq!(sac.update(&learner_only).bc_loss, 0.0);
 
-    // TD3's deterministic actor: beta * mean(mask * minQ(s,a) * |(a - mu(s)) / scale|^2), on
-    // the updates that step the actor (every second one).
+    // TD3's deterministic actor: beta * mean(mask * max(minQ(s,a), 0) * |(a - mu(s)) /
+    // scale|^2), on the updates that step the actor (every second one); the critics fitted
+    // first, as above (an even number of updates, so the next one steps no actor).
     let mut td3 = small_learner(Algorithm::td3());
-    assert_eq!(td3.update(&batch).bc_loss, 0.0, "no actor step on the first update");
-    let q = td3.q_of(&batch.obs, &batch.action);
+    for _ in 0..50 {
+        td3.update(&plain);
+    }
+    assert_eq!(td3.update(&batch).bc_loss, 0.0, "no actor step on this update");
+    let q = td3.q_of(&batch.obs, &batch.action).clamp_min(0.0);
     let mu = tch::no_grad(|| td3.actor().deterministic(&batch.obs));
     let sq = ((&batch.action - mu) / 0.5).square().sum_dim_intlist(-1, true, Kind::Float);
     let expected = (&q * &sq * &mask_t).mean(Kind::Float).double_value(&[]) * beta;

@@ -150,9 +150,11 @@ impl LearnerConfig {
 }
 
 /// The value-weighted behaviour-cloning term of a batch (the paper's Eq. for L_BC):
-/// `L_BC = -beta * mean_batch(mask * Q(s,a) * log pi(a|s))`, with `a` the controller's
-/// action at `s` ([`Self::action`]) and Q = min of the twins, detached (a weight, not a path
-/// for gradients).
+/// `L_BC = -beta * mean_batch(mask * max(Q(s,a), 0) * log pi(a|s))`, with `a` the
+/// controller's action at `s` ([`Self::action`]) and Q = min of the twins, detached (a
+/// weight, not a path for gradients). Negative values weigh 0: a weighted likelihood with a
+/// negative weight has no maximum (the paper's reward is mostly positive; this one charges
+/// drops and backward turns).
 ///
 /// Sign: the paper writes `sum beta log pi(a|s) Q(s,a)` and the step `theta <- theta -
 /// grad L_BC`; taken literally that *lowers* the likelihood of high-value controller actions,
@@ -377,10 +379,19 @@ impl ActorCritic {
         (critic_loss, q.detach())
     }
 
-    /// The BC term's weights `mask · min Q(s, a_controller)` from the critics before this
-    /// update's step (None without an active BC term).
+    /// The BC term's weights `mask · max(min Q(s, a_controller), 0)` from the critics before
+    /// this update's step (None without an active BC term). A weighted likelihood needs
+    /// weights >= 0: with a negative one, cloning turns into pushing the policy away from the
+    /// controller's action, and SAC's log-likelihood has no lower bound, so its mean runs off
+    /// (a SAC run at alpha 0 reached a BC loss of -7.6e16 within 20k steps, and its actor
+    /// commanded every joint at the bound whatever it observed). TD3's squared error is
+    /// bounded by the tanh, but a negative weight still drives its actions to the bound.
     fn bc_weight(&self, batch: &Batch) -> Option<Tensor> {
-        batch.bc.as_ref().filter(|bc| bc.beta > 0.0).map(|bc| self.q_of(&batch.obs, &bc.action) * &bc.mask)
+        batch
+            .bc
+            .as_ref()
+            .filter(|bc| bc.beta > 0.0)
+            .map(|bc| self.q_of(&batch.obs, &bc.action).clamp_min(0.0) * &bc.mask)
     }
 
     /// target ← target + τ (online − target), in place: one lerp over the critics' flat
