@@ -383,9 +383,8 @@ impl ActorCritic {
     /// this update's step (None without an active BC term). A weighted likelihood needs
     /// weights >= 0: with a negative one, cloning turns into pushing the policy away from the
     /// controller's action, and SAC's log-likelihood has no lower bound, so its mean runs off
-    /// (a SAC run at alpha 0 reached a BC loss of -7.6e16 within 20k steps, and its actor
-    /// commanded every joint at the bound whatever it observed). TD3's squared error is
-    /// bounded by the tanh, but a negative weight still drives its actions to the bound.
+    /// and tanh pins every joint at the bound whatever the actor observes. TD3's squared error
+    /// is bounded by the tanh, but a negative weight still drives its actions to the bound.
     fn bc_weight(&self, batch: &Batch) -> Option<Tensor> {
         batch
             .bc
