@@ -527,9 +527,7 @@ fn resuming_a_run_stored_before_a_default_changed_is_refused_with_the_fix() {
 /// key, while `--steps` passes that check (and here stops at the missing checkpoint).
 #[test]
 fn resuming_with_another_config_is_refused_naming_the_key() {
-    let root = std::env::temp_dir().join(format!("vge-cli-resume-change-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
-    std::fs::create_dir_all(&root).expect("temp dir");
+    let root = common::temp_dir("cli-resume-change");
     let stored =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/configs/paper-reward-vge-seed-0.toml");
     let config = std::fs::read_to_string(stored).expect("stored config").replacen(
