@@ -518,9 +518,6 @@ impl Config {
         fn first_non_finite(key: String, value: &toml::Value) -> Option<(String, f64)> {
             match value {
                 toml::Value::Float(x) if !x.is_finite() => Some((key, *x)),
-                toml::Value::Table(t) => t.iter().find_map(|(k, v)| {
-                    first_non_finite(if key.is_empty() { k.clone() } else { format!("{key}.{k}") }, v)
-                }),
                 toml::Value::Array(a) => {
                     a.iter().enumerate().find_map(|(i, v)| first_non_finite(format!("{key}[{i}]"), v))
                 }
@@ -528,7 +525,7 @@ impl Config {
             }
         }
         let value = toml::Value::try_from(self).map_err(|e| invalid(format!("cannot serialise: {e}")))?;
-        match first_non_finite(String::new(), &value) {
+        match dotted_leaves(&value).into_iter().find_map(|(key, v)| first_non_finite(key, v)) {
             Some((key, x)) => Err(invalid(format!("{key} must be a finite number, got {x}"))),
             None => Ok(()),
         }
@@ -896,25 +893,47 @@ impl std::fmt::Display for KeyChange {
 
 /// The keys whose values differ between `a` and `b`, in key order.
 pub fn changed_keys(a: &Config, b: &Config) -> Result<Vec<KeyChange>, ConfigError> {
-    fn table(config: &Config) -> Result<toml::Table, ConfigError> {
-        config.to_toml_string()?.parse().map_err(|e: toml::de::Error| invalid(format!("cannot re-read: {e}")))
+    fn table(config: &Config) -> Result<toml::Value, ConfigError> {
+        let table: toml::Table = config
+            .to_toml_string()?
+            .parse()
+            .map_err(|e: toml::de::Error| invalid(format!("cannot re-read: {e}")))?;
+        Ok(toml::Value::Table(table))
     }
-    fn walk(prefix: &str, a: Option<&toml::Value>, b: Option<&toml::Value>, out: &mut Vec<KeyChange>) {
-        if let (Some(toml::Value::Table(ta)), Some(toml::Value::Table(tb))) = (a, b) {
-            let keys: std::collections::BTreeSet<&String> = ta.keys().chain(tb.keys()).collect();
-            for key in keys {
-                let name = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
-                walk(&name, ta.get(key), tb.get(key), out);
+    let (a, b) = (table(a)?, table(b)?);
+    let (a, b) = (dotted_leaves(&a), dotted_leaves(&b));
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let text = |v: Option<&&toml::Value>| v.map_or_else(|| "-".to_owned(), ToString::to_string);
+    Ok(keys
+        .into_iter()
+        .filter(|key| a.get(*key) != b.get(*key))
+        .map(|key| KeyChange { key: key.clone(), before: text(a.get(key)), after: text(b.get(key)) })
+        .collect())
+}
+
+/// Every value of a TOML document that is not a table, by its dotted key (`sac.hidden`,
+/// `env.object_mass_kg`), in key order: the names a config's keys have on the command line
+/// (`--set KEY=VALUE`) and in errors.
+fn dotted_leaves(value: &toml::Value) -> std::collections::BTreeMap<String, &toml::Value> {
+    fn walk<'a>(
+        prefix: String,
+        value: &'a toml::Value,
+        out: &mut std::collections::BTreeMap<String, &'a toml::Value>,
+    ) {
+        match value {
+            toml::Value::Table(table) => {
+                for (key, v) in table {
+                    walk(if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") }, v, out);
+                }
             }
-        } else if a != b {
-            let text = |v: Option<&toml::Value>| v.map_or_else(|| "-".to_owned(), ToString::to_string);
-            out.push(KeyChange { key: prefix.to_owned(), before: text(a), after: text(b) });
+            _ => {
+                out.insert(prefix, value);
+            }
         }
     }
-    let (a, b) = (toml::Value::Table(table(a)?), toml::Value::Table(table(b)?));
-    let mut out = Vec::new();
-    walk("", Some(&a), Some(&b), &mut out);
-    Ok(out)
+    let mut out = std::collections::BTreeMap::new();
+    walk(String::new(), value, &mut out);
+    out
 }
 
 /// Checks a resume's overrides: `resumed` (the stored config with them applied) may differ
