@@ -22,13 +22,7 @@ pub fn storage_for(bytes: &[u8]) -> Result<Vec<f32>, LoadError> {
     let info = policy::inspect(bytes)?;
     // Same size is not same meaning: the slices must be the ones the bridge fills, the
     // actions the joints it commands, in its order.
-    vge_sim::check_policy_interface(
-        info.obs_dim,
-        info.act_dim,
-        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
-        info.action_names.iter(),
-    )
-    .map_err(LoadError::OtherHand)?;
+    vge_sim::check_policy_interface(&info).map_err(LoadError::OtherHand)?;
     Ok(vec![0.0; info.storage_len])
 }
 

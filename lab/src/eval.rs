@@ -417,13 +417,7 @@ fn with_runtime_policy<T>(
     f: impl FnOnce(&EnvConfig, &PolicyFn<'_>) -> Result<T, EvalError>,
 ) -> Result<T, EvalError> {
     let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
-    vge_sim::check_policy_interface(
-        info.obs_dim,
-        info.act_dim,
-        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
-        info.action_names.iter(),
-    )
-    .map_err(EvalError::Policy)?;
+    vge_sim::check_policy_interface(&info).map_err(EvalError::Policy)?;
     let env = at_control_rate(env, info.control_hz);
     // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
     let aligned = vge_runtime::AlignedBytes::new(bytes);

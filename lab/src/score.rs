@@ -192,13 +192,7 @@ fn check_policy(path: &Path, bytes: &[u8]) -> Result<(), ScoreError> {
     let bad = |message: String| ScoreError::Policy { path: path.to_owned(), message };
     let info =
         vge_runtime::policy::inspect(bytes).map_err(|e| bad(format!("not a valid policy file: {e}")))?;
-    vge_sim::check_policy_interface(
-        info.obs_dim,
-        info.act_dim,
-        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
-        info.action_names.iter(),
-    )
-    .map_err(bad)
+    vge_sim::check_policy_interface(&info).map_err(bad)
 }
 
 /// The fields of `best-eval.json` and `final-eval.json` the score reads.

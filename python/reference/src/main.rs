@@ -78,13 +78,7 @@ fn env_trace() -> Result<(), String> {
 fn policy_actions(policy: &str, obs_path: &str, out_path: &str) -> Result<(), String> {
     let bytes = std::fs::read(policy).map_err(|e| format!("reading {policy}: {e}"))?;
     let info = vge_runtime::policy::inspect(&bytes).map_err(|e| format!("{policy}: {e}"))?;
-    vge_sim::check_policy_interface(
-        info.obs_dim,
-        info.act_dim,
-        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)),
-        info.action_names.iter(),
-    )
-    .map_err(|e| format!("{policy}: {e}"))?;
+    vge_sim::check_policy_interface(&info).map_err(|e| format!("{policy}: {e}"))?;
     let aligned = AlignedBytes::new(&bytes);
     let mut storage = vec![0.0f32; info.storage_len];
     let runtime = Policy::<EVAL_MAX_LAYERS, EVAL_MAX_WIDTH>::load(&aligned, &mut storage)
