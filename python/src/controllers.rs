@@ -3,7 +3,8 @@
 //! controller's target change is the action.
 //!
 //! A controller keeps episode state (CS's switching trajectory) and draws from its own
-//! generator. When the env has begun a new episode since the controller last acted, the
+//! generator, so it serves the one env it was built for and refuses any other. When that env
+//! has begun a new episode since the controller last acted, the
 //! controller is reset first with a generator seeded from the episode's seed, exactly as
 //! `vge controller` resets it (`vge_controllers::rollout::run_episode`), so a Python loop
 //! reproduces that command's episodes to the bit.
@@ -34,6 +35,9 @@ struct State {
 #[pyclass(module = "vge._vge")]
 pub struct ControllerCore {
     kind: ControllerKind,
+    /// The env it was built for: its episode count keys the resets below, which would mean
+    /// nothing for another env's count.
+    env: Py<EnvCore>,
     controller: Mutex<Box<dyn Controller + Send>>,
     state: Mutex<State>,
 }
@@ -69,7 +73,7 @@ impl ControllerCore {
         let controller = kind.build(config, IgmConfig::default(), cs);
         let state =
             State { rng: ChaCha8Rng::seed_from_u64(CONTROLLER_SEED_SALT), episode: 0, last_error: None };
-        Ok(Self { kind, controller: Mutex::new(controller), state: Mutex::new(state) })
+        Ok(Self { kind, env: env.into(), controller: Mutex::new(controller), state: Mutex::new(state) })
     }
 
     /// The controller's action (15 joint-target changes, float32) for `env`'s current state,
@@ -79,6 +83,12 @@ impl ControllerCore {
         py: Python<'py>,
         env: PyRef<'py, EnvCore>,
     ) -> PyResult<Option<Bound<'py, PyArray1<f32>>>> {
+        if env.as_ptr() != self.env.as_ptr() {
+            return Err(errors::value(format!(
+                "this {} controller was built for another env; build one for each env",
+                self.kind.name()
+            )));
+        }
         let input = ControllerInput::from_privileged(env.state()?);
         let mut controller = self.controller.lock().map_err(poisoned)?;
         let mut state = self.state.lock().map_err(poisoned)?;

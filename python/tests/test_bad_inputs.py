@@ -3,6 +3,7 @@ damaged policy file raises vge.PolicyError naming the check it failed."""
 
 import shutil
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -46,6 +47,21 @@ def test_the_rust_side_checks_too(env):
     # Every other entry of 30: 15 entries, not contiguous; said so, not "15 expected 15".
     with pytest.raises(ValueError, match="action: .*contiguous"):
         env._core.step(np.zeros(30, np.float32)[::2])
+
+
+def test_a_controller_refuses_an_env_it_was_not_built_for(env):
+    other = vge.HandEnv()
+    other.reset(seed=1)
+    fg = vge.controllers.FG(env)
+    assert fg.act(env) is not None, fg.last_error
+    # Its episode state is keyed on `env`'s episode count, which means nothing for `other`:
+    # refused, by the extension itself (so the private class cannot mix them either).
+    with pytest.raises(ValueError, match="this fg controller was built for another env"):
+        fg.act(other)
+    with pytest.raises(ValueError, match="this fg controller was built for another env"):
+        fg._core.act(other._core)
+    # A wrapper of the same env is the same env.
+    assert fg.act(gym.wrappers.TimeLimit(env, 10)) is not None, fg.last_error
 
 
 def test_step_before_reset_is_a_runtime_error():

@@ -34,14 +34,11 @@ class _Controller:
 
     def __init__(self, env, horizon_steps: int | None = None):
         self._core = _vge.ControllerCore(self._kind, _core_of(env), horizon_steps)
-        self._env_core = _core_of(env)
 
     def act(self, env) -> np.ndarray | None:
-        """The controller's action for `env`'s current state, or None (see `last_error`)."""
-        core = _core_of(env)
-        if core is not self._env_core:
-            raise ValueError("this controller was built for another env")
-        return self._core.act(core)
+        """The controller's action for `env`'s current state, or None (see `last_error`).
+        Raises ValueError for an env other than the one it was built for."""
+        return self._core.act(_core_of(env))
 
     __call__ = act
 
