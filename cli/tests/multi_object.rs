@@ -212,6 +212,47 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert_eq!(copy_1_sphere[6], "0.5000", "selected success: {per_object}");
     assert!(md.contains("| first pass |"), "{md}");
 
+    // --metric ranks by another figure of the same episodes: the rotation, set per object
+    // (IQM over runs x objects of 10, 2, 6, 4, 1, 3 is 3.75; the mean of the objects' means
+    // 4.33), with profiles over the scores' range.
+    for (k, (cube, sphere)) in [(10.0, 2.0), (6.0, 4.0), (1.0, 3.0)].into_iter().enumerate() {
+        let copy = dir.join(format!("copy-{k}"));
+        let mut score = json(&copy.join("score.json"));
+        score["selected"]["per_object"]["cube"]["mean_rotation_rad"] = cube.into();
+        score["selected"]["per_object"]["sphere"]["mean_rotation_rad"] = sphere.into();
+        std::fs::write(copy.join("score.json"), score.to_string()).expect("score.json");
+    }
+    let by_rotation = dir.join("compare-rotation");
+    let compare = vge(
+        &[
+            "compare",
+            "--metric",
+            "rotation_rad",
+            "--out",
+            &by_rotation.display().to_string(),
+            "--resamples",
+            "2000",
+        ],
+        &[format!("vge={}", copies.join(","))],
+    );
+    assert!(compare.status.success(), "{}", text(&compare.stderr));
+    let csv = std::fs::read_to_string(by_rotation.join("compare.csv")).expect("compare.csv");
+    let selected: Vec<&str> =
+        csv.lines().find(|l| l.starts_with("vge,selected,")).expect("vge's row").split(',').collect();
+    let figure = |i: usize| selected[i].parse::<f64>().expect("a number");
+    assert!((figure(3) - 3.75).abs() < 1e-4, "IQM of the rotations: {csv}");
+    assert!((figure(6) - 13.0 / 3.0).abs() < 1e-4, "mean over objects: {csv}");
+    let md = std::fs::read_to_string(by_rotation.join("compare.md")).expect("compare.md");
+    assert!(md.contains("| rotation_rad IQM [95% CI] |") && md.contains("secondary reading"), "{md}");
+    assert!(by_rotation.join("profiles.png").exists() && by_rotation.join("aggregates.png").exists());
+    let bad = vge(&["compare", "--metric", "speed", "--out", &by_rotation.display().to_string()], &copies);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("unknown metric `speed`; one of success, held, rotation_rad, return"),
+        "{}",
+        text(&bad.stderr)
+    );
+
     // vge screen and vge ship measure the policy on each object.
     let screen = vge(&["screen", "--episodes", "1", "--min-success", "0"], &[run.display().to_string()]);
     assert!(screen.status.success(), "{}", text(&screen.stderr));

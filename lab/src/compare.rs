@@ -1,9 +1,10 @@
 //! `vge compare GROUP=DIR,DIR... --out DIR`: groups of scored runs side by side, reported
-//! the way the field trusts ([`crate::stats`]): per group the IQM and mean of the runs'
-//! success rates on held-out episodes (`score.json`, [`crate::score`]) with 95% stratified
-//! bootstrap intervals, the probability of improvement between groups with its interval,
-//! performance profiles with bands, and the IQM of the periodic success and return against
-//! env steps with bands. `vge plot --table1` reports its cells with the same functions.
+//! the way the field trusts ([`crate::stats`]): per group the IQM and mean of one figure of
+//! the runs' held-out episodes (`score.json`, [`crate::score`]; the success rate unless a
+//! [`Metric`] says otherwise) with 95% stratified bootstrap intervals, the probability of
+//! improvement between groups with its interval, performance profiles with bands, and the
+//! IQM of the periodic success and return against env steps with bands. `vge plot --table1`
+//! reports its cells with the same functions.
 //!
 //! Every interval draws from a generator seeded by the command's seed and the group's (or
 //! pair's) label, so that one group's interval does not change when another group is added.
@@ -15,8 +16,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use thiserror::Error;
 
+use crate::eval::ObjectFigures;
 use crate::plot::{Groups, PlotError, RunCurves, Series, XAxis};
-use crate::score::Score;
+use crate::score::{PolicyScore, Score};
 use crate::stats::{Aggregates, Bootstrap, Estimate, Scores, StatsError};
 
 #[derive(Debug, Error)]
@@ -94,11 +96,130 @@ impl Judged {
     /// Its success rate in `score`, where the score has it.
     #[must_use]
     pub fn success(self, score: &Score) -> Option<f64> {
+        self.value(score, Metric::Success)
+    }
+
+    /// Its `metric` in `score`, where the score has it.
+    #[must_use]
+    pub fn value(self, score: &Score, metric: Metric) -> Option<f64> {
         match self {
-            Self::Selected => score.selected.as_ref().map(|s| s.success_rate),
-            Self::Final => Some(score.final_policy.success_rate),
-            Self::LastSnapshots => score.last_snapshots.as_ref().map(|s| s.success_rate),
+            Self::Selected => score.selected.as_ref().map(|s| metric.of_policy(s)),
+            Self::Final => Some(metric.of_policy(&score.final_policy)),
+            Self::LastSnapshots => score
+                .last_snapshots
+                .as_ref()
+                .map(|s| metric.of(s.success_rate, s.drop_rate, s.mean_rotation_rad, s.mean_return)),
         }
+    }
+}
+
+/// The figure of a scored policy that a comparison ranks runs by, larger being better. The
+/// success rate is the task's verdict and the default; the others tell groups apart where
+/// every run fails the success test, and are read as such (docs/scoring.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Metric {
+    /// Share of episodes turned >= 2 pi about z without a drop.
+    #[default]
+    Success,
+    /// Share of episodes that end with the object in hand (1 - drop rate).
+    Held,
+    /// Mean rotation about z per episode (rad), whether or not the episode succeeded.
+    RotationRad,
+    /// Mean return per episode.
+    Return,
+}
+
+impl Metric {
+    pub const ALL: [Self; 4] = [Self::Success, Self::Held, Self::RotationRad, Self::Return];
+
+    /// Its name on the command line and in the reports.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Success => "success",
+            Self::Held => "held",
+            Self::RotationRad => "rotation_rad",
+            Self::Return => "return",
+        }
+    }
+
+    /// What a run's score of this metric is, in words.
+    #[must_use]
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Success => "success rate",
+            Self::Held => "share of episodes held (no drop)",
+            Self::RotationRad => "mean rotation about z per episode (rad)",
+            Self::Return => "mean return per episode",
+        }
+    }
+
+    /// Its name on a figure's axis.
+    #[must_use]
+    pub fn short(self) -> &'static str {
+        match self {
+            Self::Success => "success rate",
+            Self::Held => "share held",
+            Self::RotationRad => "rotation (rad)",
+            Self::Return => "return",
+        }
+    }
+
+    /// Whether its scores lie in [0, 1] (shares of episodes).
+    #[must_use]
+    pub fn is_share(self) -> bool {
+        matches!(self, Self::Success | Self::Held)
+    }
+
+    fn of(self, success_rate: f64, drop_rate: f64, mean_rotation_rad: f64, mean_return: f64) -> f64 {
+        match self {
+            Self::Success => success_rate,
+            Self::Held => 1.0 - drop_rate,
+            Self::RotationRad => mean_rotation_rad,
+            Self::Return => mean_return,
+        }
+    }
+
+    /// Its value for a scored policy (pooled over objects).
+    #[must_use]
+    pub fn of_policy(self, s: &PolicyScore) -> f64 {
+        self.of(s.success_rate, s.drop_rate, s.mean_rotation_rad, s.mean_return)
+    }
+
+    /// Its value on one object.
+    #[must_use]
+    pub fn of_object(self, f: &ObjectFigures) -> f64 {
+        self.of(f.success_rate, f.drop_rate, f.mean_rotation_rad, f.mean_return)
+    }
+}
+
+impl std::str::FromStr for Metric {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Self::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown metric `{s}`; one of {}", names.join(", "))
+        })
+    }
+}
+
+/// One figure of each run: which of its scored policies, and which of that policy's figures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Figure {
+    pub judged: Judged,
+    pub metric: Metric,
+}
+
+impl Figure {
+    /// The success rate of `judged`'s policy.
+    #[must_use]
+    pub fn success(judged: Judged) -> Self {
+        Self { judged, metric: Metric::Success }
+    }
+
+    fn of(self, score: &Score) -> Option<f64> {
+        self.judged.value(score, self.metric)
     }
 }
 
@@ -128,29 +249,28 @@ fn object_tasks(groups: &[(&str, Vec<&RunCurves>)], judged: Judged) -> Option<Ve
     (same && objects.len() > 1).then_some(objects)
 }
 
-/// The scores of `runs` for `judged`: runs x objects where `objects` are the tasks, else
-/// one task of their pooled success. None for no scored run.
+/// The scores of `runs` for `figure`: runs x objects where `objects` are the tasks, else
+/// one task of their pooled figure. None for no scored run.
 fn judged_scores(
     runs: &[&RunCurves],
-    judged: Judged,
+    figure: Figure,
     objects: Option<&[vge_sim::ObjectShape]>,
 ) -> Result<Option<Scores>, StatsError> {
     let scored: Vec<&Score> =
-        runs.iter().filter_map(|r| r.score.as_ref()).filter(|s| judged.success(s).is_some()).collect();
+        runs.iter().filter_map(|r| r.score.as_ref()).filter(|s| figure.of(s).is_some()).collect();
     if scored.is_empty() {
         return Ok(None);
     }
     let Some(objects) = objects else {
-        return Scores::one_task(&scored.iter().filter_map(|s| judged.success(s)).collect::<Vec<_>>())
-            .map(Some);
+        return Scores::one_task(&scored.iter().filter_map(|s| figure.of(s)).collect::<Vec<_>>()).map(Some);
     };
     let by_task = objects
         .iter()
         .map(|object| {
             scored
                 .iter()
-                .filter_map(|s| judged_objects(s, judged))
-                .filter_map(|p| p.of(*object).map(|f| f.success_rate))
+                .filter_map(|s| judged_objects(s, figure.judged))
+                .filter_map(|p| p.of(*object).map(|f| figure.metric.of_object(f)))
                 .collect()
         })
         .collect();
@@ -191,22 +311,22 @@ pub fn improvement(
     bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, label)).map(Some)
 }
 
-/// Thresholds of the performance profiles: tau from 0 to 1 in steps of 0.01.
+/// Thresholds of the performance profiles of shares: tau from 0 to 1 in steps of 0.01.
 #[must_use]
 pub fn profile_thresholds() -> Vec<f64> {
     crate::stats::thresholds(0.0, 1.0, 101)
 }
 
-/// The performance profile of `values` at [`profile_thresholds`] with its band, as points
-/// for [`crate::plot::draw_panels`].
+/// The performance profile of `scores` at `taus` with its band, as points for
+/// [`crate::plot::draw_panels`].
 pub(crate) fn profile(
     scores: &Scores,
+    taus: &[f64],
     bootstrap: &Bootstrap,
     seed: u64,
     label: &str,
 ) -> Result<Vec<crate::plot::SpreadPoint>, StatsError> {
-    let taus = profile_thresholds();
-    let estimates = bootstrap.performance_profile(scores, &taus, &mut rng_for(seed, label))?;
+    let estimates = bootstrap.performance_profile(scores, taus, &mut rng_for(seed, label))?;
     Ok(taus
         .iter()
         .zip(estimates)
@@ -299,10 +419,11 @@ pub fn draw_iqm_curves(
     crate::plot::draw_panels(&panels, groups, caption, palette, out)
 }
 
-/// Draws the performance profiles of the `judged` success of `groups` (scored runs only).
+/// Draws the performance profiles of `figure` over `groups` (scored runs only): thresholds
+/// from 0 to 1 for a share, else from 0 (or the lowest score) to the highest.
 pub fn draw_profiles(
     groups: &Groups,
-    judged: Judged,
+    figure: Figure,
     bootstrap: &Bootstrap,
     seed: u64,
     caption: &str,
@@ -310,28 +431,49 @@ pub fn draw_profiles(
     out: &Path,
 ) -> Result<(), CompareError> {
     let mut scored: Groups = BTreeMap::new();
-    let mut curves = Vec::new();
     let listed: Vec<(&str, Vec<&RunCurves>)> = groups.iter().map(|(n, rs)| (*n, rs.clone())).collect();
-    let objects = object_tasks(&listed, judged);
+    let objects = object_tasks(&listed, figure.judged);
+    let mut all = Vec::new();
     for (name, runs) in groups {
-        let with: Vec<&RunCurves> = runs
-            .iter()
-            .copied()
-            .filter(|r| r.score.as_ref().and_then(|s| judged.success(s)).is_some())
-            .collect();
+        let with: Vec<&RunCurves> =
+            runs.iter().copied().filter(|r| r.score.as_ref().and_then(|s| figure.of(s)).is_some()).collect();
         if with.is_empty() {
             continue;
         }
-        let Some(scores) = judged_scores(&with, judged, objects.as_deref())? else { continue };
-        curves.push((*name, profile(&scores, bootstrap, seed, name)?, false));
+        let Some(scores) = judged_scores(&with, figure, objects.as_deref())? else { continue };
+        all.push((*name, scores));
         scored.insert(*name, with);
     }
-    let title = match judged {
-        Judged::Selected => "fraction of runs with success > tau (selected policy)",
-        Judged::Final => "fraction of runs with success > tau (final policy)",
-        Judged::LastSnapshots => "fraction of runs with success > tau (last snapshots)",
+    let taus = if figure.metric.is_share() {
+        profile_thresholds()
+    } else {
+        let values = all.iter().flat_map(|(_, s)| s.task_scores().iter().flatten().copied());
+        // From 0 (or the lowest score, if below), where every run is still counted.
+        let (low, high) = values.fold((0.0f64, f64::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)));
+        // Every score at or below 0: a unit's range, so that the profile still has an axis.
+        let high = if high > low { high } else { low + 1.0 };
+        crate::stats::thresholds(low, high, 101)
     };
-    Ok(crate::plot::draw_panels(&[(title, XAxis::Threshold, curves)], &scored, caption, palette, out)?)
+    let mut curves = Vec::new();
+    for (name, scores) in &all {
+        curves.push((*name, profile(scores, &taus, bootstrap, seed, name)?, false));
+    }
+    let title = format!(
+        "fraction of runs with {} > tau ({} policy)",
+        figure.metric.name(),
+        match figure.judged {
+            Judged::Selected => "selected",
+            Judged::Final => "final",
+            Judged::LastSnapshots => "last snapshots'",
+        }
+    );
+    Ok(crate::plot::draw_panels(
+        &[(title.as_str(), XAxis::Threshold(figure.metric.short()), curves)],
+        &scored,
+        caption,
+        palette,
+        out,
+    )?)
 }
 
 /// One row of `compare.csv`.
@@ -409,12 +551,13 @@ fn read_groups(specs: &[GroupSpec]) -> Result<Vec<(String, Vec<RunCurves>)>, Com
 }
 
 /// Writes `out/compare.csv`, `compare.md`, `improvement.csv`, `aggregates.png`,
-/// `profiles.png` and `curves.png` for `specs`, with P(A > B) for `pairs` (every ordered pair
-/// when None); for runs scored object by object also `per-object.csv`
+/// `profiles.png` and `curves.png` for `specs` by `metric`, with P(A > B) for `pairs` (every
+/// ordered pair when None); for runs scored object by object also `per-object.csv`
 /// ([`crate::object_rows`]).
 pub fn write(
     specs: &[GroupSpec],
     pairs: Option<&[(String, String)]>,
+    metric: Metric,
     out: &Path,
     seed: u64,
     bootstrap: &Bootstrap,
@@ -429,7 +572,7 @@ pub fn write(
         let objects = object_tasks(&refs, judged);
         for (name, runs) in &refs {
             let label = format!("{name} {}", judged.name());
-            if let Some(scores) = judged_scores(runs, judged, objects.as_deref())? {
+            if let Some(scores) = judged_scores(runs, Figure { judged, metric }, objects.as_deref())? {
                 let aggregates = bootstrap.aggregates(&scores, &mut rng_for(seed, &label))?;
                 rows.push(CompareRow { group: (*name).to_owned(), judged, aggregates });
             }
@@ -440,10 +583,11 @@ pub fn write(
     });
     let by_name: BTreeMap<&str, &Vec<&RunCurves>> = refs.iter().map(|(n, rs)| (*n, rs)).collect();
     let selected_objects = object_tasks(&refs, Judged::Selected);
+    let selected = Figure { judged: Judged::Selected, metric };
     let mut improvements = Vec::new();
     for (a, b) in &pairs {
-        let x = judged_scores(by_name[a.as_str()], Judged::Selected, selected_objects.as_deref())?;
-        let y = judged_scores(by_name[b.as_str()], Judged::Selected, selected_objects.as_deref())?;
+        let x = judged_scores(by_name[a.as_str()], selected, selected_objects.as_deref())?;
+        let y = judged_scores(by_name[b.as_str()], selected, selected_objects.as_deref())?;
         if let (Some(x), Some(y)) = (x, y) {
             let estimate =
                 bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, &format!("{a} > {b}")))?;
@@ -452,10 +596,7 @@ pub fn write(
     }
     std::fs::create_dir_all(out).map_err(|source| CompareError::Io { path: out.to_owned(), source })?;
     let mut files = Vec::new();
-    let scores: Vec<&Score> =
-        refs.iter().flat_map(|(_, rs)| rs.iter().filter_map(|r| r.score.as_ref())).collect();
-    let mut md =
-        markdown(&refs, &rows, &improvements, &scores, bootstrap, selected_objects.as_deref(), seed)?;
+    let mut md = markdown(&refs, &rows, &improvements, bootstrap, selected_objects.as_deref(), metric, seed)?;
     let mut texts =
         vec![("compare.csv", compare_csv(&rows)), ("improvement.csv", improvement_csv(&improvements))];
     if let Some(objects) = selected_objects.as_deref() {
@@ -475,28 +616,58 @@ pub fn write(
         files.push(path);
     }
     let group_map: Groups = refs.iter().map(|(n, rs)| (*n, rs.clone())).collect();
-    let interval_rows: Vec<crate::plot::IntervalRow> = rows
-        .iter()
-        .filter(|r| r.judged == Judged::Selected)
-        .map(|r| (r.group.as_str(), r.aggregates.runs, vec![r.aggregates.iqm, r.aggregates.mean]))
-        .collect();
     let path = out.join("aggregates.png");
-    crate::plot::draw_intervals(
-        &interval_rows,
-        &["IQM of success (selected policy)", "mean of success (selected policy)"],
-        (0.0, 1.0),
-        "95% stratified bootstrap intervals",
-        &names,
-        &path,
-    )?;
+    draw_aggregates(&rows, metric, &names, &path)?;
     files.push(path);
     let path = out.join("profiles.png");
-    draw_profiles(&group_map, Judged::Selected, bootstrap, seed, "", &names, &path)?;
+    draw_profiles(&group_map, selected, bootstrap, seed, "", &names, &path)?;
     files.push(path);
     let path = out.join("curves.png");
     draw_iqm_curves(&group_map, bootstrap, seed, "IQM over runs, 95% bootstrap band", &names, &path)?;
     files.push(path);
     Ok(Written { rows, improvements, files })
+}
+
+/// `aggregates.png`: each group's IQM and mean of the selected policies' `metric` with their
+/// intervals, on [0, 1] for a share.
+fn draw_aggregates(
+    rows: &[CompareRow],
+    metric: Metric,
+    names: &[&str],
+    path: &Path,
+) -> Result<(), PlotError> {
+    let interval_rows: Vec<crate::plot::IntervalRow> = rows
+        .iter()
+        .filter(|r| r.judged == Judged::Selected)
+        .map(|r| (r.group.as_str(), r.aggregates.runs, vec![r.aggregates.iqm, r.aggregates.mean]))
+        .collect();
+    let range = if metric.is_share() {
+        (0.0, 1.0)
+    } else {
+        let ends = rows.iter().filter(|r| r.judged == Judged::Selected).flat_map(|r| {
+            [
+                r.aggregates.iqm.ci_low,
+                r.aggregates.mean.ci_low,
+                r.aggregates.iqm.ci_high,
+                r.aggregates.mean.ci_high,
+            ]
+        });
+        let (low, high) = ends.fold((0.0f64, 0.0f64), |(l, h), v| (l.min(v), h.max(v)));
+        let pad = 0.05 * (high - low).max(1e-3);
+        (low - pad, high + pad)
+    };
+    let titles = [
+        format!("IQM of {} (selected policy)", metric.short()),
+        format!("mean of {} (selected policy)", metric.short()),
+    ];
+    crate::plot::draw_intervals(
+        &interval_rows,
+        &[titles[0].as_str(), titles[1].as_str()],
+        range,
+        "95% stratified bootstrap intervals",
+        names,
+        path,
+    )
 }
 
 /// The pairs to report: `pairs` when given (each name a group's), else every ordered pair.
@@ -532,13 +703,16 @@ fn markdown(
     groups: &[(&str, Vec<&RunCurves>)],
     rows: &[CompareRow],
     improvements: &[Improvement],
-    scores: &[&Score],
     bootstrap: &Bootstrap,
     objects: Option<&[vge_sim::ObjectShape]>,
+    metric: Metric,
     seed: u64,
 ) -> Result<String, StatsError> {
-    let mut text = String::from(
-        "| group | runs | policy | success IQM [95% CI] | success mean [95% CI] |\n|---|---|---|---|---|\n",
+    let name = metric.name();
+    let scores: Vec<&Score> =
+        groups.iter().flat_map(|(_, rs)| rs.iter().filter_map(|r| r.score.as_ref())).collect();
+    let mut text = format!(
+        "| group | runs | policy | {name} IQM [95% CI] | {name} mean [95% CI] |\n|---|---|---|---|---|\n"
     );
     for r in rows {
         let runs = groups.iter().find(|(n, _)| *n == r.group).map_or(0, |(_, rs)| rs.len());
@@ -553,19 +727,20 @@ fn markdown(
         ));
     }
     if !improvements.is_empty() {
-        text.push_str("\nProbability of improvement (selected policy's success):\n\n");
+        text.push_str(&format!("\nProbability of improvement (selected policy's {name}):\n\n"));
         text.push_str(&improvement_markdown(improvements));
     }
     if let Some(objects) = objects {
         // Each object's mean over runs, with its interval: where a group's score comes from.
         let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();
         text.push_str(&format!(
-            "\nSelected policy's success per object, mean over runs [95% CI]:\n\n| group | {} |\n|---|{}\n",
+            "\nSelected policy's {name} per object, mean over runs [95% CI]:\n\n| group | {} |\n|---|{}\n",
             names.join(" | "),
             "---|".repeat(names.len())
         ));
         for (name, runs) in groups {
-            let Some(scores) = judged_scores(runs, Judged::Selected, Some(objects))? else { continue };
+            let figure = Figure { judged: Judged::Selected, metric };
+            let Some(scores) = judged_scores(runs, figure, Some(objects))? else { continue };
             let mut cells = Vec::new();
             for (object, runs) in names.iter().zip(scores.task_scores()) {
                 let label = format!("{name} selected {object}");
@@ -584,20 +759,27 @@ fn markdown(
     let episodes: Vec<String> = episodes.iter().map(ToString::to_string).collect();
     let seeds: Vec<String> = seeds.iter().map(ToString::to_string).collect();
     text.push_str(&format!(
-        "\nScores: each run's success rate on {} held-out episodes (env seeds from {}; score.json, \
+        "\nScores: each run's {} on {} held-out episodes (env seeds from {}; score.json, \
          docs/scoring.md). IQM: the mean of the middle half of the runs' scores; intervals: {:.0}% \
          stratified bootstrap percentile intervals over {} resamples. P(A > B): the probability that \
-         a run of A scores above a run of B, ties half.\n",
+         a run of A scores above a run of B, ties half.{}\n",
+        metric.describe(),
         episodes.join(" or "),
         seeds.join(" or "),
         100.0 * bootstrap.confidence,
-        bootstrap.resamples
+        bootstrap.resamples,
+        if metric == Metric::Success {
+            ""
+        } else {
+            " The success test is the task's verdict; this metric ranks runs where it cannot, as a \
+             secondary reading."
+        }
     ));
     if let Some(objects) = objects {
         let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();
         text.push_str(&format!(
             "\nThe runs were scored on {} objects ({}), and each object is a task, as in rliable: a \
-             run's success on each object is one score, the IQM is over runs x objects, the mean is \
+             run's {name} on each object is one score, the IQM is over runs x objects, the mean is \
              the mean over objects of each object's mean over runs, resamples draw runs within each \
              object, and P(A > B) is the mean over objects. The last snapshots are pooled over objects.\n",
             names.len(),
@@ -621,6 +803,24 @@ mod tests {
         assert!(parse_group("=a").is_err());
         assert!(parse_group("x=").is_err());
         assert_eq!(parse_pair("a:b"), Ok(("a".to_owned(), "b".to_owned())));
+    }
+
+    #[test]
+    fn metrics_parse_by_name_and_read_their_figure() {
+        for metric in Metric::ALL {
+            assert_eq!(metric.name().parse::<Metric>(), Ok(metric));
+        }
+        assert!("rotation".parse::<Metric>().is_err_and(|e| e.contains("one of success, held")));
+        let figures = ObjectFigures {
+            success_rate: 0.25,
+            drop_rate: 0.125,
+            mean_return: -3.0,
+            mean_rotation_rad: 7.5,
+            mean_contact_switches: 40.0,
+            episodes: 8,
+        };
+        let values: Vec<f64> = Metric::ALL.iter().map(|m| m.of_object(&figures)).collect();
+        assert_eq!(values, [0.25, 0.875, 7.5, -3.0]);
     }
 
     #[test]

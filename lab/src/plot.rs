@@ -432,8 +432,8 @@ pub(crate) type Curve<'a> = (&'a str, Vec<SpreadPoint>, bool);
 pub(crate) enum XAxis {
     /// Env steps (labelled in thousands or millions).
     EnvSteps,
-    /// A score threshold tau in [0, 1] (performance profiles).
-    Threshold,
+    /// A threshold tau on the named score (performance profiles).
+    Threshold(&'static str),
 }
 
 /// One panel of [`draw_panels`]: its title, x axis and curves.
@@ -531,6 +531,8 @@ fn draw_panel(
     palette: &[&str],
 ) -> Result<(), PlotError> {
     let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
+    // Steps and shares start at 0; a threshold on returns may lie below.
+    let x_min = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(0.0, f64::min);
     let (y_min, y_max) = curves
         .iter()
         .flat_map(|(_, c, _)| c.iter().flat_map(|p| [p.min, p.max]))
@@ -541,15 +543,15 @@ fn draw_panel(
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
-        .build_cartesian_2d(0.0..x_max, (y_min - pad)..(y_max + pad))
+        .build_cartesian_2d(x_min..x_max, (y_min - pad)..(y_max + pad))
         .map_err(draw_err)?;
     // Steps in thousands or millions: full numbers run into each other on the axis.
     let steps_label =
         |x: &f64| if x_max >= 2e6 { format!("{:.1}M", x / 1e6) } else { format!("{:.0}k", x / 1e3) };
     let threshold_label = |x: &f64| format!("{x:.1}");
-    let (x_desc, x_label): (&str, &dyn Fn(&f64) -> String) = match x_axis {
-        XAxis::EnvSteps => ("env steps", &steps_label),
-        XAxis::Threshold => ("success rate threshold tau", &threshold_label),
+    let (x_desc, x_label): (String, &dyn Fn(&f64) -> String) = match x_axis {
+        XAxis::EnvSteps => ("env steps".to_owned(), &steps_label),
+        XAxis::Threshold(score) => (format!("{score} threshold tau"), &threshold_label),
     };
     chart.configure_mesh().x_desc(x_desc).x_labels(6).x_label_formatter(x_label).draw().map_err(draw_err)?;
     for (name, c, dashed) in curves {

@@ -620,7 +620,7 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
             );
             crate::compare::draw_profiles(
                 &finished,
-                crate::compare::Judged::Selected,
+                crate::compare::Figure::success(crate::compare::Judged::Selected),
                 &bootstrap,
                 BOOTSTRAP_SEED,
                 &caption,

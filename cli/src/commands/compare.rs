@@ -18,6 +18,10 @@ use clap::Args;
 /// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
 /// env steps, with 95% bands). Definitions: docs/scoring.md.
 ///
+/// --metric ranks runs by another figure of the same held-out episodes: held (share
+/// without a drop), rotation_rad (mean rotation about z per episode) or return. The
+/// success test stays the verdict; these tell groups apart where every run fails it.
+///
 /// Runs trained and scored on several objects are compared with each object a task, and
 /// OUT/per-object.csv (also a table in compare.md) lists each run on each object: the step
 /// of its first periodic test at 50% success on that object, and the selected and final
@@ -26,6 +30,7 @@ use clap::Args;
 /// Example:
 ///   vge compare fge=docs/results/table1/cube-fg-fge vge=docs/results/cube-fg-vge-seeds
 ///       --out cmp/ --pairs vge:fge
+///   vge compare rl=runs/rl vge=runs/vge --metric rotation_rad --out cmp-rotation/
 #[derive(Debug, Args)]
 #[command(verbatim_doc_comment)]
 pub struct CompareArgs {
@@ -39,6 +44,10 @@ pub struct CompareArgs {
     /// ordered pair of groups).
     #[arg(long, value_delimiter = ',', value_parser = vge_lab::compare::parse_pair)]
     pairs: Vec<(String, String)>,
+    /// The figure of each run's held-out episodes to compare: success, held, rotation_rad
+    /// or return (larger is better for each).
+    #[arg(long, default_value = "success", value_parser = clap::value_parser!(vge_lab::compare::Metric))]
+    metric: vge_lab::compare::Metric,
     /// Seed of the bootstrap resampling.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -49,10 +58,10 @@ pub struct CompareArgs {
 
 /// `vge compare`.
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
-    let CompareArgs { groups, out, pairs, seed, resamples } = args;
+    let CompareArgs { groups, out, pairs, metric, seed, resamples } = args;
     let bootstrap = vge_lab::stats::Bootstrap { resamples, ..Default::default() };
     let pairs = (!pairs.is_empty()).then_some(pairs.as_slice());
-    let written = vge_lab::compare::write(&groups, pairs, &out, seed, &bootstrap)?;
+    let written = vge_lab::compare::write(&groups, pairs, metric, &out, seed, &bootstrap)?;
     print!("{}", std::fs::read_to_string(out.join("compare.md")).unwrap_or_default());
     for f in &written.files {
         eprintln!("wrote {}", f.display());
