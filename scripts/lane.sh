@@ -10,13 +10,15 @@
 #   scripts/lane.sh check QUEUE       check every line (run does this first)
 #   scripts/lane.sh stop QUEUE        end the lane: its run checkpoints; `run` resumes it
 #
-# A queue line is `REL COMMIT CONFIG SEED [--set KEY=VALUE ...]` (`#` starts a comment):
-# the run trains into runs/REL with runs/bin/vge-COMMIT, built once from a git worktree of
-# COMMIT (runs/src/COMMIT), and CONFIG is read from that commit, so a queue keeps training
-# the same program and the same config whatever the checkout has become since. A run is
-# skipped when docs/results/REL/score.json or runs/REL/score.json exists; a run with a
-# checkpoint resumes (bit for bit on the same binary, thread count and CPU model); a run
-# that finished training without its score is scored.
+# A queue line is `REL COMMIT CONFIG SEED [--set KEY=VALUE ...] [--score-with COMMIT2]`
+# (`#` starts a comment): the run trains into runs/REL with runs/bin/vge-COMMIT, built once
+# from a git worktree of COMMIT (runs/src/COMMIT), and CONFIG is read from that commit, so a
+# queue keeps training the same program and the same config whatever the checkout has
+# become since. A run is skipped when docs/results/REL/score.json or runs/REL/score.json
+# exists; a run with a checkpoint resumes (bit for bit on the same binary, thread count and
+# CPU model); a run that finished training without its score is scored. `--score-with`
+# scores the finished run again with vge-COMMIT2 (`vge score --force`), for scores the
+# training binary lacks (per-object ones); runs/REL.scored-with-COMMIT2 marks it done.
 #
 # `collect` copies what a result needs (config, metrics, evaluations, scores, plots, the final
 # and selected policies, the lane's training log) and never checkpoints, replay buffers,
@@ -54,14 +56,18 @@ binary_of() {
 # Every line well formed, its commit and config present, no run twice: a typo found when the
 # lane reaches its line would cost the hours before it.
 check() {
-  local queue=$1 n=0 bad=0 rel commit config seed rest
+  local queue=$1 n=0 bad=0 rel commit config seed rest score_commit
   local -A line_of=()
   [ -f "$queue" ] || { echo "lane: no queue file $queue" >&2; return 1; }
   while read -r rel commit config seed rest <&3; do
     n=$((n + 1))
     case $rel in ''|\#*) continue ;; esac
     if [ -z "$seed" ]; then
-      echo "$queue:$n: expected REL COMMIT CONFIG SEED [--set KEY=VALUE ...]" >&2; bad=1; continue
+      echo "$queue:$n: expected REL COMMIT CONFIG SEED [--set KEY=VALUE ...] [--score-with COMMIT]" >&2; bad=1; continue
+    fi
+    split_score_with
+    if [ -n "$score_commit" ] && ! git rev-parse --verify --quiet "$score_commit^{commit}" >/dev/null; then
+      echo "$queue:$n: --score-with: no commit $score_commit in this repository" >&2; bad=1
     fi
     if ! git rev-parse --verify --quiet "$commit^{commit}" >/dev/null; then
       echo "$queue:$n: no commit $commit in this repository" >&2; bad=1
@@ -69,15 +75,24 @@ check() {
       echo "$queue:$n: $config does not exist at commit $commit" >&2; bad=1
     fi
     [[ $seed =~ ^[0-9]+$ ]] || { echo "$queue:$n: seed '$seed' is not a whole number" >&2; bad=1; }
-    [[ -z $rest || $rest =~ ^(--set\ [^\ ]+=[^\ ]+\ ?)+$ ]] || { echo "$queue:$n: after the seed only --set KEY=VALUE words: $rest" >&2; bad=1; }
+    [[ -z $rest || $rest =~ ^(--set\ [^\ ]+=[^\ ]+\ ?)+$ ]] || { echo "$queue:$n: after the seed only --set KEY=VALUE words and --score-with COMMIT: $rest" >&2; bad=1; }
     if [ -n "${line_of[$rel]:-}" ]; then echo "$queue:$n: $rel is also on line ${line_of[$rel]}" >&2; bad=1; fi
     line_of[$rel]=$n
   done 3<"$queue"
   return $bad
 }
 
+# Takes `--score-with COMMIT` out of $rest into $score_commit (empty without one).
+split_score_with() {
+  score_commit=
+  if [[ " $rest " =~ \ --score-with\ ([^\ ]+)\  ]]; then
+    score_commit=${BASH_REMATCH[1]}
+    rest=$(sed -E 's/(^| )--score-with [^ ]+//; s/^ +//' <<<"$rest")
+  fi
+}
+
 run_queue() {
-  local queue log rel commit config seed rest dir bin
+  local queue log rel commit config seed rest score_commit dir bin score_bin
   queue=$1
   check "$queue" || { echo "lane: $queue has errors (above); nothing started" >&2; exit 1; }
   mkdir -p runs/lanes
@@ -87,13 +102,17 @@ run_queue() {
   while read -r rel commit config seed rest <&3; do
     case $rel in ''|\#*) continue ;; esac
     dir=runs/$rel
-    if [ -f "docs/results/$rel/score.json" ] || [ -f "$dir/score.json" ]; then
+    split_score_with
+    if [ -f "docs/results/$rel/score.json" ] ||
+      { [ -f "$dir/score.json" ] && { [ -z "$score_commit" ] || [ -f "$dir.scored-with-$score_commit" ]; }; }; then
       echo "$(date -u +%FT%TZ) skip $rel (done)" >>"$log"; continue
     fi
     bin=$(binary_of "$commit") || { echo "$(date -u +%FT%TZ) fail $rel (no binary for $commit)" >>"$log"; continue; }
     echo "$(date -u +%FT%TZ) start $rel with vge-$commit" >>"$log"
     set +e
-    if [ -f "$dir/final-eval.json" ]; then
+    if [ -f "$dir/score.json" ]; then
+      : # trained and scored; only the scoring with --score-with's binary is left
+    elif [ -f "$dir/final-eval.json" ]; then
       RAYON_NUM_THREADS=1 "$bin" score --threads 1 "$dir" >>"$dir.log" 2>&1
     elif [ -d "$dir/checkpoint" ]; then
       RAYON_NUM_THREADS=1 "$bin" train --resume "$dir" >>"$dir.log" 2>&1
@@ -103,6 +122,16 @@ run_queue() {
       RAYON_NUM_THREADS=1 "$bin" train --config "runs/src/$commit/$config" --seed "$seed" --out "$dir" $rest >>"$dir.log" 2>&1
     fi
     echo "$(date -u +%FT%TZ) end $rel (exit $?)" >>"$log"
+    if [ -n "$score_commit" ] && [ -f "$dir/score.json" ]; then
+      if score_bin=$(binary_of "$score_commit"); then
+        echo "$(date -u +%FT%TZ) score $rel again with vge-$score_commit" >>"$log"
+        RAYON_NUM_THREADS=1 "$score_bin" score --force --threads 1 "$dir" >>"$dir.log" 2>&1 &&
+          echo "vge-$score_commit" >"$dir.scored-with-$score_commit"
+        echo "$(date -u +%FT%TZ) scored $rel (exit $?)" >>"$log"
+      else
+        echo "$(date -u +%FT%TZ) fail $rel (no binary for $score_commit)" >>"$log"
+      fi
+    fi
     set -e
   done 3<"$queue"
   echo "$(date -u +%FT%TZ) queue done" >>"$log"
