@@ -69,7 +69,8 @@ pub fn rows(
 fn first_pass_step(eval_csv: &Path, object: ObjectShape) -> Result<Option<u64>, PlotError> {
     let column = format!("{}_success", object.name());
     let Some((steps, success)) = crate::plot::object_success(eval_csv, &column)? else { return Ok(None) };
-    Ok(steps.iter().zip(&success).find(|(_, s)| **s >= LEARNED_SUCCESS_RATE).map(|(step, _)| *step as u64))
+    let steps = crate::plot::whole_steps(eval_csv, &steps)?;
+    Ok(steps.iter().zip(&success).find(|(_, s)| **s >= LEARNED_SUCCESS_RATE).map(|(step, _)| *step))
 }
 
 /// `per-object.csv`: one line per row; empty cells where a figure is missing.

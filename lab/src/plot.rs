@@ -222,6 +222,27 @@ fn columns_by_name(path: &Path, names: &[&str]) -> Result<Vec<Option<Vec<f64>>>,
     Ok(columns)
 }
 
+/// A CSV's step column as whole env steps: a negative, fractional or non-finite step is
+/// refused, naming its row, rather than cast to another step.
+pub(crate) fn whole_steps(path: &Path, steps: &[f64]) -> Result<Vec<u64>, PlotError> {
+    // Below 2^53 every whole f64 is exact, and no run takes that many steps.
+    const EXACT: f64 = 9_007_199_254_740_992.0;
+    steps
+        .iter()
+        .enumerate()
+        .map(|(i, &step)| {
+            if step.is_finite() && (0.0..=EXACT).contains(&step) && step.fract() == 0.0 {
+                Ok(step as u64)
+            } else {
+                Err(PlotError::Csv {
+                    path: path.to_owned(),
+                    message: format!("row {}: step `{step}` is not a whole number of env steps", i + 2),
+                })
+            }
+        })
+        .collect()
+}
+
 /// Reads one run directory.
 pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
     let config = run_config(dir)?;
@@ -530,6 +551,21 @@ fn draw_panel(
     groups: &Groups,
     palette: &[&str],
 ) -> Result<(), PlotError> {
+    // A diverged critic logs an infinite or NaN Q: such points are left out and counted in
+    // the title, since no axis holds them (and plotters' axis fitting never ends on one).
+    let finite = |p: &&SpreadPoint| [p.step, p.mean, p.min, p.max].iter().all(|v| v.is_finite());
+    let points: usize = curves.iter().map(|(_, c, _)| c.len()).sum();
+    let curves: Vec<Curve> = curves
+        .iter()
+        .map(|(n, c, dashed)| (*n, c.iter().filter(finite).copied().collect(), *dashed))
+        .collect();
+    let left_out: usize = curves.iter().map(|(_, c, _)| c.len()).sum();
+    let left_out = points - left_out;
+    let title = if left_out == 0 {
+        title.to_owned()
+    } else {
+        format!("{title} ({left_out} non-finite points not drawn)")
+    };
     let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
     // Steps and shares start at 0; a threshold on returns may lie below.
     let x_min = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(0.0, f64::min);
@@ -539,7 +575,7 @@ fn draw_panel(
         .fold((0.0f64, 0.0f64), |(lo, hi), v| (lo.min(v), hi.max(v)));
     let pad = 0.05 * (y_max - y_min).max(1e-3);
     let mut chart = ChartBuilder::on(panel)
-        .caption(title, ("sans-serif", 20))
+        .caption(&title, ("sans-serif", 20))
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(55)
@@ -554,7 +590,7 @@ fn draw_panel(
         XAxis::Threshold(score) => (format!("{score} threshold tau"), &threshold_label),
     };
     chart.configure_mesh().x_desc(x_desc).x_labels(6).x_label_formatter(x_label).draw().map_err(draw_err)?;
-    for (name, c, dashed) in curves {
+    for (name, c, dashed) in &curves {
         let place = palette.iter().position(|p| p == name);
         let place = place.or_else(|| groups.keys().position(|k| k == name)).unwrap_or(0);
         let color = Palette99::pick(place).to_rgba();
@@ -843,6 +879,34 @@ pub(crate) fn object_success(path: &Path, column: &str) -> Result<Option<StepsAn
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn steps_must_be_whole_env_steps() {
+        let path = Path::new("eval.csv");
+        assert_eq!(whole_steps(path, &[0.0, 250_000.0, 2e6]).expect("whole"), [0, 250_000, 2_000_000]);
+        for (step, row) in [(-5.0, 3), (12.7, 3), (f64::NAN, 3), (f64::INFINITY, 3), (1e30, 3)] {
+            let err = whole_steps(path, &[100.0, step]).expect_err("refused").to_string();
+            assert!(err.contains(&format!("row {row}: step `{step}` is not a whole number")), "{err}");
+        }
+    }
+
+    #[test]
+    fn an_infinite_q_is_left_out_of_the_panel_and_counted() {
+        // A diverged critic logs inf or NaN as its mean Q. plotters' axis fitting loops
+        // forever on an infinite range: before, this plot never ended.
+        let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../docs/results/variants/sac-alpha0/table1/fge/seed-1");
+        let mut run = read_run(&stored).expect("a stored run");
+        assert!(run.mean_q.len() > 10, "the stored run logs its mean Q");
+        run.mean_q[5] = f64::INFINITY;
+        run.mean_q[6] = f64::NAN;
+        let dir = std::env::temp_dir().join(format!("vge-plot-inf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let out = dir.join("curves.png");
+        plot(&[run], &out).expect("drawn");
+        assert!(std::fs::metadata(&out).expect("written").len() > 0);
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn a_row_being_written_is_not_read_and_a_short_complete_row_is_refused_naming_it() {

@@ -155,11 +155,15 @@ fn row(axis: Axis, level: f32, max: f32, r: &EvalReport, clean_return: f64) -> R
     }
 }
 
+/// The most levels per axis: each costs a success test, so more would run for days.
+pub const MAX_LEVELS: usize = 1_000;
+
 fn check(options: &RobustnessOptions) -> Result<(), EvalError> {
-    if options.levels < 2 {
-        return Err(EvalError::InvalidOption(
-            "the robustness test needs at least 2 levels per axis".to_owned(),
-        ));
+    if !(2..=MAX_LEVELS).contains(&options.levels) {
+        return Err(EvalError::InvalidOption(format!(
+            "the robustness test needs 2 to {MAX_LEVELS} levels per axis, got {}",
+            options.levels
+        )));
     }
     if options.axes.is_empty() {
         return Err(EvalError::InvalidOption("the robustness test needs at least one axis".to_owned()));

@@ -278,9 +278,12 @@ fn plan(
     };
     let eval_csv = dir.join(crate::run_dir::EVAL);
     let steps: Vec<u64> = if eval_csv.is_file() {
-        let columns = crate::plot::csv_columns(&eval_csv, &["step"])
-            .map_err(|e| ScoreError::RunFile { path: eval_csv.clone(), message: e.to_string() })?;
-        columns.into_iter().next().unwrap_or_default().into_iter().map(|s| s as u64).collect()
+        let bad = |e: crate::plot::PlotError| ScoreError::RunFile {
+            path: eval_csv.clone(),
+            message: e.to_string(),
+        };
+        let columns = crate::plot::csv_columns(&eval_csv, &["step"]).map_err(bad)?;
+        crate::plot::whole_steps(&eval_csv, &columns.into_iter().next().unwrap_or_default()).map_err(bad)?
     } else {
         Vec::new()
     };

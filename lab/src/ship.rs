@@ -105,9 +105,7 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
         .try_into()
         .map_err(|_| ShipError::Run { path: eval_csv.display().to_string(), message: "columns".into() })?;
     let mut out = Vec::new();
-    for (step, success) in steps.into_iter().zip(success) {
-        // eval.csv's steps are whole env steps written as integers.
-        let step = step as u64;
+    for (step, success) in crate::plot::whole_steps(&eval_csv, &steps)?.into_iter().zip(success) {
         let path = dir.snapshot(step);
         if success >= min_success && path.exists() {
             out.push((Some(step), path));

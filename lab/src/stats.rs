@@ -34,6 +34,9 @@ pub const CONFIDENCE: f64 = 0.95;
 pub const RESAMPLES: usize = 10_000;
 /// The fewest resamples an interval may be drawn from.
 pub const MIN_RESAMPLES: usize = 2_000;
+/// The most: 100 times the default, past which more resamples change no reported digit and
+/// only hold memory (every statistic keeps each resample's value).
+pub const MAX_RESAMPLES: usize = 1_000_000;
 
 #[derive(Debug, Error, PartialEq)]
 pub enum StatsError {
@@ -45,6 +48,8 @@ pub enum StatsError {
     NotFinite { run: usize, task: usize, value: f64 },
     #[error("{0} bootstrap resamples: at least {MIN_RESAMPLES} are needed")]
     TooFewResamples(usize),
+    #[error("{0} bootstrap resamples: at most {MAX_RESAMPLES} are drawn")]
+    TooManyResamples(usize),
 }
 
 /// One group's scores: for every task, the score of each run (the same runs in every task).
@@ -169,6 +174,9 @@ impl Bootstrap {
     fn check(&self) -> Result<(), StatsError> {
         if self.resamples < MIN_RESAMPLES {
             return Err(StatsError::TooFewResamples(self.resamples));
+        }
+        if self.resamples > MAX_RESAMPLES {
+            return Err(StatsError::TooManyResamples(self.resamples));
         }
         Ok(())
     }
@@ -360,6 +368,12 @@ mod tests {
         assert_eq!(
             few.aggregates(&s, &mut ChaCha8Rng::seed_from_u64(0)),
             Err(StatsError::TooFewResamples(100))
+        );
+        // Every resample's value is kept: an absurd count is refused before it is allocated.
+        let many = Bootstrap { resamples: usize::MAX, ..Bootstrap::default() };
+        assert_eq!(
+            many.aggregates(&s, &mut ChaCha8Rng::seed_from_u64(0)),
+            Err(StatsError::TooManyResamples(usize::MAX))
         );
     }
 

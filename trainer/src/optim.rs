@@ -65,7 +65,8 @@ impl Adam {
         if self.lr == 0.0 {
             return;
         }
-        let t = self.step as i32;
+        // Past i32::MAX steps both corrections are 1 to f64 precision, so saturating is exact.
+        let t = i32::try_from(self.step).unwrap_or(i32::MAX);
         let bc1 = 1.0 - Self::BETA1.powi(t);
         let bc2 = 1.0 - Self::BETA2.powi(t);
         // p ← p − (lr / bc1) · m / (√(v / bc2) + ε), written as p ← p + m / d with
@@ -105,8 +106,35 @@ impl Adam {
         named: &std::collections::HashMap<String, Tensor>,
     ) -> Result<(), tch::TchError> {
         use crate::saved_state::{restore_into, saved_i64};
-        self.step = saved_i64(named, &format!("{prefix}.step"))?;
+        let key = format!("{prefix}.step");
+        let step = saved_i64(named, &key)?;
+        if step < 0 {
+            // Adam's bias corrections divide by 1 - beta^t: t = 0 would give NaN parameters.
+            return Err(tch::TchError::FileFormat(format!("the checkpoint's {key} is {step}, below 0")));
+        }
+        self.step = step;
         restore_into(&mut self.m, named, &format!("{prefix}.m"))?;
         restore_into(&mut self.v, named, &format!("{prefix}.v"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_checkpoint_with_a_negative_step_is_refused_and_a_good_one_restores() {
+        let param = Tensor::zeros([3], (Kind::Float, Device::Cpu)).set_requires_grad(true);
+        let mut adam = Adam::new(vec![param.shallow_clone()], 1e-3);
+        adam.backward_step(&(&param * 2.0).sum(Kind::Float));
+        let mut named: std::collections::HashMap<String, Tensor> =
+            adam.state("actor_opt").into_iter().collect();
+        let mut restored = Adam::new(vec![param.shallow_clone()], 1e-3);
+        restored.restore("actor_opt", &named).expect("its own state");
+        assert_eq!(restored.step, 1);
+        // Step -1 would make the first bias correction 1 - beta^0 = 0: NaN parameters.
+        named.insert("actor_opt.step".to_owned(), Tensor::from_slice(&[-1i64]));
+        let err = restored.restore("actor_opt", &named).expect_err("a negative step").to_string();
+        assert!(err.contains("the checkpoint's actor_opt.step is -1, below 0"), "{err}");
     }
 }

@@ -59,7 +59,11 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
     } = args;
     use vge_lab::robustness::{self, RobustnessOptions};
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
-    anyhow::ensure!(levels >= 2, "--levels must be at least 2 (0 and the paper's level)");
+    let max = vge_lab::robustness::MAX_LEVELS;
+    anyhow::ensure!(
+        (2..=max).contains(&levels),
+        "--levels must be 2 (0 and the paper's level) to {max}, got {levels}"
+    );
     anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
     anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
     let bytes = vge_lab::eval::read_policy_file(&policy)?;

@@ -53,8 +53,8 @@ pub struct SweepArgs {
     /// each --jobs process.
     #[arg(long, value_name = "K", default_value_t = 1, requires = "jobs", value_parser = clap::value_parser!(u32).range(1..))]
     threads_per_job: u32,
-    /// Seconds between progress lines (one per running seed) with --jobs.
-    #[arg(long, value_name = "S", default_value_t = 30, requires = "jobs")]
+    /// Seconds between progress lines (one per running seed) with --jobs (1 to 86400).
+    #[arg(long, value_name = "S", default_value_t = 30, requires = "jobs", value_parser = clap::value_parser!(u64).range(1..=86_400))]
     report_every_s: u64,
     /// Write DIR/sweep.sbatch, a Slurm array job with one task per unfinished seed (task id
     /// = seed), and submit it with sbatch. Each task resumes its seed when its folder holds a
@@ -153,7 +153,7 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) ->
     let opts = Parallel {
         jobs: jobs as usize,
         threads_per_job: args.threads_per_job as usize,
-        report_every: std::time::Duration::from_secs(args.report_every_s.max(1)),
+        report_every: std::time::Duration::from_secs(args.report_every_s),
     };
     let stop = stop_on_signal()?;
     eprintln!(
