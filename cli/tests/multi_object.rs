@@ -199,6 +199,19 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert_eq!(selected[2], "3", "{csv}");
     assert!((figure(3) - 0.575).abs() < 1e-4, "IQM over runs x objects: {csv}");
     assert!((figure(6) - 0.55).abs() < 1e-4, "mean over objects of their means: {csv}");
+    // A group's figures do not depend on the groups beside it: each interval draws from a
+    // generator seeded by its own label.
+    let alone = dir.join("compare-alone");
+    let out = vge(
+        &["compare", "--out", &alone.display().to_string(), "--resamples", "2000"],
+        &[format!("vge={}", copies.join(","))],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let alone_csv = std::fs::read_to_string(alone.join("compare.csv")).expect("compare.csv");
+    let vge_rows =
+        |csv: &str| csv.lines().filter(|l| l.starts_with("vge,")).map(str::to_owned).collect::<Vec<_>>();
+    assert_eq!(vge_rows(&alone_csv), vge_rows(&csv));
+    assert_eq!(vge_rows(&csv).len(), 3, "selected, final, last snapshots: {csv}");
     let md = std::fs::read_to_string(compared.join("compare.md")).expect("compare.md");
     assert!(md.contains("| group | cube | sphere |") && md.contains("each object is a task"), "{md}");
     // Each run on each object: 4 runs x 2 objects, the set selected success on its object.

@@ -196,6 +196,7 @@ fn a_kill_at_either_rename_of_a_checkpoint_swap_is_never_started_over_and_resume
 fn enospc_before_the_first_checkpoint_gives_a_named_error_and_an_emptied_folder_that_starts_again() {
     enospc_in_each_writer(
         "crash-enospc-start",
+        Left::NoCheckpoint,
         &[
             ("config.toml.tmp", 1),
             ("metrics.csv.tmp", 1),
@@ -211,6 +212,7 @@ fn enospc_before_the_first_checkpoint_gives_a_named_error_and_an_emptied_folder_
 fn enospc_in_a_periodic_writer_gives_a_named_error_and_a_folder_that_resumes_to_the_same_policy() {
     enospc_in_each_writer(
         "crash-enospc-periodic",
+        Left::Checkpoint,
         &[
             ("metrics.csv", 9),
             ("eval.csv", 2),
@@ -229,6 +231,7 @@ fn enospc_in_a_periodic_writer_gives_a_named_error_and_a_folder_that_resumes_to_
 fn enospc_in_a_final_writer_gives_a_named_error_and_a_folder_that_resumes_to_the_same_policy() {
     enospc_in_each_writer(
         "crash-enospc-final",
+        Left::Checkpoint,
         &[
             ("policy-best.vgep.tmp", 1),
             ("best-eval.json.tmp", 1),
@@ -238,8 +241,16 @@ fn enospc_in_a_final_writer_gives_a_named_error_and_a_folder_that_resumes_to_the
     );
 }
 
+/// What a failed write must leave: a checkpoint to resume from once the first one is saved,
+/// before it a folder emptied of run files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Left {
+    Checkpoint,
+    NoCheckpoint,
+}
+
 /// Each case `(file, which write of it fails)` in a run folder of its own under `name`.
-fn enospc_in_each_writer(name: &str, cases: &[(&str, u32)]) {
+fn enospc_in_each_writer(name: &str, left: Left, cases: &[(&str, u32)]) {
     let root = common::temp_dir(name);
     let config = config_file(&root);
     for (k, &(file, when)) in cases.iter().enumerate() {
@@ -251,8 +262,13 @@ fn enospc_in_each_writer(name: &str, cases: &[(&str, u32)]) {
         assert_eq!(out.status.code(), Some(1), "{what}: exit {:?} (not an abort): {err}", out.status);
         let named = file.trim_end_matches(".tmp");
         assert!(err.contains(named) && err.contains("No space left on device"), "{what}: {err}");
-        if vge_trainer::checkpoint::resume_dir(&dir).is_some() {
-            let ckpt = vge_trainer::checkpoint::resume_dir(&dir).expect("checkpoint");
+        let checkpoint = vge_trainer::checkpoint::resume_dir(&dir);
+        assert_eq!(
+            checkpoint.is_some(),
+            left == Left::Checkpoint,
+            "{what}: expected {left:?}, found {checkpoint:?}"
+        );
+        if let Some(ckpt) = checkpoint {
             vge_trainer::checkpoint::verify(&ckpt).unwrap_or_else(|e| panic!("{what}: {e}"));
             resume_to_the_reference_policy(&dir, &what);
         } else {

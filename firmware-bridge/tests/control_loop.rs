@@ -436,17 +436,23 @@ fn a_flood_beyond_the_receive_budget_halts_and_below_it_is_only_counted() {
     }
 }
 
-/// The bridge's end of the link with a transmit queue that is full from `after` on.
+/// The bridge's end of the link with a transmit queue that is full from `after` on. With
+/// `deliver`, the frames still reach the nodes (as if a retry below the bridge got them
+/// out), so the nodes keep answering and only the refused sends can halt the loop.
 struct FullQueue {
     inner: InProcessTransport,
     sent: u64,
     after: u64,
+    deliver: bool,
 }
 
 impl Transport for FullQueue {
     fn send(&mut self, frame: &RawFrame) -> Result<(), TransportError> {
         self.sent += 1;
         if self.sent > self.after {
+            if self.deliver {
+                self.inner.send(frame)?;
+            }
             return Err(TransportError::TxQueueFull { id: frame.id });
         }
         self.inner.send(frame)
@@ -462,12 +468,19 @@ impl Transport for FullQueue {
 #[test]
 fn a_transmit_queue_that_stays_full_halts_the_loop() {
     let (bridge, nodes) = InProcessTransport::pair();
-    let bridge = FullQueue { inner: bridge, sent: 0, after: 200 };
+    let bridge = FullQueue { inner: bridge, sent: 0, after: 200, deliver: false };
     let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(100.0, 3.0));
     // The nodes fall silent without commands, so the watchdog may see it first: both are
     // the loop refusing to go on blind.
     assert!(matches!(report.stop_reason, StopReason::TxFailure | StopReason::Watchdog), "{report:?}");
     assert!(report.link.tx_dropped >= 5, "{:?}", report.link);
+
+    // Nodes that keep answering: the watchdog stays quiet, so the refused sends alone halt it.
+    let (bridge, nodes) = InProcessTransport::pair();
+    let bridge = FullQueue { inner: bridge, sent: 0, after: 200, deliver: true };
+    let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &config(100.0, 3.0));
+    assert_eq!(report.stop_reason, StopReason::TxFailure, "{report:?}");
+    assert!(report.stop_detail.contains("could not be sent for 5 periods"), "{report:?}");
 }
 
 /// Sleeps through three periods once, as a loaded host would.

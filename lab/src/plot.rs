@@ -541,6 +541,24 @@ pub(crate) fn draw_panels(
     root.present().map_err(draw_err)
 }
 
+/// `curves` without their non-finite points, and `title` counting them. A diverged critic
+/// logs an infinite or NaN Q: no axis holds it (plotters' axis fitting never ends on one).
+fn drawable<'a>(curves: &[Curve<'a>], title: &str) -> (Vec<Curve<'a>>, String) {
+    let finite = |p: &&SpreadPoint| [p.step, p.mean, p.min, p.max].iter().all(|v| v.is_finite());
+    let kept: Vec<Curve> = curves
+        .iter()
+        .map(|(n, c, dashed)| (*n, c.iter().filter(finite).copied().collect(), *dashed))
+        .collect();
+    let left_out = curves.iter().map(|(_, c, _)| c.len()).sum::<usize>()
+        - kept.iter().map(|(_, c, _)| c.len()).sum::<usize>();
+    let title = if left_out == 0 {
+        title.to_owned()
+    } else {
+        format!("{title} ({left_out} non-finite points not drawn)")
+    };
+    (kept, title)
+}
+
 /// One panel: axes fitted to `curves`, each group's mean line over its min-max band (or a
 /// dashed mean line for a second series), and the legend.
 fn draw_panel(
@@ -551,21 +569,7 @@ fn draw_panel(
     groups: &Groups,
     palette: &[&str],
 ) -> Result<(), PlotError> {
-    // A diverged critic logs an infinite or NaN Q: such points are left out and counted in
-    // the title, since no axis holds them (and plotters' axis fitting never ends on one).
-    let finite = |p: &&SpreadPoint| [p.step, p.mean, p.min, p.max].iter().all(|v| v.is_finite());
-    let points: usize = curves.iter().map(|(_, c, _)| c.len()).sum();
-    let curves: Vec<Curve> = curves
-        .iter()
-        .map(|(n, c, dashed)| (*n, c.iter().filter(finite).copied().collect(), *dashed))
-        .collect();
-    let left_out: usize = curves.iter().map(|(_, c, _)| c.len()).sum();
-    let left_out = points - left_out;
-    let title = if left_out == 0 {
-        title.to_owned()
-    } else {
-        format!("{title} ({left_out} non-finite points not drawn)")
-    };
+    let (curves, title) = drawable(curves, title);
     let x_max = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(1.0, f64::max);
     // Steps and shares start at 0; a threshold on returns may lie below.
     let x_min = curves.iter().flat_map(|(_, c, _)| c.iter().map(|p| p.step)).fold(0.0, f64::min);
@@ -604,7 +608,7 @@ fn draw_panel(
                 ))
                 .map_err(draw_err)?;
         } else {
-            draw_band_and_mean(&mut chart, c, color, runs_label(name, groups[name].len()))?;
+            draw_band_and_mean(&mut chart, c, color, runs_label(name, groups.get(name).map_or(0, Vec::len)))?;
         }
     }
     chart
@@ -892,18 +896,20 @@ mod tests {
 
     #[test]
     fn an_infinite_q_is_left_out_of_the_panel_and_counted() {
-        // A diverged critic logs inf or NaN as its mean Q. plotters' axis fitting loops
-        // forever on an infinite range: before, this plot never ended.
-        let stored = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../docs/results/variants/sac-alpha0/table1/fge/seed-1");
-        let mut run = read_run(&stored).expect("a stored run");
-        assert!(run.mean_q.len() > 10, "the stored run logs its mean Q");
-        run.mean_q[5] = f64::INFINITY;
-        run.mean_q[6] = f64::NAN;
+        // A diverged critic logs inf or NaN as its mean Q.
+        let point = |step, v| SpreadPoint { step, mean: v, min: v, max: v };
+        let curve = vec![point(0.0, 1.0), point(1e4, f64::INFINITY), point(2e4, f64::NAN), point(3e4, 2.0)];
+        let curves: Vec<Curve> = vec![("rl", curve, false)];
+        let (kept, title) = drawable(&curves, "mean Q");
+        assert_eq!(kept[0].1, [point(0.0, 1.0), point(3e4, 2.0)]);
+        assert_eq!(title, "mean Q (2 non-finite points not drawn)");
+        assert_eq!(drawable(&kept, "mean Q").1, "mean Q", "nothing left out, nothing said");
+        // Drawn: plotters' axis fitting looped forever on the infinite point before.
         let dir = std::env::temp_dir().join(format!("vge-plot-inf-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let out = dir.join("curves.png");
-        plot(&[run], &out).expect("drawn");
+        let out = dir.join("q.png");
+        draw_panels(&[("mean Q", XAxis::EnvSteps, curves)], &Groups::new(), "", &["rl"], &out)
+            .expect("drawn");
         assert!(std::fs::metadata(&out).expect("written").len() > 0);
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -12,7 +12,7 @@ use std::process::{Command, Stdio};
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use vge_lab::stats::{Bootstrap, Estimate, Scores, probability_of_improvement};
+use vge_lab::stats::{Bootstrap, Estimate, Scores};
 
 /// Enough resamples that both sides' percentile bounds sit well within the tolerance.
 const RESAMPLES: usize = 5_000;
@@ -148,10 +148,11 @@ fn probabilities_of_improvement_and_their_intervals_agree_with_rliable() {
     let mut rng = ChaCha8Rng::seed_from_u64(43);
     for (k, (x, y)) in PAIRS.iter().enumerate() {
         let ours = bootstrap.probability_of_improvement(of(x), of(y), &mut rng).expect("P(X > Y)");
-        assert_eq!(ours.point, probability_of_improvement(of(x), of(y)).expect("point"));
         let row = &theirs["pairs"][k];
         assert_eq!((row[0].as_str(), row[1].as_str()), (Some(*x), Some(*y)));
         let t = [row[2].as_f64(), row[3].as_f64(), row[4].as_f64()].map(|v| v.expect("number"));
-        assert_close(&format!("P({x} > {y})"), ours, t, 0.02, 0.02);
+        // The point is exact (a tie counts half, one pair of 10 x 7 runs is worth 0.014); the
+        // bounds differ by the draws.
+        assert_close(&format!("P({x} > {y})"), ours, t, 1e-9, 0.02);
     }
 }

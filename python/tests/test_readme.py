@@ -5,8 +5,6 @@ import re
 import subprocess
 import sys
 
-import pytest
-
 
 def test_quickstart_runs(repo):
     out = subprocess.run(
@@ -19,8 +17,7 @@ def test_quickstart_runs(repo):
 def test_readme_shows_the_quickstart(repo):
     readme = (repo / "docs/python.md").read_text()
     section = re.search(r"^## Python\n(.*?)(?=^## |\Z)", readme, flags=re.M | re.S)
-    if section is None:
-        pytest.skip("docs/python.md has no `## Python` section yet")
+    assert section is not None, "docs/python.md has no `## Python` section"
     blocks = re.findall(r"```python\n(.*?)```", section.group(1), flags=re.S)
     assert blocks, "the `## Python` section of docs/python.md has no python code block"
     assert blocks[0] == (repo / "python/examples/quickstart.py").read_text()

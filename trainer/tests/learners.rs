@@ -163,9 +163,40 @@ fn auto_alpha_moves_and_target_critic_trails_the_critic() {
     assert!(sac.alpha() > 0.1, "alpha {}", sac.alpha());
     assert!(sac.alpha().is_finite());
 
-    // Saved and loaded into a fresh learner, α and the update count come back.
     let dir = std::env::temp_dir().join(format!("vge-auto-alpha-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
+    // The target critic trails the critic by Polyak averaging: after one more update,
+    // target = target_before + tau (critic - target_before), parameter by parameter.
+    let saved = |sac: &dyn Learner, tag: &str| {
+        let at = dir.join(tag);
+        std::fs::create_dir_all(&at).expect("dir");
+        sac.save(&at).expect("save");
+        let read = |file: &str| {
+            let mut named = Tensor::load_multi(at.join(file)).expect("a saved var store");
+            named.sort_by(|a, b| a.0.cmp(&b.0));
+            named
+        };
+        (read(learner::CRITIC_FILE), read(learner::TARGET_FILE))
+    };
+    let (_, target_before) = saved(sac.as_ref(), "before");
+    sac.update(&batch);
+    let (critic, target) = saved(sac.as_ref(), "after");
+    let tau = sac.config().tau;
+    assert_eq!(critic.len(), target.len());
+    let (mut off, mut trailed, mut behind) = (0.0f64, 0.0f64, 0.0f64);
+    for ((c, t0), t) in critic.iter().zip(&target_before).zip(&target) {
+        assert_eq!((&c.0, &t0.0), (&t.0, &t.0), "the same parameters in the same order");
+        off = off.max(max_abs(&(&t.1 - (&t0.1 + (&c.1 - &t0.1) * tau))));
+        trailed = trailed.max(max_abs(&(&t.1 - &t0.1)));
+        behind = behind.max(max_abs(&(&c.1 - &t.1)));
+    }
+    assert!(off < 1e-6, "target - (target_before + tau (critic - target_before)) up to {off}");
+    assert!(
+        trailed > 0.0 && behind > 0.0,
+        "the target moved ({trailed}), yet not onto the critic ({behind})"
+    );
+
+    // Saved and loaded into a fresh learner, α and the update count come back.
     sac.save(&dir).expect("save");
     let mut again =
         learner::build(config(EntropyCoef::Auto { target_entropy: 10.0, initial: 0.1 }), Device::Cpu)
