@@ -612,7 +612,7 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
 /// `vge ship` copies the run's policy and config, measures the copy on the run's own task (here
 /// the 0.4 kg cube of a task variant, whose paper-level push is its own weight) and writes its
 /// record, robustness figure and gait diagram; a run that is not finished is refused and
-/// nothing is written.
+/// nothing is written; a name already shipped is refused unless --force replaces it.
 #[test]
 fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfinished_one() {
     let run = common::temp_dir("ship-run");
@@ -626,22 +626,18 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
         vge_lab::config::load_config(&common::config("variants/heavy-cube.toml"), &[]).expect("config");
     std::fs::write(run.join("config.toml"), variant.to_toml_string().expect("toml")).expect("config");
     let policies = run.join("shipped");
-    let ship = || {
+    let ship_with = |policy: &str, force: bool| {
+        let mut args =
+            vec![run.display().to_string(), "--policies".to_owned(), policies.display().to_string()];
+        if force {
+            args.push("--force".to_owned());
+        }
         vge(
-            &[
-                "ship",
-                "--policy",
-                "policy-best.vgep",
-                "--name",
-                "trial",
-                "--episodes",
-                "1",
-                "--robustness-episodes",
-                "1",
-            ],
-            &[run.display().to_string(), "--policies".to_owned(), policies.display().to_string()],
+            &["ship", "--policy", policy, "--name", "trial", "--episodes", "1", "--robustness-episodes", "1"],
+            &args,
         )
     };
+    let ship = || ship_with("policy-best.vgep", false);
     // No final-eval.json: not a finished run.
     let refused = ship();
     let err = text(&refused.stderr);
@@ -678,6 +674,25 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
     assert!((level_n - 0.4 * 9.81).abs() < 1e-3, "{push}");
     assert!(record.get("per_object").is_none(), "one object, no per_object: {record}");
     assert!(text(&out.stdout).contains("FAILS  success_rate >= 0.8"), "{}", text(&out.stdout));
+
+    // Shipping another policy under the same name is refused before anything is measured,
+    // and the shipped files stay; --force replaces them.
+    let other =
+        vge(&["export", "--init", "--seed", "4", "--out"], &[run.join("policy.vgep").display().to_string()]);
+    assert!(other.status.success(), "{}", text(&other.stderr));
+    let shipped = read("trial.vgep");
+    let refused = ship_with("policy.vgep", false);
+    let err = text(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("trial.vgep exists") && err.contains("--force"),
+        "{err}"
+    );
+    assert!(!err.contains("measuring"), "refused before measuring: {err}");
+    assert!(read("trial.vgep") == shipped, "a refused ship replaced the policy");
+    let forced = ship_with("policy.vgep", true);
+    assert!(forced.status.success(), "{}", text(&forced.stderr));
+    assert!(read("trial.vgep") == std::fs::read(run.join("policy.vgep")).expect("policy"));
+    assert!(read("trial.vgep") != shipped, "two seeds, two policies");
     let _ = std::fs::remove_dir_all(&run);
 }
 

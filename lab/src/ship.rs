@@ -268,6 +268,12 @@ impl ShippedFiles {
         }
     }
 
+    /// The first of the policy file, its config and its record that already exists: a gait
+    /// shipped under this name, which shipping again would replace.
+    pub fn already_shipped(&self) -> Option<&Path> {
+        [&self.policy, &self.config, &self.record].into_iter().map(PathBuf::as_path).find(|p| p.exists())
+    }
+
     /// `NAME-gait-OBJECT.png`: the gait diagram on one object of a policy of several.
     pub fn gait_png_of(&self, object: vge_sim::ObjectShape) -> PathBuf {
         crate::gait_diagram::per_object_png(&self.gait_png, object)

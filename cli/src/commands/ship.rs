@@ -29,7 +29,8 @@ use vge_lab::ship::{self, ShipOptions, ShippedFiles};
 /// the others at the paper's levels (beside the goals); NAME.json gains `per_object`, and the
 /// gait diagrams are NAME-gait-OBJECT.png, with all of them in NAME-gait.png. Nothing is
 /// written if the policy cannot be read or measured. About 5 min on 2 cores per object.
-/// `vge screen` chooses among a run's snapshots.
+/// `vge screen` chooses among a run's snapshots. A name already shipped in DIR is refused
+/// before anything is measured, unless --force replaces it.
 ///
 /// Example: vge ship runs/robust/seed-0 --policy policy-best.vgep --name cube
 #[derive(Debug, Args)]
@@ -55,10 +56,14 @@ pub struct ShipArgs {
     /// Episodes per level of the robustness test.
     #[arg(long, default_value_t = ShipOptions::default().robustness_episodes)]
     robustness_episodes: usize,
+    /// Replace a gait already shipped under NAME (its files are overwritten once the new
+    /// policy has been measured).
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(args: ShipArgs) -> anyhow::Result<()> {
-    let ShipArgs { run, policy, name, policies, episodes, robustness_episodes } = args;
+    let ShipArgs { run, policy, name, policies, episodes, robustness_episodes, force } = args;
     anyhow::ensure!(
         episodes > 0 && robustness_episodes > 0,
         "--episodes and --robustness-episodes must be at least 1"
@@ -68,6 +73,12 @@ pub fn run(args: ShipArgs) -> anyhow::Result<()> {
         "--name {name:?}: letters, digits, '-' and '_' only (it names files)"
     );
     let files = ShippedFiles::new(&policies, &name);
+    if let (Some(existing), false) = (files.already_shipped(), force) {
+        anyhow::bail!(
+            "{} exists: a gait is already shipped as {name:?}; choose another --name, or --force to replace it",
+            existing.display()
+        );
+    }
     let options =
         ShipOptions { policy, success_episodes: episodes, robustness_episodes, ..ShipOptions::default() };
     eprintln!("vge ship: measuring {} (success test, then robustness)", run.join(&options.policy).display());
