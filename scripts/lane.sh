@@ -16,7 +16,9 @@
 # queue keeps training the same program and the same config whatever the checkout has
 # become since. A run is skipped when docs/results/REL/score.json or runs/REL/score.json
 # exists; a run with a checkpoint resumes (bit for bit on the same binary, thread count and
-# CPU model); a run that finished training without its score is scored. `--score-with`
+# CPU model); a run folder without one (stopped before its first checkpoint) is moved aside
+# to runs/REL.abandoned-TIME and the run starts again; a run that finished training without
+# its score is scored. `--score-with`
 # scores the finished run again with vge-COMMIT2 (`vge score --force`), for scores the
 # training binary lacks (per-object ones); runs/REL.scored-with-COMMIT2 marks it done.
 #
@@ -92,7 +94,7 @@ split_score_with() {
 }
 
 run_queue() {
-  local queue log rel commit config seed rest score_commit dir bin score_bin
+  local queue log rel commit config seed rest score_commit dir bin score_bin rc aside
   queue=$1
   check "$queue" || { echo "lane: $queue has errors (above); nothing started" >&2; exit 1; }
   mkdir -p runs/lanes
@@ -110,24 +112,32 @@ run_queue() {
     bin=$(binary_of "$commit") || { echo "$(date -u +%FT%TZ) fail $rel (no binary for $commit)" >>"$log"; continue; }
     echo "$(date -u +%FT%TZ) start $rel with vge-$commit" >>"$log"
     set +e
+    rc=0
     if [ -f "$dir/score.json" ]; then
       : # trained and scored; only the scoring with --score-with's binary is left
     elif [ -f "$dir/final-eval.json" ]; then
-      RAYON_NUM_THREADS=1 "$bin" score --threads 1 "$dir" >>"$dir.log" 2>&1
+      RAYON_NUM_THREADS=1 "$bin" score --threads 1 "$dir" >>"$dir.log" 2>&1; rc=$?
     elif [ -d "$dir/checkpoint" ]; then
-      RAYON_NUM_THREADS=1 "$bin" train --resume "$dir" >>"$dir.log" 2>&1
+      RAYON_NUM_THREADS=1 "$bin" train --resume "$dir" >>"$dir.log" 2>&1; rc=$?
     else
+      if [ -e "$dir" ]; then
+        # Stopped before its first checkpoint: nothing to resume, and vge refuses to train
+        # into a folder holding a run. Kept beside it, not deleted, and logged.
+        aside=$dir.abandoned-$(date -u +%Y%m%dT%H%M%SZ)
+        mv "$dir" "$aside"
+        echo "$(date -u +%FT%TZ) moved $rel aside to ${aside#runs/} (no checkpoint to resume); starting again" >>"$log"
+      fi
       mkdir -p "$(dirname "$dir")"
       # shellcheck disable=SC2086 # the --set words are meant to split
-      RAYON_NUM_THREADS=1 "$bin" train --config "runs/src/$commit/$config" --seed "$seed" --out "$dir" $rest >>"$dir.log" 2>&1
+      RAYON_NUM_THREADS=1 "$bin" train --config "runs/src/$commit/$config" --seed "$seed" --out "$dir" $rest >>"$dir.log" 2>&1; rc=$?
     fi
-    echo "$(date -u +%FT%TZ) end $rel (exit $?)" >>"$log"
+    echo "$(date -u +%FT%TZ) end $rel (exit $rc)" >>"$log"
     if [ -n "$score_commit" ] && [ -f "$dir/score.json" ]; then
       if score_bin=$(binary_of "$score_commit"); then
         echo "$(date -u +%FT%TZ) score $rel again with vge-$score_commit" >>"$log"
-        RAYON_NUM_THREADS=1 "$score_bin" score --force --threads 1 "$dir" >>"$dir.log" 2>&1 &&
-          echo "vge-$score_commit" >"$dir.scored-with-$score_commit"
-        echo "$(date -u +%FT%TZ) scored $rel (exit $?)" >>"$log"
+        RAYON_NUM_THREADS=1 "$score_bin" score --force --threads 1 "$dir" >>"$dir.log" 2>&1; rc=$?
+        [ "$rc" -eq 0 ] && echo "vge-$score_commit" >"$dir.scored-with-$score_commit"
+        echo "$(date -u +%FT%TZ) scored $rel (exit $rc)" >>"$log"
       else
         echo "$(date -u +%FT%TZ) fail $rel (no binary for $score_commit)" >>"$log"
       fi
