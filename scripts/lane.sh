@@ -15,8 +15,9 @@
 # from a git worktree of COMMIT (runs/src/COMMIT), and CONFIG is read from that commit, so a
 # queue keeps training the same program and the same config whatever the checkout has
 # become since. A run is skipped when docs/results/REL/score.json or runs/REL/score.json
-# exists; a run with a checkpoint resumes (bit for bit on the same binary, thread count and
-# CPU model); a run folder without one (stopped before its first checkpoint) is moved aside
+# exists, and so is one whose folder another process holds (its vge.lock); a run with a
+# checkpoint resumes (bit for bit on the same binary, thread count and CPU model); a run
+# folder without one (stopped before its first checkpoint) is moved aside
 # to runs/REL.abandoned-TIME and the run starts again; a run that finished training without
 # its score is scored. `--score-with`
 # scores the finished run again with vge-COMMIT2 (`vge score --force`), for scores the
@@ -93,6 +94,13 @@ split_score_with() {
   fi
 }
 
+# A checkpoint a resume reads: checkpoint/, or checkpoint.old/ left by a save killed between
+# its two renames (vge resumes from either).
+has_checkpoint() { [ -d "$1/checkpoint" ] || [ -d "$1/checkpoint.old" ]; }
+
+# Another process (a lane, a `vge train` by hand) holds the run folder's lock.
+in_use() { [ -f "$1/vge.lock" ] && ! flock -n "$1/vge.lock" true; }
+
 run_queue() {
   local queue log rel commit config seed rest score_commit dir bin score_bin rc aside
   queue=$1
@@ -110,6 +118,9 @@ run_queue() {
       echo "$(date -u +%FT%TZ) skip $rel (done)" >>"$log"; continue
     fi
     bin=$(binary_of "$commit") || { echo "$(date -u +%FT%TZ) fail $rel (no binary for $commit)" >>"$log"; continue; }
+    if in_use "$dir"; then
+      echo "$(date -u +%FT%TZ) skip $rel (in use: pid $(cat "$dir/vge.lock") holds its lock)" >>"$log"; continue
+    fi
     echo "$(date -u +%FT%TZ) start $rel with vge-$commit" >>"$log"
     set +e
     rc=0
@@ -117,7 +128,7 @@ run_queue() {
       : # trained and scored; only the scoring with --score-with's binary is left
     elif [ -f "$dir/final-eval.json" ]; then
       RAYON_NUM_THREADS=1 "$bin" score --threads 1 "$dir" >>"$dir.log" 2>&1; rc=$?
-    elif [ -d "$dir/checkpoint" ]; then
+    elif has_checkpoint "$dir"; then
       RAYON_NUM_THREADS=1 "$bin" train --resume "$dir" >>"$dir.log" 2>&1; rc=$?
     else
       if [ -e "$dir" ]; then
@@ -169,7 +180,15 @@ status() {
     case $rel in ''|\#*) continue ;; esac
     if [ -f "docs/results/$rel/score.json" ]; then state="collected"
     elif [ -f "runs/$rel/score.json" ]; then state="finished, not collected"
-    elif [ -f "runs/$rel/metrics.csv" ]; then state="at step $(tail -1 "runs/$rel/metrics.csv" | cut -d, -f1)"
+    elif [ -f "runs/$rel/final-eval.json" ]; then state="trained, not scored"
+    elif [ -e "runs/$rel" ]; then
+      state="at step $( (tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null || echo 0) | cut -d, -f1)"
+      if [ -f "runs/$rel/checkpoint/state.toml" ]; then
+        state+=", checkpoint at $(sed -n 's/^step = //p' "runs/$rel/checkpoint/state.toml")"
+      elif has_checkpoint "runs/$rel"; then state+=", checkpoint.old to resume from"
+      else state+=", no checkpoint yet"; fi
+      if in_use "runs/$rel"; then state+=", training now"
+      elif ! has_checkpoint "runs/$rel"; then state+=": starts again"; fi
     else state="not started"; fi
     printf '%-50s %s\n' "$rel" "$state"
   done 3<"$1"
