@@ -17,11 +17,11 @@
 # become since. A run is skipped when docs/results/REL/score.json or runs/REL/score.json
 # exists, and so is one whose folder another process holds (its vge.lock); a run with a
 # checkpoint resumes (bit for bit on the same binary, thread count and CPU model); a run
-# folder without one (stopped before its first checkpoint) is moved aside
-# to runs/REL.abandoned-TIME and the run starts again; a run that finished training without
-# its score is scored. `--score-with`
-# scores the finished run again with vge-COMMIT2 (`vge score --force`), for scores the
-# training binary lacks (per-object ones); runs/REL.scored-with-COMMIT2 marks it done.
+# folder without one (stopped before its first checkpoint) is moved aside to
+# runs/REL.abandoned-TIME and the run starts again; a run that finished training without its
+# score is scored. `--score-with` scores the finished run again with vge-COMMIT2
+# (`vge score --force`), for scores the training binary lacks (per-object ones);
+# runs/REL.scored-with-COMMIT2 marks it done.
 #
 # `collect` copies what a result needs (config, metrics, evaluations, scores, plots, the final
 # and selected policies, the lane's training log) and never checkpoints, replay buffers,
