@@ -94,9 +94,16 @@ split_score_with() {
   fi
 }
 
-# A checkpoint a resume reads: checkpoint/, or checkpoint.old/ left by a save killed between
-# its two renames (vge resumes from either).
-has_checkpoint() { [ -d "$1/checkpoint" ] || [ -d "$1/checkpoint.old" ]; }
+# The checkpoint folder `vge train --resume` reads, as vge picks it: checkpoint/, else
+# checkpoint.old/ (left by a save killed between its two renames); fails when there is none.
+resume_checkpoint() {
+  local c
+  for c in "$1/checkpoint" "$1/checkpoint.old"; do
+    [ -d "$c" ] && { echo "$c"; return 0; }
+  done
+  return 1
+}
+has_checkpoint() { resume_checkpoint "$1" >/dev/null; }
 
 # Another process (a lane, a `vge train` by hand) holds the run folder's lock.
 in_use() { [ -f "$1/vge.lock" ] && ! flock -n "$1/vge.lock" true; }
@@ -175,7 +182,7 @@ collect() {
 }
 
 status() {
-  local rel state
+  local rel state ckpt
   while read -r rel _ <&3; do
     case $rel in ''|\#*) continue ;; esac
     if [ -f "docs/results/$rel/score.json" ]; then state="collected"
@@ -183,12 +190,11 @@ status() {
     elif [ -f "runs/$rel/final-eval.json" ]; then state="trained, not scored"
     elif [ -e "runs/$rel" ]; then
       state="at step $( (tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null || echo 0) | cut -d, -f1)"
-      if [ -f "runs/$rel/checkpoint/state.toml" ]; then
-        state+=", checkpoint at $(sed -n 's/^step = //p' "runs/$rel/checkpoint/state.toml")"
-      elif has_checkpoint "runs/$rel"; then state+=", checkpoint.old to resume from"
+      if ckpt=$(resume_checkpoint "runs/$rel"); then
+        state+=", ${ckpt##*/} at step $(sed -n 's/^step = //p' "$ckpt/state.toml" 2>/dev/null || true)"
       else state+=", no checkpoint yet"; fi
       if in_use "runs/$rel"; then state+=", training now"
-      elif ! has_checkpoint "runs/$rel"; then state+=": starts again"; fi
+      elif [ -z "$ckpt" ]; then state+=": starts again"; fi
     else state="not started"; fi
     printf '%-50s %s\n' "$rel" "$state"
   done 3<"$1"
