@@ -100,10 +100,14 @@ pub fn cell_label(controller: ControllerKind, method: &str) -> String {
     format!("{}/{method}", controller.name())
 }
 
-/// The pairs of `improvement.csv` (FG cells): P(a run of A beats a run of B).
-pub const IMPROVEMENT_PAIRS: [(ControllerKind, &str, &str); 4] = [
+/// The pairs of `improvement.csv` (FG cells): P(a run of A beats a run of B). Every guided
+/// method against plain RL (what guidance buys), then VGE against FGE (what the critic's
+/// choice adds to the controller) and VGE + BC against VGE (what the BC term adds).
+pub const IMPROVEMENT_PAIRS: [(ControllerKind, &str, &str); 6] = [
     (ControllerKind::Fg, "vge", "rl"),
     (ControllerKind::Fg, "fge", "rl"),
+    (ControllerKind::Fg, "rl-bc", "rl"),
+    (ControllerKind::Fg, "vge-bc", "rl"),
     (ControllerKind::Fg, "vge", "fge"),
     (ControllerKind::Fg, "vge-bc", "vge"),
 ];

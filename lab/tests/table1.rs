@@ -228,6 +228,9 @@ fn scored_cells_get_their_iqm_intervals_improvements_and_profiles() {
     }
     // A finished run not scored yet: counted, not in the statistics.
     fake_run(&root.join("rl/seed-2"), "cube-fg-rl.toml", Some((0.5, 100.0)));
+    let rl_bc = root.join("rl-bc/seed-0");
+    fake_run(&rl_bc, "cube-fg-rl-bc.toml", Some((0.2, 100.0)));
+    write_score(&rl_bc, 0.2);
     let out = tempdir("scored-out");
     let written = table1::write(&[root], &out).expect("table");
     let csv = std::fs::read_to_string(out.join("table1.csv")).expect("csv");
@@ -245,10 +248,13 @@ fn scored_cells_get_their_iqm_intervals_improvements_and_profiles() {
     let improvement = std::fs::read_to_string(out.join("improvement.csv")).expect("improvement.csv");
     let mut lines = improvement.lines();
     assert_eq!(lines.next(), Some("a,b,prob_improvement,ci_low,ci_high"));
-    let row = lines.next().expect("one computable pair");
+    let row = lines.next().expect("VGE against RL");
     assert!(row.starts_with("fg/vge,fg/rl,0.8750,"), "{improvement}");
+    // Every guided method is set against RL, RL + BC too: 0.2 beats 0.1, not 0.3.
+    let row = lines.next().expect("RL + BC against RL");
+    assert!(row.starts_with("fg/rl-bc,fg/rl,0.5000,"), "{improvement}");
     assert_eq!(lines.next(), None, "the other pairs' cells have no runs: {improvement}");
-    assert_eq!(written.improvements.len(), 1);
+    assert_eq!(written.improvements.len(), 2);
     let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
     assert!(md.contains("| fg/vge | fg/rl | 0.88 |"), "{md}");
     assert!(md.contains("0.93 ["), "the IQM with its interval: {md}");

@@ -23,9 +23,9 @@ use clap::Args;
 /// held-out success with 95% intervals, selected and final: iqm, iqm_ci_low, ...,
 /// final_iqm_ci_high), DIR/table1.md (beside the paper's numbers), DIR/curves-fg.png,
 /// DIR/curves-cs.png (periodic success rate and return against env steps, one band per
-/// method) and, once runs are scored, DIR/improvement.csv (VGE and FGE against RL, VGE
-/// against FGE, VGE + BC against VGE) and DIR/profiles-fg.png, DIR/profiles-cs.png. Runs without final-eval.json are counted as
-/// running.
+/// method) and, once runs are scored, DIR/improvement.csv (every guided method against RL,
+/// VGE against FGE, VGE + BC against VGE) and DIR/profiles-fg.png, DIR/profiles-cs.png.
+/// Runs without final-eval.json are counted as running.
 /// The controllers alone come from DIR/controllers/{fg,cs,igm}.json when present
 /// (`vge controller --kind fg --episodes 20 --episode-s 30 --json`).
 ///
