@@ -164,16 +164,19 @@ fn committed_table1_is_what_its_run_folders_give() {
     // Each committed table and the roots its README names: the table's own folder and
     // VGE + FG's seeds. The three archives (the Euler-yaw reward, the paper's reward, then
     // utd 0.5 with the controllers stopped at 400k) always; the current table once its
-    // first runs are in.
-    let mut tables: Vec<_> = ["euler-yaw-reward", "paper-reward", "utd05-hs400k"]
+    // first runs are in; the comparison on the sac-alpha0 variant, whose plain-RL seeds 0-2
+    // are the variant screen's runs beside it.
+    let mut tables: Vec<(PathBuf, Vec<PathBuf>)> = ["euler-yaw-reward", "paper-reward", "utd05-hs400k"]
         .map(|archive| {
-            (results.join(archive).join("table1"), results.join(archive).join("cube-fg-vge-seeds"))
+            (results.join(archive).join("table1"), vec![results.join(archive).join("cube-fg-vge-seeds")])
         })
         .into();
     if results.join("table1/table1.csv").exists() {
-        tables.push((results.join("table1"), results.join("cube-fg-vge-seeds")));
+        tables.push((results.join("table1"), vec![results.join("cube-fg-vge-seeds")]));
     }
-    for (committed, seeds) in tables {
+    let sac_alpha0 = results.join("variants/sac-alpha0");
+    tables.push((sac_alpha0.join("table1"), (0..3).map(|k| sac_alpha0.join(format!("seed-{k}"))).collect()));
+    for (committed, others) in tables {
         let out = tempdir("committed");
         let _ = std::fs::remove_dir_all(&out);
         std::fs::create_dir_all(out.join("controllers")).expect("controllers dir");
@@ -182,7 +185,8 @@ fn committed_table1_is_what_its_run_folders_give() {
             std::fs::copy(&path, out.join("controllers").join(path.file_name().expect("name")))
                 .expect("copy");
         }
-        table1::write(&[committed.clone(), seeds], &out).expect("recompute");
+        let roots: Vec<PathBuf> = std::iter::once(committed.clone()).chain(others).collect();
+        table1::write(&roots, &out).expect("recompute");
         for file in ["table1.csv", "table1.md"] {
             let want = std::fs::read_to_string(committed.join(file)).expect(file);
             let got = std::fs::read_to_string(out.join(file)).expect(file);
