@@ -45,8 +45,16 @@ echo "==> the gait that ships with vge: policies/cube.vgep (policies/README.md)"
 echo "==> policies/cube.vgep through vge-bridge over CAN: the hand's nodes emulated on vcan0, 30 s at 20 Hz"
 scripts/canvm/run.sh scripts/canvm/bridge-demo.sh "$bridge" policies/cube.vgep 30 "${VGE_DEMO_SEED:-0}"
 
-echo "==> train: VGE + FG on the cube, $steps env steps, into $out"
-"$vge" train --config configs/cube-fg-vge.toml --out "$out" --steps "$steps" \
+# Two libtorch threads train fastest on an idle machine and stall beside a busy core
+# (docs/libtorch.md), so the cores' idle time over one second picks the count (from
+# /proc/stat, as `vge train` measures it before it warns; the load average counts a
+# container's whole host).
+cpu_jiffies() { awk '/^cpu[0-9]/ { n++; for (i = 2; i <= 9; i++) t += $i; idle += $5 + $6 } END { print n, t, idle }' /proc/stat; }
+read -r cores t0 idle0 < <(cpu_jiffies); sleep 1; read -r _ t1 idle1 < <(cpu_jiffies)
+idle_cores=$(awk -v n="$cores" -v dt=$((t1 - t0)) -v di=$((idle1 - idle0)) 'BEGIN { printf "%.1f", (dt > 0 ? n * di / dt : n) }')
+threads=$(awk -v idle="$idle_cores" 'BEGIN { print (idle >= 1.5 ? 2 : 1) }')
+echo "==> train: VGE + FG on the cube, $steps env steps, into $out ($threads libtorch thread(s): $idle_cores of $cores cores idle)"
+"$vge" train --config configs/cube-fg-vge.toml --out "$out" --steps "$steps" --set sac.threads="$threads" \
   --set sac.warmup=2000 --set run.log_interval=2000 --set run.eval_interval=10000 --set run.eval_episodes=4 --set run.eval_episode_s=10 \
   --set run.checkpoint_interval=10000 --set run.save_replay=false \
   --set run.score_episodes=0  # the held-out score of 100 episodes is for real runs (vge score)

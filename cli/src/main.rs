@@ -3,6 +3,8 @@
 
 mod closed_output;
 mod commands;
+#[cfg(feature = "train")]
+mod cpu_use;
 
 use std::io::Write as _;
 use std::process::ExitCode;

@@ -180,6 +180,7 @@ pub(crate) fn train(
         overrides.push(format!("total_steps={steps}"));
     }
     let (config, out_dir, resuming) = train_target(resume, config, out, &overrides)?;
+    warn_if_threads_exceed_idle_cores(config.sac.threads);
     let bar = progress_bar(config.total_steps);
     let resumed_from = if resuming { vge_lab::sweep::checkpoint_step(&out_dir) } else { None };
     // The controller only where the method queries it (rl runs ignore `controller`).
@@ -238,6 +239,35 @@ pub(crate) fn train(
         );
     }
     Ok(summary.stopped)
+}
+
+/// Says so when other processes leave fewer idle cores than the run has libtorch threads:
+/// its parallel regions then wait for descheduled workers and training stalls
+/// (docs/libtorch.md). Only a warning: the thread count is the config's.
+#[cfg(feature = "train")]
+fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
+    let threads = match usize::try_from(config_threads) {
+        Ok(0) | Err(_) => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        Ok(n) => n,
+    };
+    if threads < 2 {
+        return;
+    }
+    match crate::cpu_use::measure(std::time::Duration::from_millis(250)) {
+        Ok(used) if used.idle_cores() < threads as f64 - 0.5 => eprintln!(
+            "vge train: other processes keep {:.1} of the {} cores this run may use busy, leaving \
+             {:.1} idle for sac.threads = {threads}; libtorch's workers wait for each other, so \
+             training can run several times slower than at one thread. Beside other work, train \
+             with --set sac.threads=1 (or OMP_WAIT_POLICY=passive); see docs/libtorch.md",
+            used.busy_cores,
+            used.cores,
+            used.idle_cores()
+        ),
+        // No /proc/stat (not Linux): nothing measured, nothing to advise.
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::Unsupported => {}
+        Err(e) => eprintln!("vge train: could not measure how busy the cores are ({e}); training goes on"),
+    }
 }
 
 /// A flag raised by Ctrl-C or SIGTERM: training saves a checkpoint and returns.
