@@ -15,9 +15,11 @@
 # from a git worktree of COMMIT (runs/src/COMMIT), and CONFIG is read from that commit, so a
 # queue keeps training the same program and the same config whatever the checkout has
 # become since. A run is skipped when docs/results/REL/score.json or runs/REL/score.json
-# exists, and so is one whose folder another process holds (its vge.lock); a run with a
-# checkpoint resumes (bit for bit on the same binary, thread count and CPU model); a run
-# folder without one (stopped before its first checkpoint) is moved aside to
+# exists, and so is one whose folder another process holds (its vge.lock). The queue is read
+# afresh before each run, so a queue file replaced while a run trains (write a new file and
+# rename it over the old one; an edit in place could be read half-written) decides the next
+# run. A run with a checkpoint resumes (bit for bit on the same binary, thread count and CPU
+# model); a run folder without one (stopped before its first checkpoint) is moved aside to
 # runs/REL.abandoned-TIME and the run starts again; a run that finished training without its
 # score is scored. `--score-with` scores the finished run again with vge-COMMIT2
 # (`vge score --force`), for scores the training binary lacks (per-object ones);
@@ -109,25 +111,39 @@ has_checkpoint() { resume_checkpoint "$1" >/dev/null; }
 in_use() { [ -f "$1/vge.lock" ] && ! flock -n "$1/vge.lock" true; }
 
 run_queue() {
-  local queue log rel commit config seed rest score_commit dir bin score_bin rc aside
+  local queue log rel commit config seed rest score_commit dir bin score_bin rc aside picked
+  # Runs this lane has started (or failed to start), and skips it has logged, by REL.
+  local -A tried=() noted=()
   queue=$1
   check "$queue" || { echo "lane: $queue has errors (above); nothing started" >&2; exit 1; }
   mkdir -p runs/lanes
   log=runs/lanes/$(basename "$queue" .txt).log
   echo "lane: $queue, log $log"
-  # The queue is read line by line as the lane goes, so lines appended later are run too.
-  while read -r rel commit config seed rest <&3; do
-    case $rel in ''|\#*) continue ;; esac
-    dir=runs/$rel
-    split_score_with
-    if [ -f "docs/results/$rel/score.json" ] ||
-      { [ -f "$dir/score.json" ] && { [ -z "$score_commit" ] || [ -f "$dir.scored-with-$score_commit" ]; }; }; then
-      echo "$(date -u +%FT%TZ) skip $rel (done)" >>"$log"; continue
-    fi
+  # The queue is read afresh before each run: its first line neither done, nor held by
+  # another process, nor tried by this lane is the next run. So lines reordered or added
+  # while a run trains (write a new file and rename it over the queue) take effect at the
+  # next run.
+  while :; do
+    picked=
+    while read -r rel commit config seed rest <&3; do
+      case $rel in ''|\#*) continue ;; esac
+      [ -z "${tried[$rel]:-}" ] || continue
+      dir=runs/$rel
+      split_score_with
+      if [ -f "docs/results/$rel/score.json" ] ||
+        { [ -f "$dir/score.json" ] && { [ -z "$score_commit" ] || [ -f "$dir.scored-with-$score_commit" ]; }; }; then
+        [ -n "${noted[done:$rel]:-}" ] || echo "$(date -u +%FT%TZ) skip $rel (done)" >>"$log"
+        noted[done:$rel]=1; continue
+      fi
+      if in_use "$dir"; then
+        [ -n "${noted[use:$rel]:-}" ] || echo "$(date -u +%FT%TZ) skip $rel (in use: pid $(cat "$dir/vge.lock") holds its lock)" >>"$log"
+        noted[use:$rel]=1; continue
+      fi
+      picked=1; break
+    done 3<"$queue"
+    [ -n "$picked" ] || break
+    tried[$rel]=1
     bin=$(binary_of "$commit") || { echo "$(date -u +%FT%TZ) fail $rel (no binary for $commit)" >>"$log"; continue; }
-    if in_use "$dir"; then
-      echo "$(date -u +%FT%TZ) skip $rel (in use: pid $(cat "$dir/vge.lock") holds its lock)" >>"$log"; continue
-    fi
     echo "$(date -u +%FT%TZ) start $rel with vge-$commit" >>"$log"
     set +e
     rc=0
@@ -161,7 +177,7 @@ run_queue() {
       fi
     fi
     set -e
-  done 3<"$queue"
+  done
   echo "$(date -u +%FT%TZ) queue done" >>"$log"
 }
 
