@@ -6,7 +6,7 @@
 #
 #   scripts/lane.sh run QUEUE         train the queue's runs (log: runs/lanes/QUEUE-NAME.log)
 #   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL
-#   scripts/lane.sh status QUEUE      each run's state and latest step
+#   scripts/lane.sh status QUEUE      each run's state, latest step and training time left
 #   scripts/lane.sh check QUEUE       check every line (run does this first)
 #   scripts/lane.sh stop QUEUE        end the lane: its run checkpoints; `run` resumes it
 #
@@ -197,6 +197,16 @@ collect() {
   done
 }
 
+# `, about N min of training left` from the run's budget and its last logged rate (the
+# held-out score at the end adds a few minutes); nothing before the first metrics row.
+time_left() {
+  local total last
+  total=$(sed -n 's/^total_steps = //p' "$1/config.toml" 2>/dev/null | head -n 1)
+  last=$(tail -n 1 "$1/metrics.csv" 2>/dev/null) || return 0
+  awk -F, -v total="$total" '$1 ~ /^[0-9]+$/ && $NF + 0 > 0 && total > 0 {
+    printf ", about %.0f min of training left", (total - $1) / $NF / 60 }' <<<"$last"
+}
+
 status() {
   local rel state ckpt
   while read -r rel _ <&3; do
@@ -209,7 +219,7 @@ status() {
       if ckpt=$(resume_checkpoint "runs/$rel"); then
         state+=", ${ckpt##*/} at step $(sed -n 's/^step = //p' "$ckpt/state.toml" 2>/dev/null || true)"
       else state+=", no checkpoint yet"; fi
-      if in_use "runs/$rel"; then state+=", training now"
+      if in_use "runs/$rel"; then state+=", training now$(time_left "runs/$rel")"
       elif [ -z "$ckpt" ]; then state+=": starts again"; fi
     else state="not started"; fi
     printf '%-50s %s\n' "$rel" "$state"
