@@ -46,14 +46,13 @@ echo "==> policies/cube.vgep through vge-bridge over CAN: the hand's nodes emula
 scripts/canvm/run.sh scripts/canvm/bridge-demo.sh "$bridge" policies/cube.vgep 30 "${VGE_DEMO_SEED:-0}"
 
 # Two libtorch threads train fastest on an idle machine and stall beside a busy core
-# (docs/libtorch.md), so the cores' idle time over one second picks the count (from
-# /proc/stat, as `vge train` measures it before it warns; the load average counts a
-# container's whole host).
-cpu_jiffies() { awk '/^cpu[0-9]/ { n++; for (i = 2; i <= 9; i++) t += $i; idle += $5 + $6 } END { print n, t, idle }' /proc/stat; }
-read -r cores t0 idle0 < <(cpu_jiffies); sleep 1; read -r _ t1 idle1 < <(cpu_jiffies)
-idle_cores=$(awk -v n="$cores" -v dt=$((t1 - t0)) -v di=$((idle1 - idle0)) 'BEGIN { printf "%.1f", (dt > 0 ? n * di / dt : n) }')
-threads=$(awk -v idle="$idle_cores" 'BEGIN { print (idle >= 1.5 ? 2 : 1) }')
-echo "==> train: VGE + FG on the cube, $steps env steps, into $out ($threads libtorch thread(s): $idle_cores of $cores cores idle)"
+# (docs/libtorch.md): `vge bench cores` measures the idle cores and says how many threads fit.
+cores=$("$vge" bench cores --json)
+echo "==> how busy the cores are (vge bench cores): $cores"
+fit=$(sed -n 's/.*"threads_that_fit":\([0-9]*\).*/\1/p' <<<"$cores")
+[[ $fit =~ ^[0-9]+$ ]] || { echo "demo: no threads_that_fit in vge bench cores' output: $cores" >&2; exit 1; }
+threads=$((fit < 2 ? fit : 2))
+echo "==> train: VGE + FG on the cube, $steps env steps, into $out ($threads libtorch thread(s))"
 "$vge" train --config configs/cube-fg-vge.toml --out "$out" --steps "$steps" --set sac.threads="$threads" \
   --set sac.warmup=2000 --set run.log_interval=2000 --set run.eval_interval=10000 --set run.eval_episodes=4 --set run.eval_episode_s=10 \
   --set run.checkpoint_interval=10000 --set run.save_replay=false \

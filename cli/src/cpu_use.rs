@@ -1,5 +1,5 @@
 //! How busy the cores this process may run on are, measured from `/proc/stat` over a short
-//! window. Why `vge train` asks: libtorch's parallel regions wait for every worker thread, so
+//! window (`vge bench cores`). Why `vge train` asks: libtorch's parallel regions wait for every worker thread, so
 //! a run with more threads than idle cores does not slow down gently, it stalls (8x fewer env
 //! steps measured beside one busy core, docs/libtorch.md). The load average would not do: it
 //! counts tasks on every CPU of a container's host, and tasks waiting on disk.
@@ -18,6 +18,12 @@ impl CpuUse {
     /// Cores left idle over the window.
     pub fn idle_cores(&self) -> f64 {
         (self.cores as f64 - self.busy_cores).max(0.0)
+    }
+
+    /// The most libtorch threads that fit beside the other processes (at least 1): the idle
+    /// cores, rounded, so that half a core of someone else's work already costs a thread.
+    pub fn threads_that_fit(&self) -> usize {
+        (self.idle_cores() + 0.5).floor().max(1.0) as usize
     }
 }
 
@@ -120,6 +126,9 @@ mod tests {
         assert_eq!(cpu0.cores, 1);
         assert!((cpu0.busy_cores - 0.9).abs() < 1e-12, "stolen time counts as busy: {cpu0:?}");
         assert!((cpu0.idle_cores() - 0.1).abs() < 1e-12);
+        assert_eq!(cpu0.threads_that_fit(), 1, "never fewer than one");
+        let fit = |busy_cores| CpuUse { cores: 2, busy_cores }.threads_that_fit();
+        assert_eq!((fit(0.0), fit(0.49), fit(0.51), fit(1.0), fit(2.0)), (2, 2, 1, 1, 1));
     }
 
     #[test]

@@ -3,7 +3,6 @@
 
 mod closed_output;
 mod commands;
-#[cfg(feature = "train")]
 mod cpu_use;
 
 use std::io::Write as _;

@@ -67,6 +67,30 @@ fn bench_controllers_reports_every_cost_and_refuses_zero_episodes() {
 }
 
 #[test]
+fn bench_cores_measures_the_cores_and_the_threads_that_fit_and_refuses_a_bad_window() {
+    let out = Command::new(env!("CARGO_BIN_EXE_vge"))
+        .args(["bench", "cores", "--json", "--window-s", "0.2"])
+        .output()
+        .expect("vge runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document");
+    let number = |key: &str| doc[key].as_f64().unwrap_or_else(|| panic!("{key} missing in {doc}"));
+    let (cores, busy, idle, fit) =
+        (number("cores"), number("busy_cores"), number("idle_cores"), number("threads_that_fit"));
+    assert!(cores >= 1.0 && (0.0..=cores + 1e-9).contains(&busy), "{doc}");
+    assert!((busy + idle - cores).abs() < 1e-9, "busy and idle make up the cores: {doc}");
+    assert_eq!(fit, (idle + 0.5).floor().max(1.0), "the idle cores, rounded, at least 1: {doc}");
+    for window in ["0", "-1", "NaN", "61"] {
+        let bad = Command::new(env!("CARGO_BIN_EXE_vge"))
+            .args(["bench", "cores", &format!("--window-s={window}")])
+            .output()
+            .expect("vge runs");
+        assert!(!bad.status.success(), "--window-s {window} accepted");
+        assert!(String::from_utf8_lossy(&bad.stderr).contains("--window-s"), "--window-s {window}");
+    }
+}
+
+#[test]
 fn plot_groups_runs_by_experiment_and_learner_and_tabulates_success() {
     let root = std::env::temp_dir().join(format!("vge-plot-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);

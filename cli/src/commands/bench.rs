@@ -96,6 +96,18 @@ pub enum Bench {
         #[arg(long, default_value_t = 20_000)]
         iters: usize,
     },
+    /// How busy the cores this process may use are (from /proc/stat, over --window-s), and
+    /// how many libtorch threads fit beside that work: the idle cores, rounded, at least 1.
+    /// More threads than that stall rather than slow (docs/libtorch.md); `vge train` warns
+    /// when `sac.threads` exceeds it, and scripts/demo.sh trains with it (at most 2).
+    Cores {
+        /// Print one JSON line (cores, busy_cores, idle_cores, threads_that_fit).
+        #[arg(long)]
+        json: bool,
+        /// The window the cores' use is measured over, in seconds.
+        #[arg(long, default_value_t = 1.0)]
+        window_s: f64,
+    },
     /// The sub-skill controllers' cost per call, which the behaviour policy pays every step
     /// until the hard stop: the contact-force QP alone for 3, 4 and 5 contacts (clarabel),
     /// and IGM, CS and FG on the simulated cube (the adapter from the sim state included;
@@ -118,6 +130,7 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
             bench_sim(json, steps, worlds, threads)
         }
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes),
+        Bench::Cores { json, window_s } => bench_cores(json, window_s),
         #[cfg(feature = "train")]
         Bench::Update { json, updates, batch, seed, algorithm, layer_norm, matmul } => {
             libtorch::update(json, updates, batch, seed, &algorithm, layer_norm, &matmul)
@@ -175,6 +188,36 @@ fn bench_sim(json: bool, steps: usize, worlds: usize, threads: usize) -> anyhow:
 }
 
 /// `vge bench controllers`.
+fn bench_cores(json: bool, window_s: f64) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        window_s.is_finite() && window_s > 0.0 && window_s <= 60.0,
+        "--window-s {window_s}: give a time in seconds above 0 and at most 60"
+    );
+    let used = crate::cpu_use::measure(std::time::Duration::from_secs_f64(window_s))
+        .context("measuring the cores' use")?;
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "cores": used.cores,
+                "busy_cores": used.busy_cores,
+                "idle_cores": used.idle_cores(),
+                "threads_that_fit": used.threads_that_fit(),
+                "window_s": window_s,
+            })
+        );
+    } else {
+        println!(
+            "{} cores this process may use: {:.1} busy, {:.1} idle over {window_s} s; libtorch threads that fit beside that work: {}",
+            used.cores,
+            used.busy_cores,
+            used.idle_cores(),
+            used.threads_that_fit()
+        );
+    }
+    Ok(())
+}
+
 fn bench_controllers(json: bool, episodes: usize) -> anyhow::Result<()> {
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
     let mut doc = serde_json::Map::new();

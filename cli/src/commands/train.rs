@@ -254,7 +254,7 @@ fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
         return;
     }
     match crate::cpu_use::measure(std::time::Duration::from_millis(250)) {
-        Ok(used) if used.idle_cores() < threads as f64 - 0.5 => eprintln!(
+        Ok(used) if threads > used.threads_that_fit() => eprintln!(
             "vge train: other processes keep {:.1} of the {} cores this run may use busy, leaving \
              {:.1} idle for sac.threads = {threads}; libtorch's workers wait for each other, so \
              training can run several times slower than at one thread. Beside other work, train \
