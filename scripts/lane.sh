@@ -5,7 +5,8 @@
 # was interrupted, so the same command continues a queue.
 #
 #   scripts/lane.sh run QUEUE         train the queue's runs (log: runs/lanes/QUEUE-NAME.log)
-#   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL
+#   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL, and
+#                                     print what their write-up quotes (scripts/run-facts.py)
 #   scripts/lane.sh status QUEUE      each run's state, latest step and training time left
 #   scripts/lane.sh check QUEUE       check every line (run does this first)
 #   scripts/lane.sh stop QUEUE        end the lane: its run checkpoints; `run` resumes it
@@ -33,7 +34,7 @@ repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
 
-usage() { sed -n '7,11p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '7,12p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 
 # runs/bin/vge-COMMIT, built from a worktree of COMMIT under a lock (two lanes may ask at once).
 binary_of() {
@@ -194,6 +195,8 @@ collect() {
     for f in "$dir"/*.png; do [ -f "$f" ] && cp "$f" "$out/"; done
     [ -f "$dir.log" ] && cp "$dir.log" "$out/train.log"
     echo "collected $out: $(ls "$out" | tr '\n' ' ')"
+    # What its write-up quotes, read from the copies just made.
+    python3 "$(dirname "${BASH_SOURCE[0]}")/run-facts.py" "$out"
   done
 }
 
