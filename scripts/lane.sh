@@ -7,7 +7,8 @@
 #   scripts/lane.sh run QUEUE         train the queue's runs (log: runs/lanes/QUEUE-NAME.log)
 #   scripts/lane.sh collect REL...    copy finished runs from runs/REL to docs/results/REL, and
 #                                     print what their write-up quotes (scripts/run-facts.py)
-#   scripts/lane.sh status QUEUE      each run's state, latest step and training time left
+#   scripts/lane.sh status QUEUE      each run's state, latest step and training time left, and
+#                                     the whole queue's env steps and hours to go
 #   scripts/lane.sh check QUEUE       check every line (run does this first)
 #   scripts/lane.sh stop QUEUE        end the lane: its run checkpoints; `run` resumes it
 #
@@ -34,7 +35,7 @@ repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo"
 unset LIBTORCH_USE_PYTORCH LIBTORCH_INCLUDE LIBTORCH_LIB LIBTORCH_BYPASS_VERSION_CHECK
 
-usage() { sed -n '7,12p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
+usage() { sed -n '7,13p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//' >&2; exit 2; }
 
 # runs/bin/vge-COMMIT, built from a worktree of COMMIT under a lock (two lanes may ask at once).
 binary_of() {
@@ -210,23 +211,49 @@ time_left() {
     printf ", about %.0f min of training left", (total - $1) / $NF / 60 }' <<<"$last"
 }
 
+# A line's env-step budget: `--set total_steps=N` on the line, else its config's, else the
+# trainer's default (1M).
+budget_of() {
+  local commit=$1 config=$2 rest=$3 steps
+  steps=$(grep -o 'total_steps=[0-9]*' <<<"$rest" | tail -n 1 | cut -d= -f2)
+  [ -n "$steps" ] || steps=$(git show "$commit:$config" 2>/dev/null | sed -n 's/^total_steps = //p' | head -n 1)
+  steps=${steps//_/}  # TOML allows 1_000_000
+  [[ $steps =~ ^[0-9]+$ ]] || steps=1000000
+  echo "$steps"
+}
+
 status() {
-  local rel state ckpt
-  while read -r rel _ <&3; do
+  local rel commit config rest state ckpt step budget todo=0 waiting=0 rate=""
+  while read -r rel commit config _ rest <&3; do
     case $rel in ''|\#*) continue ;; esac
+    budget=$(budget_of "$commit" "$config" "$rest")
     if [ -f "docs/results/$rel/score.json" ]; then state="collected"
     elif [ -f "runs/$rel/score.json" ]; then state="finished, not collected"
     elif [ -f "runs/$rel/final-eval.json" ]; then state="trained, not scored"
     elif [ -e "runs/$rel" ]; then
       state="at step $( (tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null || echo 0) | cut -d, -f1)"
+      step=0
       if ckpt=$(resume_checkpoint "runs/$rel"); then
-        state+=", ${ckpt##*/} at step $(sed -n 's/^step = //p' "$ckpt/state.toml" 2>/dev/null || true)"
+        step=$(sed -n 's/^step = //p' "$ckpt/state.toml" 2>/dev/null || true)
+        state+=", ${ckpt##*/} at step $step"
       else state+=", no checkpoint yet"; fi
-      if in_use "runs/$rel"; then state+=", training now$(time_left "runs/$rel")"
+      if in_use "runs/$rel"; then
+        state+=", training now$(time_left "runs/$rel")"
+        step=$(tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null | cut -d, -f1)
+        rate=$(tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null | awk -F, '$NF + 0 > 0 { print $NF }')
       elif [ -z "$ckpt" ]; then state+=": starts again"; fi
-    else state="not started"; fi
+      [[ $step =~ ^[0-9]+$ ]] || step=0
+      todo=$((todo + budget - step)); waiting=$((waiting + 1))
+    else state="not started"; todo=$((todo + budget)); waiting=$((waiting + 1)); fi
     printf '%-50s %s\n' "$rel" "$state"
   done 3<"$1"
+  # The queue as a whole, to plan sessions: env steps left, and at the running run's rate
+  # (runs of other configs train at other rates) how long they take.
+  awk -v n="$waiting" -v todo="$todo" 'BEGIN { printf "to go: %d runs, %.2fM env steps", n, todo / 1e6 }'
+  if [ -n "$rate" ]; then
+    awk -v todo="$todo" -v rate="$rate" 'BEGIN { printf ", about %.1f h at the running run'"'"'s %.0f steps/s", todo / rate / 3600, rate }'
+  fi
+  echo
 }
 
 # Ends the lane running QUEUE: its shell first, so that it starts no further run, then
