@@ -15,7 +15,7 @@ use vge_runtime::{AlignedBytes, Policy, PolicyError};
 
 use crate::errors;
 
-/// `vge eval`'s runtime capacity (`vge_trainer::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
+/// `vge eval`'s runtime capacity (`vge_lab::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
 const MAX_LAYERS: usize = 8;
 const MAX_WIDTH: usize = 1024;
 type EvalPolicy<'a> = Policy<'a, MAX_LAYERS, MAX_WIDTH>;

@@ -42,7 +42,9 @@ class HandEnv(gym.Env):
     - Observation: 65 float32 (`vge.OBS_LAYOUT`): joint angles, joint targets, per fingertip
       contact point, normal and normal force (zeros out of contact).
     - Action: 15 float32 joint-target changes (rad), each within +-`max_action_rad`.
-    - Reward: the object's rotation rate about z (rad/s) while enough fingertips touch it.
+    - Reward: the object's rotation rate about z (rad/s), clipped to +-`max_reward_rad_per_s`,
+      while enough fingertips touch it; a backward turn is charged whatever the contacts
+      (`charge_reverse_rotation`, on by default), and `drop_penalty` (0 by default) on a drop.
     - terminated: the object dropped; truncated: the episode's time limit.
     - info: `tip_contacts`, `num_tip_contacts`, `contact_forces_n` (per fingertip, N),
       `external_force_n` (the push on the object, N), `object_rotation_z_rad` (this

@@ -11,7 +11,8 @@
 //!   for a step at several rad/s, a spike that says nothing about gaiting and would
 //!   dominate the critic's targets. With [`EnvConfig::charge_reverse_rotation`] (the
 //!   default) a turn backwards (negative) is charged whatever the number of contacts, so
-//!   no back-and-forth earns reward. No other penalty is added.
+//!   no back-and-forth earns reward. The one other term is [`EnvConfig::drop_penalty`]
+//!   (0 by default), subtracted on the step the object drops.
 //! - Terminated: the object centre fell more than [`EnvConfig::drop_height_m`] below its
 //!   height after the grasp, measured along gravity (world -z with the palm down, the
 //!   hand's +x side on: [`crate::HandOrientation`]), i.e. it left the hand (a drop, the

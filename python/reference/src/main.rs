@@ -24,7 +24,7 @@ use vge_env_keys::EnvKeys;
 use vge_runtime::{AlignedBytes, Policy};
 use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
 
-/// `vge eval`'s runtime capacity (`vge_trainer::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
+/// `vge eval`'s runtime capacity (`vge_lab::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
 const EVAL_MAX_LAYERS: usize = 8;
 const EVAL_MAX_WIDTH: usize = 1024;
 
