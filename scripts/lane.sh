@@ -223,7 +223,7 @@ budget_of() {
 }
 
 status() {
-  local rel commit config rest state ckpt step budget todo=0 waiting=0 rate=""
+  local rel commit config rest state last ckpt step budget todo=0 waiting=0 rate=""
   while read -r rel commit config _ rest <&3; do
     case $rel in ''|\#*) continue ;; esac
     budget=$(budget_of "$commit" "$config" "$rest")
@@ -231,7 +231,8 @@ status() {
     elif [ -f "runs/$rel/score.json" ]; then state="finished, not collected"
     elif [ -f "runs/$rel/final-eval.json" ]; then state="trained, not scored"
     elif [ -e "runs/$rel" ]; then
-      state="at step $( (tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null || echo 0) | cut -d, -f1)"
+      last=$(tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null || echo 0)
+      state="at step ${last%%,*}"
       step=0
       if ckpt=$(resume_checkpoint "runs/$rel"); then
         step=$(sed -n 's/^step = //p' "$ckpt/state.toml" 2>/dev/null || true)
@@ -239,8 +240,8 @@ status() {
       else state+=", no checkpoint yet"; fi
       if in_use "runs/$rel"; then
         state+=", training now$(time_left "runs/$rel")"
-        step=$(tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null | cut -d, -f1)
-        rate=$(tail -n 1 "runs/$rel/metrics.csv" 2>/dev/null | awk -F, '$NF + 0 > 0 { print $NF }')
+        step=${last%%,*}
+        rate=$(awk -F, '$NF + 0 > 0 { print $NF }' <<<"$last")
       elif [ -z "$ckpt" ]; then state+=": starts again"; fi
       [[ $step =~ ^[0-9]+$ ]] || step=0
       todo=$((todo + budget - step)); waiting=$((waiting + 1))

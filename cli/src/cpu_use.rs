@@ -1,8 +1,9 @@
 //! How busy the cores this process may run on are, measured from `/proc/stat` over a short
-//! window (`vge bench cores`). Why `vge train` asks: libtorch's parallel regions wait for every worker thread, so
-//! a run with more threads than idle cores does not slow down gently, it stalls (8x fewer env
-//! steps measured beside one busy core, docs/libtorch.md). The load average would not do: it
-//! counts tasks on every CPU of a container's host, and tasks waiting on disk.
+//! window (`vge bench cores`). Why `vge train` asks: libtorch's parallel regions wait for
+//! every worker thread, so a run with more threads than idle cores does not slow down
+//! gently, it stalls (8x fewer env steps measured beside one busy core, docs/libtorch.md).
+//! The load average would not do: it counts tasks on every CPU of a container's host, and
+//! tasks waiting on disk.
 
 use std::time::Duration;
 

@@ -187,7 +187,7 @@ fn bench_sim(json: bool, steps: usize, worlds: usize, threads: usize) -> anyhow:
     Ok(())
 }
 
-/// `vge bench controllers`.
+/// `vge bench cores`.
 fn bench_cores(json: bool, window_s: f64) -> anyhow::Result<()> {
     anyhow::ensure!(
         window_s.is_finite() && window_s > 0.0 && window_s <= 60.0,
@@ -218,6 +218,7 @@ fn bench_cores(json: bool, window_s: f64) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `vge bench controllers`.
 fn bench_controllers(json: bool, episodes: usize) -> anyhow::Result<()> {
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
     let mut doc = serde_json::Map::new();
