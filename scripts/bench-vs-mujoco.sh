@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # scripts/bench-vs-mujoco.sh [ROUNDS] [MUJOCO_HZ]: vge's simulator against MuJoCo on the same
-# hand, grasp and contact readout, timed in one run (issue 14), as simulated seconds per
+# hand, grasp and contact readout, timed in one run, as simulated seconds per
 # wall-clock second of one world on one thread.
 #
 # `vge bench sim --write-mjcf` writes the task as MJCF (generated from the hand model, so the

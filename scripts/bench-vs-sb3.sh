@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # scripts/bench-vs-sb3.sh [ROUNDS] [THREADS...]: vge's SAC updates against Stable-Baselines3's,
-# timed in one run (issue 14), at the sizes of `vge bench update`.
+# timed in one run, at the sizes of `vge bench update`.
 #
 # For each thread count (default: 1 and 2) the rounds alternate vge with its training
 # defaults (critic layer norm), vge without layer norm (SB3's networks), vge with bf16

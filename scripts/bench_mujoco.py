@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""MuJoCo's throughput on vge's task, to compare with `vge bench sim` (issue 14).
+"""MuJoCo's throughput on vge's task, to compare with `vge bench sim`.
 
 Loads the MJCF that `vge bench sim --write-mjcf` writes (the same hand, object, motors, and
 the settled grasp as keyframe `grasp`) and steps it the way `vge bench sim` steps one world:

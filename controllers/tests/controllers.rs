@@ -126,7 +126,7 @@ fn qp_degenerate_sets_are_typed_errors() {
     assert!(matches!(contact_force_qp(&wrong, &ring(3).1), Err(QpError::DimensionMismatch { .. })));
 }
 
-// The QP's and the controllers' cost per call: `vge bench controllers` (issue 15: timings
+// The QP's and the controllers' cost per call: `vge bench controllers` (timings
 // live in benchmarks, not tests).
 
 // ---------------------------------------------------------------- hand at a grasp

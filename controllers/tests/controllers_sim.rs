@@ -1,5 +1,5 @@
-//! The controllers on the real simulator (rapier world, clarabel QP), seeded: the
-//! acceptance of issue 5. Short episodes keep the suite fast in release.
+//! The controllers on the real simulator (rapier world, clarabel QP), seeded: IGM turns the
+//! cube, CS breaks and remakes a contact, FG does both. Short episodes keep the suite fast.
 
 use vge_controllers::rollout::{self, ControllerKind, RolloutOptions, run_episode};
 use vge_controllers::{Controller, ControllerInput, CsConfig, CsController, IgmConfig, IgmController};

@@ -1,7 +1,7 @@
 //! The hand, its object and a held grasp as a MuJoCo model (MJCF), written from the same
 //! [`HandModel`] and [`PhysicsConfig`] the rapier world is built from.
 //!
-//! Why: issue 14 compares the simulator's speed with MuJoCo's on "the same hand, grasp and
+//! Why: `scripts/bench-vs-mujoco.sh` compares the simulator's speed with MuJoCo's on "the same hand, grasp and
 //! contact readout". A hand-written MJCF would be a second copy of the geometry that could
 //! drift; this one is generated, and `scripts/bench-vs-mujoco.sh` times both in one run.
 //!

@@ -1,7 +1,7 @@
 //! The MuJoCo model `vge bench sim --write-mjcf` writes, stepped in real MuJoCo (the PyPI
 //! wheel scripts/test.sh installs in .deps/py) by the comparison's own harness,
 //! scripts/bench_mujoco.py: it must hold the cube as the rapier world does, or the speed
-//! comparison of issue 14 times another workload (a model with degree-valued joint limits
+//! comparison times another workload (a model with degree-valued joint limits
 //! dropped the cube onto 1.6 fingertips on average).
 
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! Policy files through `vge eval` and `vge-bridge run`: one that passes every load check
-//! (valid CRC, finite weights) but overflows inside its first layer at run time (issue 13,
-//! item 4) must be refused, where before ReLU turned the NaN into 0 and the hand moved; the
-//! stored gait must turn the cube and switch contacts.
+//! (valid CRC, finite weights) but overflows inside its first layer at run time must be
+//! refused, not have ReLU turn the NaN into 0 and move the hand; the stored gait must turn
+//! the cube and switch contacts.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

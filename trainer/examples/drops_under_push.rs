@@ -1,4 +1,4 @@
-//! Diagnostic for issue 12's open goal: what a policy's grasp looks like when a push drops
+//! Diagnostic for the robustness goal under pushes: what a policy's grasp looks like when a push drops
 //! the object. Runs a policy file on the runtime under the robustness test's force (std per
 //! axis, redrawn with probability 0.1 per step) and, for each drop, finds its onset: the
 //! last step at which the object was still within `ONSET_M` of its starting height. It

@@ -1,4 +1,4 @@
-//! Matmul throughput of the update's shapes in f32 and bf16 on this CPU (issue 14: whether
+//! Matmul throughput of the update's shapes in f32 and bf16 on this CPU (whether
 //! bf16 matmuls with f32 master weights could pay). `cargo run --release --example
 //! matmul_dtypes`.
 use std::time::Instant;
