@@ -5,7 +5,7 @@
 //! prints which fingertips touched and what force acted at the onsets, beside the same
 //! figures over every step of the episodes, so a drop can be told apart from bad luck:
 //!
-//!   cargo run --release -p vge-trainer --example drops_under_push -- policies/cube.vgep 1.4715 20 2000
+//!   cargo run --release -p vge-lab --example drops_under_push -- policies/cube.vgep 1.4715 20 2000
 //!
 //! Arguments: POLICY FORCE_STD_N [EPISODES=20] [SEED=2000].
 use anyhow::Context;
