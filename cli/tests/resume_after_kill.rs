@@ -8,12 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use vge_lab::config::{Config, apply_override};
-
 const TOTAL_STEPS: u64 = 3000;
 
 fn config_file(dir: &Path) -> PathBuf {
-    let mut c = Config::default();
     // TINY, then this test's own: VGE + BC with its hard stop and BC decay inside the run,
     // one thread, and a checkpoint every 400 steps (after TINY's 200, so it wins).
     let own = [
@@ -24,14 +21,7 @@ fn config_file(dir: &Path) -> PathBuf {
         "bc.beta_zero_step=2000",
         "run.checkpoint_interval=400",
     ];
-    for o in common::TINY.iter().chain(&own) {
-        apply_override(&mut c, o).expect(o);
-    }
-    c.total_steps = TOTAL_STEPS;
-    c.validate().expect("valid");
-    let path = dir.join("config.toml");
-    std::fs::write(&path, c.to_toml_string().expect("toml")).expect("write config");
-    path
+    common::tiny_config_file(dir, &own, TOTAL_STEPS)
 }
 
 fn vge(args: &[&str]) -> Command {

@@ -11,24 +11,14 @@ use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use vge_lab::config::{Config, apply_override};
-
 const TOTAL_STEPS: u64 = 800;
 
 /// TINY, with a checkpoint and an evaluation every 400 steps: a periodic checkpoint at 400
 /// and the final one at 800; snapshots, `eval.csv` and model selection.
 fn config_file(dir: &Path) -> PathBuf {
-    let mut c = Config::default();
     let own =
         ["name=\"crash-test\"", "sac.threads=1", "run.checkpoint_interval=400", "run.eval_interval=400"];
-    for o in common::TINY.iter().chain(&own) {
-        apply_override(&mut c, o).expect(o);
-    }
-    c.total_steps = TOTAL_STEPS;
-    c.validate().expect("valid");
-    let path = dir.join("config.toml");
-    std::fs::write(&path, c.to_toml_string().expect("toml")).expect("write config");
-    path
+    common::tiny_config_file(dir, &own, TOTAL_STEPS)
 }
 
 fn vge(args: &[&str]) -> Command {

@@ -1,4 +1,4 @@
-//! Helpers shared by the integration tests of vge-trainer and vge-cli (each crate's
+//! Helpers shared by the integration tests of vge-lab, vge-trainer and vge-cli (each crate's
 //! `tests/common/mod.rs` includes this file): tiny runs, configs, temp folders, Python.
 
 use std::path::PathBuf;
@@ -49,6 +49,20 @@ pub const TINY: &[&str] = &[
     // most of its time; cli/tests/score.rs tests it.
     "run.score_episodes=0",
 ];
+
+/// `dir/config.toml`: the config defaults with [`TINY`], then `own` overrides, for
+/// `total_steps`, validated. Its path.
+pub fn tiny_config_file(dir: &std::path::Path, own: &[&str], total_steps: u64) -> PathBuf {
+    let mut c = vge_lab::config::Config::default();
+    for o in TINY.iter().chain(own) {
+        vge_lab::config::apply_override(&mut c, o).expect(o);
+    }
+    c.total_steps = total_steps;
+    c.validate().expect("valid");
+    let path = dir.join("config.toml");
+    std::fs::write(&path, c.to_toml_string().expect("toml")).expect("write config");
+    path
+}
 
 /// The repository's `configs/` file `name`.
 pub fn config(name: &str) -> PathBuf {
