@@ -414,6 +414,34 @@ fn spawn_bridge(args: &[&str]) -> std::process::Child {
         .expect("vge-bridge run starts")
 }
 
+/// `vge-bridge run`'s arguments for `policy` over CAN on `iface` for `duration_s` seconds (0:
+/// until stopped), tolerant of guest stalls ([`TOLERANT`]).
+fn over_can<'a>(policy: &'a std::path::Path, iface: &'a str, duration_s: &'a str) -> Vec<&'a str> {
+    let policy = policy.to_str().expect("utf-8 temp path");
+    let mut args = vec!["--policy", policy, "--backend", "can", "--iface", iface, "--duration", duration_s];
+    args.extend(TOLERANT);
+    args
+}
+
+/// A counter of the bridge's commands on `iface`, the emulator (`seed`), given half a second
+/// to grasp the cube, and `vge-bridge run ARGS` in the background, in that order.
+fn start_loop(
+    iface: &str,
+    seed: u64,
+    args: &[&str],
+) -> (CommandCounter, std::process::Child, std::process::Child) {
+    let counter = CommandCounter::start(iface);
+    let emulator = spawn_emulator(iface, seed);
+    thread::sleep(Duration::from_millis(500));
+    (counter, emulator, spawn_bridge(args))
+}
+
+/// Ctrl-C to a bridge started by [`spawn_bridge`], and what it left once it ended.
+fn stop_bridge(bridge: std::process::Child) -> Finished {
+    interrupt(&bridge);
+    finished(bridge.wait_with_output().expect("bridge exits"))
+}
+
 /// Ctrl-C (SIGINT) to a child.
 fn interrupt(child: &std::process::Child) {
     let status = std::process::Command::new("kill")
@@ -717,13 +745,7 @@ fn stopping_the_emulator_fires_the_bridge_watchdog() {
 fn bad_frames_from_a_third_socket_are_counted_and_ignored() {
     let iface = hil_iface();
     let policy = exported_policy_as(5, "f16");
-    let counter = CommandCounter::start(&iface);
-    let emulator = spawn_emulator(&iface, 2);
-    thread::sleep(Duration::from_millis(500));
-    let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
-    args.extend(TOLERANT);
-    let bridge = spawn_bridge(&args);
+    let (counter, emulator, bridge) = start_loop(&iface, 2, &over_can(&policy, &iface, "0"));
     // Inject only once the bridge runs (its first enabled commands).
     counter.wait_for(1, Duration::from_secs(60));
     let socket = open(&iface);
@@ -742,8 +764,7 @@ fn bad_frames_from_a_third_socket_are_counted_and_ignored() {
     }
     // Five more steps: the bridge has taken in everything injected before them.
     counter.wait_for(counter.seen() + 5, Duration::from_secs(60));
-    interrupt(&bridge);
-    let run = finished(bridge.wait_with_output().expect("bridge exits"));
+    let run = stop_bridge(bridge);
     let emulated = wait_for_output(emulator);
     let _ = std::fs::remove_file(&policy);
     eprintln!("{}\n{emulated}", run.stdout);
@@ -858,9 +879,7 @@ fn heartbeats_both_ways_and_enable_states_follow_the_commands() {
     let emulator_started = Instant::now();
     let emulator = spawn_emulator(&iface, 3);
     thread::sleep(Duration::from_millis(500));
-    let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "3.0"];
-    args.extend(TOLERANT);
+    let args = over_can(&policy, &iface, "3.0");
     let bridge_started = Instant::now();
     let report = bridge_run(&args);
     let bridge_life_s = bridge_started.elapsed().as_secs_f64();
@@ -936,9 +955,7 @@ fn a_killed_bridge_leaves_the_nodes_holding_with_fault_command_timeout() {
     let command_timeout_s = 1.0;
     let emulator = spawn_emulator_with(&iface, 4, &["--command-timeout-s", &command_timeout_s.to_string()]);
     thread::sleep(Duration::from_millis(500));
-    let policy_arg = policy.to_str().expect("utf-8");
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
-    args.extend(TOLERANT);
+    let args = over_can(&policy, &iface, "0");
     let mut bridge = spawn_bridge(&args);
     counter.wait_for(10, Duration::from_secs(60));
     bridge.kill().expect("SIGKILL the bridge");
@@ -1099,9 +1116,8 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
             Message::JointPosition(old).encode().expect("in range")
         })
     });
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
+    let mut args = over_can(&policy, &iface, "0");
     args.extend(["--rate", "4"]);
-    args.extend(TOLERANT);
     let bridge = spawn_bridge(&args);
     // The three replays sent, then three more steps: the bridge has taken them in.
     let waiting = Instant::now();
@@ -1110,8 +1126,7 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
         thread::sleep(Duration::from_millis(20));
     }
     counter.wait_for(counter.seen() + 3, Duration::from_secs(60));
-    interrupt(&bridge);
-    let run = finished(bridge.wait_with_output().expect("bridge exits"));
+    let run = stop_bridge(bridge);
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let emulated = wait_for_output(emulator);
     assert_eq!(injector.join().expect("injector"), 3);
@@ -1130,13 +1145,7 @@ fn implausible_positions_from_the_wire_hold_then_halt_and_stale_ones_are_dropped
 fn a_flood_of_id_0x000_does_not_disturb_the_loop() {
     let iface = hil_iface();
     let policy = hold_policy(9);
-    let counter = CommandCounter::start(&iface);
-    let emulator = spawn_emulator(&iface, 7);
-    thread::sleep(Duration::from_millis(500));
-    let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "0"];
-    args.extend(TOLERANT);
-    let bridge = spawn_bridge(&args);
+    let (counter, emulator, bridge) = start_loop(&iface, 7, &over_can(&policy, &iface, "0"));
     // 5,000 frames of id 0x000 at 800/s (6.25 s) while the bridge runs.
     counter.wait_for(1, Duration::from_secs(60));
     let socket = open(&iface);
@@ -1154,8 +1163,7 @@ fn a_flood_of_id_0x000_does_not_disturb_the_loop() {
     }
     let took = start.elapsed();
     counter.wait_for(counter.seen() + 5, Duration::from_secs(60));
-    interrupt(&bridge);
-    let run = finished(bridge.wait_with_output().expect("bridge exits"));
+    let run = stop_bridge(bridge);
     let emulated = wait_for_output(emulator);
     let _ = std::fs::remove_file(&policy);
     let report = run.stdout;
@@ -1173,13 +1181,7 @@ fn a_flood_of_id_0x000_does_not_disturb_the_loop() {
 fn error_frames_are_counted_and_bus_off_halts_the_bridge() {
     let iface = hil_iface();
     let policy = exported_policy(10);
-    let counter = CommandCounter::start(&iface);
-    let emulator = spawn_emulator(&iface, 8);
-    thread::sleep(Duration::from_millis(500));
-    let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "120"];
-    args.extend(TOLERANT);
-    let bridge = spawn_bridge(&args);
+    let (counter, emulator, bridge) = start_loop(&iface, 8, &over_can(&policy, &iface, "120"));
     // Once the bridge runs: error-passive (controller problem, data[1] = 0x10 rx/0x20 tx
     // passive) three times, then bus-off.
     counter.wait_for(3, Duration::from_secs(60));
@@ -1244,10 +1246,8 @@ fn the_emulator_prints_its_summary_on_ctrl_c() {
 fn a_node_that_restarts_mid_run_makes_the_bridge_hold_and_halt() {
     let iface = hil_iface();
     let policy = exported_policy(11);
-    let policy_arg = policy.to_str().expect("utf-8 temp path");
     let restart = ["--restart-node", "2", "--restart-after-commands", "20"];
-    let mut args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface, "--duration", "120"];
-    args.extend(TOLERANT);
+    let args = over_can(&policy, &iface, "120");
 
     let capture = Capture::start(&iface);
     let emulator = spawn_emulator_with(&iface, 10, &restart);
