@@ -6,7 +6,6 @@
 //! pipe open shows it does print there (a command that printed nothing would pass vacuously).
 //! The episode counts are tiny: this is about the output, not the work.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -19,33 +18,15 @@ fn vge() -> Command {
     Command::new(env!("CARGO_BIN_EXE_vge"))
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Stream {
-    Stdout,
-    Stderr,
-}
+#[path = "../../tests/support/closed_pipe.rs"]
+mod closed_pipe;
+use closed_pipe::Stream;
 
-/// Runs `vge args` with `closed` a pipe without a reader and the other stream captured;
-/// returns the exit status and what the other stream got.
+/// Runs `vge args` with `closed` a pipe without a reader ([`closed_pipe::run_closed`]).
 fn run_closed(args: &[String], closed: Stream) -> (Option<i32>, String) {
-    let (reader, writer) = std::io::pipe().expect("a pipe");
-    drop(reader);
     let mut cmd = vge();
-    cmd.args(args).stdin(Stdio::null());
-    match closed {
-        Stream::Stdout => cmd.stdout(writer).stderr(Stdio::piped()),
-        Stream::Stderr => cmd.stderr(writer).stdout(Stdio::piped()),
-    };
-    let mut child = cmd.spawn().expect("vge starts");
-    drop(cmd); // and with it this process's copy of the writer
-    let mut other = String::new();
-    let pipe: Option<&mut dyn Read> = match closed {
-        Stream::Stdout => child.stderr.as_mut().map(|p| p as &mut dyn Read),
-        Stream::Stderr => child.stdout.as_mut().map(|p| p as &mut dyn Read),
-    };
-    pipe.expect("captured").read_to_string(&mut other).expect("read the other stream");
-    let status = child.wait().expect("vge exits");
-    (status.code(), other)
+    cmd.args(args);
+    closed_pipe::run_closed(cmd, closed)
 }
 
 /// `vge args` with both streams open: its status and (stdout, stderr).

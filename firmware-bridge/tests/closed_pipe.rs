@@ -6,7 +6,6 @@
 //! pipe open shows it does print there. The runs are short: this is about the output. (`emulate`
 //! needs a CAN interface: the HIL suite, tests/tests/hil.rs, covers it.)
 
-use std::io::Read;
 use std::process::{Command, Stdio};
 
 const POLICY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
@@ -17,33 +16,15 @@ fn bridge() -> Command {
     Command::new(env!("CARGO_BIN_EXE_vge-bridge"))
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Stream {
-    Stdout,
-    Stderr,
-}
+#[path = "../../tests/support/closed_pipe.rs"]
+mod closed_pipe;
+use closed_pipe::Stream;
 
-/// Runs `vge-bridge args` with `closed` a pipe without a reader and the other stream
-/// captured; returns the exit status and what the other stream got.
+/// Runs `vge-bridge args` with `closed` a pipe without a reader ([`closed_pipe::run_closed`]).
 fn run_closed(args: &[&str], closed: Stream) -> (Option<i32>, String) {
-    let (reader, writer) = std::io::pipe().expect("a pipe");
-    drop(reader);
     let mut cmd = bridge();
-    cmd.args(args).stdin(Stdio::null());
-    match closed {
-        Stream::Stdout => cmd.stdout(writer).stderr(Stdio::piped()),
-        Stream::Stderr => cmd.stderr(writer).stdout(Stdio::piped()),
-    };
-    let mut child = cmd.spawn().expect("vge-bridge starts");
-    drop(cmd); // and with it this process's copy of the writer
-    let mut other = String::new();
-    let pipe: Option<&mut dyn Read> = match closed {
-        Stream::Stdout => child.stderr.as_mut().map(|p| p as &mut dyn Read),
-        Stream::Stderr => child.stdout.as_mut().map(|p| p as &mut dyn Read),
-    };
-    pipe.expect("captured").read_to_string(&mut other).expect("read the other stream");
-    let status = child.wait().expect("vge-bridge exits");
-    (status.code(), other)
+    cmd.args(args);
+    closed_pipe::run_closed(cmd, closed)
 }
 
 /// Asserts that `args` prints on `closed` when it is open, and exits 0 without a panic when
