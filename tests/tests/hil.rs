@@ -599,15 +599,14 @@ fn the_shipped_gait_turns_the_cube_a_full_turn_over_vcan() {
     let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
     let emulator = spawn_emulator(&iface, 0);
     thread::sleep(Duration::from_millis(500)); // the emulator grasps the cube first
-    let mut args = vec!["--policy", policy, "--backend", "can", "--iface", &iface];
-    args.extend(["--steps", "600", "--duration", "0"]);
-    args.extend(TOLERANT);
-    let over_can = bridge_run(&args);
+    let mut args = over_can(std::path::Path::new(policy), &iface, "0");
+    args.extend(["--steps", "600"]);
+    let report = bridge_run(&args);
     let emulated = wait_for_output(emulator);
-    eprintln!("{over_can}\n{emulated}");
-    print_timing("shipped gait", &over_can);
-    assert_eq!(json_field(&over_can, "stop_reason").as_deref(), Some("steps"), "{over_can}");
-    assert_eq!(json_f64(&over_can, "steps"), 600.0, "{over_can}");
+    eprintln!("{report}\n{emulated}");
+    print_timing("shipped gait", &report);
+    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("steps"), "{report}");
+    assert_eq!(json_f64(&report, "steps"), 600.0, "{report}");
     assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "dropped: {emulated}");
     assert!(json_f64(&emulated, "rotation_rad") >= std::f64::consts::TAU, "{emulated}");
     assert!(json_f64(&emulated, "contact_switches") >= 10.0, "{emulated}");
@@ -620,7 +619,7 @@ fn closed_loop_matches_in_process(fd: bool) -> usize {
     let iface = hil_iface();
     let policy = exported_policy(3);
     let policy_arg = policy.to_str().expect("utf-8 temp path");
-    let steps = ["--steps", "40", "--duration", "0"];
+    let steps = ["--steps", "40"];
 
     // A third socket counts FD frames on the bus while the loop runs.
     let capture = socketcan::CanFdSocket::open(&iface).expect("FD socket (vcan MTU 72)");
@@ -639,9 +638,8 @@ fn closed_loop_matches_in_process(fd: bool) -> usize {
     });
 
     let mut emulator_args = vec![];
-    let mut run_args = vec!["--policy", policy_arg, "--backend", "can", "--iface", &iface];
+    let mut run_args = over_can(&policy, &iface, "0");
     run_args.extend(steps);
-    run_args.extend(TOLERANT);
     if fd {
         emulator_args.push("--fd");
         run_args.push("--fd");
@@ -654,6 +652,7 @@ fn closed_loop_matches_in_process(fd: bool) -> usize {
     let fd_frames = counter.join().expect("counter");
     let mut sim_args = vec!["--policy", policy_arg, "--backend", "sim", "--seed", "5"];
     sim_args.extend(steps);
+    sim_args.extend(["--duration", "0"]);
     sim_args.extend(TOLERANT);
     let in_process = bridge_run(&sim_args);
     let _ = std::fs::remove_file(&policy);
