@@ -39,6 +39,18 @@ type ObjectArg = ObjectShape;
 #[cfg(not(feature = "sim"))]
 type ObjectArg = String;
 
+/// The simulated hand's episode, for `run --backend sim` and `emulate --model sim`.
+#[derive(Debug, Args)]
+struct SimHandArgs {
+    /// Object in the simulated hand (`run --backend sim`, `emulate --model sim`): cube,
+    /// sphere, cylinder, dodecahedron, icosahedron or hexagonal-prism.
+    #[arg(long, default_value = "cube")]
+    object: ObjectArg,
+    /// Seed of the simulated hand's episode.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
 /// Exit status of `emulate` when a node faulted (e.g. the bridge stopped sending commands
 /// while the fingers were enabled): the summary is printed, and scripts see the fault.
 const EXIT_NODE_FAULT: u8 = 3;
@@ -200,13 +212,8 @@ enum Command {
         /// frame for the hand; the interface needs an FD MTU (72).
         #[arg(long)]
         fd: bool,
-        /// Object in the simulated hand (backend sim): cube, sphere, cylinder, dodecahedron,
-        /// icosahedron or hexagonal-prism.
-        #[arg(long, default_value = "cube")]
-        object: ObjectArg,
-        /// Seed of the simulated episode (backend sim).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
+        #[command(flatten)]
+        sim_hand: SimHandArgs,
         /// Record the simulated episode (backend sim) into this file (JSON Lines): each finger
         /// link's pose and the object's, the fingertip and link contact points with their
         /// normal forces, the joint-target changes sent and the reward, one line per control
@@ -241,13 +248,8 @@ enum Command {
         /// Speak the CAN FD option (model sim): node states and hand commands as FD frames.
         #[arg(long)]
         fd: bool,
-        /// Object in the simulated hand (model sim): cube, sphere, cylinder, dodecahedron,
-        /// icosahedron or hexagonal-prism.
-        #[arg(long, default_value = "cube")]
-        object: ObjectArg,
-        /// Seed of the simulated episode (model sim).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
+        #[command(flatten)]
+        sim_hand: SimHandArgs,
         /// Stop after this many seconds without a frame.
         #[arg(long, default_value_t = 10.0)]
         idle_timeout_s: f64,
@@ -471,7 +473,16 @@ fn print_report(
 
 fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Run { policy, backend, hand, iface, fd, object, seed, record, loop_args } => {
+        Command::Run {
+            policy,
+            backend,
+            hand,
+            iface,
+            fd,
+            sim_hand: SimHandArgs { object, seed },
+            record,
+            loop_args,
+        } => {
             if backend == Backend::Sim && !cfg!(feature = "sim") {
                 return Err(no_sim("--backend sim (the default)"));
             }
@@ -527,8 +538,7 @@ fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             iface,
             model,
             fd,
-            object,
-            seed,
+            sim_hand: SimHandArgs { object, seed },
             idle_timeout_s,
             command_timeout_s,
             restart_node,

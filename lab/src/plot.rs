@@ -156,8 +156,9 @@ fn read(path: &Path) -> Result<String, PlotError> {
 }
 
 /// Columns of a CSV with a header row, by name; a name the header lacks is an error naming
-/// it. An empty field (a metrics window in which no episode ended) repeats the column's
-/// previous value (0 before any).
+/// it. An empty field (a metrics window in which no episode ended, or before the first
+/// update) is NaN: nothing was measured there, and curves leave it out
+/// ([`on_common_grid`]).
 pub(crate) fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
     let columns = columns_by_name(path, names)?;
     names
@@ -210,7 +211,7 @@ fn columns_by_name(path: &Path, names: &[&str]) -> Result<Vec<Option<Vec<f64>>>,
                 ))
             })?;
             let value = if field.is_empty() {
-                values.last().copied().unwrap_or(0.0)
+                f64::NAN
             } else {
                 field.parse::<f64>().map_err(|_| {
                     bad(format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]))
@@ -375,12 +376,19 @@ fn spread(runs: &[&RunCurves], series: Series) -> Vec<SpreadPoint> {
 }
 
 /// Every run's value of `series` at the logged steps of the run that ended earliest (the
-/// others interpolated), runs without the series left out: (step, one value per run).
+/// others interpolated), runs without the series left out: (step, one value per run). A
+/// step a run measured nothing at (a NaN from an empty CSV field) is not a point of its
+/// series: its neighbours are interpolated across it.
 pub(crate) fn on_common_grid(runs: &[&RunCurves], series: Series) -> Vec<(f64, Vec<f64>)> {
-    let usable: Vec<(&[f64], &[f64])> =
-        runs.iter().map(|r| series(r)).filter(|(xs, ys)| !xs.is_empty() && !ys.is_empty()).collect();
-    let Some(grid) =
-        usable.iter().map(|(xs, _)| *xs).min_by(|a, b| a[a.len() - 1].total_cmp(&b[b.len() - 1]))
+    let usable: Vec<(Vec<f64>, Vec<f64>)> = runs
+        .iter()
+        .map(|r| {
+            let (xs, ys) = series(r);
+            xs.iter().zip(ys).filter(|(_, y)| !y.is_nan()).map(|(&x, &y)| (x, y)).unzip()
+        })
+        .filter(|(xs, _): &(Vec<f64>, Vec<f64>)| !xs.is_empty())
+        .collect();
+    let Some(grid) = usable.iter().map(|(xs, _)| xs).min_by(|a, b| a[a.len() - 1].total_cmp(&b[b.len() - 1]))
     else {
         return Vec::new();
     };
@@ -922,7 +930,8 @@ mod tests {
         // The last row has no newline yet: the writer is still at it.
         std::fs::write(&csv, "step,success,return\n100,0.5,3\n200,,4\n300,0.").expect("write");
         let columns = csv_columns(&csv, &["step", "success"]).expect("reads the complete rows");
-        assert_eq!(columns, vec![vec![100.0, 200.0], vec![0.5, 0.5]], "an empty field repeats");
+        assert_eq!(columns[0], vec![100.0, 200.0]);
+        assert!(columns[1][0] == 0.5 && columns[1][1].is_nan(), "an empty field is NaN: {columns:?}");
         assert_eq!(csv_columns_if_present(&csv, &["step", "mean_q"]).expect("reads"), None);
         assert_eq!(csv_columns_if_present(&dir.join("absent.csv"), &["step"]).expect("no file"), None);
         let err = csv_columns(&csv, &["step", "mean_q"]).expect_err("no such column").to_string();
@@ -931,6 +940,38 @@ mod tests {
         let err = csv_columns(&csv, &["return"]).expect_err("a short row").to_string();
         assert!(err.contains("row 3 has 2 fields, the header 3: no `return`"), "{err}");
         assert_eq!(csv_columns(&csv, &["success"]).expect("the fields it has"), vec![vec![0.5, 0.7]]);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_window_that_measured_nothing_is_left_out_of_the_curves_not_drawn_as_zero() {
+        let dir = std::env::temp_dir().join(format!("vge-plot-empty-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
+        let config = crate::config::load_config(&configs.join("cube-fg-rl.toml"), &[]).expect("config");
+        std::fs::write(dir.join("config.toml"), config.to_toml_string().expect("toml")).expect("write");
+        // No update before the first row ended (mean_q empty), no episode in the third.
+        std::fs::write(
+            dir.join(crate::run_dir::METRICS),
+            "step,return,rotation,controller_share,mean_q\n\
+             10000,1.0,0.1,1.0,\n20000,2.0,0.2,0.5,4.0\n30000,,,0.4,6.0\n40000,4.0,0.4,0.3,8.0\n",
+        )
+        .expect("write");
+        let run = read_run(&dir).expect("read");
+        assert!(run.mean_q[0].is_nan() && run.mean_return[2].is_nan(), "{run:?}");
+        // mean Q starts where it was first measured; the return's gap is interpolated across.
+        let q = on_common_grid(&[&run], |r| (&r.step, &r.mean_q));
+        assert_eq!(q, vec![(20000.0, vec![4.0]), (30000.0, vec![6.0]), (40000.0, vec![8.0])]);
+        let ret = on_common_grid(&[&run], |r| (&r.step, &r.mean_return));
+        assert_eq!(ret, vec![(10000.0, vec![1.0]), (20000.0, vec![2.0]), (40000.0, vec![4.0])]);
+        let mut rng = crate::compare::rng_for(0, "mean Q");
+        let iqm =
+            iqm_curve(&[&run, &run], |r| (&r.step, &r.mean_q), &crate::stats::Bootstrap::default(), &mut rng)
+                .expect("no NaN reaches the statistics");
+        assert_eq!(
+            iqm.iter().map(|p| (p.step, p.mean)).collect::<Vec<_>>(),
+            [(20000.0, 4.0), (30000.0, 6.0), (40000.0, 8.0)]
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 
