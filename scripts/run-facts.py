@@ -5,12 +5,14 @@ Usage: scripts/run-facts.py RUN_DIR [RUN_DIR ...]
 
 Reads RUN_DIR/score.json (held-out scores), final-eval.json (wall time), metrics.csv (the
 critic's mean Q against the discounted return collected, the BC term, the controller's
-share) and eval.csv (the periodic tests), and prints one table row and the numbers a
-bullet quotes. Standard library only, so it runs with any Python 3.
+share), eval.csv (the periodic tests), train.log and the lanes' logs (runs/lanes/*.log: when
+each segment of a run started and ended), and prints one table row and the numbers a bullet
+quotes. Standard library only, so it runs with any Python 3.
 """
 
 import csv
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -40,6 +42,40 @@ def value_range(pairs):
 
 def fmt_range(r, digits=1):
     return "-" if r is None else f"{r[0]:.{digits}f} to {r[1]:.{digits}f}"
+
+
+def segments(run):
+    """Each training segment in train.log: (resumed from step or 0, wall s, how it ended)."""
+    log = run / "train.log"
+    if not log.is_file():
+        return []
+    out = []
+    for line in log.read_text().splitlines():
+        if line.startswith("training "):
+            m = re.search(r"resuming from step (\d+)", line)
+            out.append([int(m.group(1)) if m else 0, None, "killed (no end line)"])
+        elif out and line.startswith("time this session: "):
+            out[-1][1] = float(line.split()[3])
+        elif out and line.startswith("stopped at step "):
+            out[-1][2] = f"stopped checkpointed at {int(line.split()[3].rstrip(':')):,}"
+        elif out and line.startswith("done: "):
+            out[-1][2] = "done"
+    return out
+
+
+def lane_events(run):
+    """(time, start|end, lane) of the run in runs/lanes/*.log, the run named as in its queue."""
+    parts = run.resolve().parts
+    if "results" not in parts:
+        return []
+    rel = "/".join(parts[parts.index("results") + 1:])
+    events = []
+    for log in sorted(Path("runs/lanes").glob("*.log")):
+        for line in log.read_text().splitlines():
+            fields = line.split()
+            if len(fields) >= 3 and fields[1] in ("start", "end") and fields[2] == rel:
+                events.append((fields[0], fields[1], log.stem))
+    return sorted(events)
 
 
 def facts(run):
@@ -86,6 +122,13 @@ def facts(run):
     print("periodic tests (step: success, drops): " + "; ".join(
         f"{steps_label(int(r['step']))}: {float(r['success']):.0%}, {float(r['drops']):.0%}"
         for r in periodic))
+    segs = segments(run)
+    if segs:
+        print(f"segments (train.log): {len(segs)}: " + "; ".join(
+            f"from {frm:,}, {'-' if s is None else f'{s:,.0f} s'}, {end}" for frm, s, end in segs))
+    events = lane_events(run)
+    if events:
+        print("lanes: " + "; ".join(f"{t} {what} ({lane})" for t, what, lane in events))
 
 
 def main():
