@@ -70,7 +70,8 @@ def lane_events(run):
         return []
     rel = "/".join(parts[parts.index("results") + 1:])
     events = []
-    for log in sorted(Path("runs/lanes").glob("*.log")):
+    lanes = Path(__file__).resolve().parent.parent / "runs" / "lanes"
+    for log in sorted(lanes.glob("*.log")):
         for line in log.read_text().splitlines():
             fields = line.split()
             if len(fields) >= 3 and fields[1] in ("start", "end") and fields[2] == rel:
