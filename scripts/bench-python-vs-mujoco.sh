@@ -4,7 +4,7 @@
 # Python loop over MuJoCo on the same hand, timed in one run.
 #
 # MuJoCo (240 Hz) steps the model `vge bench sim --write-mjcf` writes, with scripts/bench_mujoco.py's
-# loop (the same action table, contact readout and episode ends as
+# loop (the same action table, written by vge_sim::bench, contact readout and episode ends as
 # python/examples/bench_loop.py's). Rounds alternate the two (default 3), unpinned: the
 # VecHandEnv uses every core, the single loops one. Prints the medians, the ratios, and the
 # size of the installed extension; every round's JSON line is kept in
@@ -27,12 +27,15 @@ reference=target/release/vge-python-reference
 model=target/vge-hand.mjcf.xml
 mkdir -p target
 "$reference" write-mjcf "$model"
+# The bench's actions, from vge_sim::bench itself, for both loops (2000 steps, their default).
+actions=target/bench-actions.f32
+"$reference" bench-actions "$actions" 2000
 out=target/bench-python-vs-mujoco.jsonl
 : >"$out"
 for r in $(seq 1 "$rounds"); do
   echo "round $r of $rounds..." >&2
-  "$venv/bin/python" python/examples/bench_loop.py --num-envs "$num_envs" >>"$out"
-  "$venv/bin/python" scripts/bench_mujoco.py "$model" >>"$out"
+  "$venv/bin/python" python/examples/bench_loop.py --num-envs "$num_envs" --actions "$actions" >>"$out"
+  "$venv/bin/python" scripts/bench_mujoco.py "$model" --actions "$actions" >>"$out"
 done
 "$venv/bin/python" - "$out" <<'PY'
 import json, os, statistics, sys

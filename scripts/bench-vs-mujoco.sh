@@ -24,14 +24,16 @@ fi
 cargo build --release -p vge-cli --bin vge >&2
 vge=target/release/vge
 model=target/vge-hand.mjcf.xml
-"$vge" bench sim --write-mjcf "$model" --mujoco-timestep-s "$(python3 -c "print(1/$mujoco_hz)")"
+actions=target/bench-actions.f32
+"$vge" bench sim --write-mjcf "$model" --mujoco-timestep-s "$(python3 -c "print(1/$mujoco_hz)")" \
+  --write-actions "$actions"
 out=target/bench-vs-mujoco.jsonl
 : >"$out"
 core=$(($(nproc) - 1))
 for r in $(seq 1 "$rounds"); do
   echo "round $r of $rounds..." >&2
   taskset -c "$core" "$vge" bench sim --json --worlds 1 --threads 1 >>"$out"
-  taskset -c "$core" "$venv/bin/python" scripts/bench_mujoco.py "$model" >>"$out"
+  taskset -c "$core" "$venv/bin/python" scripts/bench_mujoco.py "$model" --actions "$actions" >>"$out"
 done
 python3 - "$out" <<'EOF'
 import json, statistics, sys

@@ -4,7 +4,8 @@
 Loads the MJCF that `vge bench sim --write-mjcf` writes (the same hand, object, motors, and
 the settled grasp as keyframe `grasp`) and steps it the way `vge bench sim` steps one world:
 at the control rate, each control step adds a small deterministic pseudo-random change to
-the 15 motor targets (the same SplitMix hash as vge_sim::bench, clipped to the joint limits),
+the 15 motor targets (the table `vge bench sim --write-actions` writes: vge_sim::bench's own
+actions, clipped to the joint limits),
 runs the physics steps of one control period, and reads the fingertip contacts (position,
 normal, normal force per fingertip-object pair, as vge's observation does). An episode ends
 when the object falls 3 cm below its start height or after `--episode-steps`; then the
@@ -25,18 +26,15 @@ import time
 import mujoco
 import numpy as np
 
-MASK = (1 << 64) - 1
-
-
-def action(w, k, j, max_rad):
-    """vge_sim::bench::action: 0.2 * max * (2u - 1), u from a SplitMix-style hash."""
-    x = ((w << 40) ^ (k << 8) ^ j) & MASK
-    x = (x + 0x9E3779B97F4A7C15) & MASK
-    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK
-    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK
-    x ^= x >> 31
-    u = np.float32(x >> 40) / np.float32(1 << 24)
-    return 0.2 * max_rad * (2.0 * u - 1.0)
+def load_actions(path, steps):
+    """The first `steps` rows of the action table `vge bench sim --write-actions` wrote."""
+    raw = np.fromfile(path, dtype="<f4")
+    if raw.size % 15:
+        raise SystemExit(f"{path}: {raw.size} floats is not a whole number of 15-joint rows")
+    table = raw.reshape(-1, 15).astype(np.float64)
+    if len(table) < steps:
+        raise SystemExit(f"{path}: {len(table)} control steps of actions, --steps asks for {steps}")
+    return table[:steps]
 
 
 def main():
@@ -44,7 +42,8 @@ def main():
     p.add_argument("mjcf", help="model written by `vge bench sim --write-mjcf FILE`")
     p.add_argument("--steps", type=int, default=2000, help="control steps to time (default 2000)")
     p.add_argument("--control-hz", type=float, default=20.0, help="control rate (default 20, as vge's env)")
-    p.add_argument("--max-action-rad", type=float, default=0.05, help="vge's max_action_rad (default 0.05)")
+    p.add_argument("--actions", required=True, metavar="FILE",
+                   help="the action table (`vge bench sim --write-mjcf M --write-actions FILE`)")
     p.add_argument("--settle-s", type=float, default=1.0, help="settling time after the keyframe (default 1 s)")
     p.add_argument("--episode-steps", type=int, default=400, help="episode length in control steps (default 400)")
     args = p.parse_args()
@@ -105,8 +104,8 @@ def main():
         q = data.xquat[obj_body]
         return math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
 
-    # The actions are computed before timing, so that Python's speed does not count against MuJoCo.
-    table = np.array([[action(0, k, j, args.max_action_rad) for j in range(15)] for k in range(args.steps)])
+    # Loaded before timing, so that Python's speed does not count against MuJoCo.
+    table = load_actions(args.actions, args.steps)
 
     def drive(steps):
         z0 = reset()

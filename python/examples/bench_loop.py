@@ -5,7 +5,8 @@ scripts/bench-python-vs-mujoco.sh, beside scripts/bench_mujoco.py's loop over Mu
 same hand.
 
 The workload is bench_mujoco.py's: from the settled grasp, each control step changes the 15
-joint targets by the same deterministic pseudo-random table (0.2 x max_action_rad), and an
+joint targets by the same deterministic pseudo-random table (0.2 x max_action_rad, the file
+`vge-python-reference bench-actions FILE STEPS` or `vge bench sim --write-actions` writes), and an
 episode ends on a drop or after 400 steps. vge's reset simulates the grasp closing (MuJoCo's
 restores a settled state): vge pays for its resets here, as in `vge bench sim`.
 
@@ -20,28 +21,25 @@ import numpy as np
 
 import vge
 
-MASK = (1 << 64) - 1
-
-
-def action(w, k, j, max_rad):
-    """vge_sim::bench::action (as scripts/bench_mujoco.py): 0.2 * max * (2u - 1)."""
-    x = ((w << 40) ^ (k << 8) ^ j) & MASK
-    x = (x + 0x9E3779B97F4A7C15) & MASK
-    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & MASK
-    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & MASK
-    x ^= x >> 31
-    u = np.float32(x >> 40) / np.float32(1 << 24)
-    return np.float32(0.2 * max_rad * (2.0 * u - 1.0))
+def load_actions(path, steps):
+    """The first `steps` rows (15 float32 targets each) of the bench's action table."""
+    raw = np.fromfile(path, dtype="<f4")
+    if raw.size % 15 or raw.size // 15 < steps:
+        raise SystemExit(f"{path}: {raw.size} floats; needs at least {steps} rows of 15")
+    return raw.reshape(-1, 15)[:steps]
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--steps", type=int, default=2000, help="control steps to time per env (default 2000)")
     p.add_argument("--num-envs", type=int, default=8, help="envs of the VecHandEnv (default 8)")
+    p.add_argument("--actions", required=True, metavar="FILE",
+                   help="the action table (`vge-python-reference bench-actions FILE STEPS`)")
     args = p.parse_args()
-    max_rad = 0.05
-    # Computed before timing, as bench_mujoco.py does.
-    table = np.array([[action(0, k, j, max_rad) for j in range(15)] for k in range(args.steps)], np.float32)
+    if args.steps < 1 or args.num_envs < 1:
+        p.error("--steps and --num-envs must be >= 1")
+    # Loaded before timing, as bench_mujoco.py does.
+    table = load_actions(args.actions, args.steps)
 
     env = vge.HandEnv("cube")
     env.reset(seed=0)

@@ -100,6 +100,15 @@ fn action(w: usize, k: usize, max: f32) -> [f32; NUM_JOINTS] {
     })
 }
 
+/// The first world's actions for `steps` control steps at `max_action_rad`, as rows of
+/// [`NUM_JOINTS`] little-endian f32: the table the Python loops that are timed against this
+/// bench (scripts/bench_mujoco.py, python/examples/bench_loop.py) replay, written here so that
+/// no second copy of the hash has to agree with this one.
+#[must_use]
+pub fn first_world_actions_f32_le(steps: usize, max_action_rad: f32) -> Vec<u8> {
+    (0..steps).flat_map(|k| action(0, k, max_action_rad)).flat_map(f32::to_le_bytes).collect()
+}
+
 /// Runs `steps` control steps on `env`, resetting when an episode ends; returns resets.
 fn drive(env: &mut Env, w: usize, steps: usize) -> Result<usize, SimError> {
     let max = env.config().max_action_rad;
@@ -162,6 +171,21 @@ pub fn run(settings: &BenchSettings) -> Result<SimBench, SimError> {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_written_action_table_is_the_first_worlds_actions_row_by_row() {
+        let max = EnvConfig::default().max_action_rad;
+        let bytes = first_world_actions_f32_le(3, max);
+        assert_eq!(bytes.len(), 3 * NUM_JOINTS * 4);
+        let floats: Vec<f32> =
+            bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        for (k, row) in floats.chunks_exact(NUM_JOINTS).enumerate() {
+            assert_eq!(row, action(0, k, max), "row {k}");
+            assert!(row.iter().all(|a| a.abs() <= 0.2 * max), "row {k}: {row:?}");
+        }
+        // Rows differ: the table is not one action repeated.
+        assert_ne!(floats[..NUM_JOINTS], floats[NUM_JOINTS..2 * NUM_JOINTS]);
+    }
 
     #[test]
     fn a_short_run_reports_simulated_seconds_per_second_at_its_control_rate() {

@@ -29,12 +29,17 @@ fn mujoco_holds_the_settled_grasp_on_five_fingertips() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let model = dir.join("hand.xml");
     std::fs::write(&model, &xml).expect("write model");
+    let actions = dir.join("actions.f32");
+    std::fs::write(&actions, vge_sim::bench::first_world_actions_f32_le(200, env.max_action_rad))
+        .expect("write actions");
 
     let harness = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/bench_mujoco.py");
     let out = Command::new(python())
         .arg(harness)
         .arg(&model)
         .args(["--steps", "200"])
+        .arg("--actions")
+        .arg(&actions)
         .output()
         .expect("python runs (VGE_PYTHON, or .deps/py made by scripts/test.sh with mujoco)");
     let _ = std::fs::remove_dir_all(&dir);

@@ -62,6 +62,10 @@ pub enum Bench {
         /// comparison (docs/results/sim-vs-mujoco/).
         #[arg(long, default_value_t = 1.0 / 240.0, requires = "write_mjcf")]
         mujoco_timestep_s: f32,
+        /// With --write-mjcf: also write the first world's actions for --steps control steps
+        /// (rows of 15 little-endian f32), the table scripts/bench_mujoco.py replays.
+        #[arg(long, value_name = "FILE", requires = "write_mjcf")]
+        write_actions: Option<PathBuf>,
     },
     /// The policy on a Cortex-M4F (runtime/firmware-m4 under qemu-system-arm -icount), as
     /// f32, f16 and i8 weights: flash and RAM of the firmware (linked against the STM32F405's
@@ -125,7 +129,13 @@ pub enum Bench {
 /// `vge bench`.
 pub fn run(bench: Bench) -> anyhow::Result<()> {
     match bench {
-        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, .. } => write_mjcf(&path, mujoco_timestep_s),
+        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, write_actions, steps, .. } => {
+            write_mjcf(&path, mujoco_timestep_s)?;
+            match write_actions {
+                Some(actions) => write_bench_actions(&actions, steps),
+                None => Ok(()),
+            }
+        }
         Bench::Sim { json, steps, worlds, threads, write_mjcf: None, .. } => {
             bench_sim(json, steps, worlds, threads)
         }
@@ -153,6 +163,15 @@ fn write_mjcf(path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<
     let xml = vge_sim::mjcf::settled_grasp_mjcf(&EnvConfig::default(), 0, mujoco_timestep_s)?;
     std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {} (MuJoCo, time step {mujoco_timestep_s} s)", path.display());
+    Ok(())
+}
+
+/// `vge bench sim --write-actions`.
+fn write_bench_actions(path: &std::path::Path, steps: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(steps > 0, "--steps must be at least 1");
+    let bytes = vge_sim::bench::first_world_actions_f32_le(steps, EnvConfig::default().max_action_rad);
+    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("wrote {} ({steps} control steps of the bench's actions)", path.display());
     Ok(())
 }
 

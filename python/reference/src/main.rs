@@ -8,13 +8,16 @@
 //! - `vge-python-reference policy-actions POLICY OBS OUT`: the actions of the policy file
 //!   for the `f32` little-endian observations in OBS (rows of the policy's input width),
 //!   written to OUT the same way, loaded and run the way `vge eval` does
-//!   (`vge_trainer::eval::with_runtime_policy`: the file's dimensions and observation layout
+//!   (`vge_lab::eval`'s `with_runtime_policy`: the file's dimensions and observation layout
 //!   checked against the hand, its bytes copied to a 16-byte aligned buffer, a
 //!   `Policy<8, 1024>`).
 //! - `vge-python-reference write-mjcf FILE [TIMESTEP_S]`: the hand, cube and settled grasp
 //!   as MJCF for MuJoCo, by the call `vge bench sim --write-mjcf` makes
 //!   (`vge_sim::mjcf::settled_grasp_mjcf` of the default env, seed 0; default timestep
 //!   1/240 s), for scripts/bench-python-vs-mujoco.sh without a libtorch build.
+//! - `vge-python-reference bench-actions FILE STEPS`: the bench's action table, as
+//!   `vge bench sim --write-actions` writes it (`vge_sim::bench::first_world_actions_f32_le`
+//!   at the default env's `max_action_rad`), for the same script.
 
 use std::io::Read;
 use std::process::ExitCode;
@@ -110,6 +113,16 @@ fn write_mjcf(path: &str, timestep_s: Option<&str>) -> Result<(), String> {
     std::fs::write(path, xml).map_err(|e| format!("writing {path}: {e}"))
 }
 
+fn bench_actions(path: &str, steps: &str) -> Result<(), String> {
+    let steps: usize = steps.parse().map_err(|e| format!("steps `{steps}`: {e}"))?;
+    if steps == 0 {
+        return Err("steps: needs at least 1".to_owned());
+    }
+    let bytes =
+        vge_sim::bench::first_world_actions_f32_le(steps, vge_sim::EnvConfig::default().max_action_rad);
+    std::fs::write(path, bytes).map_err(|e| format!("writing {path}: {e}"))
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.iter().map(String::as_str).collect::<Vec<_>>().as_slice() {
@@ -117,9 +130,11 @@ fn main() -> ExitCode {
         ["policy-actions", policy, obs, out] => policy_actions(policy, obs, out),
         ["write-mjcf", path] => write_mjcf(path, None),
         ["write-mjcf", path, timestep_s] => write_mjcf(path, Some(timestep_s)),
+        ["bench-actions", path, steps] => bench_actions(path, steps),
         _ => Err("usage: vge-python-reference env-trace < REQUEST.json\n       \
                   vge-python-reference policy-actions POLICY OBS.f32 OUT.f32\n       \
-                  vge-python-reference write-mjcf FILE [TIMESTEP_S]"
+                  vge-python-reference write-mjcf FILE [TIMESTEP_S]\n       \
+                  vge-python-reference bench-actions FILE STEPS"
             .to_owned()),
     };
     match result {
