@@ -49,6 +49,9 @@ def main():
     args = p.parse_args()
     if args.steps < 1 or args.episode_steps < 1 or not args.control_hz > 0 or args.settle_s < 0:
         p.error("--steps and --episode-steps must be >= 1, --control-hz > 0, --settle-s >= 0")
+    # Read first, so that a bad table fails before MuJoCo settles the grasp, and before
+    # timing, so that Python's speed does not count against MuJoCo.
+    table = load_actions(args.actions, args.steps)
 
     model = mujoco.MjModel.from_xml_path(args.mjcf)
     data = mujoco.MjData(model)
@@ -103,9 +106,6 @@ def main():
     def yaw():
         q = data.xquat[obj_body]
         return math.atan2(2 * (q[0] * q[3] + q[1] * q[2]), 1 - 2 * (q[2] ** 2 + q[3] ** 2))
-
-    # Loaded before timing, so that Python's speed does not count against MuJoCo.
-    table = load_actions(args.actions, args.steps)
 
     def drive(steps):
         z0 = reset()
