@@ -771,60 +771,23 @@ pub fn load_config(path: &Path, overrides: &[String]) -> Result<Config, ConfigEr
 }
 
 /// The top-level key of a config file that names the file it builds on, relative to the
-/// file's own folder: `base = "cube-base.toml"`. A config is then its base with the keys it
-/// sets replaced (tables merge key by key, any other value replaces the base's whole), so a
-/// grid config states only what sets it apart. A run folder stores the merged config.
-pub const BASE_KEY: &str = "base";
-
-/// Bases of bases, at most this many: a longer chain is a mistake.
-const MAX_BASE_CHAIN: usize = 8;
+/// file's own folder: `base = "cube-base.toml"` (`vge_config_file::read_with_bases`: a config
+/// is its base with the keys it sets replaced). A run folder stores the merged config.
+pub use vge_config_file::BASE_KEY;
 
 /// The TOML table of the config file at `path`, its `base` (and the base's base, ...)
-/// merged under it.
+/// merged under it; each file's `[learner]` is moved to its canonical place first.
 pub fn read_config_table(path: &Path) -> Result<toml::Table, ConfigError> {
-    read_with_bases(path, &mut Vec::new())
+    vge_config_file::read_with_bases(path, &mut |table: &mut toml::Table, shown: &str| {
+        fold_learner_section(table, shown, false)
+    })
 }
 
-fn read_with_bases(path: &Path, chain: &mut Vec<PathBuf>) -> Result<toml::Table, ConfigError> {
-    let shown = path.display().to_string();
-    let text =
-        std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: shown.clone(), source })?;
-    let mut table: toml::Table = text
-        .parse()
-        .map_err(|e: toml::de::Error| ConfigError::Parse { path: shown.clone(), message: e.to_string() })?;
-    fold_learner_section(&mut table, &shown, false)?;
-    let Some(base) = table.remove(BASE_KEY) else {
-        return Ok(table);
-    };
-    let parse_err = |message: String| ConfigError::Parse { path: shown.clone(), message };
-    let base = base.as_str().ok_or_else(|| {
-        parse_err(format!("`{BASE_KEY}` names a file, as a string; got a {}", base.type_str()))
-    })?;
-    let base_path = path.parent().unwrap_or(Path::new(".")).join(base);
-    chain.push(path.canonicalize().unwrap_or_else(|_| path.to_owned()));
-    let canonical = base_path.canonicalize().unwrap_or_else(|_| base_path.clone());
-    if chain.contains(&canonical) {
-        return Err(parse_err(format!(
-            "`{BASE_KEY}` {} is a config this one is already built on",
-            base_path.display()
-        )));
-    }
-    if chain.len() > MAX_BASE_CHAIN {
-        return Err(parse_err(format!("more than {MAX_BASE_CHAIN} bases in a chain")));
-    }
-    let mut merged = read_with_bases(&base_path, chain)?;
-    merge_table(&mut merged, table);
-    Ok(merged)
-}
-
-/// `over`'s keys into `base`: tables merge key by key, other values replace.
-fn merge_table(base: &mut toml::Table, over: toml::Table) {
-    for (key, value) in over {
-        match (base.get_mut(&key), value) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_table(b, o),
-            (_, value) => {
-                base.insert(key, value);
-            }
+impl From<vge_config_file::BaseChainError> for ConfigError {
+    fn from(e: vge_config_file::BaseChainError) -> Self {
+        match e {
+            vge_config_file::BaseChainError::Io { path, source } => Self::Io { path, source },
+            vge_config_file::BaseChainError::Parse { path, message } => Self::Parse { path, message },
         }
     }
 }

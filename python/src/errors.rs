@@ -6,7 +6,7 @@
 use pyo3::PyErr;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyRuntimeError, PyValueError};
-use vge_env_keys::EnvKeysError;
+use vge_config_file::EnvKeysError;
 use vge_sim::SimError;
 
 create_exception!(

@@ -1,10 +1,10 @@
 //! Python keyword arguments as `[env]` keys: each value becomes the TOML value a config file
 //! would hold, so keyword arguments and config files are read by the one
-//! [`vge_env_keys::EnvKeys`] reader (unknown keys and wrong types refused by name).
+//! [`vge_config_file::EnvKeys`] reader (unknown keys and wrong types refused by name).
 
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyString};
-use vge_env_keys::EnvKeys;
+use vge_config_file::EnvKeys;
 
 use crate::errors;
 

@@ -23,7 +23,7 @@ use std::io::Read;
 use std::process::ExitCode;
 
 use serde::Deserialize;
-use vge_env_keys::EnvKeys;
+use vge_config_file::EnvKeys;
 use vge_runtime::{AlignedBytes, Policy};
 use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
 

@@ -2,10 +2,11 @@
 //! one definition the lab's configs read too) read from a config file, with its `base`
 //! chain, or from Python keyword arguments, and validated into [`vge_sim::EnvConfig`]s.
 //!
-//! Not the lab's config reader: the lab brings plots, statistics, sweeps and ONNX that the
-//! Python package does not need. A test keeps the two readers in step
-//! (python/tests/test_against_rust.py): a config loaded here drives the controllers to the
-//! same returns, to the bit, as `vge controller --config` on the same file.
+//! The lab's config reader builds the rest of a config (learner, run, plots) that the Python
+//! package does not need; both read the file through [`crate::read_with_bases`]. A test
+//! (python/tests/test_against_rust.py) checks the outcome end to end: a config loaded here
+//! drives the controllers to the same returns, to the bit, as `vge controller --config` on
+//! the same file.
 //!
 //! Keys are read from a TOML table (a config file's `[env]`, or Python keyword arguments
 //! turned into one), so unknown keys and wrong types are refused with the key's name.
@@ -14,41 +15,7 @@ use serde::Deserialize;
 use thiserror::Error;
 use vge_sim::{EnvConfig, EnvSection};
 
-/// The TOML table of the config file at `path` with its `base` chain merged under it (tables
-/// key by key, other values replaced), as `vge_lab::config::read_config_table` reads it.
-fn read_with_bases(path: &std::path::Path, depth: usize) -> Result<toml::Table, EnvKeysError> {
-    let shown = path.display().to_string();
-    let text =
-        std::fs::read_to_string(path).map_err(|source| EnvKeysError::Io { path: shown.clone(), source })?;
-    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| EnvKeysError::Parse {
-        origin: shown.clone(),
-        message: e.to_string(),
-    })?;
-    let Some(base) = table.remove("base") else {
-        return Ok(table);
-    };
-    let invalid = |message: String| EnvKeysError::Invalid { origin: shown.clone(), message };
-    let base = base.as_str().ok_or_else(|| invalid("`base` names a file, as a string".to_owned()))?;
-    // The lab refuses loops by name; a depth bound is enough to refuse them here.
-    if depth >= 8 {
-        return Err(invalid("more than 8 bases in a chain (or a loop)".to_owned()));
-    }
-    let mut merged =
-        read_with_bases(&path.parent().unwrap_or(std::path::Path::new(".")).join(base), depth + 1)?;
-    merge_table(&mut merged, table);
-    Ok(merged)
-}
-
-fn merge_table(base: &mut toml::Table, over: toml::Table) {
-    for (key, value) in over {
-        match (base.get_mut(&key), value) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_table(b, o),
-            (_, value) => {
-                base.insert(key, value);
-            }
-        }
-    }
-}
+use crate::BaseChainError;
 
 /// Why a set of `[env]` keys cannot become an environment.
 #[derive(Debug, Error)]
@@ -79,6 +46,15 @@ pub enum EnvKeysError {
     },
 }
 
+impl From<BaseChainError> for EnvKeysError {
+    fn from(e: BaseChainError) -> Self {
+        match e {
+            BaseChainError::Io { path, source } => Self::Io { path, source },
+            BaseChainError::Parse { path, message } => Self::Parse { origin: path, message },
+        }
+    }
+}
+
 /// The `[env]` section of a vge config, as the Python package reads it.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(transparent)]
@@ -100,14 +76,13 @@ impl EnvKeys {
     }
 
     /// The `[env]` table of the config file at `path` (empty when it has none) over its
-    /// base's (a config's `base = "FILE"`, as the lab reads it: `vge_lab::config::BASE_KEY`),
-    /// with `overrides` replacing its keys.
+    /// bases' ([`crate::read_with_bases`]), with `overrides` replacing its keys.
     pub fn config_file_table(
         path: &std::path::Path,
         overrides: toml::Table,
     ) -> Result<toml::Table, EnvKeysError> {
         let shown = path.display().to_string();
-        let mut doc = read_with_bases(path, 0)?;
+        let mut doc = crate::read_with_bases(path, &mut |_, _| Ok::<(), EnvKeysError>(()))?;
         let mut env = match doc.remove("env") {
             None => toml::Table::new(),
             Some(toml::Value::Table(t)) => t,
