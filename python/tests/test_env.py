@@ -74,6 +74,18 @@ def test_keys_by_name_and_from_config(repo):
     assert multi.object != "cube"
 
 
+def test_config_files_are_read_over_their_base_chain_as_the_lab_reads_them(repo, tmp_path):
+    # configs/variants/side-on.toml is cube-base.toml plus one [env] key.
+    side_on = vge.HandEnv.from_config(repo / "configs/variants/side-on.toml")
+    assert "SideOn" in side_on._core.config_debug()
+    assert "SideOn" not in vge.HandEnv.from_config(repo / "configs/cube-base.toml")._core.config_debug()
+    # A loop is refused naming the file, with the lab's message (one reader, config-file/).
+    (tmp_path / "a.toml").write_text('base = "b.toml"\n')
+    (tmp_path / "b.toml").write_text('base = "a.toml"\n')
+    with pytest.raises(ValueError, match=r"b\.toml.*already built on"):
+        vge.HandEnv.from_config(tmp_path / "a.toml")
+
+
 def test_bad_keys_name_the_key(repo):
     with pytest.raises(ValueError, match="control_hzz"):
         vge.HandEnv(control_hzz=20.0)
