@@ -1,0 +1,236 @@
+//! The TOML beside the XML, and the fingers it names: each fingertip is a site or a body, each
+//! finger the joints on the path from the root to its fingertip.
+
+use serde::Deserialize;
+
+use nalgebra::Vector3;
+
+use crate::error::HandError;
+use crate::mjcf::Parsed;
+use crate::model::{Finger, GeomShape};
+
+/// Sites whose name starts with this are the fingertips of a hand without a TOML (or whose
+/// TOML names none), in file order.
+pub const FINGERTIP_SITE_PREFIX: &str = "fingertip";
+
+/// What the TOML may say; every key is optional, and an unknown key is refused.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct Spec {
+    /// Site or body names, one per finger, in finger order.
+    pub(crate) fingertips: Option<Vec<String>>,
+    /// The fingers' names, in the same order.
+    pub(crate) finger_names: Option<Vec<String>>,
+    /// The palm's body name.
+    pub(crate) palm: Option<String>,
+    /// The keyframe that is the hand's start grasp.
+    pub(crate) start_grasp: Option<String>,
+}
+
+impl Spec {
+    pub(crate) fn parse(text: &str, file: &str) -> Result<Self, HandError> {
+        toml::from_str(text).map_err(|e| HandError::Spec { file: file.to_owned(), message: e.to_string() })
+    }
+}
+
+/// What the TOML resolves to in the model.
+#[derive(Debug)]
+pub(crate) struct Resolved {
+    pub(crate) fingers: Vec<Finger>,
+    pub(crate) palm: Option<usize>,
+    pub(crate) start_grasp: Option<usize>,
+}
+
+/// Where a fingertip name points.
+enum Tip {
+    Site(usize),
+    Body(usize),
+}
+
+pub(crate) fn resolve(
+    parsed: &Parsed,
+    spec: &Spec,
+    spec_file: &str,
+    xml_file: &str,
+) -> Result<Resolved, HandError> {
+    let spec_error = |message: String| HandError::Spec { file: spec_file.to_owned(), message };
+    let tips: Vec<String> = match &spec.fingertips {
+        Some(tips) => tips.clone(),
+        None => {
+            let by_rule: Vec<String> = parsed
+                .sites
+                .iter()
+                .filter_map(|s| s.name.clone())
+                .filter(|n| n.starts_with(FINGERTIP_SITE_PREFIX))
+                .collect();
+            if by_rule.is_empty() {
+                return Err(HandError::Spec {
+                    file: xml_file.to_owned(),
+                    message: format!(
+                        "no fingertips: name them in `fingertips = [...]` in a TOML beside the XML (same \
+                         stem), or name the fingertip sites `{FINGERTIP_SITE_PREFIX}...`"
+                    ),
+                });
+            }
+            by_rule
+        }
+    };
+    if tips.is_empty() {
+        return Err(spec_error("`fingertips` is empty".to_owned()));
+    }
+    let names = match &spec.finger_names {
+        Some(names) if names.len() != tips.len() => {
+            return Err(spec_error(format!("{} finger_names for {} fingertips", names.len(), tips.len())));
+        }
+        Some(names) => names.clone(),
+        None => tips.clone(),
+    };
+    for (i, name) in names.iter().enumerate() {
+        if names[..i].contains(name) {
+            return Err(spec_error(format!("finger `{name}` is named twice")));
+        }
+    }
+    let mut fingers = Vec::with_capacity(tips.len());
+    for (tip, name) in tips.iter().zip(&names) {
+        fingers.push(finger(parsed, tip, name, &spec_error)?);
+    }
+    check_ownership(parsed, &fingers)?;
+    for pair in fingers.windows(2) {
+        if let [a, b] = pair
+            && b.joints.start < a.joints.start
+        {
+            return Err(spec_error(format!(
+                "finger `{}` (joints {:?}) is listed after `{}` (joints {:?}): list the fingers in the \
+                 order of their joints in the file, so that the joint vector is MuJoCo's qpos",
+                b.name, b.joints, a.name, a.joints
+            )));
+        }
+    }
+    let palm = spec
+        .palm
+        .as_ref()
+        .map(|p| body_named(parsed, p).ok_or_else(|| spec_error(format!("palm: no body named `{p}`"))))
+        .transpose()?;
+    let start_grasp = spec
+        .start_grasp
+        .as_ref()
+        .map(|k| {
+            let mut found = parsed
+                .keyframes
+                .iter()
+                .enumerate()
+                .filter(|(_, key)| key.name.as_deref() == Some(k.as_str()));
+            match (found.next(), found.next()) {
+                (Some((i, _)), None) => Ok(i),
+                (None, _) => Err(spec_error(format!("start_grasp: no keyframe named `{k}`"))),
+                (Some(_), Some(_)) => Err(spec_error(format!("start_grasp: two keyframes are named `{k}`"))),
+            }
+        })
+        .transpose()?;
+    Ok(Resolved { fingers, palm, start_grasp })
+}
+
+fn body_named(parsed: &Parsed, name: &str) -> Option<usize> {
+    parsed.bodies.iter().position(|b| b.name.as_deref() == Some(name))
+}
+
+fn finger(
+    parsed: &Parsed,
+    tip: &str,
+    name: &str,
+    spec_error: &dyn Fn(String) -> HandError,
+) -> Result<Finger, HandError> {
+    let site = parsed.sites.iter().position(|s| s.name.as_deref() == Some(tip));
+    let body = body_named(parsed, tip);
+    let found = match (site, body) {
+        (Some(s), None) => Tip::Site(s),
+        (None, Some(b)) => Tip::Body(b),
+        (Some(_), Some(_)) => {
+            return Err(spec_error(format!("fingertip `{tip}` names both a site and a body; rename one")));
+        }
+        (None, None) => return Err(spec_error(format!("fingertip `{tip}` is neither a site nor a body"))),
+    };
+    let (tip_body, offset) = match found {
+        Tip::Site(s) => {
+            let site = &parsed.sites[s];
+            (site.body, site.pose_in_body.translation.vector)
+        }
+        Tip::Body(b) => (b, Vector3::zeros()),
+    };
+    // The joints on the path, root first: each body's joints are contiguous, ancestors' first.
+    let mut path = Vec::new();
+    let mut body = Some(tip_body);
+    while let Some(b) = body {
+        path.push(parsed.bodies[b].joints.clone());
+        body = parsed.bodies[b].parent;
+    }
+    path.reverse();
+    let joints: Vec<usize> = path.into_iter().flatten().collect();
+    let (Some(&first), Some(&last)) = (joints.first(), joints.last()) else {
+        return Err(spec_error(format!("fingertip `{tip}` has no joint on its path from the root")));
+    };
+    if last + 1 - first != joints.len() {
+        // A joint of another branch lies between two of this finger's.
+        let gap = (first..=last).find(|j| !joints.contains(j)).unwrap_or(first);
+        return Err(HandError::Invalid {
+            at: parsed.joint_at[gap].clone(),
+            message: format!(
+                "joint `{}` lies between joints of finger `{name}` in the file, so that finger's joints are \
+                 not contiguous in the joint vector: write each finger's bodies together",
+                parsed.joints[gap].name
+            ),
+        });
+    }
+    Ok(Finger {
+        name: name.to_owned(),
+        tip_name: tip.to_owned(),
+        joints: first..last + 1,
+        tip_body,
+        tip_offset_in_body_m: offset,
+        tip_radius_m: tip_radius(parsed, tip_body, &offset),
+    })
+}
+
+/// Every hinge joint moves exactly one finger.
+fn check_ownership(parsed: &Parsed, fingers: &[Finger]) -> Result<(), HandError> {
+    for (j, joint) in parsed.joints.iter().enumerate() {
+        let owners: Vec<&str> =
+            fingers.iter().filter(|f| f.joints.contains(&j)).map(|f| f.name.as_str()).collect();
+        let message = match owners.as_slice() {
+            [_] => continue,
+            [] => format!(
+                "joint `{}` is on no finger's path: every hinge joint must move one finger (a wrist or arm \
+                 joint is outside a hand)",
+                joint.name
+            ),
+            [a, b, ..] => format!(
+                "joint `{}` is on the paths of fingers `{a}` and `{b}`: a joint must move one finger only",
+                joint.name
+            ),
+        };
+        return Err(HandError::Invalid { at: parsed.joint_at[j].clone(), message });
+    }
+    Ok(())
+}
+
+/// The radius of the tip body's colliding sphere or capsule nearest the fingertip point.
+fn tip_radius(parsed: &Parsed, body: usize, tip: &Vector3<f32>) -> Option<f32> {
+    parsed.bodies[body]
+        .geoms
+        .iter()
+        .filter(|g| g.collides())
+        .filter_map(|g| {
+            let centre = g.pose_in_body.translation.vector;
+            match g.shape {
+                GeomShape::Sphere { radius_m } => Some(((tip - centre).norm(), radius_m)),
+                GeomShape::Capsule { radius_m, half_length_m } => {
+                    let axis = g.pose_in_body.rotation * Vector3::z();
+                    let along = (tip - centre).dot(&axis).clamp(-half_length_m, half_length_m);
+                    Some(((tip - (centre + axis * along)).norm(), radius_m))
+                }
+                _ => None,
+            }
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, r)| r)
+}
