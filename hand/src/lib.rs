@@ -55,9 +55,9 @@
 //! # Fingers and the joint vector
 //! A finger is the set of joints on the path from the root to its fingertip's body. Every hinge
 //! joint must be on exactly one finger's path (a joint shared by two fingers, such as a wrist,
-//! or on none is refused), each finger's joints must be contiguous in the file, and the fingers
-//! must be listed in the order of their joints. The joint vector is then MuJoCo's qpos of a
-//! hand-only model (file order) and finger-major.
+//! or on none is refused), which with MuJoCo's depth-first numbering makes each finger's joints
+//! contiguous; the fingers must be listed in the order of their joints. The joint vector is
+//! then MuJoCo's qpos of a hand-only model (file order) and finger-major.
 //!
 //! # Frames and units
 //! The world frame is the MJCF world frame; a joint's axis and anchor are in its body's frame,

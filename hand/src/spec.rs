@@ -90,11 +90,15 @@ pub(crate) fn resolve(
             return Err(spec_error(format!("finger `{name}` is named twice")));
         }
     }
-    let mut fingers = Vec::with_capacity(tips.len());
-    for (tip, name) in tips.iter().zip(&names) {
-        fingers.push(finger(parsed, tip, name, &spec_error)?);
+    let mut paths = Vec::with_capacity(tips.len());
+    for tip in &tips {
+        paths.push(path_to(parsed, tip, &spec_error)?);
     }
-    check_ownership(parsed, &fingers)?;
+    check_ownership(parsed, &paths, &names)?;
+    let mut fingers = Vec::with_capacity(tips.len());
+    for ((tip, name), path) in tips.iter().zip(&names).zip(paths) {
+        fingers.push(finger(parsed, tip, name, path)?);
+    }
     for pair in fingers.windows(2) {
         if let [a, b] = pair
             && b.joints.start < a.joints.start
@@ -134,12 +138,14 @@ fn body_named(parsed: &Parsed, name: &str) -> Option<usize> {
     parsed.bodies.iter().position(|b| b.name.as_deref() == Some(name))
 }
 
-fn finger(
-    parsed: &Parsed,
-    tip: &str,
-    name: &str,
-    spec_error: &dyn Fn(String) -> HandError,
-) -> Result<Finger, HandError> {
+/// A fingertip's body, its point in that body, and the joints on its path from the root.
+struct Path {
+    tip_body: usize,
+    offset: Vector3<f32>,
+    joints: Vec<usize>,
+}
+
+fn path_to(parsed: &Parsed, tip: &str, spec_error: &dyn Fn(String) -> HandError) -> Result<Path, HandError> {
     let site = parsed.sites.iter().position(|s| s.name.as_deref() == Some(tip));
     let body = body_named(parsed, tip);
     let found = match (site, body) {
@@ -158,20 +164,30 @@ fn finger(
         Tip::Body(b) => (b, Vector3::zeros()),
     };
     // The joints on the path, root first: each body's joints are contiguous, ancestors' first.
-    let mut path = Vec::new();
+    let mut ranges = Vec::new();
     let mut body = Some(tip_body);
     while let Some(b) = body {
-        path.push(parsed.bodies[b].joints.clone());
+        ranges.push(parsed.bodies[b].joints.clone());
         body = parsed.bodies[b].parent;
     }
-    path.reverse();
-    let joints: Vec<usize> = path.into_iter().flatten().collect();
-    let (Some(&first), Some(&last)) = (joints.first(), joints.last()) else {
+    ranges.reverse();
+    let joints: Vec<usize> = ranges.into_iter().flatten().collect();
+    if joints.is_empty() {
         return Err(spec_error(format!("fingertip `{tip}` has no joint on its path from the root")));
+    }
+    Ok(Path { tip_body, offset, joints })
+}
+
+fn finger(parsed: &Parsed, tip: &str, name: &str, path: Path) -> Result<Finger, HandError> {
+    let (first, last) = match (path.joints.first(), path.joints.last()) {
+        (Some(&first), Some(&last)) => (first, last),
+        _ => (0, 0),
     };
-    if last + 1 - first != joints.len() {
-        // A joint of another branch lies between two of this finger's.
-        let gap = (first..=last).find(|j| !joints.contains(j)).unwrap_or(first);
+    if last + 1 - first != path.joints.len() {
+        // A joint of another finger lies between two of this finger's. With bodies numbered depth
+        // first and every joint owned once (checked before), this cannot happen; kept so that a
+        // change to either cannot make the joint vector silently differ from MuJoCo's qpos.
+        let gap = (first..=last).find(|j| !path.joints.contains(j)).unwrap_or(first);
         return Err(HandError::Invalid {
             at: parsed.joint_at[gap].clone(),
             message: format!(
@@ -185,17 +201,17 @@ fn finger(
         name: name.to_owned(),
         tip_name: tip.to_owned(),
         joints: first..last + 1,
-        tip_body,
-        tip_offset_in_body_m: offset,
-        tip_radius_m: tip_radius(parsed, tip_body, &offset),
+        tip_body: path.tip_body,
+        tip_offset_in_body_m: path.offset,
+        tip_radius_m: tip_radius(parsed, path.tip_body, &path.offset),
     })
 }
 
 /// Every hinge joint moves exactly one finger.
-fn check_ownership(parsed: &Parsed, fingers: &[Finger]) -> Result<(), HandError> {
+fn check_ownership(parsed: &Parsed, paths: &[Path], names: &[String]) -> Result<(), HandError> {
     for (j, joint) in parsed.joints.iter().enumerate() {
         let owners: Vec<&str> =
-            fingers.iter().filter(|f| f.joints.contains(&j)).map(|f| f.name.as_str()).collect();
+            paths.iter().zip(names).filter(|(p, _)| p.joints.contains(&j)).map(|(_, n)| n.as_str()).collect();
         let message = match owners.as_slice() {
             [_] => continue,
             [] => format!(
