@@ -22,6 +22,7 @@
 //! last joint command the node applied. `docs/can-protocol.md` is the full description
 //! (with bus load) and `docs/vge-hand.dbc` describes the same frames for CAN tools.
 
+pub mod allegro;
 pub mod fd;
 mod fields;
 mod messages;
