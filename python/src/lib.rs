@@ -5,7 +5,8 @@
 //! - [`vec_env::VecEnvCore`]: N of them stepped on rayon's threads into preallocated numpy
 //!   arrays, with Gymnasium's next-step autoreset;
 //! - [`controllers::ControllerCore`]: IGM, CS or FG acting on an `EnvCore`'s state;
-//! - [`policy::PolicyCore`]: a policy file on the no_std runtime.
+//! - [`policy::PolicyCore`]: a policy file on the no_std runtime;
+//! - [`hand::HandCore`]: a hand read from its MJCF description, with its kinematics.
 //!
 //! Nothing here panics on Python input: every value is checked and refused with an
 //! exception carrying the Rust error's message ([`errors`]).
@@ -15,6 +16,7 @@ use pyo3::prelude::*;
 mod controllers;
 mod env;
 mod errors;
+mod hand;
 mod keys;
 mod policy;
 mod vec_env;
@@ -25,7 +27,9 @@ fn _vge(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<vec_env::VecEnvCore>()?;
     m.add_class::<controllers::ControllerCore>()?;
     m.add_class::<policy::PolicyCore>()?;
+    m.add_class::<hand::HandCore>()?;
     m.add("PolicyError", m.py().get_type::<errors::PolicyError>())?;
+    m.add("HandError", m.py().get_type::<errors::HandError>())?;
     m.add("OBS_DIM", vge_sim::OBS_DIM)?;
     m.add("NUM_JOINTS", vge_sim::NUM_JOINTS)?;
     m.add("NUM_FINGERS", vge_sim::NUM_FINGERS)?;

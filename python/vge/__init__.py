@@ -1,6 +1,7 @@
 """vge from Python: the simulated hand as a Gymnasium environment (`HandEnv`, and
-`VecHandEnv` stepping many in Rust), vge's controllers as experts (`vge.controllers`) and
-policy files on vge's runtime (`Policy`).
+`VecHandEnv` stepping many in Rust), vge's controllers as experts (`vge.controllers`),
+policy files on vge's runtime (`Policy`), and hand descriptions with their kinematics
+(`Hand`).
 
 Importing `vge` registers one Gymnasium id per object: `gymnasium.make("vge/FingerGait-Cube-v0")`.
 """
@@ -10,8 +11,9 @@ from __future__ import annotations
 import gymnasium as gym
 
 from . import _vge, controllers
-from ._vge import NUM_FINGERS, NUM_JOINTS, OBJECTS, OBS_DIM, OBS_LAYOUT, PolicyError
+from ._vge import NUM_FINGERS, NUM_JOINTS, OBJECTS, OBS_DIM, OBS_LAYOUT, HandError, PolicyError
 from .env import HandEnv
+from .hand import Hand
 from .policy import Policy
 from .vector import VecHandEnv
 
@@ -33,6 +35,8 @@ for _object in OBJECTS:
 __all__ = [
     "HandEnv",
     "VecHandEnv",
+    "Hand",
+    "HandError",
     "Policy",
     "PolicyError",
     "controllers",
