@@ -24,7 +24,8 @@ fn lift_isometry<T: RealField + Copy>(iso: &Isometry3<f32>) -> Isometry3<T> {
     let q = iso.rotation.quaternion();
     Isometry3::from_parts(
         Translation3::from(lift_vector(&iso.translation.vector)),
-        UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(lift(q.w), lift(q.i), lift(q.j), lift(q.k))),
+        // Renormalised in T: an f32 unit quaternion is unit only to f32 precision.
+        UnitQuaternion::new_normalize(nalgebra::Quaternion::new(lift(q.w), lift(q.i), lift(q.j), lift(q.k))),
     )
 }
 
@@ -68,7 +69,7 @@ impl Hand {
                 let anchor = pose * Point3::from(pos);
                 frames.anchors.push(anchor.coords);
                 frames.axes.push(pose.rotation * axis);
-                let turn = UnitQuaternion::from_axis_angle(&Unit::new_unchecked(axis), q_rad[j]);
+                let turn = UnitQuaternion::from_axis_angle(&Unit::new_normalize(axis), q_rad[j]);
                 let rotation = pose.rotation * turn;
                 pose = Isometry3::from_parts(Translation3::from(anchor.coords - rotation * pos), rotation);
             }

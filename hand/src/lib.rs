@@ -107,12 +107,19 @@ pub struct Hand {
 /// `optional`.
 fn read_limited(path: &Path, optional: bool) -> Result<Option<String>, HandError> {
     let shown = || path.display().to_string();
+    // Checked before opening, as opening a named pipe would wait for a writer.
+    match std::fs::metadata(path) {
+        Ok(meta) if !meta.is_file() => return Err(HandError::NotAFile { path: shown() }),
+        Err(e) if optional && e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(HandError::Io { path: shown(), source }),
+        Ok(_) => {}
+    }
     let file = match std::fs::File::open(path) {
         Ok(f) => f,
         Err(e) if optional && e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(source) => return Err(HandError::Io { path: shown(), source }),
     };
-    // The metadata of the opened file, so that what is checked is what is read.
+    // And the opened file's, so that what is checked is what is read.
     let meta = file.metadata().map_err(|source| HandError::Io { path: shown(), source })?;
     if !meta.is_file() {
         return Err(HandError::NotAFile { path: shown() });

@@ -255,7 +255,7 @@ fn queries_refuse_wrong_lengths_non_finite_angles_and_bad_fingers() {
 }
 
 #[test]
-fn load_refuses_directories_and_oversized_files() {
+fn load_refuses_directories_pipes_and_oversized_files() {
     let dir = std::env::temp_dir().join(format!("vge-hand-test-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("sub.xml")).unwrap();
     assert!(matches!(Hand::load(dir.join("sub.xml")), Err(HandError::NotAFile { .. })));
@@ -264,6 +264,15 @@ fn load_refuses_directories_and_oversized_files() {
     file.set_len(vge_hand::MAX_FILE_BYTES + 1).unwrap();
     assert!(matches!(Hand::load(&big), Err(HandError::TooLarge { .. })));
     assert!(matches!(Hand::load(dir.join("absent.xml")), Err(HandError::Io { .. })));
+    // A named pipe is refused unopened (opening it would wait for a writer), as the XML or
+    // as the TOML beside it.
+    let xml = dir.join("hand.xml");
+    std::fs::write(&xml, finger("", "")).unwrap();
+    assert!(Hand::load(&xml).is_ok());
+    let made = std::process::Command::new("mkfifo").arg(dir.join("hand.toml")).status();
+    if made.is_ok_and(|s| s.success()) {
+        assert!(matches!(Hand::load(&xml), Err(HandError::NotAFile { path }) if path.ends_with("hand.toml")));
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
