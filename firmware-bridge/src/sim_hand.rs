@@ -196,7 +196,7 @@ impl SimHand {
     /// The state frames of `fingers`' nodes, from the latest observation.
     fn state_frames(&self, fingers: &[FingerId], seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
         let state = self.env.privileged();
-        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or([0.0; 15]);
+        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or_else(|| vec![0.0; 15]);
         let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
         let hand = &self.env.config().hand;
         let kp = self.env.config().physics.motor_stiffness_nm_per_rad;

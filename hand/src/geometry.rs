@@ -53,6 +53,11 @@ impl Orientation {
                 if q.norm() < EPS {
                     return Err(Degenerate);
                 }
+                // Unit to float32 precision: kept as written, so that a file of float32 frames
+                // reads back bit for bit (MuJoCo's normalisation would move it by < 1e-7).
+                if (q.norm() - 1.0).abs() < UNIT_TOLERANCE {
+                    return Ok(UnitQuaternion::new_unchecked(q));
+                }
                 Ok(UnitQuaternion::from_quaternion(q))
             }
             Self::AxisAngle(axis, angle) => {
@@ -87,13 +92,20 @@ impl Orientation {
     }
 }
 
+/// How far from 1 a quaternion's norm may be to count as unit: a few float32 roundings.
+const UNIT_TOLERANCE: f64 = 4.0 * f32::EPSILON as f64;
+
 /// A pose from a position and a rotation, stored in `f32`.
 pub(crate) fn pose_f32(pos: &Vector3<f64>, rot: &UnitQuaternion<f64>) -> Isometry3<f32> {
     let q = rot.quaternion();
-    Isometry3::from_parts(
-        Translation3::new(pos.x as f32, pos.y as f32, pos.z as f32),
-        UnitQuaternion::new_normalize(Quaternion::new(q.w as f32, q.i as f32, q.j as f32, q.k as f32)),
-    )
+    let q32 = Quaternion::new(q.w as f32, q.i as f32, q.j as f32, q.k as f32);
+    // Renormalised only where the cast left it off unit: a float32 frame stays as written.
+    let rotation = if (f64::from(q32.norm()) - 1.0).abs() < UNIT_TOLERANCE {
+        UnitQuaternion::new_unchecked(q32)
+    } else {
+        UnitQuaternion::new_normalize(q32)
+    };
+    Isometry3::from_parts(Translation3::new(pos.x as f32, pos.y as f32, pos.z as f32), rotation)
 }
 
 /// A primitive's shape for its mass properties (half sizes, m).

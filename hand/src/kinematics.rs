@@ -24,9 +24,20 @@ fn lift_isometry<T: RealField + Copy>(iso: &Isometry3<f32>) -> Isometry3<T> {
     let q = iso.rotation.quaternion();
     Isometry3::from_parts(
         Translation3::from(lift_vector(&iso.translation.vector)),
-        // Renormalised in T: an f32 unit quaternion is unit only to f32 precision.
-        UnitQuaternion::new_normalize(nalgebra::Quaternion::new(lift(q.w), lift(q.i), lift(q.j), lift(q.k))),
+        unit_in::<T>(nalgebra::Quaternion::new(lift(q.w), lift(q.i), lift(q.j), lift(q.k))),
     )
+}
+
+/// A quaternion renormalised in `T` where it is off unit at `T`'s precision: an f32 unit
+/// quaternion lifted to f64 is unit only to f32 precision, while in f32 it is kept as it is
+/// (renormalising it there would move it by an ulp from the frames the simulator uses).
+fn unit_in<T: RealField + Copy>(q: nalgebra::Quaternion<T>) -> UnitQuaternion<T> {
+    let tolerance = T::default_epsilon() * nalgebra::convert::<f64, T>(4.0);
+    if (q.norm() - T::one()).abs() <= tolerance {
+        UnitQuaternion::new_unchecked(q)
+    } else {
+        UnitQuaternion::new_normalize(q)
+    }
 }
 
 /// Joint anchors and axes in the world frame, with the bodies' frames.
@@ -69,7 +80,11 @@ impl Hand {
                 let anchor = pose * Point3::from(pos);
                 frames.anchors.push(anchor.coords);
                 frames.axes.push(pose.rotation * axis);
-                let turn = UnitQuaternion::from_axis_angle(&Unit::new_normalize(axis), q_rad[j]);
+                // As a scaled axis (nalgebra's `Isometry3::rotation`), which rounds as the
+                // simulator's kinematics always have, so that a world closed on an object from
+                // these frames is the former world bit for bit.
+                let turn =
+                    UnitQuaternion::from_scaled_axis(Unit::new_normalize(axis).into_inner() * q_rad[j]);
                 let rotation = pose.rotation * turn;
                 pose = Isometry3::from_parts(Translation3::from(anchor.coords - rotation * pos), rotation);
             }

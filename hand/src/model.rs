@@ -201,8 +201,10 @@ pub struct Finger {
     /// The fingertip point in that body's frame (m): the site's position, or the origin for
     /// a fingertip named by its body.
     pub tip_offset_in_body_m: Vector3<f32>,
-    /// Radius of the tip body's colliding sphere or capsule nearest the fingertip point, if
-    /// it has one (m).
+    /// The fingertip's geom: the tip body's colliding sphere or capsule nearest the fingertip
+    /// point (its index in that body's geoms), if it has one.
+    pub tip_geom: Option<usize>,
+    /// Radius of that geom (m).
     pub tip_radius_m: Option<f32>,
 }
 

@@ -203,7 +203,13 @@ fn finger(parsed: &Parsed, tip: &str, name: &str, path: Path) -> Result<Finger, 
         joints: first..last + 1,
         tip_body: path.tip_body,
         tip_offset_in_body_m: path.offset,
-        tip_radius_m: tip_radius(parsed, path.tip_body, &path.offset),
+        tip_geom: tip_geom(parsed, path.tip_body, &path.offset),
+        tip_radius_m: tip_geom(parsed, path.tip_body, &path.offset).and_then(|g| {
+            match parsed.bodies[path.tip_body].geoms[g].shape {
+                GeomShape::Sphere { radius_m } | GeomShape::Capsule { radius_m, .. } => Some(radius_m),
+                _ => None,
+            }
+        }),
     })
 }
 
@@ -229,24 +235,27 @@ fn check_ownership(parsed: &Parsed, paths: &[Path], names: &[String]) -> Result<
     Ok(())
 }
 
-/// The radius of the tip body's colliding sphere or capsule nearest the fingertip point.
-fn tip_radius(parsed: &Parsed, body: usize, tip: &Vector3<f32>) -> Option<f32> {
+/// The tip body's colliding sphere or capsule nearest the fingertip point (its index in the
+/// body's geoms); of two as near (a link capsule ending where the tip sphere is centred), the
+/// larger, which is what touches first.
+fn tip_geom(parsed: &Parsed, body: usize, tip: &Vector3<f32>) -> Option<usize> {
     parsed.bodies[body]
         .geoms
         .iter()
-        .filter(|g| g.collides())
-        .filter_map(|g| {
+        .enumerate()
+        .filter(|(_, g)| g.collides())
+        .filter_map(|(i, g)| {
             let centre = g.pose_in_body.translation.vector;
             match g.shape {
-                GeomShape::Sphere { radius_m } => Some(((tip - centre).norm(), radius_m)),
+                GeomShape::Sphere { radius_m } => Some(((tip - centre).norm(), radius_m, i)),
                 GeomShape::Capsule { radius_m, half_length_m } => {
                     let axis = g.pose_in_body.rotation * Vector3::z();
                     let along = (tip - centre).dot(&axis).clamp(-half_length_m, half_length_m);
-                    Some(((tip - (centre + axis * along)).norm(), radius_m))
+                    Some(((tip - (centre + axis * along)).norm(), radius_m, i))
                 }
                 _ => None,
             }
         })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, r)| r)
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(b.1.total_cmp(&a.1)))
+        .map(|(_, _, i)| i)
 }

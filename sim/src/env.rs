@@ -35,7 +35,7 @@ use crate::error::SimError;
 use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
 use crate::objects::ObjectConfig;
 use crate::observation::{FingertipReading, OBS_DIM, build_observation};
-use crate::world::{ContactReading, HandWorld, ObjectState, PhysicsConfig};
+use crate::world::{ContactReading, HandWorld, JointServo, ObjectState, PhysicsConfig};
 
 /// How the initial grasp is made: the fingers close (both flexions together) until they
 /// touch the object, found geometrically by bisection on the closing angle; their targets
@@ -216,6 +216,23 @@ fn round_steps(duration_s: f32, hz: f32) -> usize {
 }
 
 impl EnvConfig {
+    /// The servo of each joint: the hand's joint limits and torque caps, the physics'
+    /// motor stiffness and damping (the knobs a task sets).
+    #[must_use]
+    pub fn servos(&self) -> Vec<JointServo> {
+        self.hand
+            .joint_limits()
+            .iter()
+            .zip(self.hand.torque_caps_nm())
+            .map(|(limit, cap)| JointServo {
+                limit: *limit,
+                kp_nm_per_rad: self.physics.motor_stiffness_nm_per_rad,
+                kv_nms_per_rad: self.physics.motor_damping_nms_per_rad,
+                torque_cap_nm: cap,
+            })
+            .collect()
+    }
+
     /// Physics steps per control step (rounded: `(1/30)/(1/240)` in f32 is not 8).
     #[must_use]
     pub fn physics_steps_per_control(&self) -> usize {
@@ -497,7 +514,9 @@ impl Env {
         object.mass_kg *= DomainRandomization::draw(&mut self.rng, cfg.randomization.mass_scale);
         object.friction *= DomainRandomization::draw(&mut self.rng, cfg.randomization.friction_scale);
         let q0 = [0.0f32; NUM_JOINTS];
-        let mut world = HandWorld::new(&cfg.hand, &cfg.physics, &object, &q0, &Isometry3::identity())?;
+        let description = crate::hands::vge15()?;
+        let mut world =
+            HandWorld::new(&description, &cfg.servos(), &cfg.physics, &object, &q0, &Isometry3::identity())?;
         world.set_object_fixed(true);
         let mut q = q0;
         for finger in 0..NUM_FINGERS {
@@ -505,7 +524,7 @@ impl Env {
                 continue;
             }
             let roll = cfg.hand.fingers[finger].joint_limits[0].clamp(noise[2 * finger]);
-            match close_finger(&world, finger, roll)? {
+            match close_finger(&world, &cfg.hand, finger, roll)? {
                 Some(s) => {
                     let s = s + noise[2 * finger + 1].min(0.0);
                     q[joint_index(finger, 0)] = roll;
@@ -560,11 +579,15 @@ impl Env {
 
     fn read_state(&self) -> Result<PrivilegedState, SimError> {
         let world = self.world.as_ref().ok_or(SimError::NotReset)?;
+        let contacts = world.fingertip_contacts();
+        let contacts: [Option<ContactReading>; NUM_FINGERS] = contacts.try_into().map_err(|c: Vec<_>| {
+            SimError::InvalidConfig(format!("{} fingertips, expected {NUM_FINGERS}", c.len()))
+        })?;
         Ok(PrivilegedState {
             object: world.object_state(),
-            q_rad: world.joint_positions(),
-            q_target_rad: *world.joint_targets(),
-            contacts: world.fingertip_contacts(),
+            q_rad: joint_array(&world.joint_positions())?,
+            q_target_rad: joint_array(world.joint_targets())?,
+            contacts,
         })
     }
 
@@ -623,7 +646,7 @@ impl Env {
         let max = cfg.max_action_rad;
         let n_physics = cfg.physics_steps_per_control();
         let world = self.world.as_mut().ok_or(SimError::NotReset)?;
-        let current = *world.joint_targets();
+        let current = joint_array(world.joint_targets())?;
         let target: [f32; NUM_JOINTS] = std::array::from_fn(|k| current[k] + action[k].clamp(-max, max));
         world.set_joint_targets(&target);
         let pert = cfg.perturbation;
@@ -718,10 +741,20 @@ impl Env {
     }
 }
 
+/// A joint vector of the 15-DOF layout the env still works in.
+fn joint_array(v: &[f32]) -> Result<[f32; NUM_JOINTS], SimError> {
+    v.try_into().map_err(|_| SimError::ActionLength { got: v.len(), expected: NUM_JOINTS })
+}
+
 /// Closing angle `s` (both flexions = s) at which `finger`, at roll `roll`, first touches
 /// the object; `None` when it never does within the flexion limit.
-fn close_finger(world: &HandWorld, finger: usize, roll: f32) -> Result<Option<f32>, SimError> {
-    let limit = world.hand().fingers[finger].joint_limits[1];
+fn close_finger(
+    world: &HandWorld,
+    hand: &HandModel,
+    finger: usize,
+    roll: f32,
+) -> Result<Option<f32>, SimError> {
+    let limit = hand.fingers[finger].joint_limits[1];
     let dist = |s: f32| world.finger_object_distance_m(finger, &[roll, s, s]);
     let step = 0.02;
     let mut lo = 0.0f32.max(limit.lower_rad);

@@ -27,6 +27,7 @@ pub mod env_keys;
 pub mod episode;
 pub mod error;
 pub mod gait;
+pub mod hands;
 pub mod kinematics;
 #[cfg(feature = "physics")]
 pub mod mjcf;
@@ -64,4 +65,4 @@ pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
 pub use vec_env::VecEnv;
 #[cfg(feature = "physics")]
-pub use world::{ContactReading, HandOrientation, HandWorld, ObjectState, PhysicsConfig};
+pub use world::{ContactReading, HandOrientation, HandWorld, JointServo, ObjectState, PhysicsConfig};

@@ -52,14 +52,16 @@ pub struct GraspKeyframe {
 }
 
 impl GraspKeyframe {
-    /// The current state of `world`.
-    #[must_use]
-    pub fn of(world: &HandWorld) -> Self {
-        Self {
-            q_rad: world.joint_positions(),
-            q_target_rad: *world.joint_targets(),
+    /// The current state of `world` (a hand of the 15-DOF layout).
+    pub fn of(world: &HandWorld) -> Result<Self, SimError> {
+        let joints = |v: &[f32]| -> Result<[f32; NUM_JOINTS], SimError> {
+            v.try_into().map_err(|_| SimError::ActionLength { got: v.len(), expected: NUM_JOINTS })
+        };
+        Ok(Self {
+            q_rad: joints(&world.joint_positions())?,
+            q_target_rad: joints(world.joint_targets())?,
             object_pose: world.object_state().pose,
-        }
+        })
     }
 }
 
@@ -219,7 +221,7 @@ pub fn settled_grasp_mjcf(
     sim.reset(seed)?;
     let world = sim.world().ok_or_else(|| SimError::InvalidConfig("no world after reset".to_owned()))?;
     let settings = MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s };
-    hand_mjcf(&settings, &GraspKeyframe::of(world))
+    hand_mjcf(&settings, &GraspKeyframe::of(world)?)
 }
 
 #[cfg(test)]
@@ -249,7 +251,7 @@ mod tests {
         sim.reset(0).unwrap();
         let world = sim.world().unwrap();
         assert_eq!(&qpos[..NUM_JOINTS], &world.joint_positions()[..]);
-        assert_eq!(&ctrl[..], &world.joint_targets()[..]);
+        assert_eq!(&ctrl[..], world.joint_targets());
         assert!(qpos[1] > 0.1, "thumb flexed: {}", qpos[1]);
         assert!(ctrl[1] > qpos[1], "squeezed past contact");
         // Joint ranges are radians (MJCF's default unit is degrees), and hold the grasp.

@@ -35,7 +35,7 @@ use thiserror::Error;
 
 use crate::env::{Env, EnvConfig, StepResult};
 use crate::error::SimError;
-use crate::kinematics::{FINGER_NAMES, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS};
+use crate::kinematics::{FINGER_NAMES, NUM_JOINTS};
 use crate::objects::{ObjectConfig, ObjectShape};
 use crate::world::{ContactReading, HandWorld};
 
@@ -184,10 +184,8 @@ impl EpisodeRecorder {
         let step = result.info.step as u64;
         self.rotation_rad += f64::from(result.info.object_rotation_z_rad);
         let mut links = Vec::with_capacity(NUM_JOINTS);
-        for f in 0..NUM_FINGERS {
-            for link in 0..JOINTS_PER_FINGER {
-                links.push(pose7(&world.link_pose(f, link)?));
-            }
+        for joint in 0..NUM_JOINTS {
+            links.push(pose7(&world.link_pose(joint)?));
         }
         let (fingertip_contacts, link_contacts) = contacts(world);
         let row = StepRow {

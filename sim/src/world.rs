@@ -1,7 +1,9 @@
-//! The rapier3d world: a fixed palm (five fixed finger bases), one multibody per finger
-//! (roll, proximal flexion, distal flexion; reduced coordinates with position motors),
-//! and one dynamic object. Bodies and joints are placed from [`HandModel`]'s frames, so
-//! the physics and the kinematics agree by construction (tested in `tests/`).
+//! The rapier3d world of a hand read from its description ([`vge_hand::Hand`]) and one
+//! dynamic object: the palm and every body welded to it fixed, one multibody per finger
+//! (a revolute joint with a position motor for each of the finger's hinges, reduced
+//! coordinates), the bodies welded to a moving body merged into it. Bodies and joints are
+//! placed from the description's kinematics, so the physics and the kinematics agree by
+//! construction (tested in `tests/`).
 //!
 //! Why these settings (see `shared/notes/rapier-hand.md`): multibody joints (impulse-joint
 //! motors never reach the commanded torque), one multibody per finger (2.5-3x faster than
@@ -19,7 +21,12 @@ use rapier3d::math::{Pose, Rotation, Vector};
 use rapier3d::pipeline::PhysicsWorld;
 
 use crate::error::SimError;
-use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
+use std::ops::Range;
+use std::sync::Arc;
+
+use vge_hand::{GeomMass, GeomShape, Hand};
+
+use crate::kinematics::JointLimit;
 use crate::objects::ObjectConfig;
 
 /// Physics parameters of the world (SI units).
@@ -229,15 +236,6 @@ impl ObjectState {
     }
 }
 
-#[derive(Debug, Clone, Copy)]
-struct FingerHandles {
-    /// [roll body, proximal body, distal body].
-    links: [RigidBodyHandle; JOINTS_PER_FINGER],
-    joints: [MultibodyJointHandle; JOINTS_PER_FINGER],
-    tip: ColliderHandle,
-    link_colliders: [ColliderHandle; 2],
-}
-
 const HAND_GROUP: Group = Group::GROUP_1;
 const OBJECT_GROUP: Group = Group::GROUP_2;
 
@@ -259,20 +257,192 @@ pub(crate) fn v3(v: Vector) -> Vector3<f32> {
     Vector3::new(v.x, v.y, v.z)
 }
 
+/// The servo that holds one joint at its target: what the world's position motor does. The
+/// description gives each joint's (its `<position>` actuator and range); a task may change
+/// them (a stiffer motor, a larger torque cap).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointServo {
+    /// Range of motion; targets and teleports are clamped into it.
+    pub limit: JointLimit,
+    /// Motor stiffness (N m / rad).
+    pub kp_nm_per_rad: f32,
+    /// Motor damping (N m s / rad).
+    pub kv_nms_per_rad: f32,
+    /// Largest motor torque (N m): with a position motor it sets the grip force.
+    pub torque_cap_nm: f32,
+}
+
+impl JointServo {
+    /// Each joint's servo as the description gives it: its range, its `<position>` actuator's
+    /// kp, kv and the larger magnitude of its force range. A joint without a range, without
+    /// an actuator or without a force range is refused: an unlimited motor on a simulated
+    /// hand squeezes without bound.
+    pub fn from_description(hand: &Hand) -> Result<Vec<Self>, SimError> {
+        hand.joints()
+            .iter()
+            .map(|joint| {
+                let refuse = |what: &str| {
+                    SimError::InvalidConfig(format!(
+                        "hand {}: joint {} has no {what}",
+                        hand.name(),
+                        joint.name
+                    ))
+                };
+                let limit = joint.limit.ok_or_else(|| refuse("range"))?;
+                let servo = joint.servo.as_ref().ok_or_else(|| refuse("position actuator"))?;
+                let [lo, hi] = servo.force_range_nm.ok_or_else(|| refuse("actuator force range"))?;
+                Ok(Self {
+                    limit: JointLimit { lower_rad: limit.lower_rad, upper_rad: limit.upper_rad },
+                    kp_nm_per_rad: servo.kp_nm_per_rad,
+                    kv_nms_per_rad: servo.kv_nms_per_rad,
+                    torque_cap_nm: lo.abs().max(hi.abs()),
+                })
+            })
+            .collect()
+    }
+
+    fn validate(&self, joint: &str) -> Result<(), SimError> {
+        let JointLimit { lower_rad, upper_rad } = self.limit;
+        let ok = lower_rad.is_finite()
+            && upper_rad.is_finite()
+            && lower_rad <= upper_rad
+            && self.kp_nm_per_rad.is_finite()
+            && self.kp_nm_per_rad > 0.0
+            && self.kv_nms_per_rad.is_finite()
+            && self.kv_nms_per_rad >= 0.0
+            && self.torque_cap_nm.is_finite()
+            && self.torque_cap_nm > 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(SimError::InvalidConfig(format!(
+                "joint {joint}: servo {self:?} (needs a finite range, kp > 0, kv >= 0, torque cap > 0)"
+            )))
+        }
+    }
+}
+
+/// The rapier body a joint moves and the joint that moves it.
+#[derive(Debug, Clone, Copy)]
+struct JointHandles {
+    body: RigidBodyHandle,
+    joint: MultibodyJointHandle,
+}
+
+/// A finger's colliders: the fingertip and the rest.
+#[derive(Debug, Clone)]
+struct FingerHandles {
+    /// Its joints in the joint vector.
+    joints: Range<usize>,
+    /// The fingertip's collider (the sphere or capsule at the fingertip).
+    tip: ColliderHandle,
+    /// Every other collider on the finger's moving bodies, in body order.
+    links: Vec<ColliderHandle>,
+}
+
+/// Where each body of the description lives in rapier: on a fixed body (the palm and what
+/// is welded to it) or on a moving body, at a pose in that body's frame.
+#[derive(Debug, Clone, Copy)]
+enum Placement {
+    Fixed,
+    Moving { joint: usize, pose_in_rigid_body: Isometry3<f32> },
+}
+
+/// The joint frame of a revolute joint turning about `axis`: rapier turns about the frame's
+/// x. Axis-aligned axes get exact quarter turns (a general arc carries rounding into every
+/// joint frame).
+fn frame_turning_about(axis: &Vector3<f32>) -> Rotation {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    match (axis.x, axis.y, axis.z) {
+        (1.0, 0.0, 0.0) => Rotation::IDENTITY,
+        (-1.0, 0.0, 0.0) => Rotation::from_rotation_z(PI),
+        (0.0, 1.0, 0.0) => Rotation::from_rotation_z(FRAC_PI_2),
+        (0.0, -1.0, 0.0) => Rotation::from_rotation_z(-FRAC_PI_2),
+        (0.0, 0.0, 1.0) => Rotation::from_rotation_y(-FRAC_PI_2),
+        (0.0, 0.0, -1.0) => Rotation::from_rotation_y(FRAC_PI_2),
+        _ => Rotation::from_rotation_arc(Vector::X, Vector::new(axis.x, axis.y, axis.z)),
+    }
+}
+
+/// A collision geom as a rapier collider (its pose in the geom's rigid body still to set);
+/// `None` for a visual mesh.
+fn geom_collider(shape: &GeomShape) -> Option<(ColliderBuilder, Pose)> {
+    match shape {
+        GeomShape::Sphere { radius_m } => Some((ColliderBuilder::ball(*radius_m), Pose::IDENTITY)),
+        GeomShape::Capsule { radius_m, half_length_m } => {
+            Some((ColliderBuilder::capsule_z(*half_length_m, *radius_m), Pose::IDENTITY))
+        }
+        // rapier's cylinders stand along y, MuJoCo's along z.
+        GeomShape::Cylinder { radius_m, half_length_m } => Some((
+            ColliderBuilder::cylinder(*half_length_m, *radius_m),
+            Pose::from_rotation(Rotation::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+        )),
+        GeomShape::Box { half_extents_m: h } => {
+            Some((ColliderBuilder::cuboid(h.x, h.y, h.z), Pose::IDENTITY))
+        }
+        GeomShape::VisualMesh { .. } => None,
+    }
+}
+
+/// A colliding geom's collider with its friction, groups and mass (none when its body's
+/// `<inertial>` gives the mass), and the frame of rapier's shape in the geom's frame.
+fn collider_builder(
+    geom: &vge_hand::Geom,
+    body_has_inertial: bool,
+    physics: &PhysicsConfig,
+    groups: InteractionGroups,
+) -> Option<(ColliderBuilder, Pose)> {
+    if !geom.collides() {
+        return None;
+    }
+    let (builder, shape_frame) = geom_collider(&geom.shape)?;
+    let builder = builder.friction(physics.finger_friction).collision_groups(groups);
+    let builder = if body_has_inertial {
+        builder.density(0.0)
+    } else {
+        match geom.mass {
+            GeomMass::Kg(kg) => builder.mass(kg),
+            GeomMass::DensityKgPerM3(density) => builder.density(density),
+        }
+    };
+    Some((builder, shape_frame))
+}
+
+fn mass_properties(inertial: &vge_hand::Inertial) -> MassProperties {
+    let c = inertial.com_in_body_m;
+    let com = Vector::new(c.x, c.y, c.z);
+    let m = inertial.inertia_kg_m2;
+    let diagonal = m[(0, 1)] == 0.0 && m[(0, 2)] == 0.0 && m[(1, 2)] == 0.0;
+    if diagonal {
+        MassProperties::new(com, inertial.mass_kg, Vector::new(m[(0, 0)], m[(1, 1)], m[(2, 2)]))
+    } else {
+        let column = |j: usize| rapier3d::math::Vector::new(m[(0, j)], m[(1, j)], m[(2, j)]);
+        MassProperties::with_inertia_matrix(
+            com,
+            inertial.mass_kg,
+            rapier3d::math::Matrix::from_cols(column(0), column(1), column(2)),
+        )
+    }
+}
+
 /// The physics world of one hand and one object.
 pub struct HandWorld {
-    hand: HandModel,
+    hand: Arc<Hand>,
+    servos: Vec<JointServo>,
     physics: PhysicsConfig,
     world: PhysicsWorld,
-    fingers: [FingerHandles; NUM_FINGERS],
+    joints: Vec<JointHandles>,
+    fingers: Vec<FingerHandles>,
+    placements: Vec<Placement>,
     object_body: RigidBodyHandle,
     object_collider: ColliderHandle,
-    q_target: [f32; NUM_JOINTS],
+    q_target: Vec<f32>,
 }
 
 impl std::fmt::Debug for HandWorld {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("HandWorld")
+            .field("hand", &self.hand.name())
             .field("physics", &self.physics)
             .field("q_target", &self.q_target)
             .field("object", &self.object_state())
@@ -280,18 +450,61 @@ impl std::fmt::Debug for HandWorld {
     }
 }
 
+/// Per body of the description: where it is placed in rapier. A moving body is the one its
+/// (single) hinge turns; a body without joints goes with its parent.
+fn placements(hand: &Hand) -> Result<Vec<Placement>, SimError> {
+    let mut out: Vec<Placement> = Vec::with_capacity(hand.bodies().len());
+    for body in hand.bodies() {
+        let placement = match body.joints.len() {
+            0 => match body.parent.and_then(|p| out.get(p)) {
+                None | Some(Placement::Fixed) => Placement::Fixed,
+                Some(Placement::Moving { joint, pose_in_rigid_body }) => Placement::Moving {
+                    joint: *joint,
+                    pose_in_rigid_body: pose_in_rigid_body * body.pose_in_parent,
+                },
+            },
+            1 => Placement::Moving { joint: body.joints.start, pose_in_rigid_body: Isometry3::identity() },
+            n => {
+                return Err(SimError::InvalidConfig(format!(
+                    "hand {}: body {} has {n} joints; the simulator takes one hinge per body",
+                    hand.name(),
+                    body.name.as_deref().unwrap_or("(unnamed)")
+                )));
+            }
+        };
+        out.push(placement);
+    }
+    Ok(out)
+}
+
 impl HandWorld {
-    /// Builds the world with all joints at `q_rad` (targets too) and the object at rest
-    /// with its centre at `object_pose`.
+    /// Builds the world of `hand` with its joints driven by `servos` (one per joint), all
+    /// joints at `q_rad` (targets too) and the object at rest with its centre at
+    /// `object_pose`.
     pub fn new(
-        hand: &HandModel,
+        hand: &Arc<Hand>,
+        servos: &[JointServo],
         physics: &PhysicsConfig,
         object: &ObjectConfig,
-        q_rad: &[f32; NUM_JOINTS],
+        q_rad: &[f32],
         object_pose: &Isometry3<f32>,
     ) -> Result<Self, SimError> {
         physics.validate()?;
         object.validate()?;
+        let n = hand.num_joints();
+        if servos.len() != n {
+            return Err(SimError::InvalidConfig(format!(
+                "{} servos for the {n} joints of {}",
+                servos.len(),
+                hand.name()
+            )));
+        }
+        for (servo, joint) in servos.iter().zip(hand.joints()) {
+            servo.validate(&joint.name)?;
+        }
+        if q_rad.len() != n {
+            return Err(SimError::ActionLength { got: q_rad.len(), expected: n });
+        }
         let mut world = PhysicsWorld::new();
         let g = physics.gravity_m_per_s2_vector();
         world.gravity = Vector::new(g.x, g.y, g.z);
@@ -310,94 +523,172 @@ impl HandWorld {
         let hand_groups = InteractionGroups::new(HAND_GROUP, hand_filter, InteractionTestMode::And);
         let object_groups = InteractionGroups::new(OBJECT_GROUP, HAND_GROUP, InteractionTestMode::And);
 
-        let mut fingers = Vec::with_capacity(NUM_FINGERS);
-        for (i, finger) in hand.fingers.iter().enumerate() {
-            let q = hand.finger_joints(i, q_rad)?;
-            let frames = finger.frames(&q)?;
-            let base = world.bodies.insert(RigidBodyBuilder::fixed().pose(iso_to_pose(&frames[0])));
-            // The roll link has no geometry (its axis meets the proximal flexion axis at the
-            // knuckle): a small point mass keeps the reduced mass matrix regular.
-            let roll = world.bodies.insert(
-                RigidBodyBuilder::dynamic()
-                    .pose(iso_to_pose(&frames[1]))
-                    .additional_mass_properties(MassProperties::new(Vector::ZERO, 0.005, Vector::splat(1e-6)))
-                    .can_sleep(false),
-            );
-            let prox = world
-                .bodies
-                .insert(RigidBodyBuilder::dynamic().pose(iso_to_pose(&frames[2])).can_sleep(false));
-            let dist = world
-                .bodies
-                .insert(RigidBodyBuilder::dynamic().pose(iso_to_pose(&frames[3])).can_sleep(false));
-            let link = |length: f32| {
-                ColliderBuilder::capsule_z(0.5 * length, finger.link_radius_m)
-                    .translation(Vector::new(0.0, 0.0, -0.5 * length))
-                    .density(physics.link_density_kg_per_m3)
-                    .friction(physics.finger_friction)
-                    .collision_groups(hand_groups)
+        let placements = placements(hand)?;
+        let clamped: Vec<f32> = q_rad.iter().zip(servos).map(|(q, s)| s.limit.clamp(*q)).collect();
+        let body_poses =
+            hand.body_poses_world(&clamped).map_err(|e| SimError::InvalidConfig(e.to_string()))?;
+        let bodies = hand.bodies();
+        let joints_desc = hand.joints();
+
+        // Finger by finger, as rapier's solver order follows insertion: the fixed body its
+        // first joint hangs from (one multibody per finger), its moving bodies (one per
+        // joint, at the description's pose), their colliders, then its joints. The palm's
+        // colliders (what is welded to the world) go on one fixed body after the fingers.
+        let mut rigid: Vec<Option<RigidBodyHandle>> = vec![None; n];
+        let mut colliders_of_joint: Vec<Vec<(usize, ColliderHandle)>> = vec![Vec::new(); n];
+        let mut joints: Vec<Option<JointHandles>> = vec![None; n];
+        for finger in hand.fingers() {
+            let Some(first) = joints_desc.get(finger.joints.start) else { continue };
+            let root_parent = bodies[first.body].parent.ok_or_else(|| {
+                SimError::InvalidConfig(format!("joint {} is on the world body", first.name))
+            })?;
+            let base = match placements[root_parent] {
+                Placement::Fixed => {
+                    world.bodies.insert(RigidBodyBuilder::fixed().pose(iso_to_pose(&body_poses[root_parent])))
+                }
+                Placement::Moving { .. } => {
+                    return Err(SimError::InvalidConfig(format!(
+                        "finger {}: its first joint {} hangs from a moving body (a joint shared with another finger)",
+                        finger.name, first.name
+                    )));
+                }
             };
-            let prox_col =
-                world.colliders.insert_with_parent(link(finger.proximal_length_m), prox, &mut world.bodies);
-            let dist_col =
-                world.colliders.insert_with_parent(link(finger.distal_length_m), dist, &mut world.bodies);
-            let tip = world.colliders.insert_with_parent(
-                ColliderBuilder::ball(finger.tip_radius_m)
-                    .translation(Vector::new(0.0, 0.0, -finger.distal_length_m))
-                    .density(physics.link_density_kg_per_m3)
-                    .friction(physics.finger_friction)
-                    .collision_groups(hand_groups),
-                dist,
-                &mut world.bodies,
-            );
-            // Revolute joints about the joint frame's x: identity frames for the roll (about
-            // base +x), frames turned +90 deg about z for the flexions (about +y).
-            let about_y = Rotation::from_rotation_z(std::f32::consts::FRAC_PI_2);
-            let joint_frames = [
-                (Pose::IDENTITY, Pose::IDENTITY),
-                (Pose::from_rotation(about_y), Pose::from_rotation(about_y)),
-                (
-                    Pose::from_parts(Vector::new(0.0, 0.0, -finger.proximal_length_m), about_y),
-                    Pose::from_rotation(about_y),
-                ),
-            ];
-            let chain = [(base, roll), (roll, prox), (prox, dist)];
-            let mut joints = Vec::with_capacity(JOINTS_PER_FINGER);
-            for j in 0..JOINTS_PER_FINGER {
-                let limit = finger.joint_limits[j];
-                let target = limit.clamp(q[j]);
-                let joint = GenericJointBuilder::new(JointAxesMask::LOCKED_REVOLUTE_AXES)
+            for j in finger.joints.clone() {
+                let pose = body_poses[joints_desc[j].body];
+                let mut builder = RigidBodyBuilder::dynamic().pose(iso_to_pose(&pose)).can_sleep(false);
+                // Mass: a body's `<inertial>` when the file gives one (its geoms then add none,
+                // as in MuJoCo), else its geoms' densities or masses through the colliders.
+                let inertials =
+                    bodies.iter().enumerate().filter_map(|(b, body)| match (placements[b], body.inertial) {
+                        (Placement::Moving { joint, pose_in_rigid_body }, Some(inertial)) if joint == j => {
+                            Some(mass_properties(&inertial).transform_by(&iso_to_pose(&pose_in_rigid_body)))
+                        }
+                        _ => None,
+                    });
+                if let Some(props) = inertials.reduce(|a, b| a + b) {
+                    builder = builder.additional_mass_properties(props);
+                }
+                rigid[j] = Some(world.bodies.insert(builder));
+            }
+            let rigid_of =
+                |j: usize| rigid[j].ok_or_else(|| SimError::InvalidConfig(format!("joint {j} has no body")));
+            for (b, body) in bodies.iter().enumerate() {
+                let Placement::Moving { joint, pose_in_rigid_body } = placements[b] else { continue };
+                if !finger.joints.contains(&joint) {
+                    continue;
+                }
+                for (g, geom) in body.geoms.iter().enumerate() {
+                    let Some(builder) = collider_builder(geom, body.inertial.is_some(), physics, hand_groups)
+                    else {
+                        continue;
+                    };
+                    let (builder, shape_frame) = builder;
+                    let pose = pose_in_rigid_body * geom.pose_in_body;
+                    let c = builder.position(iso_to_pose(&pose) * shape_frame);
+                    let handle = world.colliders.insert_with_parent(c, rigid_of(joint)?, &mut world.bodies);
+                    colliders_of_joint[joint].push((b * 1_000 + g, handle));
+                }
+            }
+            // Joints: the parent's frame of the hinge = the body's pose in its parent, then the
+            // hinge's anchor and axis; the child's = the anchor and axis in the body.
+            for j in finger.joints.clone() {
+                let joint = &joints_desc[j];
+                let body = &bodies[joint.body];
+                let parent = body.parent.unwrap_or(0);
+                let (parent_rigid, parent_pose) = match placements[parent] {
+                    Placement::Fixed => (base, Isometry3::identity()),
+                    Placement::Moving { joint: pj, pose_in_rigid_body } => {
+                        (rigid_of(pj)?, pose_in_rigid_body)
+                    }
+                };
+                let turn = frame_turning_about(joint.axis_in_body.as_ref());
+                let anchor = joint.pos_in_body_m;
+                let frame2 = Pose::from_parts(Vector::new(anchor.x, anchor.y, anchor.z), turn);
+                let frame1 = iso_to_pose(&(parent_pose * body.pose_in_parent)) * frame2;
+                let servo = servos[j];
+                let data = GenericJointBuilder::new(JointAxesMask::LOCKED_REVOLUTE_AXES)
                     // A finger's links overlap at its joints: with the fingers colliding, only
                     // different fingers may touch.
                     .contacts_enabled(!physics.finger_collisions)
-                    .local_frame1(joint_frames[j].0)
-                    .local_frame2(joint_frames[j].1)
-                    .limits(JointAxis::AngX, [limit.lower_rad, limit.upper_rad])
+                    .local_frame1(frame1)
+                    .local_frame2(frame2)
+                    .limits(JointAxis::AngX, [servo.limit.lower_rad, servo.limit.upper_rad])
                     .motor_model(JointAxis::AngX, MotorModel::ForceBased)
-                    .motor_position(
-                        JointAxis::AngX,
-                        target,
-                        physics.motor_stiffness_nm_per_rad,
-                        physics.motor_damping_nms_per_rad,
-                    )
-                    .motor_max_force(JointAxis::AngX, finger.torque_caps_nm[j])
+                    .motor_position(JointAxis::AngX, clamped[j], servo.kp_nm_per_rad, servo.kv_nms_per_rad)
+                    .motor_max_force(JointAxis::AngX, servo.torque_cap_nm)
                     .build();
-                let handle = world
-                    .multibody_joints
-                    .insert(chain[j].0, chain[j].1, joint, true)
-                    .ok_or_else(|| SimError::InvalidConfig(format!("finger {i}: joint {j} rejected")))?;
-                joints.push(handle);
+                let child = rigid_of(j)?;
+                let handle =
+                    world.multibody_joints.insert(parent_rigid, child, data, true).ok_or_else(|| {
+                        SimError::InvalidConfig(format!("joint {}: rejected by rapier", joint.name))
+                    })?;
+                joints[j] = Some(JointHandles { body: child, joint: handle });
             }
-            let joints: [MultibodyJointHandle; JOINTS_PER_FINGER] =
-                joints.try_into().map_err(|_| SimError::InvalidConfig("joint count".to_owned()))?;
-            fingers.push(FingerHandles {
-                links: [roll, prox, dist],
-                joints,
-                tip,
-                link_colliders: [prox_col, dist_col],
-            });
         }
-        let fingers: [FingerHandles; NUM_FINGERS] =
-            fingers.try_into().map_err(|_| SimError::InvalidConfig("finger count".to_owned()))?;
+        let joints: Vec<JointHandles> = joints
+            .into_iter()
+            .enumerate()
+            .map(|(j, h)| {
+                h.ok_or_else(|| {
+                    SimError::InvalidConfig(format!("joint {} is on no finger", joints_desc[j].name))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        // The palm and what is welded to it: fixed colliders (the object must not rest on
+        // them in a fingertip grasp, but they are there to be touched).
+        let palm_geoms: Vec<(usize, &vge_hand::Geom)> = bodies
+            .iter()
+            .enumerate()
+            .filter(|(b, _)| matches!(placements[*b], Placement::Fixed))
+            .flat_map(|(b, body)| body.geoms.iter().map(move |g| (b, g)))
+            .filter(|(_, g)| g.collides())
+            .collect();
+        if !palm_geoms.is_empty() {
+            let palm = world.bodies.insert(RigidBodyBuilder::fixed());
+            for (b, geom) in palm_geoms {
+                if let Some((builder, shape_frame)) = collider_builder(geom, true, physics, hand_groups) {
+                    let pose = body_poses[b] * geom.pose_in_body;
+                    world.colliders.insert_with_parent(
+                        builder.position(iso_to_pose(&pose) * shape_frame),
+                        palm,
+                        &mut world.bodies,
+                    );
+                }
+            }
+        }
+
+        let mut fingers = Vec::with_capacity(hand.num_fingers());
+        for finger in hand.fingers() {
+            let Placement::Moving { joint: tip_joint, .. } = placements[finger.tip_body] else {
+                return Err(SimError::InvalidConfig(format!(
+                    "finger {}: its fingertip does not move",
+                    finger.name
+                )));
+            };
+            // The fingertip's collider: the geom the description names as the fingertip's.
+            let Some(g) = finger.tip_geom else {
+                return Err(SimError::InvalidConfig(format!(
+                    "finger {}: no colliding sphere or capsule on its fingertip body",
+                    finger.name
+                )));
+            };
+            let key = finger.tip_body * 1_000 + g;
+            let mut tip = None;
+            let mut links = Vec::new();
+            for j in finger.joints.clone() {
+                for (k, handle) in &colliders_of_joint[j] {
+                    if *k == key && j == tip_joint {
+                        tip = Some(*handle);
+                    } else {
+                        links.push(*handle);
+                    }
+                }
+            }
+            let tip = tip.ok_or_else(|| {
+                SimError::InvalidConfig(format!("finger {}: fingertip collider", finger.name))
+            })?;
+            fingers.push(FingerHandles { joints: finger.joints.clone(), tip, links });
+        }
 
         let object_body = world.bodies.insert(
             RigidBodyBuilder::dynamic().pose(iso_to_pose(object_pose)).can_sleep(false).ccd_enabled(false),
@@ -408,23 +699,32 @@ impl HandWorld {
             &mut world.bodies,
         );
         let mut this = Self {
-            hand: hand.clone(),
+            hand: Arc::clone(hand),
+            servos: servos.to_vec(),
             physics: *physics,
             world,
+            joints,
             fingers,
+            placements,
             object_body,
             object_collider,
-            q_target: [0.0; NUM_JOINTS],
+            q_target: vec![0.0; n],
         };
         this.set_joint_positions(q_rad)?;
         this.set_joint_targets(q_rad);
         Ok(this)
     }
 
-    /// The hand model the world was built from.
+    /// The hand the world was built from.
     #[must_use]
-    pub fn hand(&self) -> &HandModel {
+    pub fn hand(&self) -> &Arc<Hand> {
         &self.hand
+    }
+
+    /// The joints' servos.
+    #[must_use]
+    pub fn servos(&self) -> &[JointServo] {
+        &self.servos
     }
 
     /// The physics parameters.
@@ -444,31 +744,33 @@ impl HandWorld {
         self.world.integration_parameters.dt
     }
 
-    /// Joint angles (rad), finger-major, read from the multibodies.
+    /// Joint angles (rad), in the hand's joint order, read from the multibodies.
     #[must_use]
-    pub fn joint_positions(&self) -> [f32; NUM_JOINTS] {
-        let mut q = [0.0; NUM_JOINTS];
-        for (i, f) in self.fingers.iter().enumerate() {
-            for (j, h) in f.joints.iter().enumerate() {
-                if let Some((mb, link)) = self.world.multibody_joints.get(*h)
-                    && let Some(l) = mb.link(link)
-                {
-                    q[joint_index(i, j)] = l.joint.coords()[3];
-                }
-            }
-        }
-        q
+    pub fn joint_positions(&self) -> Vec<f32> {
+        self.joints
+            .iter()
+            .map(|h| {
+                self.world
+                    .multibody_joints
+                    .get(h.joint)
+                    .and_then(|(mb, link)| mb.link(link).map(|l| l.joint.coords()[3]))
+                    .unwrap_or(0.0)
+            })
+            .collect()
     }
 
-    /// Joint velocities (rad/s), finger-major.
+    /// Joint velocities (rad/s), in the hand's joint order.
     #[must_use]
-    pub fn joint_velocities(&self) -> [f32; NUM_JOINTS] {
-        let mut dq = [0.0; NUM_JOINTS];
-        for (i, f) in self.fingers.iter().enumerate() {
-            if let Some((mb, _)) = self.world.multibody_joints.get(f.joints[0]) {
+    pub fn joint_velocities(&self) -> Vec<f32> {
+        let mut dq = vec![0.0; self.joints.len()];
+        for f in &self.fingers {
+            let Some(first) = self.joints.get(f.joints.start) else { continue };
+            if let Some((mb, _)) = self.world.multibody_joints.get(first.joint) {
                 let v = mb.generalized_velocity();
-                for j in 0..JOINTS_PER_FINGER.min(v.len()) {
-                    dq[joint_index(i, j)] = v[j];
+                for (k, j) in f.joints.clone().enumerate() {
+                    if let Some(value) = v.get(k) {
+                        dq[j] = *value;
+                    }
                 }
             }
         }
@@ -477,30 +779,35 @@ impl HandWorld {
 
     /// Teleports the joints to `q_rad` (clamped to the limits) with zero joint velocity,
     /// and moves the link bodies accordingly. Non-finite entries are rejected.
-    pub fn set_joint_positions(&mut self, q_rad: &[f32; NUM_JOINTS]) -> Result<(), SimError> {
+    pub fn set_joint_positions(&mut self, q_rad: &[f32]) -> Result<(), SimError> {
+        if q_rad.len() != self.joints.len() {
+            return Err(SimError::ActionLength { got: q_rad.len(), expected: self.joints.len() });
+        }
         if let Some(index) = q_rad.iter().position(|v| !v.is_finite()) {
             return Err(SimError::NonFiniteAction { index, value: q_rad[index] });
         }
-        let limits = self.hand.joint_limits();
         let current = self.joint_positions();
-        for (i, f) in self.fingers.iter().enumerate() {
-            let Some((mb, _)) = self.world.multibody_joints.get_mut(f.joints[0]) else { continue };
+        for f in &self.fingers {
+            let Some(first) = self.joints.get(f.joints.start) else { continue };
+            let Some((mb, _)) = self.world.multibody_joints.get_mut(first.joint) else { continue };
             // Turns the root's provisional free joint into the fixed one first, so the
-            // multibody has exactly the three finger DOFs.
+            // multibody has exactly the finger's DOFs.
             mb.forward_kinematics(&self.world.bodies, true);
-            if mb.ndofs() != JOINTS_PER_FINGER {
-                return Err(SimError::InvalidConfig(format!("finger {i}: {} DOFs", mb.ndofs())));
+            if mb.ndofs() != f.joints.len() {
+                return Err(SimError::InvalidConfig(format!(
+                    "a finger's multibody has {} DOFs for {} joints",
+                    mb.ndofs(),
+                    f.joints.len()
+                )));
             }
-            let disp: [f32; JOINTS_PER_FINGER] = std::array::from_fn(|j| {
-                let k = joint_index(i, j);
-                limits[k].clamp(q_rad[k]) - current[k]
-            });
+            let disp: Vec<f32> =
+                f.joints.clone().map(|k| self.servos[k].limit.clamp(q_rad[k]) - current[k]).collect();
             mb.apply_displacements(&disp);
             mb.generalized_velocity_mut().fill(0.0);
             mb.forward_kinematics(&self.world.bodies, false);
             mb.update_rigid_bodies(&mut self.world.bodies, true);
-            for h in f.links {
-                if let Some(rb) = self.world.bodies.get_mut(h) {
+            for h in &self.joints[f.joints.clone()] {
+                if let Some(rb) = self.world.bodies.get_mut(h.body) {
                     rb.set_linvel(Vector::ZERO, true);
                     rb.set_angvel(Vector::ZERO, true);
                 }
@@ -511,48 +818,97 @@ impl HandWorld {
 
     /// Current joint targets (rad).
     #[must_use]
-    pub fn joint_targets(&self) -> &[f32; NUM_JOINTS] {
+    pub fn joint_targets(&self) -> &[f32] {
         &self.q_target
     }
 
     /// Sets the motor targets; entries are clamped to the joint limits (NaN is replaced
-    /// by the current target, but callers validate first).
-    pub fn set_joint_targets(&mut self, q_target_rad: &[f32; NUM_JOINTS]) {
-        let limits = self.hand.joint_limits();
-        let kp = self.physics.motor_stiffness_nm_per_rad;
-        let kd = self.physics.motor_damping_nms_per_rad;
-        for (i, f) in self.fingers.iter().enumerate() {
-            for (j, h) in f.joints.iter().enumerate() {
-                let k = joint_index(i, j);
-                let v = q_target_rad[k];
-                let target = if v.is_finite() { limits[k].clamp(v) } else { self.q_target[k] };
-                self.q_target[k] = target;
-                if let Some((mb, link)) = self.world.multibody_joints.get_mut(*h)
-                    && let Some(l) = mb.link_mut(link)
-                {
-                    l.joint.data.set_motor_position(JointAxis::AngX, target, kp, kd);
-                }
+    /// by the current target, but callers validate first). Extra entries are ignored and
+    /// missing ones keep their target.
+    pub fn set_joint_targets(&mut self, q_target_rad: &[f32]) {
+        for (k, (h, v)) in self.joints.iter().zip(q_target_rad).enumerate() {
+            let servo = self.servos[k];
+            let target = if v.is_finite() { servo.limit.clamp(*v) } else { self.q_target[k] };
+            self.q_target[k] = target;
+            if let Some((mb, link)) = self.world.multibody_joints.get_mut(h.joint)
+                && let Some(l) = mb.link_mut(link)
+            {
+                l.joint.data.set_motor_position(
+                    JointAxis::AngX,
+                    target,
+                    servo.kp_nm_per_rad,
+                    servo.kv_nms_per_rad,
+                );
+                // After torque driving, the servo's own cap again.
+                l.joint.data.set_motor_max_force(JointAxis::AngX, servo.torque_cap_nm);
             }
         }
     }
 
-    /// World pose of link body `link` (0 roll, 1 proximal, 2 distal) of `finger`: equals
-    /// the kinematics frame `link + 1`.
-    pub fn link_pose(&self, finger: usize, link: usize) -> Result<Isometry3<f32>, SimError> {
-        let f = self.hand.finger(finger)?;
-        let _ = f;
-        let h = *self.fingers[finger]
-            .links
-            .get(link)
-            .ok_or_else(|| SimError::InvalidConfig(format!("link index {link}")))?;
-        Ok(self.world.bodies.get(h).map(|rb| pose_to_iso(rb.position())).unwrap_or_else(Isometry3::identity))
+    /// World pose of the description's body `body`, read from rapier (the world's own
+    /// fixed frame for the palm and what is welded to it).
+    pub fn body_pose(&self, body: usize) -> Result<Isometry3<f32>, SimError> {
+        match self.placements.get(body) {
+            None => Err(SimError::InvalidConfig(format!("body index {body}"))),
+            Some(Placement::Fixed) => {
+                let zeros = vec![0.0f32; self.joints.len()];
+                let poses =
+                    self.hand.body_poses_world(&zeros).map_err(|e| SimError::InvalidConfig(e.to_string()))?;
+                Ok(poses[body])
+            }
+            Some(Placement::Moving { joint, pose_in_rigid_body }) => {
+                let rb = self.world.bodies.get(self.joints[*joint].body).ok_or(SimError::NotReset)?;
+                Ok(pose_to_iso(rb.position()) * pose_in_rigid_body)
+            }
+        }
     }
 
-    /// World position of the fingertip sphere centre of `finger`, read from rapier.
+    /// Drives the joints by torques (N m, one per joint) instead of their servos, as a
+    /// torque-controlled hand is driven (its joint controller's host runs the position loop);
+    /// each torque is held until the next call, and `set_joint_targets` gives the joints back
+    /// to their servos. Torques beyond a joint's cap are clipped to it; 0 leaves the joint limp.
+    /// Non-finite torques are refused and nothing is changed.
+    pub fn set_joint_torques(&mut self, torques_nm: &[f32]) -> Result<(), SimError> {
+        if torques_nm.len() != self.joints.len() {
+            return Err(SimError::ActionLength { got: torques_nm.len(), expected: self.joints.len() });
+        }
+        if let Some(index) = torques_nm.iter().position(|v| !v.is_finite()) {
+            return Err(SimError::NonFiniteAction { index, value: torques_nm[index] });
+        }
+        for (k, (h, tau)) in self.joints.iter().zip(torques_nm).enumerate() {
+            let cap = self.servos[k].torque_cap_nm;
+            if let Some((mb, link)) = self.world.multibody_joints.get_mut(h.joint)
+                && let Some(l) = mb.link_mut(link)
+            {
+                // A velocity motor that can never reach its target velocity pushes with its
+                // whole force, which is the torque asked for: no stiffness, unit damping, a
+                // target far beyond any joint speed, the torque as the force cap.
+                let target_rad_per_s = if *tau >= 0.0 { 1e6 } else { -1e6 };
+                l.joint.data.set_motor(JointAxis::AngX, 0.0, target_rad_per_s, 0.0, 1.0);
+                l.joint.data.set_motor_max_force(JointAxis::AngX, tau.abs().min(cap));
+            }
+        }
+        Ok(())
+    }
+
+    /// World pose of the rigid body that joint `joint` turns (its link), read from rapier.
+    pub fn link_pose(&self, joint: usize) -> Result<Isometry3<f32>, SimError> {
+        let h =
+            self.joints.get(joint).ok_or_else(|| SimError::InvalidConfig(format!("joint index {joint}")))?;
+        let rb = self.world.bodies.get(h.body).ok_or(SimError::NotReset)?;
+        Ok(pose_to_iso(rb.position()))
+    }
+
+    /// World position of the fingertip point of `finger` (its site, or its body's origin),
+    /// read from rapier.
     pub fn fingertip_position_m(&self, finger: usize) -> Result<Vector3<f32>, SimError> {
-        let dist = self.link_pose(finger, 2)?;
-        let len = self.hand.finger(finger)?.distal_length_m;
-        Ok((dist * nalgebra::Point3::new(0.0, 0.0, -len)).coords)
+        let f = self
+            .hand
+            .fingers()
+            .get(finger)
+            .ok_or_else(|| SimError::InvalidConfig(format!("finger index {finger}")))?;
+        let pose = self.body_pose(f.tip_body)?;
+        Ok((pose * nalgebra::Point3::from(f.tip_offset_in_body_m)).coords)
     }
 
     /// Pose and velocity of the object.
@@ -653,18 +1009,18 @@ impl HandWorld {
         })
     }
 
-    /// Contact of each fingertip sphere with the object (`None` when not touching:
+    /// Contact of each fingertip with the object, in finger order (`None` when not touching:
     /// zero normal impulse in the last step).
     #[must_use]
-    pub fn fingertip_contacts(&self) -> [Option<ContactReading>; NUM_FINGERS] {
-        std::array::from_fn(|i| self.pair_reading(self.fingers[i].tip))
+    pub fn fingertip_contacts(&self) -> Vec<Option<ContactReading>> {
+        self.fingers.iter().map(|f| self.pair_reading(f.tip)).collect()
     }
 
-    /// Contacts of the link capsules (proximal, distal) of each finger with the object;
-    /// these carry load too at large roll angles.
+    /// Contacts of each finger's other colliders (its links) with the object, per finger in
+    /// body order; these carry load too at large roll angles.
     #[must_use]
-    pub fn link_contacts(&self) -> [[Option<ContactReading>; 2]; NUM_FINGERS] {
-        std::array::from_fn(|i| std::array::from_fn(|k| self.pair_reading(self.fingers[i].link_colliders[k])))
+    pub fn link_contacts(&self) -> Vec<Vec<Option<ContactReading>>> {
+        self.fingers.iter().map(|f| f.links.iter().map(|c| self.pair_reading(*c)).collect()).collect()
     }
 
     /// Whether any position, rotation or velocity in the world is non-finite.
@@ -676,33 +1032,43 @@ impl HandWorld {
             .all(|(_, rb)| rb.position().is_finite() && rb.linvel().is_finite() && rb.angvel().is_finite())
     }
 
-    /// Signed distance (m, negative when penetrating) between the fingertip sphere of
-    /// `finger` at joint angles `q` and the object at its current pose; used to close the
-    /// fingers geometrically. Also checks the distal link capsule, returning the smaller.
-    pub fn finger_object_distance_m(
-        &self,
-        finger: usize,
-        q: &[f32; JOINTS_PER_FINGER],
-    ) -> Result<f32, SimError> {
-        let f = self.hand.finger(finger)?;
-        let frames = f.frames(q)?;
+    /// Signed distance (m, negative when penetrating) between the object at its current pose
+    /// and the body carrying `finger`'s fingertip (its fingertip and any other collider on
+    /// it), with the finger's joints at `q_finger_rad` and the others where they are; used
+    /// to close the fingers geometrically.
+    pub fn finger_object_distance_m(&self, finger: usize, q_finger_rad: &[f32]) -> Result<f32, SimError> {
+        let f = self
+            .fingers
+            .get(finger)
+            .ok_or_else(|| SimError::InvalidConfig(format!("finger index {finger}")))?;
+        if q_finger_rad.len() != f.joints.len() {
+            return Err(SimError::ActionLength { got: q_finger_rad.len(), expected: f.joints.len() });
+        }
+        let mut q = self.joint_positions();
+        q[f.joints.clone()].copy_from_slice(q_finger_rad);
+        let poses = self.hand.body_poses_world(&q).map_err(|e| SimError::InvalidConfig(e.to_string()))?;
+        let tip_collider = self.world.colliders.get(f.tip).ok_or(SimError::NotReset)?;
+        let tip_rigid = tip_collider.parent().ok_or(SimError::NotReset)?;
+        let tip_joint = self.joints.iter().position(|h| h.body == tip_rigid).ok_or(SimError::NotReset)?;
+        let rigid_pose = iso_to_pose(&poses[self.hand.joints()[tip_joint].body]);
         let obj = self.world.colliders.get(self.object_collider).ok_or(SimError::NotReset)?;
         let obj_pose = *obj.position();
-        let dist_pose = iso_to_pose(&frames[3]);
-        let tip_pose = dist_pose * Pose::from_translation(Vector::new(0.0, 0.0, -f.distal_length_m));
-        let ball = rapier3d::parry::shape::Ball::new(f.tip_radius_m);
-        let half = 0.5 * f.distal_length_m;
-        let capsule = rapier3d::parry::shape::Capsule::new_z(half, f.link_radius_m);
-        let cap_pose = dist_pose * Pose::from_translation(Vector::new(0.0, 0.0, -half));
-        let d = |pose: &Pose, shape: &dyn rapier3d::parry::shape::Shape| -> Result<f32, SimError> {
-            match rapier3d::parry::query::contact(pose, shape, &obj_pose, obj.shape(), 0.0) {
-                Ok(Some(c)) => Ok(c.dist),
-                Ok(None) => rapier3d::parry::query::distance(pose, shape, &obj_pose, obj.shape())
-                    .map(|d| d.distance)
-                    .map_err(|e| SimError::InvalidConfig(format!("distance query: {e:?}"))),
-                Err(e) => Err(SimError::InvalidConfig(format!("contact query: {e:?}"))),
+        let mut nearest = f32::INFINITY;
+        for handle in std::iter::once(&f.tip).chain(&f.links) {
+            let Some(c) = self.world.colliders.get(*handle) else { continue };
+            if c.parent() != Some(tip_rigid) {
+                continue;
             }
-        };
-        Ok(d(&tip_pose, &ball)?.min(d(&cap_pose, &capsule)?))
+            let pose = rigid_pose * c.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY);
+            let d = match rapier3d::parry::query::contact(&pose, c.shape(), &obj_pose, obj.shape(), 0.0) {
+                Ok(Some(contact)) => contact.dist,
+                Ok(None) => rapier3d::parry::query::distance(&pose, c.shape(), &obj_pose, obj.shape())
+                    .map(|d| d.distance)
+                    .map_err(|e| SimError::InvalidConfig(format!("distance query: {e:?}")))?,
+                Err(e) => return Err(SimError::InvalidConfig(format!("contact query: {e:?}"))),
+            };
+            nearest = nearest.min(d);
+        }
+        Ok(nearest)
     }
 }

@@ -24,7 +24,7 @@ fn mujoco_holds_the_settled_grasp_on_five_fingertips() {
     let keyframe_z = world.object_state().pose.translation.vector.z;
     let settings =
         MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s: 1.0 / 240.0 };
-    let xml = hand_mjcf(&settings, &GraspKeyframe::of(world)).expect("model");
+    let xml = hand_mjcf(&settings, &GraspKeyframe::of(world).expect("keyframe")).expect("model");
     let dir = std::env::temp_dir().join(format!("vge-mjcf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let model = dir.join("hand.xml");

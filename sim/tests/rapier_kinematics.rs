@@ -9,7 +9,9 @@ use vge_sim::{
 fn world_at(q: &[f32; NUM_JOINTS]) -> HandWorld {
     // The object far away so nothing touches.
     let far = Isometry3::translation(0.0, 0.0, -1.0);
-    HandWorld::new(&HandModel::default(), &PhysicsConfig::default(), &ObjectConfig::default(), q, &far)
+    let hand = vge_sim::hands::vge15().expect("vge15");
+    let servos = EnvConfig::default().servos();
+    HandWorld::new(&hand, &servos, &PhysicsConfig::default(), &ObjectConfig::default(), q, &far)
         .expect("world")
 }
 
@@ -33,7 +35,7 @@ fn rapier_links_and_fingertips_match_forward_kinematics() {
             let qf = hand.finger_joints(f, &q).expect("q");
             let frames = hand.finger_frames(f, &qf).expect("frames");
             for link in 0..JOINTS_PER_FINGER {
-                let pose = world.link_pose(f, link).expect("pose");
+                let pose = world.link_pose(vge_sim::kinematics::joint_index(f, link)).expect("pose");
                 let dp = (pose.translation.vector - frames[link + 1].translation.vector).norm();
                 let dr = pose.rotation.angle_to(&frames[link + 1].rotation);
                 assert!(dp < 1e-5 && dr < 1e-5, "finger {f} link {link}: {dp} m, {dr} rad");
@@ -42,7 +44,7 @@ fn rapier_links_and_fingertips_match_forward_kinematics() {
             let fk = hand.fingertip_position_m(f, &qf).expect("fk");
             assert!((tip - fk).norm() < 1e-5, "finger {f}: rapier {tip:?} vs FK {fk:?}");
         }
-        assert_eq!(world.joint_positions(), q);
+        assert_eq!(world.joint_positions(), q.to_vec());
     }
 }
 

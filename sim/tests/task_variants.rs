@@ -109,7 +109,8 @@ fn a_doubled_torque_cap_squeezes_harder_and_keeps_the_thumbs_proportion() {
 fn free_fall(orientation: HandOrientation, steps: usize) -> Vector3<f32> {
     let physics = PhysicsConfig { hand_orientation: orientation, ..PhysicsConfig::default() };
     let mut world = HandWorld::new(
-        &HandModel::default(),
+        &vge_sim::hands::vge15().expect("vge15"),
+        &EnvConfig::default().servos(),
         &physics,
         &ObjectConfig::default(),
         &[0.0; NUM_JOINTS],
@@ -169,10 +170,12 @@ fn the_side_on_drop_test_follows_gravity() {
 /// each other), the object parked out of reach, with finger collisions on or off.
 fn closest_tips_m(finger_collisions: bool, flex: f32, roll: f32) -> f32 {
     let physics = PhysicsConfig { finger_collisions, ..PhysicsConfig::default() };
-    let hand = HandModel::default();
+    let hand = vge_sim::hands::vge15().expect("vge15");
+    let servos = EnvConfig::default().servos();
     let away = Isometry3::translation(0.0, 0.0, -1.0);
     let mut world =
-        HandWorld::new(&hand, &physics, &ObjectConfig::default(), &[0.0; NUM_JOINTS], &away).expect("world");
+        HandWorld::new(&hand, &servos, &physics, &ObjectConfig::default(), &[0.0; NUM_JOINTS], &away)
+            .expect("world");
     world.set_object_fixed(true);
     let mut target = [0.0f32; NUM_JOINTS];
     for finger in 0..NUM_FINGERS {

@@ -1,0 +1,121 @@
+//! The Allegro hand (`hands/allegro.xml`) in the real rapier world: built from its file, it
+//! holds the 65 mm cube from its start grasp with the hand still.
+
+use nalgebra::Isometry3;
+use vge_sim::{HandWorld, JointServo, ObjectConfig, ObjectShape, PhysicsConfig};
+
+/// The cube the Allegro's file is laid out for (its comments): 65 mm, 0.1 kg.
+fn allegro_cube() -> ObjectConfig {
+    ObjectConfig { shape: ObjectShape::Cube, width_m: 0.065, mass_kg: 0.1, friction: 0.8 }
+}
+
+/// The start grasp's targets: every joint but each finger's first (its spread or rotation)
+/// pressed `squeeze_rad` further, as vge's grasp squeezes.
+fn squeezed(hand: &vge_hand::Hand, q: &[f32], squeeze_rad: f32) -> Vec<f32> {
+    let mut target = q.to_vec();
+    for finger in hand.fingers() {
+        for j in finger.joints.clone().skip(1) {
+            target[j] += squeeze_rad;
+        }
+    }
+    target
+}
+
+#[test]
+fn the_allegro_builds_from_its_file_with_its_own_sizes() {
+    let hand = vge_sim::hands::load("allegro").expect("allegro");
+    assert_eq!((hand.num_joints(), hand.num_fingers()), (16, 4));
+    let servos = JointServo::from_description(&hand).expect("servos");
+    let q = hand.start_grasp_rad().expect("the file's grasp keyframe");
+    let far = Isometry3::translation(0.0, 0.0, -1.0);
+    let world =
+        HandWorld::new(&hand, &servos, &PhysicsConfig::default(), &allegro_cube(), &q, &far).expect("world");
+    assert_eq!(world.joint_positions().len(), 16);
+    assert_eq!(world.fingertip_contacts().len(), 4);
+    // rapier places the fingertips where the file's kinematics put them.
+    let fk = hand.fingertip_positions_m(&q).expect("fk");
+    for (f, want) in fk.iter().enumerate() {
+        let got = world.fingertip_position_m(f).expect("tip");
+        assert!((got - want).norm() < 1e-5, "finger {f}: rapier {got:?}, file {want:?}");
+    }
+    // A servo of the wrong count is refused.
+    assert!(
+        HandWorld::new(&hand, &servos[..15], &PhysicsConfig::default(), &allegro_cube(), &q, &far).is_err()
+    );
+}
+
+#[test]
+fn the_allegro_holds_the_cube_for_5_s_from_its_start_grasp() {
+    let hand = vge_sim::hands::load("allegro").expect("allegro");
+    let servos = JointServo::from_description(&hand).expect("servos");
+    let q = hand.start_grasp_rad().expect("grasp");
+    let physics = PhysicsConfig::default();
+    let mut world =
+        HandWorld::new(&hand, &servos, &physics, &allegro_cube(), &q, &Isometry3::identity()).expect("world");
+    world.set_object_fixed(true);
+    world.set_joint_targets(&squeezed(&hand, &q, 0.05));
+    let steps = |s: f32| (s * physics.physics_hz).round() as usize;
+    for _ in 0..steps(0.05) {
+        world.step();
+    }
+    world.set_object_fixed(false);
+    for _ in 0..steps(0.25) {
+        world.step();
+    }
+    let start = world.object_state().pose;
+    let touching = world.fingertip_contacts().iter().filter(|c| c.is_some()).count();
+    assert!(touching >= 3, "after settling {touching} fingertips touch the cube");
+    for _ in 0..steps(5.0) {
+        world.step();
+    }
+    assert!(world.is_finite());
+    let end = world.object_state().pose;
+    let fall_m = start.translation.vector.z - end.translation.vector.z;
+    let moved_m = (end.translation.vector - start.translation.vector).norm();
+    let turned_rad = end.rotation.angle_to(&start.rotation);
+    let touching = world.fingertip_contacts().iter().filter(|c| c.is_some()).count();
+    println!(
+        "5 s held: fell {fall_m:.4} m, moved {moved_m:.4} m, turned {turned_rad:.3} rad, {touching} tips touch"
+    );
+    assert!(touching >= 3, "{touching} fingertips touch after 5 s");
+    assert!(fall_m < 0.01, "the cube sank {fall_m} m in 5 s");
+    assert!(moved_m < 0.015 && turned_rad < 0.3, "the cube moved {moved_m} m and turned {turned_rad} rad");
+}
+
+#[test]
+fn torque_driven_joints_turn_the_way_they_are_pushed_and_return_to_their_servos() {
+    let hand = vge_sim::hands::load("allegro").expect("allegro");
+    let servos = JointServo::from_description(&hand).expect("servos");
+    let q = hand.start_grasp_rad().expect("grasp");
+    let far = Isometry3::translation(0.0, 0.0, -1.0);
+    let mut world =
+        HandWorld::new(&hand, &servos, &PhysicsConfig::default(), &allegro_cube(), &q, &far).expect("world");
+    // The index finger's middle flexion (ffj2), pushed each way for 0.1 s.
+    let joint = hand.joint_index("ffj2").expect("ffj2");
+    let mut moved = Vec::new();
+    for push_nm in [0.3f32, -0.3] {
+        world.set_joint_targets(&q);
+        for _ in 0..30 {
+            world.step();
+        }
+        let before = world.joint_positions()[joint];
+        let mut torques = vec![0.0; q.len()];
+        torques[joint] = push_nm;
+        world.set_joint_torques(&torques).expect("torques");
+        for _ in 0..12 {
+            world.step();
+        }
+        moved.push(world.joint_positions()[joint] - before);
+    }
+    assert!(moved[0] > 0.02 && moved[1] < -0.02, "ffj2 moved {moved:?} rad under +-0.3 N m");
+    // Back on its servo, it returns to its target.
+    world.set_joint_targets(&q);
+    for _ in 0..120 {
+        world.step();
+    }
+    let error = (world.joint_positions()[joint] - q[joint]).abs();
+    assert!(error < 0.02, "ffj2 is {error} rad from its target 1 s after its servo took over");
+    let mut bad = vec![0.0; q.len()];
+    bad[3] = f32::NAN;
+    assert!(world.set_joint_torques(&bad).is_err());
+}
