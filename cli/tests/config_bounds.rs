@@ -195,3 +195,130 @@ fn the_largest_policies_fit_the_file_size_limits() {
     let widest = 4 * (HAND_MAX_LAYERS * HAND_MAX_WIDTH * HAND_MAX_WIDTH) as u64;
     assert!(widest < HAND_MAX_FILE_LEN as u64 && (HAND_MAX_FILE_LEN as u64) < 4 << 20, "{HAND_MAX_FILE_LEN}");
 }
+
+/// `vge ARGS` as [`vge_with_peak_memory`], also timed (s), and killed (a failure) after 120 s:
+/// an input that blocks vge (a FIFO read) fails the test instead of hanging it.
+fn vge_timed(args: &[&str]) -> (bool, String, u64, f64) {
+    let script = "import resource, subprocess, sys, time\n\
+        t = time.monotonic()\n\
+        r = subprocess.run(sys.argv[1:], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=120)\n\
+        s = time.monotonic() - t\n\
+        sys.stderr.buffer.write(r.stderr)\n\
+        print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, s)\n";
+    let out = Command::new(common::python())
+        .arg("-c")
+        .arg(script)
+        .arg(env!("CARGO_BIN_EXE_vge"))
+        .args(args)
+        .output()
+        .expect("python runs (VGE_PYTHON, or .deps/py made by scripts/test.sh)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let fields: Vec<&str> = stdout.split_whitespace().collect();
+    let [code, kib, seconds] = fields[..] else {
+        panic!("vge {args:?} did not end in 120 s: {stdout}{stderr}")
+    };
+    let peak = kib.parse::<u64>().expect("KiB") * 1024;
+    (code == "0", stderr, peak, seconds.parse().expect("seconds"))
+}
+
+/// A config whose base is `/dev/zero`, a FIFO or a 1 GB (sparse) file is refused naming that
+/// file, unread: without reading it (the memory vge takes stays near its start), without
+/// blocking on the FIFO, within seconds.
+#[test]
+fn a_base_of_dev_zero_a_fifo_or_a_1gb_file_is_refused_unread_naming_it() {
+    let root = common::temp_dir("config-base-bounds");
+    let fifo = root.join("fifo.toml");
+    assert!(Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs").success());
+    let big = root.join("big.toml");
+    std::fs::File::create(&big).expect("create").set_len(1 << 30).expect("a sparse 1 GB file");
+    for (base, why) in [
+        ("/dev/zero".to_owned(), "not a regular file (a character device)"),
+        (fifo.display().to_string(), "not a regular file (a FIFO)"),
+        (big.display().to_string(), "1073741824 bytes, more than the 4194304"),
+    ] {
+        let config = root.join("c.toml");
+        std::fs::write(&config, format!("base = \"{base}\"\nseed = 1\n")).expect("config");
+        let out = root.join("run");
+        let args =
+            ["train", "--config", config.to_str().expect("utf-8"), "--out", out.to_str().expect("utf-8")];
+        let (ok, err, peak, seconds) = vge_timed(&args);
+        eprintln!("base {base}: refused in {seconds:.2} s, peak {} MB", peak >> 20);
+        assert!(!ok, "base {base} was not refused");
+        assert!(err.contains(&base) && err.contains(why) && err.contains("not read"), "{base}: {err}");
+        assert!(peak < baseline_bytes() + LIMIT_BYTES, "{base}: refused after taking {peak} bytes");
+        assert!(!out.exists(), "{base}: a refused run left a folder");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Protobuf's wire format by hand: field `field` of length-delimited `bytes`.
+fn pb_bytes(out: &mut Vec<u8>, field: u64, bytes: &[u8]) {
+    let mut varint = |mut v: u64| loop {
+        let b = (v & 0x7f) as u8;
+        v >>= 7;
+        out.push(if v == 0 { b } else { b | 0x80 });
+        if v == 0 {
+            break;
+        }
+    };
+    varint(field << 3 | 2);
+    varint(bytes.len() as u64);
+    out.extend_from_slice(bytes);
+}
+
+/// An ONNX model of one chain of `n` nodes of `op`, about 70 bytes a node (57 MB for 850,000,
+/// the size of a file that once took 2.45 GB and 9 s to refuse), written directly: built as
+/// messages it would take gigabytes here too.
+fn onnx_chain(n: usize, op: &str) -> Vec<u8> {
+    let mut graph = Vec::with_capacity(n * 80);
+    let mut node = Vec::new();
+    for i in 0..n {
+        node.clear();
+        pb_bytes(&mut node, 1, format!("value_{i:07}").as_bytes());
+        pb_bytes(&mut node, 1, b"weight");
+        pb_bytes(&mut node, 2, format!("value_{:07}", i + 1).as_bytes());
+        pb_bytes(&mut node, 3, format!("node_{i:07}_of_chain").as_bytes());
+        pb_bytes(&mut node, 4, op.as_bytes());
+        pb_bytes(&mut graph, 1, &node);
+    }
+    let mut model = vec![0x08, 0x08]; // ir_version 8
+    pb_bytes(&mut model, 7, &graph);
+    model
+}
+
+/// What `vge --help` takes to start (s): libtorch's libraries load before any command runs.
+fn start_seconds() -> f64 {
+    let (ok, err, _, seconds) = vge_timed(&["--help"]);
+    assert!(ok, "{err}");
+    seconds
+}
+
+/// ONNX files of an 850,000-node chain, within the importer's 64 MiB file cap, are refused by
+/// their layer count (a chain of Gemm) or node count (a chain of Identity) before a message is
+/// built: the file is read (57 MB), and little more memory or time is taken.
+#[test]
+fn an_850000_node_onnx_chain_is_refused_by_its_layer_or_node_count_unbuilt() {
+    let root = common::temp_dir("onnx-chain");
+    let start = start_seconds();
+    for (op, why) in [("Gemm", "more than 8 Gemm and MatMul nodes"), ("Identity", "more than 1024 nodes")] {
+        let model = onnx_chain(850_000, op);
+        assert!(model.len() as u64 <= vge_export::onnx::MAX_ONNX_FILE_LEN, "{} bytes", model.len());
+        let path = root.join("chain.onnx");
+        std::fs::write(&path, &model).expect("write");
+        let out = root.join("chain.vgep");
+        let (path, out) = (path.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+        let (ok, err, peak, seconds) =
+            vge_timed(&["import", "--onnx", path, "--out", out, "--action-scale", "hand"]);
+        let over = peak.saturating_sub(baseline_bytes());
+        eprintln!(
+            "{} MB chain of {op}: refused in {seconds:.2} s (vge starts in {start:.2} s), {} MB over vge's start",
+            model.len() >> 20,
+            over >> 20
+        );
+        assert!(!ok && err.contains(why), "{op}: {err}");
+        assert!(over < 200 << 20, "{op}: refused after taking {over} bytes more than vge's start");
+        assert!(!Path::new(out).exists());
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}

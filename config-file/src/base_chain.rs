@@ -52,8 +52,9 @@ fn read_chain<E: From<BaseChainError>>(
     each_file: &mut impl FnMut(&mut toml::Table, &str) -> Result<(), E>,
 ) -> Result<toml::Table, E> {
     let shown = path.display().to_string();
-    let text =
-        std::fs::read_to_string(path).map_err(|source| BaseChainError::Io { path: shown.clone(), source })?;
+    // Bounded: a base of /dev/zero, a FIFO or a 1 GB file is refused before it is read.
+    let text = crate::read_to_string_bounded(path, crate::MAX_CONFIG_FILE_LEN)
+        .map_err(|source| BaseChainError::Io { path: shown.clone(), source })?;
     let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| BaseChainError::Parse {
         path: shown.clone(),
         message: e.to_string(),
@@ -162,5 +163,29 @@ mod tests {
         std::fs::write(dir.join("n.toml"), "base = 3\n").expect("n");
         let e = read(&dir.join("n.toml")).expect_err("number").to_string();
         assert!(e.contains("n.toml") && e.contains("as a string"), "{e}");
+    }
+
+    /// A base that is a device, a FIFO or a file longer than any config is refused before a
+    /// byte of it is read, naming it: nothing blocks, nothing is read whole.
+    #[test]
+    fn a_base_of_dev_zero_a_fifo_or_a_giant_is_refused_unread_naming_it() {
+        let dir = temp_dir("bounded");
+        let fifo = dir.join("fifo.toml");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+        assert!(made.success());
+        let big = dir.join("big.toml");
+        std::fs::File::create(&big).expect("create").set_len(1 << 30).expect("sparse 1 GB");
+        for (base, why) in [
+            ("/dev/zero".to_owned(), "a character device"),
+            (fifo.display().to_string(), "a FIFO"),
+            (big.display().to_string(), "1073741824 bytes"),
+        ] {
+            std::fs::write(dir.join("c.toml"), format!("base = \"{base}\"\n")).expect("c");
+            let e = read(&dir.join("c.toml")).expect_err(&base).to_string();
+            assert!(e.contains(&base) && e.contains(why) && e.contains("not read"), "{e}");
+        }
+        // The file named on the command line is bounded the same way.
+        let e = read(Path::new("/dev/zero")).expect_err("device").to_string();
+        assert!(e.contains("/dev/zero") && e.contains("a character device"), "{e}");
     }
 }

@@ -261,11 +261,13 @@ pub const MAX_FILE_LEN: usize = vge_runtime::policy::max_file_len(8, 1024);
 
 /// The bytes of the policy file at `path`, refused unread ([`ExportError::TooLarge`]) when
 /// its length (from its metadata) exceeds `max_len`, and never more than `max_len` read (a
-/// file that grows meanwhile is refused too).
+/// file that grows meanwhile is refused too). Only a regular file is opened
+/// ([`check_regular_file`]).
 pub fn read_policy_bytes(path: &Path, max_len: usize) -> Result<Vec<u8>, ExportError> {
     use std::io::Read;
     let io = |source| ExportError::Io { path: path.to_owned(), source };
     let too_large = |len: u64| ExportError::TooLarge { path: path.to_owned(), len, max: max_len };
+    check_regular_file(path).map_err(io)?;
     let file = std::fs::File::open(path).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();
     if len > max_len as u64 {
@@ -277,6 +279,19 @@ pub fn read_policy_bytes(path: &Path, max_len: usize) -> Result<Vec<u8>, ExportE
         return Err(too_large(bytes.len() as u64));
     }
     Ok(bytes)
+}
+
+/// Refuses, before it is opened, a path that is not a regular file: opening a FIFO would block
+/// until a writer comes, and a device such as `/dev/zero` has no length to check.
+pub(crate) fn check_regular_file(path: &Path) -> std::io::Result<()> {
+    if std::fs::metadata(path)?.is_file() {
+        Ok(())
+    } else {
+        Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file: vge reads regular files only (not read)",
+        ))
+    }
 }
 
 /// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`

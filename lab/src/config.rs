@@ -384,40 +384,18 @@ impl Default for Config {
 
 /// The most memory a run may hold by [`Config::memory_estimate`], whatever the machine: 1 TiB.
 /// Beyond it a size is a typo (`sac.buffer_size = 1000000000000` asks for 656 TB).
-pub const MAX_RUN_BYTES: u64 = 1 << 40;
-
+pub use vge_config_file::memory::MAX_RUN_BYTES;
 /// One env of the training vector with its controller, generator and bookkeeping, besides its
-/// episode's rewards: a generous bound on the measured growth of `vge train`'s resident memory
-/// per env.
-const ENV_BYTES: u64 = 4 << 20;
+/// episode's records (shared with the Python package's vector env).
+use vge_config_file::memory::{ENV_BYTES, bytes_text, machine_memory_bytes};
+
+/// What a training env keeps per step of its episode: the reward (for the Monte-Carlo
+/// returns), and the executed action and controller calls that replay an episode in progress
+/// after a stop (`vge_trainer`'s checkpoint).
+const EPISODE_STEP_BYTES: u64 = 4 + 4 * vge_sim::NUM_JOINTS as u64 + 2 * 8;
 
 /// One evaluation episode's outcome as an evaluation keeps it.
 const EVAL_EPISODE_BYTES: u64 = 256;
-
-/// `bytes` in decimal units, 3 significant digits (`656 MB`, `1.10 TB`).
-fn bytes_text(bytes: u64) -> String {
-    let units = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut x = bytes as f64;
-    let mut unit = 0;
-    while x >= 1000.0 && unit + 1 < units.len() {
-        x /= 1000.0;
-        unit += 1;
-    }
-    match x {
-        _ if unit == 0 => format!("{bytes} B"),
-        x if x >= 100.0 => format!("{x:.0} {}", units[unit]),
-        x if x >= 10.0 => format!("{x:.1} {}", units[unit]),
-        x => format!("{x:.2} {}", units[unit]),
-    }
-}
-
-/// `MemTotal` of `/proc/meminfo`, in bytes (None where it cannot be read: not Linux).
-fn machine_memory_bytes() -> Option<u64> {
-    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
-    let kib: u64 = line.trim_start_matches("MemTotal:").trim().trim_end_matches("kB").trim().parse().ok()?;
-    kib.checked_mul(1024)
-}
 
 fn invalid(msg: impl Into<String>) -> ConfigError {
     ConfigError::Invalid(msg.into())
@@ -538,8 +516,9 @@ impl Config {
         let (obs, act) = (vge_sim::OBS_DIM as u64, vge_sim::NUM_JOINTS as u64);
         // A transition: obs, next obs, action, BC action, and 4 scalars, as f32.
         let replay = (self.sac.buffer_size as u64).saturating_mul((2 * obs + 2 * act + 4) * 4);
-        // Each env, and its episode's rewards (kept for the Monte-Carlo returns).
-        let per_env = ENV_BYTES.saturating_add((self.env.episode_length as u64).saturating_mul(4));
+        // Each env, and its episode's records.
+        let per_env =
+            ENV_BYTES.saturating_add((self.env.episode_length as u64).saturating_mul(EPISODE_STEP_BYTES));
         let envs = (self.num_envs as u64).saturating_mul(per_env);
         // The actor and twin critics with their targets, Adam's moments and gradients (about
         // 12 copies of the parameters), and a minibatch's activations through them (about 24

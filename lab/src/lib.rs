@@ -17,6 +17,7 @@ pub mod gait_diagram;
 pub mod object_rows;
 pub mod plot;
 pub mod policy_meta;
+pub mod read_limits;
 pub mod robustness;
 pub mod run_dir;
 pub mod run_eval;

@@ -151,8 +151,10 @@ pub(crate) struct FinalEvalFields {
     pub(crate) per_object: Option<crate::eval::PerObjectFigures>,
 }
 
+/// A run's CSV table or JSON record (the larger bound of the two).
 fn read(path: &Path) -> Result<String, PlotError> {
-    std::fs::read_to_string(path).map_err(|source| PlotError::Io { path: path.to_owned(), source })
+    crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_TABLE_FILE_LEN)
+        .map_err(|source| PlotError::Io { path: path.to_owned(), source })
 }
 
 /// Columns of a CSV with a header row, by name; a name the header lacks is an error naming

@@ -54,7 +54,8 @@ pub struct RunCost {
 /// The effective configuration stored in a run folder (`config.toml`), validated.
 pub fn run_config(dir: &Path) -> Result<Config, RunEvalError> {
     let path = RunDir::new(dir).config();
-    let text = std::fs::read_to_string(&path).map_err(io_err(&path))?;
+    let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
+        .map_err(io_err(&path))?;
     let config = Config::from_toml_str(&text)?;
     config.validate()?;
     Ok(config)
@@ -244,7 +245,11 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
     let bytes = match crate::eval::read_policy_file(&snapshot) {
         Ok(b) => b,
         Err(crate::eval::EvalError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
-            eprintln!("model selection skipped: {} is missing", snapshot.display());
+            // Not eprintln!: a closed stderr must not stop the run that is finishing.
+            let _ = std::io::Write::write_fmt(
+                &mut std::io::stderr(),
+                format_args!("model selection skipped: {} is missing\n", snapshot.display()),
+            );
             return Ok(());
         }
         Err(e) => return Err(e.into()),

@@ -165,14 +165,17 @@ struct PlannedPolicy {
 impl PlannedPolicy {
     fn read(dir: &Path, file: &str, step: u64) -> Result<Self, ScoreError> {
         let path = dir.join(file);
-        let bytes = std::fs::read(&path).map_err(|e| ScoreError::Policy {
-            path: path.clone(),
-            message: if e.kind() == std::io::ErrorKind::NotFound {
-                "missing".to_owned()
-            } else {
-                e.to_string()
-            },
-        })?;
+        let bytes =
+            crate::read_limits::read_bounded(&path, vge_export::MAX_FILE_LEN as u64).map_err(|e| {
+                ScoreError::Policy {
+                    path: path.clone(),
+                    message: if e.kind() == std::io::ErrorKind::NotFound {
+                        "missing".to_owned()
+                    } else {
+                        e.to_string()
+                    },
+                }
+            })?;
         check_policy(&path, &bytes)?;
         Ok(Self { file: file.to_owned(), step, bytes })
     }
@@ -206,8 +209,8 @@ struct FinalEvalSteps {
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ScoreError> {
-    let text =
-        std::fs::read_to_string(path).map_err(|source| ScoreError::Io { path: path.to_owned(), source })?;
+    let text = crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_RECORD_FILE_LEN)
+        .map_err(|source| ScoreError::Io { path: path.to_owned(), source })?;
     serde_json::from_str(&text)
         .map_err(|e| ScoreError::RunFile { path: path.to_owned(), message: e.to_string() })
 }
@@ -215,8 +218,8 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ScoreErro
 /// The run's config (`DIR/config.toml`).
 fn run_config(dir: &Path) -> Result<Config, ScoreError> {
     let path = dir.join(crate::run_dir::CONFIG);
-    let text =
-        std::fs::read_to_string(&path).map_err(|source| ScoreError::Io { path: path.clone(), source })?;
+    let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
+        .map_err(|source| ScoreError::Io { path: path.clone(), source })?;
     let config = crate::config::parse_with_overrides(&text, &path.display().to_string(), &[])
         .map_err(|e| ScoreError::RunFile { path: path.clone(), message: e.to_string() })?;
     config.validate().map_err(|e| ScoreError::RunFile { path, message: e.to_string() })?;

@@ -113,10 +113,13 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
     }
     let final_policy = dir.policy();
     if final_policy.exists() {
-        let bytes = std::fs::read(&final_policy).map_err(io_err(&final_policy))?;
+        let read = |p: &Path| {
+            crate::read_limits::read_bounded(p, vge_export::MAX_FILE_LEN as u64).map_err(io_err(p))
+        };
+        let bytes = read(&final_policy)?;
         let mut same = false;
         for (_, p) in &out {
-            same |= std::fs::read(p).map_err(io_err(p))? == bytes;
+            same |= read(p)? == bytes;
         }
         if !same {
             out.push((None, final_policy));
@@ -365,7 +368,8 @@ pub fn ship(
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
     crate::atomic_file::write(&files.policy, &bytes).map_err(io_err(&files.policy))?;
-    let config = std::fs::read(dir.config()).map_err(io_err(&dir.config()))?;
+    let config = crate::read_limits::read_bounded(&dir.config(), crate::read_limits::MAX_CONFIG_FILE_LEN)
+        .map_err(io_err(&dir.config()))?;
     crate::atomic_file::write(&files.config, &config).map_err(io_err(&files.config))?;
     robustness::plot(&record.robustness, &files.robustness_png)?;
     let objects: Vec<_> = bases.iter().map(|b| b.object.shape).collect();

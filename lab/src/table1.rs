@@ -513,8 +513,8 @@ pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, Alo
         if !path.exists() {
             continue;
         }
-        let text =
-            std::fs::read_to_string(&path).map_err(|source| PlotError::Io { path: path.clone(), source })?;
+        let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN)
+            .map_err(|source| PlotError::Io { path: path.clone(), source })?;
         let c: ControllerAlone = serde_json::from_str(text.trim())
             .map_err(|e| PlotError::Csv { path: path.clone(), message: e.to_string() })?;
         alone.insert(kind, (c.success_rate, c.mean_return, c.mean_contact_switches));

@@ -86,6 +86,23 @@ struct Buffers {
     step: Py<PyArray1<i64>>,
 }
 
+/// One env's row of the output arrays (bytes).
+const ROW_BYTES: u64 = (4 * OBS_DIM + 8 + 3 + NUM_FINGERS + 4 * NUM_FINGERS + 4 * 3 + 4 + 4 + 1 + 8) as u64;
+
+/// Refuses `num_envs` envs that no machine holds, or this one does not, before any is made,
+/// with the memory they would take: as `vge train` refuses its `num_envs`, by the bounds of
+/// `vge_config_file::memory`, instead of allocating until the process is killed.
+fn check_fits_memory(num_envs: usize) -> PyResult<()> {
+    use vge_config_file::memory::{SIM_ENV_BYTES, bytes_text, refusal};
+    let per_env = SIM_ENV_BYTES + ROW_BYTES;
+    let total = (num_envs as u64).saturating_mul(per_env);
+    let parts = format!(" ({} per env)", bytes_text(per_env));
+    match refusal(&format!("VecHandEnv({num_envs})"), total, &parts) {
+        Some(why) => Err(errors::value(format!("num_envs: {why}"))),
+        None => Ok(()),
+    }
+}
+
 /// The batch behind `vge.VecHandEnv`.
 #[pyclass(module = "vge._vge")]
 #[derive(Debug)]
@@ -201,6 +218,7 @@ impl VecEnvCore {
         if num_envs == 0 {
             return Err(errors::value("num_envs must be at least 1"));
         }
+        check_fits_memory(num_envs)?;
         let (keys, origin) = keys::read(config_path, keys)?;
         let envs = (0..num_envs)
             .map(|i| {

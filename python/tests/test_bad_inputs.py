@@ -122,3 +122,17 @@ def test_damaged_policy_files_name_the_check(tmp_path, repo, change, match):
 def test_missing_policy_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothing.vgep"):
         vge.Policy.load(tmp_path / "nothing.vgep")
+
+
+def test_a_vector_of_envs_no_machine_holds_is_refused_before_any_is_made():
+    # 10**8 envs would take hundreds of TB: refused with the estimate, as `vge train` refuses
+    # its num_envs, instead of allocating until the process is killed.
+    with pytest.raises(ValueError, match=r"VecHandEnv\(100000000\) would hold about .* more than the 1.10 TB"):
+        vge.VecHandEnv(10**8)
+
+
+def test_a_config_base_that_is_a_device_is_refused_unread_naming_it(tmp_path):
+    config = tmp_path / "c.toml"
+    config.write_text('base = "/dev/zero"\n')
+    with pytest.raises(OSError, match="/dev/zero.*not a regular file"):
+        vge.HandEnv.from_config(str(config))

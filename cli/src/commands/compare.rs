@@ -62,7 +62,9 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     let bootstrap = vge_lab::stats::Bootstrap { resamples, ..Default::default() };
     let pairs = (!pairs.is_empty()).then_some(pairs.as_slice());
     let written = vge_lab::compare::write(&groups, pairs, metric, &out, seed, &bootstrap)?;
-    print!("{}", std::fs::read_to_string(out.join("compare.md")).unwrap_or_default());
+    let md = out.join("compare.md");
+    let text = vge_lab::read_limits::read_to_string_bounded(&md, vge_lab::read_limits::MAX_RECORD_FILE_LEN);
+    print!("{}", text.unwrap_or_default());
     for f in &written.files {
         eprintln!("wrote {}", f.display());
     }

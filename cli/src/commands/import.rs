@@ -16,7 +16,9 @@ use vge_sim::EnvConfig;
 /// Mul/Add scaling behind (docs/onnx.md). Refuses anything else, naming the node, its op
 /// and why (an unsupported op, a width that is not the hand's 65 observations or 15
 /// actions, a layer wider than the runtime holds, a non-finite weight), and writes
-/// nothing then.
+/// nothing then. A file of more than 64 MiB is refused unread, and a model of more than
+/// 1024 nodes, or of more Gemm and MatMul nodes than twice the layers the runtime holds, is
+/// refused from its encoding before any of it is built.
 ///
 /// Example: vge import --onnx sac_actor.onnx --out sac.vgep --action-scale hand
 #[derive(Debug, Args)]
@@ -112,7 +114,8 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
 /// The numbers of a file, separated by whitespace or commas (`--obs-mean`, `--obs-std`).
 fn read_numbers(path: Option<&std::path::Path>) -> anyhow::Result<Option<Vec<f32>>> {
     let Some(path) = path else { return Ok(None) };
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = vge_lab::read_limits::read_to_string_bounded(path, vge_lab::read_limits::MAX_NUMBERS_FILE_LEN)
+        .with_context(|| format!("reading {}", path.display()))?;
     let values = text
         .split(|c: char| c.is_whitespace() || c == ',')
         .filter(|t| !t.is_empty())

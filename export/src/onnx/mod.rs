@@ -10,6 +10,7 @@
 //!
 //! The protobuf messages are `onnx-protobuf`'s, generated from the ONNX project's `onnx.proto`.
 
+pub mod census;
 mod error;
 mod read;
 mod tensor;
@@ -69,6 +70,7 @@ pub fn import_file(
 ) -> Result<Imported, OnnxError> {
     use std::io::Read;
     let io = |source| OnnxError::Io { path: onnx.to_owned(), source };
+    crate::policy_file::check_regular_file(onnx).map_err(io)?;
     let file = std::fs::File::open(onnx).map_err(io)?;
     let len = file.metadata().map_err(io)?.len();
     if len > MAX_ONNX_FILE_LEN {

@@ -89,8 +89,12 @@ pub struct Imported {
 }
 
 /// Imports the ONNX model `bytes` as a policy for `target`; see the module docs for the
-/// graphs accepted. The result has passed the policy file's validation.
+/// graphs accepted. The result has passed the policy file's validation. A model with more
+/// nodes, layers or fields than any MLP actor is refused from its wire format before it is
+/// parsed ([`super::census`]): at most [`super::census::MAX_NODES`] nodes, and twice
+/// `target.max_layers` `Gemm` and `MatMul` nodes (room for a dead head beside each layer).
 pub fn import(bytes: &[u8], target: &ImportTarget, options: &ImportOptions) -> Result<Imported, OnnxError> {
+    super::census::count(bytes, 2 * target.max_layers)?;
     let model = ModelProto::parse_from_bytes(bytes).map_err(OnnxError::Parse)?;
     let graph = model.graph.as_ref().ok_or_else(|| OnnxError::Graph("the model has no graph".to_owned()))?;
     check_opset(&model)?;
