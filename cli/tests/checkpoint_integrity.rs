@@ -22,7 +22,8 @@ const TOTAL: u64 = 140;
 /// `configs/cube-fg-vge.toml` with the shared tiny overrides (`algorithm` when given).
 fn config(algorithm: Option<&str>) -> Config {
     let mut overrides: Vec<String> = common::TINY.iter().map(|s| (*s).to_owned()).collect();
-    // A checkpoint boundary at `STOP_AT`, so that the resumed run is the uninterrupted one.
+    // A checkpoint boundary at `STOP_AT`: the stop keeps the periodic checkpoint (no episodes
+    // in progress), whose files this test lists.
     overrides.extend(["sac.threads=1".to_owned(), "run.checkpoint_interval=60".to_owned()]);
     if let Some(a) = algorithm {
         overrides.push(format!("algorithm=\"{a}\""));
@@ -302,7 +303,7 @@ fn measure_save_and_verify_with_a_full_replay_buffer() {
     let mut saves = Vec::new();
     for _ in 0..3 {
         let t = Instant::now();
-        checkpoint::save(&root, sac.as_ref(), Some(&replay), state).expect("checkpoint");
+        checkpoint::save(&root, sac.as_ref(), Some(&replay), state, None).expect("checkpoint");
         saves.push(t.elapsed().as_secs_f64());
     }
     let dir = root.join("checkpoint");

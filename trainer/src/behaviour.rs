@@ -92,12 +92,14 @@ impl BehaviourStats {
     }
 }
 
+/// An env's H-step segment: whom it follows and for how many more steps. A checkpoint taken
+/// with episodes in progress keeps it ([`Behaviour::segment`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Segment {
-    source: Source,
-    remaining: usize,
+pub struct Segment {
+    pub source: Source,
+    pub remaining: usize,
     /// The controller's state is stale (it was not followed last step, or a new episode).
-    controller_stale: bool,
+    pub controller_stale: bool,
 }
 
 const FRESH: Segment = Segment { source: Source::Learner, remaining: 0, controller_stale: true };
@@ -107,12 +109,30 @@ const FRESH: Segment = Segment { source: Source::Learner, remaining: 0, controll
 pub struct EnvController {
     pub controller: Box<dyn Controller + Send>,
     pub rng: ChaCha8Rng,
+    /// The calls made since the collector last took them: a controller's state cannot be
+    /// saved, so an episode in progress at a checkpoint is rebuilt by making them again.
+    pub calls: Vec<ControllerCall>,
+}
+
+impl EnvController {
+    pub fn new(controller: Box<dyn Controller + Send>, rng: ChaCha8Rng) -> Self {
+        Self { controller, rng, calls: Vec::new() }
+    }
 }
 
 impl std::fmt::Debug for EnvController {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("EnvController").finish_non_exhaustive()
+        f.debug_struct("EnvController").field("calls", &self.calls).finish_non_exhaustive()
     }
+}
+
+/// A call of an env's controller that changed its state or drew from its generator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerCall {
+    /// `Controller::reset`.
+    Reset,
+    /// `Controller::act` on the env's state before the step it was made at.
+    Act,
 }
 
 /// Min-twin Q-values of `(obs, action)` rows, one per row.
@@ -189,6 +209,18 @@ impl Behaviour {
     pub fn episode_reset(&mut self, i: usize) {
         if let Some(s) = self.segments.get_mut(i) {
             *s = FRESH;
+        }
+    }
+
+    /// Env `i`'s segment (a fresh one past the envs).
+    pub fn segment(&self, i: usize) -> Segment {
+        self.segments.get(i).copied().unwrap_or(FRESH)
+    }
+
+    /// Puts env `i` back in `segment` (an episode in progress, from a checkpoint).
+    pub fn set_segment(&mut self, i: usize, segment: Segment) {
+        if let Some(s) = self.segments.get_mut(i) {
+            *s = segment;
         }
     }
 
@@ -375,16 +407,18 @@ impl Behaviour {
         ctx: &StepContext<'_>,
         controllers: &mut [EnvController],
     ) -> Option<[f32; NUM_JOINTS]> {
-        let (Some(EnvController { controller, rng }), Some(Some(input))) =
+        let (Some(EnvController { controller, rng, calls }), Some(Some(input))) =
             (controllers.get_mut(i), ctx.inputs.get(i))
         else {
             return None;
         };
         if self.segments[i].controller_stale {
             controller.reset(rng);
+            calls.push(ControllerCall::Reset);
             self.segments[i].controller_stale = false;
         }
         self.stats.controller_queries += 1;
+        calls.push(ControllerCall::Act);
         match controller.act(input, rng) {
             Ok(a) if a.iter().all(|v| v.is_finite()) => Some(a),
             _ => {

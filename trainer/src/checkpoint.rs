@@ -4,7 +4,8 @@
 //! `DIR/checkpoint/` holds `state.toml` (the training loop's counters, generator state and
 //! metric windows), the networks and optimiser state that [`Learner::save`] writes (`actor.ot`,
 //! `critic.ot`, `target.ot`, `target_actor.ot` for TD3, `optim.ot`), `replay.bin` when the
-//! run keeps its replay buffer, and [`MANIFEST`] (`manifest.json`): every other file's name,
+//! run keeps its replay buffer, `episodes.bin` when the envs' episodes go on through the
+//! checkpoint (a stop, the end: `crate::train`), and [`MANIFEST`] (`manifest.json`): every other file's name,
 //! length in bytes and CRC-32 (IEEE, `"0x%08x"`).
 //!
 //! [`save`] writes everything into `DIR/checkpoint.tmp/`, each file's CRC computed as it is
@@ -45,10 +46,20 @@ pub const MANIFEST: &str = "manifest.json";
 pub use vge_lab::run_dir::CHECKPOINT_STATE as STATE_FILE;
 /// The replay buffer ([`ReplayBuffer::write_to`]).
 pub const REPLAY_FILE: &str = "replay.bin";
+/// The envs' episodes in progress, when they go on through the checkpoint (`crate::train`).
+pub const EPISODES_FILE: &str = "episodes.bin";
 /// Every file a vge checkpoint holds besides its manifest: one of these that the manifest
 /// does not list is refused.
-pub const KNOWN_FILES: [&str; 7] =
-    [STATE_FILE, ACTOR_FILE, CRITIC_FILE, TARGET_FILE, TARGET_ACTOR_FILE, OPTIM_FILE, REPLAY_FILE];
+pub const KNOWN_FILES: [&str; 8] = [
+    STATE_FILE,
+    ACTOR_FILE,
+    CRITIC_FILE,
+    TARGET_FILE,
+    TARGET_ACTOR_FILE,
+    OPTIM_FILE,
+    REPLAY_FILE,
+    EPISODES_FILE,
+];
 /// The manifest's `format`.
 pub const MANIFEST_FORMAT: u32 = 1;
 
@@ -209,7 +220,8 @@ pub fn crc_of_file(path: &Path) -> std::io::Result<(u64, u32)> {
 }
 
 /// Saves a checkpoint into `out_dir/checkpoint/`: the networks and optimiser state of `learner`,
-/// `replay` when given, `state_toml` as `state.toml`, and the manifest (module docs). The
+/// `replay` when given, `state_toml` as `state.toml`, `episodes` when given, and the manifest
+/// (module docs). The
 /// previous checkpoint stays whole until the new one is complete; a write that fails (a full
 /// disk) is an error naming the file and the OS's error, and removes the incomplete
 /// `checkpoint.tmp/` so that the space it took is free again.
@@ -218,9 +230,10 @@ pub fn save(
     learner: &dyn Learner,
     replay: Option<&ReplayBuffer>,
     state_toml: &str,
+    episodes: Option<&[u8]>,
 ) -> Result<(), CheckpointError> {
     let tmp = out_dir.join(TMP_DIR);
-    let written = write_tmp(&tmp, learner, replay, state_toml);
+    let written = write_tmp(&tmp, learner, replay, state_toml, episodes);
     if written.is_err() {
         // Best effort: the error that matters is the write's.
         let _ = std::fs::remove_dir_all(&tmp);
@@ -235,6 +248,7 @@ fn write_tmp(
     learner: &dyn Learner,
     replay: Option<&ReplayBuffer>,
     state_toml: &str,
+    episodes: Option<&[u8]>,
 ) -> Result<(), CheckpointError> {
     let write_err = |path: &Path| {
         let path = path.to_owned();
@@ -256,6 +270,9 @@ fn write_tmp(
     drop(networks);
     if let Some(replay) = replay {
         files.push(write_file(tmp, REPLAY_FILE, |w| replay.write_to(w))?);
+    }
+    if let Some(bytes) = episodes {
+        files.push(write_file(tmp, EPISODES_FILE, |w| w.write_all(bytes))?);
     }
     files.push(write_file(tmp, STATE_FILE, |w| w.write_all(state_toml.as_bytes()))?);
     let manifest =
@@ -305,7 +322,7 @@ pub fn verify(dir: &Path) -> Result<Manifest, CheckpointError> {
         return Err(CheckpointError::NotAFolder { path: dir.to_owned() });
     }
     let path = dir.join(MANIFEST);
-    let text = match std::fs::read(&path) {
+    let text = match vge_lab::read_limits::read_bounded(&path, vge_lab::read_limits::MAX_RECORD_FILE_LEN) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(CheckpointError::NoManifest { path });
@@ -396,7 +413,8 @@ pub fn open(out_dir: &Path) -> Result<Verified, CheckpointError> {
     let mut checkpoint = Verified { dir, manifest, state_toml: String::new() };
     let path = checkpoint.require(STATE_FILE)?;
     checkpoint.state_toml =
-        std::fs::read_to_string(&path).map_err(|source| CheckpointError::Read { path, source })?;
+        vge_lab::read_limits::read_to_string_bounded(&path, vge_lab::read_limits::MAX_RECORD_FILE_LEN)
+            .map_err(|source| CheckpointError::Read { path, source })?;
     Ok(checkpoint)
 }
 
@@ -423,6 +441,16 @@ impl Verified {
         } else {
             Err(CheckpointError::NotListed { path })
         }
+    }
+
+    /// The envs' episodes in progress (`episodes.bin`), when the manifest lists them: a
+    /// checkpoint whose episodes go on through it. Verified, so read whole.
+    pub fn episodes(&self) -> Result<Option<Vec<u8>>, CheckpointError> {
+        if !self.manifest.files.iter().any(|f| f.name == EPISODES_FILE) {
+            return Ok(None);
+        }
+        let path = self.require(EPISODES_FILE)?;
+        std::fs::read(&path).map(Some).map_err(|source| CheckpointError::Read { path, source })
     }
 
     /// Restores the networks and optimiser state into `learner` (same configuration as the one

@@ -52,6 +52,7 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
                 config.cs_config(&env_config),
             ),
             rng: ChaCha8Rng::seed_from_u64(seed + 100),
+            calls: Vec::new(),
         }];
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let start = env.privileged().expect("state");
@@ -91,6 +92,7 @@ fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
             config.cs_config(&env_config),
         ),
         rng: ChaCha8Rng::seed_from_u64(1),
+        calls: Vec::new(),
     }];
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config.clone() });

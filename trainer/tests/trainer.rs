@@ -92,6 +92,7 @@ fn rig() -> Rig {
         controllers: vec![EnvController {
             controller: Box::new(Constant { calls: calls.clone() }),
             rng: ChaCha8Rng::seed_from_u64(1),
+            calls: Vec::new(),
         }],
         calls,
         rng: ChaCha8Rng::seed_from_u64(2),
@@ -623,46 +624,43 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert!(file.obs_std.iter().all(|&s| s >= 1e-2));
     assert_eq!(file.obs_clip, Some(vge_trainer::nets::OBS_CLIP as f32));
 
-    // Interrupted by the stop flag at step 120 (a checkpoint boundary), then resumed.
-    let part_dir = tempdir("part");
-    let stop = AtomicBool::new(false);
-    let part = train(&tiny_config(140), &part_dir, false, &stop, &mut |p| {
-        if p.step >= 120 {
-            stop.store(true, Ordering::SeqCst);
+    // Stopped by the flag, then resumed: at step 120 (a checkpoint boundary: the periodic
+    // checkpoint stays); at 86 (mid-episode, mid-segment, mid-metrics-window, controllers
+    // still queried) and once more at 106 after that resume (past the hard stop); and at 24,
+    // in the warm-up. Each resumed run ends as the uninterrupted run: the stop path's
+    // checkpoint keeps the envs' episodes, which the resume replays.
+    for stops in [&[120][..], &[86, 106], &[24]] {
+        let part_dir = tempdir(&format!("part-{}", stops[0]));
+        for (k, &at) in stops.iter().enumerate() {
+            let stop = AtomicBool::new(false);
+            let part = train(&tiny_config(140), &part_dir, k > 0, &stop, &mut |p| {
+                if p.step >= at {
+                    stop.store(true, Ordering::SeqCst);
+                }
+            })
+            .expect("interrupted run");
+            assert!(part.stopped && part.policy.is_none());
+            assert_eq!(part.steps, at);
+            assert!(!part_dir.join("policy.vgep").exists());
+            let kept = part_dir.join("checkpoint/episodes.bin").exists();
+            assert_eq!(kept, at % 60 != 0, "episodes in progress saved at {at} (checkpoint interval 60)");
         }
-    })
-    .expect("interrupted run");
-    assert!(part.stopped);
-    assert_eq!(part.steps, 120);
-    assert!(!part_dir.join("policy.vgep").exists());
-    let state: toml::Value =
-        toml::from_str(&std::fs::read_to_string(part_dir.join("checkpoint/state.toml")).expect("state.toml"))
-            .expect("toml");
-    let first = |key: &str| state[key].as_float().unwrap_or_else(|| panic!("{key} in state.toml"));
-    let (first_wall_s, first_cpu_s) = (first("wall_s"), first("cpu_s"));
-    assert!(first_wall_s > 0.0 && first_cpu_s > 0.0, "{first_wall_s} {first_cpu_s}");
-    let resumed = train(&tiny_config(140), &part_dir, true, &never, &mut |_| {}).expect("resumed run");
-    assert_eq!(resumed.steps, 140);
-    assert_eq!(resumed.updates, full.updates);
-    assert_eq!(resumed.behaviour, full.behaviour);
-    assert_eq!(metrics_without_speed(&part_dir), metrics_without_speed(&full_dir));
-    // The run's cost counts both sessions: wall time, and CPU time (which pauses do not add to).
-    let cost = |d: &std::path::Path| -> (f64, f64) {
-        let text = std::fs::read_to_string(d.join("final-eval.json")).expect("final-eval.json");
-        let doc: serde_json::Value = serde_json::from_str(&text).expect("json");
-        (doc["wall_s"].as_f64().expect("wall_s"), doc["cpu_s"].as_f64().expect("cpu_s"))
-    };
-    let (wall_s, cpu_s) = cost(&part_dir);
-    assert!(
-        wall_s > first_wall_s && cpu_s > first_cpu_s,
-        "{wall_s} {cpu_s} after {first_wall_s} {first_cpu_s}"
-    );
-    let resumed_policy = std::fs::read(part_dir.join("policy.vgep")).expect("policy");
-    assert!(resumed_policy == full_policy, "resumed actor differs from the uninterrupted one");
+        let state: toml::Value = toml::from_str(
+            &std::fs::read_to_string(part_dir.join("checkpoint/state.toml")).expect("state.toml"),
+        )
+        .expect("toml");
+        let first = |key: &str| state[key].as_float().unwrap_or_else(|| panic!("{key} in state.toml"));
+        let (first_wall_s, first_cpu_s) = (first("wall_s"), first("cpu_s"));
+        assert!(first_wall_s > 0.0 && first_cpu_s > 0.0, "{first_wall_s} {first_cpu_s}");
+        let resumed = train(&tiny_config(140), &part_dir, true, &never, &mut |_| {}).expect("resumed run");
+        assert_eq!(resumed.steps, 140);
+        assert_eq!(resumed.updates, full.updates, "stops at {stops:?}");
+        assert_eq!(resumed.behaviour, full.behaviour, "stops at {stops:?}");
+        assert_eq!(metrics_without_speed(&part_dir), metrics_without_speed(&full_dir), "stops at {stops:?}");
+        check_resumed(&part_dir, &full_dir, &full_policy, (first_wall_s, first_cpu_s));
+        let _ = std::fs::remove_dir_all(part_dir);
+    }
     check_model_selection(&full_dir, &full_policy);
-    let best =
-        |d: &std::path::Path| std::fs::read_to_string(d.join("best-eval.json")).expect("best-eval.json");
-    assert_eq!(best(&part_dir), best(&full_dir), "model selection differs after a resume");
 
     // Same seed, same run; the exported policy runs on the runtime.
     let again_dir = tempdir("again");
@@ -678,9 +676,36 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert_eq!(report.episodes, 1);
     assert!(report.mean_return.is_finite());
     assert!(report.to_json_line().starts_with("{\"episodes\":1,"));
-    for d in [full_dir, part_dir, again_dir] {
+    for d in [full_dir, again_dir] {
         let _ = std::fs::remove_dir_all(d);
     }
+}
+
+/// A run resumed to its end against the uninterrupted one (`full`): the same policy and
+/// model selection, and a cost counting both sessions (after `first` = (wall, CPU) s).
+fn check_resumed(
+    part_dir: &std::path::Path,
+    full_dir: &std::path::Path,
+    full_policy: &[u8],
+    first: (f64, f64),
+) {
+    let (first_wall_s, first_cpu_s) = first;
+    // The run's cost counts both sessions: wall time, and CPU time (which pauses do not add to).
+    let cost = |d: &std::path::Path| -> (f64, f64) {
+        let text = std::fs::read_to_string(d.join("final-eval.json")).expect("final-eval.json");
+        let doc: serde_json::Value = serde_json::from_str(&text).expect("json");
+        (doc["wall_s"].as_f64().expect("wall_s"), doc["cpu_s"].as_f64().expect("cpu_s"))
+    };
+    let (wall_s, cpu_s) = cost(part_dir);
+    assert!(
+        wall_s > first_wall_s && cpu_s > first_cpu_s,
+        "{wall_s} {cpu_s} after {first_wall_s} {first_cpu_s}"
+    );
+    let resumed_policy = std::fs::read(part_dir.join("policy.vgep")).expect("policy");
+    assert!(resumed_policy == full_policy, "resumed actor differs from the uninterrupted one");
+    let best =
+        |d: &std::path::Path| std::fs::read_to_string(d.join("best-eval.json")).expect("best-eval.json");
+    assert_eq!(best(part_dir), best(full_dir), "model selection differs after a resume");
 }
 
 #[test]

@@ -9,8 +9,9 @@ use tch::Tensor;
 use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
 
 use super::TrainError;
+use super::in_progress::{EnvInProgress, EpisodeLog, InProgress};
 use super::metrics::{TrainingObjects, Window};
-use crate::behaviour::{Behaviour, Decision, EnvController, StepContext};
+use crate::behaviour::{Behaviour, ControllerCall, Decision, EnvController, StepContext};
 use crate::learner::{Learner, mix_seed, standard_normal};
 use crate::replay::ReplayBuffer;
 use vge_controllers::{ControllerInput, IgmConfig};
@@ -41,6 +42,8 @@ struct EnvSlot {
     /// Its current observation.
     obs: [f32; OBS_DIM],
     episode: EnvEpisode,
+    /// What replays its episode so far ([`super::in_progress`]).
+    log: EpisodeLog,
     /// Its config's disturbances, which the curricula ramp up to.
     full: Disturbances,
 }
@@ -55,6 +58,8 @@ pub(super) struct Collector {
     ramp: Option<DisturbanceRamp>,
     /// Which object each env holds, for the per-object metrics.
     objects: TrainingObjects,
+    /// Env steps taken so far ([`Self::set_progress`]).
+    progress: u64,
 }
 
 /// Raises each env's random force on the object and its drop penalty (over
@@ -79,6 +84,11 @@ impl DisturbanceRamp {
             Some(_) if ramp_steps == 0 => 1.0,
             Some(done) => (done as f64 / ramp_steps as f64).min(1.0) as f32,
         }
+    }
+
+    /// The ramp as it stood at `step`.
+    fn at(&self, step: u64) -> Self {
+        Self { step, ..self.clone() }
     }
 
     /// The disturbances, out of `full`, for an episode starting now (the drop penalty ramps
@@ -111,10 +121,12 @@ impl Collector {
         let controllers = match config.controller.filter(|_| config.method.queries_controller()) {
             Some(kind) => env_configs
                 .iter()
-                .map(|e| EnvController {
-                    controller: kind.build(e, IgmConfig::default(), config.cs_config(e)),
-                    // Reseeded at each episode's start (`reset`).
-                    rng: ChaCha8Rng::seed_from_u64(0),
+                .map(|e| {
+                    EnvController::new(
+                        kind.build(e, IgmConfig::default(), config.cs_config(e)),
+                        // Reseeded at each episode's start (`reset`).
+                        ChaCha8Rng::seed_from_u64(0),
+                    )
                 })
                 .collect(),
             None => Vec::new(),
@@ -132,7 +144,13 @@ impl Collector {
             .map(|c| {
                 let full =
                     Disturbances { noise: c.noise, push: c.perturbation, drop_penalty: c.drop_penalty };
-                Ok(EnvSlot { env: Env::new(c)?, obs: [0.0; OBS_DIM], episode: EnvEpisode::default(), full })
+                Ok(EnvSlot {
+                    env: Env::new(c)?,
+                    obs: [0.0; OBS_DIM],
+                    episode: EnvEpisode::default(),
+                    log: EpisodeLog::default(),
+                    full,
+                })
             })
             .collect::<Result<_, SimError>>()?;
         Ok(Self {
@@ -142,6 +160,7 @@ impl Collector {
             max_action_rad: config.env.max_action_rad,
             seed: config.seed,
             objects: TrainingObjects::new(&config.env.objects, n),
+            progress: 0,
         })
     }
 
@@ -162,6 +181,7 @@ impl Collector {
     /// Tells the disturbance curricula how many env steps training has taken: episodes
     /// that start from now on get that step's levels.
     pub fn set_progress(&mut self, step: u64) {
+        self.progress = step;
         if let Some(ramp) = &mut self.ramp {
             ramp.step = step;
         }
@@ -183,11 +203,15 @@ impl Collector {
     ) -> Result<(), TrainError> {
         let mut seeds = vec![None; self.len()];
         for &i in which {
-            seeds[i] = Some(rng.next_u64());
+            let env_seed = rng.next_u64();
+            seeds[i] = Some(env_seed);
             let controller_seed = rng.next_u64();
             if let Some(c) = self.controllers.get_mut(i) {
                 c.rng = ChaCha8Rng::seed_from_u64(controller_seed);
+                c.calls.clear();
             }
+            self.slots[i].log =
+                EpisodeLog { env_seed, controller_seed, ramp_step: self.progress, ..EpisodeLog::default() };
             behaviour.episode_reset(i);
             if let Some(ramp) = &self.ramp {
                 let slot = &mut self.slots[i];
@@ -285,6 +309,11 @@ impl Collector {
             .collect::<Result<Vec<_>, SimError>>()?;
         let mut finished = Vec::new();
         for (i, ((r, d), slot)) in results.iter().zip(decisions).zip(&mut self.slots).enumerate() {
+            let at = u32::try_from(slot.log.actions.len()).unwrap_or(u32::MAX);
+            if let Some(c) = self.controllers.get_mut(i) {
+                slot.log.calls.extend(c.calls.drain(..).map(|call| (at, call)));
+            }
+            slot.log.actions.push(d.action);
             let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
             replay.push(&slot.obs, &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
             let episode = &mut slot.episode;
@@ -307,7 +336,163 @@ impl Collector {
         }
         Ok(finished.len() as u64)
     }
+
+    /// Every env's episode in progress, for a checkpoint that does not end them.
+    pub fn in_progress(&self, behaviour: &Behaviour) -> InProgress {
+        let envs = self
+            .slots
+            .iter()
+            .enumerate()
+            .map(|(i, s)| EnvInProgress { log: s.log.clone(), segment: behaviour.segment(i), obs: s.obs })
+            .collect();
+        InProgress { envs }
+    }
+
+    /// Puts every env back into its episode in progress at a checkpoint (in place of a
+    /// reset): the same reset, actions and controller calls again, in parallel
+    /// ([`super::in_progress`]). Returns a note per env whose replay did not arrive at the
+    /// observation saved with it (another binary or CPU model than the one that stopped): it
+    /// goes on from where the replay took it, or from a new episode where the replay ended
+    /// its episode early.
+    pub fn restore(
+        &mut self,
+        saved: &InProgress,
+        behaviour: &mut Behaviour,
+    ) -> Result<Vec<String>, TrainError> {
+        let n = self.len();
+        if saved.envs.len() != n {
+            return Err(TrainError::Resume(format!(
+                "the checkpoint holds {} envs' episodes in progress, the run has {n} envs",
+                saved.envs.len()
+            )));
+        }
+        for (i, e) in saved.envs.iter().enumerate() {
+            if !e.log.calls.is_empty() && self.controllers.get(i).is_none() {
+                return Err(TrainError::Resume(format!(
+                    "env {i}'s episode in progress has controller calls, and this run has no controller"
+                )));
+            }
+            if let Some(ramp) = &self.ramp {
+                let slot = &mut self.slots[i];
+                let d = ramp.at(e.log.ramp_step).levels(slot.full);
+                slot.env.set_disturbances(d.noise, d.push)?;
+                slot.env.set_drop_penalty(d.drop_penalty)?;
+            }
+            if let Some(c) = self.controllers.get_mut(i) {
+                c.rng = ChaCha8Rng::seed_from_u64(e.log.controller_seed);
+                c.calls.clear();
+            }
+            behaviour.set_segment(i, e.segment);
+        }
+        let mut controllers: Vec<Option<&mut EnvController>> =
+            self.controllers.iter_mut().map(Some).collect();
+        controllers.resize_with(n, || None);
+        let replayed = self
+            .slots
+            .par_iter_mut()
+            .zip(saved.envs.par_iter())
+            .zip(controllers.into_par_iter())
+            .enumerate()
+            .map(|(i, ((slot, e), controller))| replay(i, slot, e, controller))
+            .collect::<Result<Vec<_>, TrainError>>()?;
+        let mut notes = Vec::new();
+        for (i, r) in replayed.into_iter().enumerate() {
+            let steps = saved.envs[i].log.actions.len();
+            match r {
+                Replayed::Same => {}
+                Replayed::Different => notes.push(format!(
+                    "env {i}'s episode in progress ({steps} steps) replayed to another state than the \
+                     one it stopped in (another vge binary or CPU model?): the run goes on from the \
+                     replayed state, no longer bit for bit"
+                )),
+                Replayed::Ended(k) => {
+                    behaviour.episode_reset(i);
+                    notes.push(format!(
+                        "env {i}'s episode in progress ended at step {k} of {steps} when replayed \
+                         (another vge binary or CPU model?): it starts a new episode, and the run is \
+                         no longer bit for bit"
+                    ));
+                }
+            }
+        }
+        Ok(notes)
+    }
 }
+
+/// How an env's replay went.
+enum Replayed {
+    /// It arrived at the saved observation, bit for bit.
+    Same,
+    /// It arrived elsewhere.
+    Different,
+    /// Its episode ended at this step of the replay; the env starts a new one.
+    Ended(usize),
+}
+
+/// Env `i`'s episode made again from its log: its reset, then before each step the
+/// controller calls made there (on the state that step starts from), then the step.
+fn replay(
+    i: usize,
+    slot: &mut EnvSlot,
+    saved: &EnvInProgress,
+    mut controller: Option<&mut EnvController>,
+) -> Result<Replayed, TrainError> {
+    let log = &saved.log;
+    let bad = |what: String| TrainError::Resume(format!("env {i}'s episode in progress: {what}"));
+    slot.obs = slot.env.reset(log.env_seed)?.0;
+    slot.episode =
+        EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::with_capacity(log.actions.len()) };
+    let mut calls = log.calls.iter().peekable();
+    for (k, action) in log.actions.iter().enumerate() {
+        while let Some(&(_, call)) = calls.next_if(|(at, _)| *at as usize == k) {
+            let c = controller
+                .as_deref_mut()
+                .ok_or_else(|| bad("a controller call without a controller".into()))?;
+            let input = slot
+                .env
+                .privileged()
+                .map(ControllerInput::from_privileged)
+                .ok_or_else(|| bad(format!("no state for the controller at step {k}")))?;
+            match call {
+                ControllerCall::Reset => c.controller.reset(&mut c.rng),
+                // Its action was taken or not when it was made; what matters here is the
+                // state the call leaves behind (a switching plan, the generator).
+                ControllerCall::Act => {
+                    let _ = c.controller.act(&input, &mut c.rng);
+                }
+            }
+        }
+        if slot.episode.rewards.len() != k {
+            return Err(bad(format!("step {k} out of order")));
+        }
+        let r = slot.env.step(action)?;
+        slot.episode.tracker.record(r.reward, r.info.object_rotation_z_rad, r.info.tip_contacts);
+        slot.episode.rewards.push(r.reward);
+        slot.obs = r.obs;
+        if r.terminated || r.truncated {
+            // The trainer's generator must not move here (that would change every draw after
+            // it): the new episode's seeds come from the old one's.
+            let (env_seed, controller_seed) = (log.env_seed ^ REPLAY_ENDED_SALT, log.controller_seed);
+            slot.obs = slot.env.reset(env_seed)?.0;
+            slot.episode = EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::new() };
+            if let Some(c) = controller {
+                c.rng = ChaCha8Rng::seed_from_u64(controller_seed);
+            }
+            slot.log =
+                EpisodeLog { env_seed, controller_seed, ramp_step: log.ramp_step, ..EpisodeLog::default() };
+            return Ok(Replayed::Ended(k + 1));
+        }
+    }
+    if calls.next().is_some() {
+        return Err(bad("controller calls past its last step".into()));
+    }
+    slot.log = log.clone();
+    let same = slot.obs.iter().zip(&saved.obs).all(|(a, b)| a.to_bits() == b.to_bits());
+    Ok(if same { Replayed::Same } else { Replayed::Different })
+}
+
+/// Salt of the seed of the new episode an env starts when its replayed one ended early.
+const REPLAY_ENDED_SALT: u64 = 0x5eed_e9d5;
 
 #[cfg(test)]
 mod tests {

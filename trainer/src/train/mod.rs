@@ -6,6 +6,7 @@
 //! own module: `collector` (the envs, their episodes, acting and storing transitions),
 //! `metrics` (the window behind each `metrics.csv` row), `run_folder` (the files a run
 //! writes as it goes, the checkpoint), `state` (`state.toml`: counters and the generator),
+//! `in_progress` (`episodes.bin`: what replays the envs' episodes through a stop),
 //! `evaluation` (periodic and final evaluations, model selection), `clock` (the run's wall
 //! and CPU time across sessions).
 //!
@@ -19,7 +20,8 @@
 //! - `eval.csv`: deterministic evaluations of the actor every `run.eval_interval` steps;
 //! - `checkpoint/`: `state.toml` (counters, generator state, metric window), `actor.ot`,
 //!   `critic.ot`, `target.ot`, `target_actor.ot` (TD3), `optim.ot` (Adam moments, α),
-//!   `replay.bin` (optional), and `manifest.json` (every file's length and CRC-32). It is
+//!   `replay.bin` (optional), `episodes.bin` (the envs' episodes in progress, when it keeps
+//!   them: a stop, the end), and `manifest.json` (every file's length and CRC-32). It is
 //!   written to `checkpoint.tmp/` and renamed, so a SIGKILL leaves the previous one whole, and
 //!   a resume verifies every file against the manifest first: a damaged, truncated or
 //!   unverifiable checkpoint is refused with the file's name, never resumed
@@ -41,13 +43,16 @@
 //! samples per step, updates per update index), so libtorch's generator state need not be
 //! saved. Physics state cannot be saved, so a checkpoint ends every env's episode (a
 //! truncation: bootstrapped, not terminal) and all envs reset from the generator right after
-//! it, in an uninterrupted run exactly as in a resumed one. Resuming from a periodic
-//! checkpoint therefore reproduces the uninterrupted run bit for bit (tested). A stop
-//! (Ctrl-C) checkpoints at the current step: the resumed run is then the run whose
-//! checkpoint boundary fell at that step.
+//! it, in an uninterrupted run exactly as in a resumed one. A checkpoint written by a stop
+//! (Ctrl-C, SIGTERM) or at the end is the same state by the same path, but the envs'
+//! episodes go on through it: it also saves what replays each env's episode so far (its
+//! reset seed, actions and controller calls, `in_progress`), and a resume makes them again.
+//! Resuming from either kind reproduces the uninterrupted run bit for bit (tested), whatever
+//! step the stop came at.
 
 mod clock;
 mod collector;
+mod in_progress;
 mod metrics;
 mod run_folder;
 mod state;
@@ -311,6 +316,21 @@ fn init_networks(config: &Config, source: &Path, learner: &mut dyn Learner) -> R
     Ok(crate::checkpoint::open(source)?.load_networks(learner)?)
 }
 
+/// What a checkpoint does with the envs' episodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Episodes {
+    /// They end at it: every env resets right after it, in this run as in a resumed one.
+    EndHere,
+    /// They go on: the checkpoint saves what replays them (`in_progress`).
+    GoOn,
+}
+
+/// A line on stderr that is dropped where stderr is gone (a closed pipe): training goes on.
+fn note_line(line: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "{line}");
+}
+
 /// A phase of [`PhaseTimes`].
 #[derive(Debug, Clone, Copy)]
 enum Phase {
@@ -379,9 +399,11 @@ impl<'a> Trainer<'a> {
         let mut collector = Collector::new(config)?;
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let (mut c, mut before) = (Counters::default(), RunCost { wall_s: 0.0, cpu_s: Some(0.0) });
+        let mut in_progress = None;
         if resume {
             // Every file is checked against the manifest before any is read.
-            let state = run_folder::load_checkpoint(out_dir, learner.as_mut(), &mut replay)?;
+            let (state, episodes) = run_folder::load_checkpoint(out_dir, learner.as_mut(), &mut replay)?;
+            in_progress = episodes;
             rng = state.rng()?;
             c = state.counters();
             behaviour.stats = state.behaviour_stats();
@@ -401,7 +423,17 @@ impl<'a> Trainer<'a> {
         };
         let opened = RunFolder::open(out_dir, config, c.step, resume, lock).and_then(|folder| {
             collector.set_progress(c.step);
-            collector.reset_all(&mut behaviour, &mut rng)?;
+            match &in_progress {
+                // A checkpoint that kept its episodes (a stop, the end): every env goes on
+                // with the episode it was in, as it would have without the stop.
+                Some(saved) => {
+                    for note in collector.restore(saved, &mut behaviour)? {
+                        note_line(&format!("vge: note: {note}"));
+                    }
+                }
+                // A periodic checkpoint: every env resets right after it (module docs).
+                None => collector.reset_all(&mut behaviour, &mut rng)?,
+            }
             Ok(folder)
         });
         let folder = match opened {
@@ -530,7 +562,7 @@ impl<'a> Trainer<'a> {
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
             self.lap(Phase::Sim);
-            self.checkpoint()?;
+            self.checkpoint(Episodes::EndHere)?;
             self.lap(Phase::Checkpoint);
             // A checkpoint ends every episode (module docs).
             self.collector.set_progress(step);
@@ -540,7 +572,9 @@ impl<'a> Trainer<'a> {
         Ok(())
     }
 
-    fn checkpoint(&mut self) -> Result<(), TrainError> {
+    /// Saves the run's whole state at this step: one path for the periodic checkpoints, a
+    /// stop and the end, which differ only in what becomes of the envs' episodes.
+    fn checkpoint(&mut self, episodes: Episodes) -> Result<(), TrainError> {
         let state = TrainState::capture(
             &self.c,
             &self.rng,
@@ -549,7 +583,11 @@ impl<'a> Trainer<'a> {
             self.config.run.save_replay,
             self.cost.now(),
         );
-        self.folder.checkpoint(self.learner.as_ref(), &self.replay, &state)?;
+        let in_progress = match episodes {
+            Episodes::EndHere => None,
+            Episodes::GoOn => Some(self.collector.in_progress(&self.behaviour).to_bytes()),
+        };
+        self.folder.checkpoint(self.learner.as_ref(), &self.replay, &state, in_progress.as_deref())?;
         self.checkpointed_at = Some(self.c.step);
         Ok(())
     }
@@ -558,9 +596,11 @@ impl<'a> Trainer<'a> {
     /// evaluations.
     fn finish(mut self, stopped: bool) -> Result<TrainSummary, TrainError> {
         // A checkpoint taken at this very step holds the state before the env resets that
-        // followed it: keep it, so that a resume redoes those resets exactly.
+        // followed it: keep it, so that a resume redoes those resets exactly. Any other step
+        // is mid-episode for the envs: the checkpoint keeps their episodes, so that a resume
+        // (after a stop, or with more steps after the end) goes on as if nothing had stopped.
         if self.checkpointed_at != Some(self.c.step)
-            && let Err(e) = self.checkpoint()
+            && let Err(e) = self.checkpoint(Episodes::GoOn)
         {
             self.abandon_if_unsaved();
             return Err(e);

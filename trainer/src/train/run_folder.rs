@@ -11,6 +11,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use super::in_progress::InProgress;
 use super::metrics::{METRICS_HEADER, TrainingObjects, csv_fields};
 use super::state::TrainState;
 use super::{TrainError, io_err};
@@ -20,6 +21,7 @@ use crate::replay::ReplayBuffer;
 use crate::tensorboard::EventWriter;
 use vge_lab::atomic_file;
 use vge_lab::config::Config;
+use vge_lab::read_limits;
 use vge_lab::run_lock::RunLock;
 
 pub use vge_lab::run_dir::RUN_FILES;
@@ -92,7 +94,8 @@ impl RunFolder {
                 // Rows are appended to it with its header when the file is new.
                 std::fs::remove_file(&eval_path).map_err(io_err(&eval_path))?;
             }
-            let stored = std::fs::read_to_string(&config_path).map_err(io_err(&config_path))?;
+            let stored = read_limits::read_to_string_bounded(&config_path, read_limits::MAX_CONFIG_FILE_LEN)
+                .map_err(io_err(&config_path))?;
             if stored != effective {
                 atomic_file::write(&config_path, effective.as_bytes()).map_err(io_err(&config_path))?;
             }
@@ -141,14 +144,16 @@ impl RunFolder {
         self.events.scalars(step, &scalars).map_err(io_err(self.events.path()))
     }
 
-    /// Saves a checkpoint ([`crate::checkpoint::save`]) of `learner`, `state` and, when
-    /// `state.has_replay`, `replay`. The rows logged up to it are synced to disk first: a
-    /// resume from it keeps them.
+    /// Saves a checkpoint ([`crate::checkpoint::save`]) of `learner`, `state`, when
+    /// `state.has_replay` `replay`, and the envs' episodes in progress when they go on
+    /// through it. The rows logged up to it are synced to disk first: a resume from it keeps
+    /// them.
     pub fn checkpoint(
         &self,
         learner: &dyn Learner,
         replay: &ReplayBuffer,
         state: &TrainState,
+        episodes: Option<&[u8]>,
     ) -> Result<(), TrainError> {
         let path = &self.metrics_path;
         self.metrics.get_ref().sync_data().map_err(io_err(path))?;
@@ -160,28 +165,35 @@ impl RunFolder {
         }
         let text =
             toml::to_string(state).map_err(|e| TrainError::Resume(format!("serialising state: {e}")))?;
-        Ok(checkpoint::save(&self.dir, learner, state.has_replay.then_some(replay), &text)?)
+        Ok(checkpoint::save(&self.dir, learner, state.has_replay.then_some(replay), &text, episodes)?)
     }
 }
 
 /// The checkpoint of `dir`, verified ([`crate::checkpoint::open`]), loaded into `learner` and
-/// `replay`; returns its state.
+/// `replay`; returns its state and, when it kept them, the envs' episodes in progress.
 pub(super) fn load_checkpoint(
     dir: &Path,
     learner: &mut dyn Learner,
     replay: &mut ReplayBuffer,
-) -> Result<TrainState, TrainError> {
+) -> Result<(TrainState, Option<InProgress>), TrainError> {
     let ckpt = checkpoint::open(dir)?;
     let state: TrainState = toml::from_str(ckpt.state_toml()).map_err(|e| {
         TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::STATE_FILE).display()))
     })?;
+    let episodes = match ckpt.episodes()? {
+        Some(bytes) => Some(InProgress::from_bytes(&bytes).map_err(|e| {
+            TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::EPISODES_FILE).display()))
+        })?),
+        None => None,
+    };
     ckpt.load(learner, state.has_replay.then_some(replay))?;
-    Ok(state)
+    Ok((state, episodes))
 }
 
 /// The first line of the file at `path`, without its line end.
 fn first_line(path: &Path) -> Result<String, TrainError> {
-    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    let text =
+        read_limits::read_to_string_bounded(path, read_limits::MAX_TABLE_FILE_LEN).map_err(io_err(path))?;
     Ok(text.lines().next().unwrap_or("").to_owned())
 }
 
@@ -193,7 +205,7 @@ fn first_line(path: &Path) -> Result<String, TrainError> {
 /// appended to, it would not read as a table. Returns false when the file holds no complete
 /// line (missing, or a header cut short): it holds no row, and a new one must be started.
 fn resume_csv(path: &Path, step: u64) -> Result<bool, TrainError> {
-    let text = match std::fs::read_to_string(path) {
+    let text = match read_limits::read_to_string_bounded(path, read_limits::MAX_TABLE_FILE_LEN) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
         Err(e) => return Err(io_err(path)(e)),
@@ -201,7 +213,10 @@ fn resume_csv(path: &Path, step: u64) -> Result<bool, TrainError> {
     if !text.contains('\n') {
         if step > 0 && text.is_empty() {
             // Emptied by a vge before this one, killed while rewriting it: the rows are gone.
-            eprintln!("vge: note: {} was empty; it starts again at step {step}", path.display());
+            super::note_line(&format!(
+                "vge: note: {} was empty; it starts again at step {step}",
+                path.display()
+            ));
         }
         return Ok(false);
     }
