@@ -1,5 +1,8 @@
 //! A closed stdout or stderr ends `vge` quietly with status 0, as it does command-line tools:
-//! `vge inspect policies/cube.vgep | head -1` succeeds, also under `set -o pipefail`.
+//! `vge inspect policies/cube.vgep | head -1` succeeds, also under `set -o pipefail`. Except
+//! where the work outlives its output: `vge train`, `vge sweep` and `vge score` print with
+//! [`outln!`] and [`errln!`], which drop a line that cannot be written, and go on to the end
+//! of their runs (their folders hold what they report); they call [`keep_going`].
 //!
 //! Rust ignores SIGPIPE, so writing to a pipe whose reader has gone fails with EPIPE, and the
 //! print macros panic on that ("failed printing to stdout: Broken pipe (os error 32)").
@@ -10,12 +13,40 @@
 
 use std::any::Any;
 use std::io;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// `println!` for work that must outlive its output: a line that cannot be written (a pipe
+/// whose reader has gone) is dropped, and the work goes on.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
+/// `eprintln!` as [`outln!`]: a line that cannot be written is dropped.
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// Set by commands whose work outlives their output ([`keep_going`]).
+static KEEP_GOING: AtomicBool = AtomicBool::new(false);
+
+/// From now on a print macro meeting a closed pipe is a bug (these commands print with
+/// [`outln!`] and [`errln!`]), reported as the panic it is, never as a quiet success: a run
+/// that exited 0 halfway would look finished.
+pub fn keep_going() {
+    KEEP_GOING.store(true, Ordering::SeqCst);
+}
 
 /// Installs the hook; call first thing in `main`.
 pub fn end_quietly_when_closed() {
     let previous = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if is_closed_output(info.payload()) {
+        if is_closed_output(info.payload()) && !KEEP_GOING.load(Ordering::SeqCst) {
             std::process::exit(0);
         }
         previous(info);

@@ -1,9 +1,11 @@
 //! `vge`: train, evaluate, export and inspect finger-gaiting policies. This file parses the
 //! command line and dispatches; each subcommand is a module of `commands`.
 
+#[macro_use]
 mod closed_output;
 mod commands;
 mod cpu_use;
+mod stop;
 
 use std::io::Write as _;
 use std::process::ExitCode;
@@ -18,7 +20,10 @@ use commands::{
 /// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
 #[derive(Debug, Parser)]
 #[command(version, about, long_about = None)]
-#[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0.")]
+#[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0, \
+but for `vge train`, `vge sweep` and `vge score`, which drop the lines and go on to the end of their \
+runs. Exit status: 0 done, 1 an error, 128 + a signal's number (130 SIGINT, 143 SIGTERM, 129 SIGHUP) \
+when a signal stopped training with its checkpoint saved.")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -56,12 +61,17 @@ pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
 
 fn main() -> ExitCode {
     closed_output::end_quietly_when_closed();
+    let command = Cli::parse().command;
+    if matches!(command, Command::Train(_) | Command::Sweep(_) | Command::Score(_)) {
+        // Runs that take hours finish whether or not anyone still reads their output.
+        closed_output::keep_going();
+    }
     // Before libtorch allocates anything; a refusal only costs speed (vge_trainer::heap).
     #[cfg(feature = "train")]
     if !vge_trainer::heap::keep_freed_memory() {
-        eprintln!("vge: note: glibc heap settings not applied; updates may run slower");
+        errln!("vge: note: glibc heap settings not applied; updates may run slower");
     }
-    let result = match Cli::parse().command {
+    let result = match command {
         Command::Train(args) => train::run(args),
         Command::Sweep(args) => sweep::run(args),
         Command::Plot(args) => plot::run(args),
@@ -80,6 +90,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            if let Some(stopped) = e.downcast_ref::<stop::Stopped>() {
+                // The command said where it stopped and how to go on.
+                return ExitCode::from(stopped.exit_code());
+            }
             // Not eprintln!: with stderr closed the failure must still exit 1, not 0.
             let _ = writeln!(std::io::stderr(), "vge: {}", error_text(&e));
             ExitCode::FAILURE

@@ -344,13 +344,14 @@ fn sweep_jobs_forwards_sigterm_so_every_running_seed_checkpoints() {
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM).expect("SIGTERM");
     let end = sweep.wait_with_output().expect("vge sweep ends");
     let stdout = text(&end.stdout);
-    assert!(end.status.success(), "{stdout}{}", text(&end.stderr));
+    // Stopped, not finished: 128 + SIGTERM, as each stopped seed exits.
+    assert_eq!(end.status.code(), Some(143), "{stdout}{}", text(&end.stderr));
     for seed in [0, 1] {
         let run = out.join(format!("seed-{seed}"));
         let log = std::fs::read_to_string(run.join("train.log")).expect("train.log");
         let step = vge_lab::sweep::checkpoint_step(&run).expect("checkpoint");
         assert!(log.contains(&format!("stopped at step {step}: checkpoint saved")), "{log}");
-        assert!(stdout.contains(&format!("seed {seed}: stopped at step {step}")), "{stdout}");
+        assert!(stdout.contains(&format!("seed {seed}: stopped at step {step} (exit 143)")), "{stdout}");
     }
     assert!(stdout.contains("seed 2: not started"), "{stdout}");
     let _ = std::fs::remove_dir_all(&root);

@@ -4,7 +4,10 @@
 //! Each printing subcommand runs with its stdout (or stderr) a pipe whose reader was closed
 //! before it started, so its first write meets EPIPE every time; the same command with the
 //! pipe open shows it does print there (a command that printed nothing would pass vacuously).
-//! The episode counts are tiny: this is about the output, not the work.
+//! The episode counts are tiny: this is about the output, not the work. The commands that
+//! train or score are the exception: they drop their output and finish their work.
+
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -166,4 +169,69 @@ fn notes_on_a_closed_stderr_end_quietly_and_an_error_still_fails() {
         let (code, _) = run_closed(&["inspect".to_owned(), missing.clone()], Stream::Stderr);
         assert_eq!(code, Some(1), "a failure with stderr closed still exits 1");
     }
+}
+
+/// `configs/cube-fg-vge.toml` made a run of seconds (`common::TINY`), `steps` long.
+fn tiny_train_args(out: &str, steps: u64) -> Vec<String> {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/cube-fg-vge.toml");
+    let mut args: Vec<String> = ["train", "--config", config.to_str().expect("utf-8"), "--out", out]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    args.extend(["--steps".to_owned(), steps.to_string()]);
+    args.extend(common::tiny_args());
+    args.extend(["--set".to_owned(), "sac.threads=1".to_owned()]);
+    args
+}
+
+fn finished(run: &Path) -> bool {
+    vge_lab::sweep::check_finished(run).is_ok()
+}
+
+/// Training outlives its output: with the reader of its output gone (`| head -1`, or closed
+/// before it started) `vge train` prints nothing more, trains to its end and writes its
+/// policy, and exits 0; so do `vge sweep` for every seed and `vge score`.
+#[test]
+fn train_sweep_and_score_finish_their_runs_when_their_reader_is_gone() {
+    let dir = TempDir::new("train");
+    let vge_bin = env!("CARGO_BIN_EXE_vge");
+    // As a user types it: the first line, then head exits and the pipe has no reader.
+    let run = dir.path("head");
+    let quoted: Vec<String> = tiny_train_args(&run, 300).iter().map(|a| format!("'{a}'")).collect();
+    let script = format!("set -o pipefail; '{vge_bin}' {} 2>&1 | head -1", quoted.join(" "));
+    let out = Command::new("bash").args(["-c", &script]).output().expect("bash runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{:?}: {stdout}{}", out.status, String::from_utf8_lossy(&out.stderr));
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    assert!(finished(Path::new(&run)), "`vge train | head -1` did not finish its run");
+
+    for closed in [Stream::Stdout, Stream::Stderr] {
+        let run = dir.path(&format!("closed-{closed:?}"));
+        let (code, other) = run_closed(&tiny_train_args(&run, 200), closed);
+        assert_eq!(code, Some(0), "train with {closed:?} closed: {other}");
+        assert!(!other.contains("panicked"), "{other}");
+        assert!(finished(Path::new(&run)), "train with {closed:?} closed did not finish its run");
+    }
+
+    // Seeds one after the other in this process: both finish.
+    let sweep = dir.path("sweep");
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/cube-fg-vge.toml");
+    let mut args: Vec<String> = ["sweep", "--config", config.to_str().expect("utf-8"), "--seeds", "0..2"]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    args.extend(["--out".to_owned(), sweep.clone(), "--steps".to_owned(), "200".to_owned()]);
+    args.extend(common::tiny_args());
+    let (code, other) = run_closed(&args, Stream::Stderr);
+    assert_eq!(code, Some(0), "sweep with stderr closed: {other}");
+    for seed in 0..2 {
+        assert!(finished(&Path::new(&sweep).join(format!("seed-{seed}"))), "seed {seed} did not finish");
+    }
+
+    // Scoring a finished run writes its score.json with nobody reading.
+    let head_run = Path::new(&run);
+    let score = ["score".to_owned(), run.clone(), "--episodes".to_owned(), "2".to_owned()];
+    let (code, other) = run_closed(&score, Stream::Stdout);
+    assert_eq!(code, Some(0), "score with stdout closed: {other}");
+    assert!(head_run.join("score.json").exists(), "vge score wrote no score.json");
 }

@@ -101,9 +101,26 @@ pub fn check_finished(dir: &Path) -> Result<(), String> {
 /// [`crate::run_dir::RunDir::resume_checkpoint`]), for messages: the checkpoint is not verified here.
 pub fn checkpoint_step(dir: &Path) -> Option<u64> {
     let ckpt = crate::run_dir::RunDir::new(dir).resume_checkpoint()?;
-    let text = std::fs::read_to_string(ckpt.join(crate::run_dir::CHECKPOINT_STATE)).ok()?;
+    let path = ckpt.join(crate::run_dir::CHECKPOINT_STATE);
+    let text =
+        crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN).ok()?;
     let table: toml::Table = toml::from_str(&text).ok()?;
     u64::try_from(table.get("step")?.as_integer()?).ok()
+}
+
+/// The exit status of a `vge train` or `vge sweep` that a signal stopped (its checkpoint
+/// saved): 128 + the signal's number, as a shell reports a process that the signal ended
+/// (SIGINT 130, SIGTERM 143, SIGHUP 129). Never 0: a stopped run is not a finished one.
+pub fn stopped_exit_code(signal: i32) -> u8 {
+    u8::try_from(128 + signal.clamp(1, 127)).unwrap_or(u8::MAX)
+}
+
+/// The signal whose stop `code` reports ([`stopped_exit_code`]) for the signals `vge train`
+/// stops on: SIGHUP, SIGINT, SIGTERM.
+pub fn stopped_by(code: i32) -> Option<i32> {
+    [nix::libc::SIGHUP, nix::libc::SIGINT, nix::libc::SIGTERM]
+        .into_iter()
+        .find(|&signal| i32::from(stopped_exit_code(signal)) == code)
 }
 
 /// True when the overrides set `sac.threads` (the sweep then leaves the thread count alone).
@@ -167,8 +184,9 @@ pub enum Outcome {
     Skipped,
     /// Trained to the end: `policy.vgep` written.
     Done,
-    /// Stopped by a signal at this step with a checkpoint; the next sweep resumes it.
-    Stopped(Option<u64>),
+    /// Stopped by a signal at this step with a checkpoint, exiting with this status
+    /// ([`stopped_exit_code`]); the next sweep resumes it.
+    Stopped { step: Option<u64>, code: i32 },
     /// The child failed (or could not start): why, and its log.
     Failed { why: String, log: PathBuf },
     /// The sweep was stopped before this seed's turn.
@@ -265,7 +283,8 @@ fn spawn(exe: &Path, sweep: &Sweep, seed: u64, opts: &Parallel) -> Result<Job, S
     Ok(Job { seed, child })
 }
 
-/// SIGTERM: what `vge train` takes as "checkpoint and exit", like Ctrl-C.
+/// SIGTERM: what `vge train` takes as "checkpoint and exit", like Ctrl-C (it then exits
+/// with [`stopped_exit_code`]).
 fn terminate(job: &Job) {
     use nix::sys::signal::{Signal, kill};
     use nix::unistd::Pid;
@@ -281,8 +300,7 @@ fn reap(running: &mut Vec<Job>, sweep: &Sweep) -> Vec<(u64, Outcome)> {
     running.retain_mut(|job| {
         let outcome = match job.child.try_wait() {
             Ok(None) => return true,
-            Ok(Some(status)) if status.success() => finished(&sweep.seed_dir(job.seed)),
-            Ok(Some(status)) => Outcome::Failed { why: status.to_string(), log: log_path(sweep, job.seed) },
+            Ok(Some(status)) => how_it_ended(&sweep.seed_dir(job.seed), status, &log_path(sweep, job.seed)),
             Err(e) => Outcome::Failed { why: format!("waiting for it: {e}"), log: log_path(sweep, job.seed) },
         };
         ended.push((job.seed, outcome));
@@ -291,9 +309,20 @@ fn reap(running: &mut Vec<Job>, sweep: &Sweep) -> Vec<(u64, Outcome)> {
     ended
 }
 
-/// A child that exited with success either finished or was stopped with a checkpoint.
-fn finished(dir: &Path) -> Outcome {
-    if check_finished(dir).is_ok() { Outcome::Done } else { Outcome::Stopped(checkpoint_step(dir)) }
+/// How a child that exited with `status` ended: finished (0, and its run reads back whole),
+/// stopped by a signal with its checkpoint ([`stopped_exit_code`]), or failed.
+fn how_it_ended(dir: &Path, status: std::process::ExitStatus, log: &Path) -> Outcome {
+    let failed = |why: String| Outcome::Failed { why, log: log.to_owned() };
+    match status.code() {
+        Some(0) => match check_finished(dir) {
+            Ok(()) => Outcome::Done,
+            Err(e) => failed(format!("it exited 0 but its run is not finished: {e}")),
+        },
+        Some(code) if stopped_by(code).is_some() && checkpoint_step(dir).is_some() => {
+            Outcome::Stopped { step: checkpoint_step(dir), code }
+        }
+        _ => failed(status.to_string()),
+    }
 }
 
 /// `seed 3: 120000/1000000 steps, 85 steps/s, return 12.3, success 30% at 100000`, from the
@@ -302,7 +331,9 @@ fn finished(dir: &Path) -> Outcome {
 /// stderr holds a progress bar only on a terminal, so the files are what every run has.
 pub fn progress_line(dir: &Path, seed: u64, steps: Option<u64>) -> String {
     let from_config = || {
-        let text = std::fs::read_to_string(dir.join(crate::run_dir::CONFIG)).ok()?;
+        let path = dir.join(crate::run_dir::CONFIG);
+        let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
+            .ok()?;
         u64::try_from(text.parse::<toml::Table>().ok()?.get("total_steps")?.as_integer()?).ok()
     };
     let total_steps = steps.or_else(from_config);
@@ -347,7 +378,8 @@ struct MetricsRow {
 /// The named columns of the last complete row of the CSV file `path` (a row being written
 /// has no newline yet).
 fn last_row(path: &Path, names: &[&str]) -> Option<Vec<String>> {
-    let text = std::fs::read_to_string(path).ok()?;
+    let text =
+        crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_TABLE_FILE_LEN).ok()?;
     let complete = &text[..text.rfind('\n')?];
     let mut lines = complete.lines();
     let header: Vec<&str> = lines.next()?.split(',').collect();
@@ -375,7 +407,9 @@ fn last_success(dir: &Path) -> Option<(u64, f64)> {
 
 /// The final policy's success rate and whether the seed learned (`final-eval.json`).
 fn final_success(dir: &Path) -> Option<(f64, bool)> {
-    let text = std::fs::read_to_string(dir.join(crate::run_dir::FINAL_EVAL)).ok()?;
+    let path = dir.join(crate::run_dir::FINAL_EVAL);
+    let text =
+        crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN).ok()?;
     let doc: serde_json::Value = serde_json::from_str(&text).ok()?;
     Some((doc.get("success_rate")?.as_f64()?, doc.get("learned")?.as_bool()?))
 }
@@ -401,8 +435,8 @@ pub fn summary_line(sweep: &Sweep, seed: u64, outcome: &Outcome) -> String {
             ),
             None => format!("seed {seed}: done; {}", dir.join(crate::run_dir::POLICY).display()),
         },
-        Outcome::Stopped(step) => format!(
-            "seed {seed}: stopped at step {}, checkpoint saved; the same sweep again resumes it",
+        Outcome::Stopped { step, code } => format!(
+            "seed {seed}: stopped at step {} (exit {code}), checkpoint saved; the same sweep again resumes it",
             step.map_or_else(|| "?".to_owned(), |s| s.to_string())
         ),
         Outcome::Failed { why, log } => format!("seed {seed}: FAILED ({why}); log {}", log.display()),
@@ -527,6 +561,12 @@ pub fn sbatch_script(
         "# SIGTERM to vge {SIGNAL_LEAD_S} s before the time limit: it writes a checkpoint and exits."
     ));
     line(format!("#SBATCH --signal=TERM@{SIGNAL_LEAD_S}"));
+    // The task's exit status is vge's (exec): never 0 for a seed that is not finished.
+    line(format!(
+        "# Exit status: 0 the seed finished; {} stopped by SIGTERM with its checkpoint (resubmit, or",
+        stopped_exit_code(nix::libc::SIGTERM)
+    ));
+    line("# RequeueExit in slurm.conf, to resume it); 1 an error (see the log).".into());
     line("set -euo pipefail".into());
     line("seed=$SLURM_ARRAY_TASK_ID".into());
     line(format!("run={d}/seed-$seed"));
@@ -587,7 +627,7 @@ fn copy_config(from: &Path, to: &Path) -> Result<(), SweepError> {
     let text = toml::to_string(&merged)
         .map_err(|e| SweepError::Invalid(format!("{}: {e}", from.display())))?
         .into_bytes();
-    match std::fs::read(to) {
+    match crate::read_limits::read_bounded(to, crate::read_limits::MAX_CONFIG_FILE_LEN) {
         Ok(existing) if existing == text => Ok(()),
         Ok(_) => Err(SweepError::OtherConfig(to.display().to_string())),
         Err(_) => crate::atomic_file::write(to, &text).map_err(io_err(to)),

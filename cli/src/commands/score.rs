@@ -78,7 +78,7 @@ fn score(
         let mut last_shown = std::time::Instant::now();
         let mut show = |p: &vge_lab::score::ScoreProgress| {
             if p.done == p.total || last_shown.elapsed().as_secs_f64() >= 10.0 {
-                eprintln!(
+                errln!(
                     "vge score: run {}/{} {}: {} episodes of {} ({}), {:.0} s",
                     i + 1,
                     runs.len(),
@@ -94,7 +94,7 @@ fn score(
         match pool.install(|| score_run(dir, &options, &mut show)) {
             Ok((outcome, notes)) => {
                 for note in notes {
-                    eprintln!("vge score: {}: {note}", dir.display());
+                    errln!("vge score: {}: {note}", dir.display());
                 }
                 let (verb, s) = match &outcome {
                     ScoreOutcome::Scored(s) => ("scored", s),
@@ -104,7 +104,7 @@ fn score(
                     s.selected.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
                 let last =
                     s.last_snapshots.as_ref().map_or("-".to_owned(), |p| format!("{:.2}", p.success_rate));
-                println!(
+                outln!(
                     "{}: {verb}: success on {} held-out episodes: selected {selected}, final {:.2}, last snapshots {last} ({:.0} s)",
                     dir.display(),
                     s.episodes,
@@ -118,12 +118,12 @@ fn score(
                         let sel = selected
                             .and_then(|p| p.0.get(k))
                             .map_or("-".to_owned(), |(_, f)| format!("{:.2}", f.success_rate));
-                        println!("  {object}: selected {sel}, final {:.2}", f.success_rate);
+                        outln!("  {object}: selected {sel}, final {:.2}", f.success_rate);
                     }
                 }
             }
             Err(e) => {
-                eprintln!("vge score: {e}");
+                errln!("vge score: {e}");
                 failed.push(dir.display().to_string());
             }
         }

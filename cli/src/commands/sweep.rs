@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 
 #[cfg(feature = "train")]
-use super::train::{stop_on_signal, train};
+use super::train::{stopped_error, train};
 
 /// Train one config for several seeds, one run directory each (DIR/seed-N)
 ///
@@ -18,8 +18,13 @@ use super::train::{stop_on_signal, train};
 /// Three ways to run the seeds: one after the other in this process (the default);
 /// `--jobs N` side by side as N `vge train` processes, each logging to
 /// DIR/seed-N/train.log, with a progress line per seed every 30 s and a summary; or
-/// `--slurm`, a Slurm array job with one task per seed (docs/cluster.md). Ctrl-C or
-/// SIGTERM makes every running seed write a checkpoint and exit.
+/// `--slurm`, a Slurm array job with one task per seed (docs/cluster.md).
+///
+/// Ctrl-C, SIGTERM or SIGHUP makes every running seed write a checkpoint and exit, and the
+/// sweep exits with 130, 143 or 129 (128 + the signal's number). Exit status 0 means every
+/// seed finished; 1 that a seed failed (its log is named); a seed stopped on its own (a
+/// signal sent to its process alone) also makes the sweep exit with that seed's status. A
+/// closed stdout or stderr never stops the seeds: the lines are dropped.
 ///
 /// Examples:
 ///   vge sweep --config configs/cube-fg-vge.toml --seeds 0..4 --out runs/fg --jobs 2
@@ -122,22 +127,33 @@ fn sweep(args: SweepArgs) -> anyhow::Result<()> {
 #[cfg(feature = "train")]
 fn sweep_in_process(sweep: &vge_lab::sweep::Sweep) -> anyhow::Result<()> {
     use vge_lab::sweep::{SeedState, seed_state};
-    let stop = stop_on_signal()?;
+    let stop = crate::stop::on_signal_stop()?;
     for seed in sweep.seeds.clone() {
+        if stop.load(std::sync::atomic::Ordering::SeqCst) {
+            // Between two seeds: the next one is not started (its folder stays as it is).
+            errln!("sweep stopped before seed {seed}: the same `vge sweep` again trains it");
+            return Err(stopped_error());
+        }
         let dir = sweep.seed_dir(seed);
         let (steps, overrides) = (sweep.steps, &sweep.overrides);
         let stopped = match seed_state(&dir) {
             SeedState::Done => {
-                eprintln!("seed {seed}: done already ({})", dir.display());
+                errln!("seed {seed}: done already ({})", dir.display());
                 continue;
             }
-            SeedState::Interrupted => train(None, None, Some(dir), Some(seed), steps, overrides, &stop)?,
+            SeedState::Interrupted => train(None, None, Some(dir), Some(seed), steps, overrides, stop)?,
             SeedState::New => {
-                train(Some(sweep.config.clone()), Some(dir), None, Some(seed), steps, overrides, &stop)?
+                train(Some(sweep.config.clone()), Some(dir), None, Some(seed), steps, overrides, stop)?
             }
         };
         if stopped {
-            break;
+            errln!(
+                "sweep stopped at seed {seed} of {}..{}: the same `vge sweep` again resumes it and \
+                 trains the seeds after it",
+                sweep.seeds.start,
+                sweep.seeds.end
+            );
+            return Err(stopped_error());
         }
     }
     Ok(())
@@ -155,16 +171,16 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) ->
         threads_per_job: args.threads_per_job as usize,
         report_every: std::time::Duration::from_secs(args.report_every_s),
     };
-    let stop = stop_on_signal()?;
-    eprintln!(
+    let stop = crate::stop::on_signal_stop()?;
+    errln!(
         "sweep: seeds {}..{}, {jobs} at a time, logs in {}/seed-N/train.log",
         sweep.seeds.start,
         sweep.seeds.end,
         sweep.out.display()
     );
-    let outcomes = run_parallel(&exe, sweep, &opts, &stop, &mut |line| eprintln!("{line}"));
+    let outcomes = run_parallel(&exe, sweep, &opts, stop, &mut |line| errln!("{line}"));
     for (seed, outcome) in &outcomes {
-        println!("{}", summary_line(sweep, *seed, outcome));
+        outln!("{}", summary_line(sweep, *seed, outcome));
     }
     let failed: Vec<String> = outcomes
         .iter()
@@ -175,6 +191,17 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) ->
         .collect();
     if !failed.is_empty() {
         bail!("{} of {} seeds failed: {}", failed.len(), outcomes.len(), failed.join(", "));
+    }
+    if crate::stop::received().is_some() {
+        return Err(stopped_error());
+    }
+    // A seed stopped by a signal to its own process: unfinished, so the sweep is too.
+    let stopped = outcomes.iter().find_map(|(_, o)| match o {
+        Outcome::Stopped { code, .. } => vge_lab::sweep::stopped_by(*code),
+        _ => None,
+    });
+    if let Some(signal) = stopped {
+        return Err(anyhow::Error::new(crate::stop::Stopped { signal }));
     }
     Ok(())
 }
@@ -198,19 +225,19 @@ fn sweep_slurm(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep) -> anyhow::Resul
         .context("finding the vge binary the tasks run")?;
     let (script, seeds) = write_sbatch(&exe, sweep, &slurm)?;
     if seeds.is_empty() {
-        println!("every seed is done already (DIR/seed-N/policy.vgep): nothing to submit");
+        outln!("every seed is done already (DIR/seed-N/policy.vgep): nothing to submit");
         return Ok(());
     }
     let dir = script.parent().unwrap_or(&sweep.out).display().to_string();
     if args.dry_run {
-        println!("wrote {} (seeds {}); submit it with: sbatch {0}", script.display(), array_spec(&seeds));
+        outln!("wrote {} (seeds {}); submit it with: sbatch {0}", script.display(), array_spec(&seeds));
         return Ok(());
     }
     let job = submit(&script)?;
-    println!("submitted array job {job}: seeds {} from {}", array_spec(&seeds), script.display());
-    println!("follow it:    squeue -j {job}    (task id = seed)");
-    println!("logs:         {dir}/seed-N/train.log");
-    println!("curves:       vge plot {dir}/seed-* --out {dir}/curves.png");
-    println!("interrupted?  the same `vge sweep --slurm` again resumes unfinished seeds");
+    outln!("submitted array job {job}: seeds {} from {}", array_spec(&seeds), script.display());
+    outln!("follow it:    squeue -j {job}    (task id = seed)");
+    outln!("logs:         {dir}/seed-N/train.log");
+    outln!("curves:       vge plot {dir}/seed-* --out {dir}/curves.png");
+    outln!("interrupted?  the same `vge sweep --slurm` again resumes unfinished seeds");
     Ok(())
 }

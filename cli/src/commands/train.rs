@@ -1,5 +1,8 @@
 //! `vge train`: one run, new or resumed, with a progress bar on a terminal (a line per metrics
-//! row and per success test elsewhere); Ctrl-C or SIGTERM saves a checkpoint and stops it.
+//! row and per success test elsewhere); Ctrl-C, SIGTERM or SIGHUP saves a checkpoint, stops it
+//! and exits with 128 + the signal's number ([`crate::stop`]). Progress is a view: where
+//! stdout or stderr is gone (`vge train ... | head`), the lines are dropped and the run goes
+//! on to its end; its folder's files hold every row.
 
 use std::path::PathBuf;
 
@@ -15,9 +18,20 @@ use clap::Args;
 /// --logdir DIR`), DIR/eval.csv (the periodic success tests), DIR/snapshots/ (the policy at
 /// each test), checkpoints in DIR/checkpoint and, when done, the actor as DIR/policy.vgep
 /// with DIR/final-eval.json, the snapshot picked on validation grasps as
-/// DIR/policy-best.vgep with DIR/best-eval.json, and DIR/score.json (`vge score`). Ctrl-C
-/// saves a checkpoint and exits; `--resume` continues, also after a kill (from the last
-/// periodic checkpoint), with the run's own config.
+/// DIR/policy-best.vgep with DIR/best-eval.json, and DIR/score.json (`vge score`).
+///
+/// Stopping: Ctrl-C (SIGINT), SIGTERM (kill, Slurm's scancel, preemption and time limit) or
+/// SIGHUP finish the step in progress, save a checkpoint there (the envs' episodes in
+/// progress included), print `stopped at step N: ...` with the command that continues, and
+/// exit with status 130 (SIGINT), 143 (SIGTERM) or 129 (SIGHUP), never 0. `vge train
+/// --resume DIR` then continues exactly as if the run had not stopped: the same policy and
+/// metrics, bit for bit, on the same binary, `sac.threads` and CPU model. After a kill -9 or
+/// a crash it continues from the last periodic checkpoint (`run.checkpoint_interval`), also
+/// bit for bit. Exit status 0: the run finished (DIR/policy.vgep written); 1: an error.
+///
+/// Output: a closed stdout or stderr (`vge train ... | head -1`) never stops training; the
+/// lines are dropped and the run goes on to its end (DIR/metrics.csv and DIR/eval.csv hold
+/// every row the progress lines show).
 ///
 /// Progress: a bar on a terminal; where stderr is a file or a pipe (nohup, a batch job),
 /// one line per metrics row (`step 20000/1000000 (2%), 151 steps/s, 1h48m left, return
@@ -59,7 +73,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     #[cfg(feature = "train")]
     {
         let TrainArgs { config, out, resume, seed, steps, overrides } = args;
-        train(config, out, resume, seed, steps, &overrides, &*stop_on_signal()?).map(|_| ())
+        let stop = crate::stop::on_signal_stop()?;
+        if train(config, out, resume, seed, steps, &overrides, stop)? {
+            return Err(stopped_error());
+        }
+        Ok(())
     }
     #[cfg(not(feature = "train"))]
     {
@@ -80,15 +98,18 @@ fn train_target(
     use vge_lab::config as cfg;
     Ok(match (resume, config, out) {
         (Some(dir), _, _) => {
-            let text = std::fs::read_to_string(dir.join(vge_lab::run_dir::CONFIG))
-                .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
+            let text = vge_lab::read_limits::read_to_string_bounded(
+                &dir.join(vge_lab::run_dir::CONFIG),
+                vge_lab::read_limits::MAX_CONFIG_FILE_LEN,
+            )
+            .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
             let origin = dir.join(vge_lab::run_dir::CONFIG).display().to_string();
             cfg::check_resumable(&text, &origin)?;
             let stored = cfg::parse_with_overrides(&text, &origin, &[])?;
             let config = cfg::parse_with_overrides(&text, &origin, overrides)?;
             config.validate()?;
             for note in cfg::check_resume(&stored, &config, &origin)? {
-                eprintln!("vge train: {note}");
+                errln!("vge train: {note}");
             }
             (config, dir, true)
         }
@@ -185,7 +206,7 @@ pub(crate) fn train(
     let resumed_from = if resuming { vge_lab::sweep::checkpoint_step(&out_dir) } else { None };
     // The controller only where the method queries it (rl runs ignore `controller`).
     let controller = config.controller.filter(|_| config.method.queries_controller());
-    eprintln!(
+    errln!(
         "training {} ({}{}, {}, seed {}){} into {}{}",
         config.name,
         config.method.name(),
@@ -206,7 +227,7 @@ pub(crate) fn train(
     let summary = tr::train(&config, &out_dir, resuming, stop, &mut |p: &tr::Progress<'_>| {
         if let Some(report) = p.evaluation {
             let line = evaluation_line(p.step, report);
-            if terminal { bar.println(line) } else { eprintln!("{line}") }
+            if terminal { bar.println(line) } else { errln!("{line}") }
         }
         if terminal {
             bar.set_position(p.step);
@@ -219,19 +240,22 @@ pub(crate) fn train(
                 p.episodes
             ));
         } else if p.logged {
-            eprintln!("{}", progress_line(p));
+            errln!("{}", progress_line(p));
         }
     })?;
     bar.finish();
-    println!("time this session: {}", summary.times);
+    outln!("time this session: {}", summary.times);
     if summary.stopped {
-        println!(
-            "stopped at step {}: checkpoint saved; continue with `vge train --resume {}`",
+        // One line that a log keeps and a scheduler's script can parse: the step, the
+        // signal, and how to go on.
+        let by = crate::stop::received().map_or_else(String::new, |s| format!(" ({s})"));
+        errln!(
+            "stopped at step {}: checkpoint saved{by}; continue with `vge train --resume {}`",
             summary.steps,
             out_dir.display()
         );
     } else if let Some(policy) = summary.policy {
-        println!(
+        outln!(
             "done: {} steps, {} updates; policy written to {}",
             summary.steps,
             summary.updates,
@@ -254,7 +278,7 @@ fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
         return;
     }
     match crate::cpu_use::measure(std::time::Duration::from_millis(250)) {
-        Ok(used) if threads > used.threads_that_fit() => eprintln!(
+        Ok(used) if threads > used.threads_that_fit() => errln!(
             "vge train: other processes keep {:.1} of the {} cores this run may use busy, leaving \
              {:.1} idle for sac.threads = {threads}; libtorch's workers wait for each other, so \
              training can run several times slower than at one thread. Beside other work, train \
@@ -266,16 +290,14 @@ fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
         // No /proc/stat (not Linux): nothing measured, nothing to advise.
         Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::Unsupported => {}
-        Err(e) => eprintln!("vge train: could not measure how busy the cores are ({e}); training goes on"),
+        Err(e) => errln!("vge train: could not measure how busy the cores are ({e}); training goes on"),
     }
 }
 
-/// A flag raised by Ctrl-C or SIGTERM: training saves a checkpoint and returns.
+/// The error a command returns after a signal stopped its training: `main` exits with
+/// 128 + the signal's number ([`crate::stop`]).
 #[cfg(feature = "train")]
-pub(crate) fn stop_on_signal() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
-    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, std::sync::atomic::Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-    Ok(stop)
+pub(crate) fn stopped_error() -> anyhow::Error {
+    // The flag is only raised by the handler, which records the signal first.
+    anyhow::Error::new(crate::stop::received().unwrap_or(crate::stop::Stopped { signal: libc::SIGTERM }))
 }
