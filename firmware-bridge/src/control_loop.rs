@@ -208,7 +208,7 @@ pub struct ErrorFrameCounts {
 }
 
 impl ErrorFrameCounts {
-    fn count(&mut self, class: u32) {
+    pub(crate) fn count(&mut self, class: u32) {
         if class & ErrorClass::BUS_OFF != 0 {
             self.bus_off += 1;
         } else if class & ErrorClass::CONTROLLER != 0 {

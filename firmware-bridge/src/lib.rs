@@ -17,6 +17,16 @@
 pub mod protocol;
 
 #[cfg(feature = "std")]
+pub mod allegro_emulator;
+#[cfg(feature = "std")]
+pub mod allegro_hand;
+#[cfg(feature = "std")]
+pub mod allegro_link;
+#[cfg(feature = "std")]
+pub mod allegro_loop;
+#[cfg(feature = "sim")]
+pub mod allegro_sim;
+#[cfg(feature = "std")]
 pub mod control_loop;
 #[cfg(feature = "std")]
 pub mod emulator;

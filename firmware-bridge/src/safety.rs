@@ -14,28 +14,36 @@ pub struct SafetyCounts {
     pub limit_clamps: u64,
 }
 
+/// The filter of an `N`-joint hand: vge's 15 by default, the Allegro's 16.
 #[derive(Debug, Clone)]
-pub struct SafetyFilter {
+pub struct SafetyFilter<const N: usize = 15> {
     max_delta_rad: f32,
-    limits: [JointLimit; 15],
-    last_safe_rad: [f32; 15],
+    limits: [JointLimit; N],
+    last_safe_rad: [f32; N],
     pub counts: SafetyCounts,
 }
 
-impl SafetyFilter {
+impl<const N: usize> SafetyFilter<N> {
     /// `start_rad` (e.g. the measured joint positions) becomes the first safe target; it is
     /// clamped into the limits.
-    pub fn new(max_delta_rad: f32, limits: [JointLimit; 15], start_rad: [f32; 15]) -> Self {
+    pub fn new(max_delta_rad: f32, limits: [JointLimit; N], start_rad: [f32; N]) -> Self {
         let last_safe_rad = std::array::from_fn(|i| limits[i].clamp(start_rad[i]));
         Self { max_delta_rad: max_delta_rad.abs(), limits, last_safe_rad, counts: SafetyCounts::default() }
     }
 
-    pub fn last_safe_rad(&self) -> [f32; 15] {
+    pub fn last_safe_rad(&self) -> [f32; N] {
         self.last_safe_rad
     }
 
+    /// Moves the safe targets towards proposed absolute targets (a PD loop's): the same
+    /// checks as [`Self::apply_delta`] on the change they ask for.
+    pub fn apply_target(&mut self, target_rad: &[f32; N]) -> [f32; N] {
+        let delta: [f32; N] = std::array::from_fn(|i| target_rad[i] - self.last_safe_rad[i]);
+        self.apply_delta(&delta)
+    }
+
     /// Applies a proposed change of the targets and returns the safe targets to send.
-    pub fn apply_delta(&mut self, delta_rad: &[f32; 15]) -> [f32; 15] {
+    pub fn apply_delta(&mut self, delta_rad: &[f32; N]) -> [f32; N] {
         if delta_rad.iter().any(|d| !d.is_finite()) {
             self.counts.non_finite_holds += 1;
             return self.last_safe_rad;
@@ -85,6 +93,25 @@ mod tests {
         bad[7] = f32::INFINITY;
         assert_eq!(f.apply_delta(&bad), before);
         assert_eq!(f.counts.non_finite_holds, 2);
+    }
+
+    #[test]
+    fn absolute_targets_are_approached_a_step_at_a_time_and_nan_holds() {
+        let limits = [JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 16];
+        let mut f = SafetyFilter::new(0.05, limits, [0.0; 16]);
+        let mut goal = [0.12; 16];
+        goal[3] = 9.0;
+        assert_eq!(f.apply_target(&goal)[0], 0.05);
+        f.apply_target(&goal);
+        let t = f.apply_target(&goal);
+        assert!((t[0] - 0.12).abs() < 1e-6 && t[3] == 0.15, "{t:?}");
+        for _ in 0..20 {
+            f.apply_target(&goal);
+        }
+        assert_eq!(f.last_safe_rad()[3], 0.5);
+        goal[7] = f32::NAN;
+        assert_eq!(f.apply_target(&goal), f.last_safe_rad());
+        assert_eq!(f.counts.non_finite_holds, 1);
     }
 
     #[test]

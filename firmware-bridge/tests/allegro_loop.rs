@@ -1,0 +1,281 @@
+//! The Allegro bridge loop against the emulated hand over the in-process link: start-up and
+//! shut-down frames, the PD law, the safety reactions. The hand is a set of simple inertias
+//! ([`InertiaPlant`]) unless a test says otherwise, so these run in a second without the
+//! physics engine; `allegro_hil.rs` runs the real processes on vcan0.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
+use std::time::Duration;
+
+use vge_bridge::allegro_emulator::{AllegroHandEmulator, AllegroPlant, EmulatedHand, InertiaPlant, serve};
+use vge_bridge::allegro_hand::{AllegroHand, DEFAULT_SQUEEZE_RAD};
+use vge_bridge::allegro_link::{AllegroInProcess, AllegroLink, AllegroReceived};
+use vge_bridge::allegro_loop::{self, AllegroLoopConfig, AllegroReport, HoldTargets};
+use vge_bridge::control_loop::StopReason;
+use vge_bridge::protocol::allegro::{AllegroConfig, AllegroFrame, Command, NUM_JOINTS};
+use vge_bridge::transport::TransportError;
+
+/// A link that records every frame sent through it, both ways.
+struct Tap<L> {
+    inner: L,
+    sent: Arc<std::sync::Mutex<Vec<AllegroFrame>>>,
+}
+
+impl<L: AllegroLink> AllegroLink for Tap<L> {
+    fn send(&mut self, frame: &AllegroFrame) -> Result<(), TransportError> {
+        self.sent.lock().expect("tap").push(*frame);
+        self.inner.send(frame)
+    }
+    fn recv(&mut self, timeout: Duration) -> Result<Option<AllegroReceived>, TransportError> {
+        self.inner.recv(timeout)
+    }
+    fn bus_counts(&self) -> vge_bridge::transport::BusCounts {
+        self.inner.bus_counts()
+    }
+}
+
+struct Run {
+    report: Result<AllegroReport, allegro_loop::AllegroLoopError>,
+    host_frames: Vec<AllegroFrame>,
+    emulator: AllegroHandEmulator<InertiaPlant>,
+}
+
+/// The loop against an emulated hand of inertias starting at `q0`, with `config` changed by
+/// `tweak`; the emulator runs until the loop is done. `silence_after_sets`: the hand stops
+/// reporting after that many position sets (a hand that went quiet).
+fn run_against_inertias(
+    targets: [f32; NUM_JOINTS],
+    q0: [f32; NUM_JOINTS],
+    tweak: impl FnOnce(&mut AllegroLoopConfig),
+) -> Run {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut config = AllegroLoopConfig::new(&hand);
+    // Generous: a loaded test machine must not trip the watchdog in tests about other things.
+    config.position_timeout = Duration::from_secs(2);
+    tweak(&mut config);
+    let (bridge_end, mut hand_end) = AllegroInProcess::pair();
+    let done = Arc::new(AtomicBool::new(false));
+    let hand_done = done.clone();
+    let emulator = thread::spawn(move || {
+        let mut e = AllegroHandEmulator::new(EmulatedHand::default(), InertiaPlant::at(q0));
+        serve(&mut hand_end, &mut e, Duration::from_secs(5), &hand_done).expect("emulator link");
+        e
+    });
+    let sent = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut tap = Tap { inner: bridge_end, sent: sent.clone() };
+    let report = allegro_loop::run(&mut tap, &mut HoldTargets(targets), &config, &AtomicBool::new(false));
+    // Let the emulator take in the shut-down frames before it stops.
+    thread::sleep(Duration::from_millis(50));
+    done.store(true, Ordering::Relaxed);
+    let emulator = emulator.join().expect("emulator thread");
+    let host_frames = sent.lock().expect("tap").clone();
+    Run { report, host_frames, emulator }
+}
+
+fn ids(frames: &[AllegroFrame]) -> Vec<(u16, bool, usize)> {
+    frames.iter().map(|f| (f.id(), f.is_remote(), f.payload().len())).collect()
+}
+
+const SHUTDOWN_IDS: [(u16, bool, usize); 6] = [
+    (0x180, false, 8),
+    (0x184, false, 8),
+    (0x188, false, 8),
+    (0x18C, false, 8),
+    (0x104, false, 0),
+    (0x204, false, 6),
+];
+
+#[test]
+fn the_loop_starts_up_holds_its_targets_and_shuts_down_in_the_drivers_order() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let targets = hand.squeezed_grasp_rad(DEFAULT_SQUEEZE_RAD);
+    let run = run_against_inertias(targets, hand.start_grasp_rad, |c| c.max_cycles = Some(400));
+    let report = run.report.expect("the loop ran");
+    assert_eq!(report.stop_reason, StopReason::StepsReached, "{}", report.stop_detail);
+    assert_eq!(report.cycles, 400);
+    let frames = &run.host_frames;
+    assert_eq!(
+        ids(&frames[..5]),
+        [(0x104, false, 0), (0x200, true, 0), (0x220, true, 0), (0x204, false, 6), (0x100, false, 0)],
+        "start-up: servo off, info and serial requests, set period, servo on"
+    );
+    assert_eq!(frames[3].payload(), &[3, 0, 0, 0, 0xF4, 0x01]);
+    assert_eq!(ids(&frames[frames.len() - 6..]), SHUTDOWN_IDS, "shut-down");
+    for f in &frames[frames.len() - 6..frames.len() - 2] {
+        assert_eq!(f.payload(), &[0; 8], "zero torque");
+    }
+    assert_eq!(frames[frames.len() - 1].payload(), &[0; 6], "reports off");
+    let torque_frames = frames.iter().filter(|f| (0x180..=0x18C).contains(&f.id())).count() as u64;
+    assert_eq!(torque_frames, 4 * 400 + 4);
+    let info = report.info.expect("info");
+    assert_eq!(info.hardware_major(), 4);
+    assert_eq!(report.serial.as_deref(), Some("VGEEMU01"));
+    assert_eq!(report.shutdown_frames, 6);
+    // The emulator saw it all, applied torques, and was left limp and quiet.
+    let e = &run.emulator;
+    assert!(!e.servo_on());
+    assert_eq!(e.period().position_ms, 0);
+    assert_eq!(e.stats.torque_frames, 4 * 400 + 4);
+    assert_eq!(e.stats.torques_beyond_clip, 0);
+    // The joints went to the targets (the targets ramp at 1 rad/s; 400 sets are 1.2 s).
+    for (k, target) in targets.iter().enumerate() {
+        let err = (e.plant().q_rad()[k] - target).abs();
+        assert!(err < 0.02, "{}: {err} rad from its target", hand.joint_name(k));
+    }
+    eprintln!("{}", report.json_line(&[]));
+}
+
+#[test]
+fn a_hand_that_stops_reporting_is_shut_down_after_the_position_timeout() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let (bridge_end, mut hand_end) = AllegroInProcess::pair();
+    let hand_thread = thread::spawn(move || {
+        let mut e = AllegroHandEmulator::new(EmulatedHand::default(), InertiaPlant::at(hand.start_grasp_rad));
+        // Runs until 100 sets have gone out, then falls silent and listens only.
+        let stop = AtomicBool::new(false);
+        let mut out = Vec::new();
+        let mut received = Vec::new();
+        let start = std::time::Instant::now();
+        while start.elapsed() < Duration::from_secs(10) {
+            if let Some(AllegroReceived::Frame(f)) = hand_end.recv(Duration::from_millis(1)).expect("recv") {
+                received.push(f);
+                if e.stats.position_sets < 100 {
+                    e.handle(&f, &mut out);
+                }
+            }
+            if e.stats.position_sets < 100 && e.period().position_ms > 0 {
+                e.advance(3, &mut out);
+            }
+            for f in out.drain(..) {
+                hand_end.send(&f).expect("send");
+            }
+            if received.iter().any(|f| f.id() == 0x204 && f.payload() == [0; 6])
+                || stop.load(Ordering::Relaxed)
+            {
+                break;
+            }
+        }
+        received
+    });
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut config = AllegroLoopConfig::new(&hand);
+    config.position_timeout = Duration::from_millis(60);
+    let mut tap = Tap { inner: bridge_end, sent: Arc::new(std::sync::Mutex::new(Vec::new())) };
+    let report =
+        allegro_loop::run(&mut tap, &mut HoldTargets(hand.start_grasp_rad), &config, &AtomicBool::new(false))
+            .expect("the loop ran");
+    let received = hand_thread.join().expect("hand thread");
+    assert_eq!(report.stop_reason, StopReason::Watchdog);
+    assert!(report.stop_detail.contains("no complete set of position frames"), "{}", report.stop_detail);
+    assert_eq!(report.stop_reason.exit_code(), 10);
+    assert!(report.cycles <= 100, "{} torque sets for 100 position sets", report.cycles);
+    assert_eq!(ids(&received[received.len() - 6..]), SHUTDOWN_IDS);
+}
+
+#[test]
+fn a_torque_beyond_the_clip_never_leaves_the_host() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    // Targets 1 rad past the grasp against joints that barely move: kp 3 asks for 3 N m.
+    let targets = hand.squeezed_grasp_rad(1.0);
+    let run = run_against_inertias(targets, hand.start_grasp_rad, |c| {
+        c.max_cycles = Some(100);
+        c.max_delta_rad = 1.0;
+    });
+    let report = run.report.expect("the loop ran");
+    assert!(report.max_torque_nm > 1.0, "the PD law asked for {} N m", report.max_torque_nm);
+    assert!(report.torque_clips > 0);
+    let scale = AllegroConfig::V4.torque;
+    let mut checked = 0;
+    for f in run.host_frames.iter().filter(|f| (0x180..=0x18C).contains(&f.id())) {
+        let finger = usize::from((f.id() - 0x180) / 4);
+        for (j, b) in f.payload().chunks_exact(2).enumerate() {
+            let count = i16::from_le_bytes([b[0], b[1]]);
+            assert!(
+                count.unsigned_abs() <= scale.pwm_limit[finger][j].unsigned_abs(),
+                "{count} on {finger}.{j}"
+            );
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, (100 + 1) * 16);
+    assert_eq!(run.emulator.stats.torques_beyond_clip, 0);
+}
+
+#[test]
+fn implausible_positions_are_dropped_then_halt() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut q0 = hand.start_grasp_rad;
+    // A joint reading far outside its range, as a broken sensor would.
+    q0[5] = 2.8;
+    let run = run_against_inertias(hand.start_grasp_rad, q0, |c| c.max_cycles = Some(100));
+    let report = run.report.expect("the loop ran");
+    assert_eq!(report.stop_reason, StopReason::ImplausibleState, "{}", report.stop_detail);
+    assert!(report.stop_detail.contains("joint 5"), "{}", report.stop_detail);
+    assert_eq!(report.cycles, 0, "no torque from an implausible reading");
+    assert_eq!(report.implausible_sets, 11);
+    assert_eq!(ids(&run.host_frames[run.host_frames.len() - 6..]), SHUTDOWN_IDS);
+}
+
+#[test]
+fn a_silent_bus_fails_start_up_and_still_shuts_down() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut config = AllegroLoopConfig::new(&hand);
+    config.startup_timeout = Duration::from_millis(100);
+    let (bridge_end, _hand_end) = AllegroInProcess::pair();
+    let sent = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut tap = Tap { inner: bridge_end, sent: sent.clone() };
+    let err =
+        allegro_loop::run(&mut tap, &mut HoldTargets(hand.start_grasp_rad), &config, &AtomicBool::new(false))
+            .expect_err("nobody answers");
+    assert!(err.to_string().contains("no info answer"), "{err}");
+    let frames = sent.lock().expect("tap").clone();
+    assert_eq!(ids(&frames[frames.len() - 6..]), SHUTDOWN_IDS);
+}
+
+#[test]
+fn commands_decode_as_the_hand_reads_them() {
+    // Every frame the loop sends is a command the hand's decoder takes.
+    let hand = AllegroHand::shipped().expect("allegro");
+    let run = run_against_inertias(hand.start_grasp_rad, hand.start_grasp_rad, |c| c.max_cycles = Some(20));
+    for f in &run.host_frames {
+        Command::decode_frame(&AllegroConfig::V4, f).expect("a command");
+    }
+    assert_eq!(run.emulator.stats.ignored_frames, 0);
+}
+
+/// The loop holding the simulated hand's start grasp in real time (ignored: it takes 3 s of
+/// a core; the HIL test holds it for 10 s over vcan0).
+#[cfg(feature = "sim")]
+#[test]
+#[ignore = "real-time physics for 3 s"]
+fn the_simulated_allegro_holds_its_cube_under_the_pd_loop() {
+    use vge_bridge::allegro_sim::{SimAllegro, SimAllegroConfig};
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut config = AllegroLoopConfig::new(&hand);
+    config.position_timeout = Duration::from_secs(2);
+    config.max_cycles = Some(1000);
+    let (mut bridge_end, mut hand_end) = AllegroInProcess::pair();
+    let done = Arc::new(AtomicBool::new(false));
+    let hand_done = done.clone();
+    let emulator = thread::spawn(move || {
+        let plant = SimAllegro::new(SimAllegroConfig::default()).expect("sim");
+        let mut e = AllegroHandEmulator::new(EmulatedHand::default(), plant);
+        serve(&mut hand_end, &mut e, Duration::from_secs(5), &hand_done).expect("emulator link");
+        (e.stats, e.plant().hold(), e.plant().released())
+    });
+    let report = allegro_loop::run(
+        &mut bridge_end,
+        &mut HoldTargets(hand.squeezed_grasp_rad(DEFAULT_SQUEEZE_RAD)),
+        &config,
+        &AtomicBool::new(false),
+    )
+    .expect("the loop ran");
+    thread::sleep(Duration::from_millis(50));
+    done.store(true, Ordering::Relaxed);
+    let (stats, hold, released) = emulator.join().expect("emulator");
+    eprintln!("{}", report.json_line(&[]));
+    eprintln!("emulator: {stats:?}\nhold: {hold:?} released {released}");
+    let hold = hold.expect("the stand was taken away");
+    assert!(hold.fell_m < 0.01 && hold.tips_touching >= 3, "{hold:?}");
+}
