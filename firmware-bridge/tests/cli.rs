@@ -54,8 +54,36 @@ fn run_refuses_a_bad_hand_file_naming_the_file_and_the_joint() {
 fn run_help_documents_the_hand_file_and_the_default_limits() {
     let out = bridge(&["run", "--help"]);
     let help = String::from_utf8_lossy(&out.stdout);
-    assert!(help.contains("--hand <FILE>") && help.contains("joint_limits_rad"), "{help}");
+    assert!(help.contains("--hand <HAND|FILE>") && help.contains("joint_limits_rad"), "{help}");
     assert!(help.contains("thumb    [-0.500, +0.500] [-0.300, +1.600] [-0.300, +1.600]"), "{help}");
+}
+
+/// The Allegro runs no policy yet, and none of vge15's options that do not apply to it: each
+/// refusal says why and what to use instead, before any bus is touched.
+#[test]
+fn run_and_emulate_for_the_allegro_refuse_what_does_not_apply_saying_why() {
+    for (args, why) in [
+        (&["run", "--hand", "allegro", "--policy", "/nonexistent.vgep"][..], "use --hold"),
+        (&["run", "--hand", "allegro", "--hold", "--fd"], "the Allegro speaks classic CAN"),
+        (&["run", "--hand", "allegro", "--hold", "--record", "x.jsonl"], "the Allegro's is not recorded"),
+        (&["run", "--hand", "allegro", "--hold", "--squeeze-rad", "5"], "--squeeze-rad must be"),
+        (&["run", "--hold"], "--hold holds the Allegro's grasp (--hand allegro)"),
+        (&["emulate", "--hand", "allegro", "--model", "lag"], "the Allegro is torque-driven"),
+        (&["emulate", "--hand", "allegro", "--fd"], "the Allegro speaks classic CAN"),
+        (&["emulate", "--hand", "allegro", "--restart-node", "1"], "the Allegro has none"),
+    ] {
+        let out = bridge(args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(why), "{args:?}: {}", stderr(&out));
+    }
+    let out = bridge(&["run", "--hand", "allegro", "--hold", "--policy", "/nonexistent.vgep"]);
+    assert_eq!(out.status.code(), Some(2), "--hold and --policy conflict: {}", stderr(&out));
+    let out = bridge(&["run", "--hand", "allegro"]);
+    assert_eq!(out.status.code(), Some(2), "a policy or --hold is required: {}", stderr(&out));
+    // No interface: a clear error after the loop's settings were accepted.
+    let out = bridge(&["run", "--hand", "allegro", "--hold", "--backend", "can", "--iface", "vcan-absent"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("opening CAN interface vcan-absent"), "{}", stderr(&out));
 }
 
 #[cfg(not(feature = "sim"))]
@@ -65,6 +93,8 @@ fn without_the_sim_feature_asking_for_the_simulator_is_a_clear_error() {
         &["run", "--policy", "/nonexistent.vgep"][..],
         &["run", "--policy", "/nonexistent.vgep", "--backend", "sim", "--object", "sphere"],
         &["emulate", "--model", "sim"],
+        &["run", "--hand", "allegro", "--hold"],
+        &["emulate", "--hand", "allegro"],
     ] {
         let out = bridge(args);
         assert!(!out.status.success());
