@@ -189,7 +189,7 @@ fn sigterm_and_sigint_at_any_step_then_resume_equal_an_uninterrupted_run() {
     // Between the periodic checkpoints (every 400 steps) and the log rows (every 50): the stop
     // lands wherever the loop is when the signal comes.
     for (k, (signal, after, code)) in
-        [(Signal::SIGTERM, 650, 143), (Signal::SIGINT, 1560, 130), (Signal::SIGTERM, 2420, 143)]
+        [(Signal::SIGTERM, 650, 143), (Signal::SIGINT, 1510, 130), (Signal::SIGTERM, 2420, 143)]
             .into_iter()
             .enumerate()
     {
