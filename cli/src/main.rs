@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use commands::{
-    bench, compare, controller, eval, export, import, inspect, plot, robustness, score, screen, ship, sweep,
+    bench, compare, controller, eval, export, hand, import, inspect, plot, robustness, score, screen, ship, sweep,
     train,
 };
 
@@ -43,6 +43,7 @@ enum Command {
     Export(export::ExportArgs),
     Import(import::ImportArgs),
     Inspect(inspect::InspectArgs),
+    Hand(hand::HandArgs),
     Controller(controller::ControllerArgs),
     /// Measure vge's hot paths on this machine.
     #[command(subcommand)]
@@ -84,6 +85,7 @@ fn main() -> ExitCode {
         Command::Export(args) => export::run(args),
         Command::Import(args) => import::run(args),
         Command::Inspect(args) => inspect::run(args),
+        Command::Hand(args) => hand::run(args),
         Command::Controller(args) => controller::run(args),
         Command::Bench(bench) => bench::run(bench),
     };

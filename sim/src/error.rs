@@ -42,6 +42,9 @@ pub enum SimError {
     /// The physics produced a non-finite state (should not happen; reported, not hidden).
     #[error("physics state became non-finite: {0}")]
     NonFiniteState(String),
+    /// A hand's description was refused (the reader's message names the file, element and line).
+    #[error("{0}")]
+    Hand(String),
     /// A kinematics query failed.
     #[error(transparent)]
     Kinematics(#[from] KinematicsError),

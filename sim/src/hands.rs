@@ -32,7 +32,7 @@ fn shipped(name: &str) -> Option<Result<Arc<Hand>, SimError>> {
             .get_or_init(|| {
                 Hand::from_strs(xml, Some(toml), n)
                     .map(Arc::new)
-                    .map_err(|e| SimError::InvalidConfig(format!("shipped hand {n}: {e}")))
+                    .map_err(|e| SimError::Hand(format!("shipped hand {n}: {e}")))
             })
             .clone(),
     )
@@ -50,10 +50,10 @@ pub fn load(spec: &str) -> Result<Arc<Hand>, SimError> {
         return hand;
     }
     if spec.contains(std::path::MAIN_SEPARATOR) || spec.contains('/') || spec.ends_with(".xml") {
-        return Hand::load(Path::new(spec)).map(Arc::new).map_err(|e| SimError::InvalidConfig(e.to_string()));
+        return Hand::load(Path::new(spec)).map(Arc::new).map_err(|e| SimError::Hand(e.to_string()));
     }
-    Err(SimError::InvalidConfig(format!(
-        "hand `{spec}`: not a shipped hand ({}) nor a path to an MJCF file",
+    Err(SimError::Hand(format!(
+        "hand `{spec}`: not a shipped hand ({}) nor a path to an MJCF file (a path has a `/` or ends in .xml)",
         shipped_names().join(", ")
     )))
 }

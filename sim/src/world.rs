@@ -274,7 +274,9 @@ pub struct JointServo {
 
 impl JointServo {
     /// Each joint's servo as the description gives it: its range, its `<position>` actuator's
-    /// kp, kv and the larger magnitude of its force range. A joint without a range, without
+    /// kp, its kv plus the joint's own damping (rapier's joints have no passive damping, so the
+    /// motor carries it; unlike MuJoCo's, it then counts against the torque cap), and the
+    /// larger magnitude of its force range. A joint without a range, without
     /// an actuator or without a force range is refused: an unlimited motor on a simulated
     /// hand squeezes without bound.
     pub fn from_description(hand: &Hand) -> Result<Vec<Self>, SimError> {
@@ -294,7 +296,7 @@ impl JointServo {
                 Ok(Self {
                     limit: JointLimit { lower_rad: limit.lower_rad, upper_rad: limit.upper_rad },
                     kp_nm_per_rad: servo.kp_nm_per_rad,
-                    kv_nms_per_rad: servo.kv_nms_per_rad,
+                    kv_nms_per_rad: servo.kv_nms_per_rad + joint.damping_nms_per_rad,
                     torque_cap_nm: lo.abs().max(hi.abs()),
                 })
             })

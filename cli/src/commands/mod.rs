@@ -6,6 +6,7 @@ pub mod compare;
 pub mod controller;
 pub mod eval;
 pub mod export;
+pub mod hand;
 pub mod import;
 pub mod inspect;
 pub mod plot;
