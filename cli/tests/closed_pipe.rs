@@ -213,7 +213,8 @@ fn train_sweep_and_score_finish_their_runs_when_their_reader_is_gone() {
         assert!(finished(Path::new(&run)), "train with {closed:?} closed did not finish its run");
     }
 
-    // Seeds one after the other in this process: both finish.
+    // Seeds one after the other in this process, as `vge sweep ... | head -1` once stopped at
+    // the first seed: both finish.
     let sweep = dir.path("sweep");
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/cube-fg-vge.toml");
     let mut args: Vec<String> = ["sweep", "--config", config.to_str().expect("utf-8"), "--seeds", "0..2"]
@@ -222,8 +223,8 @@ fn train_sweep_and_score_finish_their_runs_when_their_reader_is_gone() {
         .collect();
     args.extend(["--out".to_owned(), sweep.clone(), "--steps".to_owned(), "200".to_owned()]);
     args.extend(common::tiny_args());
-    let (code, other) = run_closed(&args, Stream::Stderr);
-    assert_eq!(code, Some(0), "sweep with stderr closed: {other}");
+    let (code, other) = run_closed(&args, Stream::Stdout);
+    assert_eq!(code, Some(0), "sweep with stdout closed: {other}");
     for seed in 0..2 {
         assert!(finished(&Path::new(&sweep).join(format!("seed-{seed}"))), "seed {seed} did not finish");
     }
