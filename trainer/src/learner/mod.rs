@@ -458,6 +458,11 @@ pub trait Learner: Send + std::fmt::Debug {
 
     /// Sets the matmul precision of the networks beyond the shared ones.
     fn set_own_matmul_precision(&mut self, _precision: MatmulPrecision) {}
+    /// The actor's log-std averaged over `obs` (a batch) and the action's dimensions: how
+    /// widely a stochastic actor still explores. `None` for a deterministic actor (TD3).
+    fn actor_mean_log_std(&self, _obs: &Tensor) -> Option<f64> {
+        None
+    }
 
     /// Sets the observation normalisation of the networks beyond the shared ones.
     fn set_own_obs_normalisation(&mut self, _mean: &Tensor, _std: &Tensor) {}

@@ -58,6 +58,11 @@ impl Learner for SoftActorCritic {
         self.alpha
     }
 
+    fn actor_mean_log_std(&self, obs: &Tensor) -> Option<f64> {
+        let (_, log_std) = tch::no_grad(|| self.core.actor.distribution(obs));
+        Some(log_std.mean(Kind::Float).double_value(&[]))
+    }
+
     /// A sample of the policy, with `eps` as its noise.
     fn behaviour_action(&self, obs: &Tensor, eps: &Tensor) -> Tensor {
         tch::no_grad(|| self.core.actor.sample_with(obs, Some(eps)).action)

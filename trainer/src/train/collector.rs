@@ -178,6 +178,11 @@ impl Collector {
         self.slots.iter().map(|s| s.obs).collect()
     }
 
+    /// Every env's current observation as one `[envs, obs]` tensor.
+    pub fn observation_tensor(&self) -> Tensor {
+        Tensor::from_slice(self.observations().as_flattened()).view([self.len() as i64, OBS_DIM as i64])
+    }
+
     /// Tells the disturbance curricula how many env steps training has taken: episodes
     /// that start from now on get that step's levels.
     pub fn set_progress(&mut self, step: u64) {
@@ -248,7 +253,7 @@ impl Collector {
         }
         let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
         let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
-        let t = Tensor::from_slice(self.observations().as_flattened()).view([n as i64, OBS_DIM as i64]);
+        let t = self.observation_tensor();
         let v = Vec::<f32>::try_from(learner.behaviour_action(&t, &eps).contiguous().view(-1))?;
         Ok(v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect())
     }

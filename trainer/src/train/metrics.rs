@@ -7,7 +7,7 @@ use vge_sim::{EpisodeOutcome, ObjectShape};
 use crate::behaviour::BehaviourStats;
 use crate::learner::UpdateStats;
 
-pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,beta,updates,steps_per_s";
+pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,actor_log_std,beta,updates,steps_per_s";
 
 /// Sums over the current metrics window.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -182,9 +182,12 @@ impl Window {
 
     /// One metrics row: `(column, value)` in [`METRICS_HEADER`] order after `step`; `None`
     /// where the window had nothing to average (no finished episode, no update).
+    /// `actor_log_std` is the actor's mean log-std at the envs' observations when the row is
+    /// written (`None` for a deterministic actor).
     pub fn values(
         &self,
         episodes: u64,
+        actor_log_std: Option<f64>,
         beta: f64,
         updates: u64,
         sps: f64,
@@ -210,6 +213,7 @@ impl Window {
             ("mean_q", per_update(w.mean_q)),
             ("mc_return", (w.mc_return_count > 0).then(|| w.mc_return_sum / w.mc_return_count as f64)),
             ("mc_return_max", w.mc_return_max),
+            ("actor_log_std", actor_log_std),
             ("beta", Some(beta)),
             ("updates", Some(updates as f64)),
             ("steps_per_s", Some(sps)),
@@ -249,7 +253,8 @@ mod tests {
 
     #[test]
     fn metrics_columns_match_the_csv_header() {
-        let names: Vec<&str> = Window::default().values(0, 0.0, 0, 0.0).iter().map(|(n, _)| *n).collect();
+        let names: Vec<&str> =
+            Window::default().values(0, None, 0.0, 0, 0.0).iter().map(|(n, _)| *n).collect();
         assert_eq!(format!("step,{}", names.join(",")), METRICS_HEADER);
     }
 

@@ -524,10 +524,13 @@ impl<'a> Trainer<'a> {
         let steps_per_s = (step - self.session_first_step) as f64 / self.cost.session_wall_s().max(1e-9);
         let logged = crossed(config.run.log_interval) || step >= config.total_steps;
         if logged {
+            // At the envs' current observations: no draw from any generator, so logging it
+            // changes nothing of the run.
+            let log_std = self.learner.actor_mean_log_std(&self.collector.observation_tensor());
             let mut values: Vec<(String, Option<f64>)> = self
                 .c
                 .window
-                .values(self.c.episodes, self.beta(), self.learner.updates(), steps_per_s)
+                .values(self.c.episodes, log_std, self.beta(), self.learner.updates(), steps_per_s)
                 .into_iter()
                 .map(|(name, v)| (name.to_owned(), v))
                 .collect();
