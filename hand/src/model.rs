@@ -21,6 +21,12 @@ impl JointLimit {
     pub fn contains(&self, q_rad: f32) -> bool {
         (self.lower_rad..=self.upper_rad).contains(&q_rad)
     }
+
+    /// `q_rad` clamped into the range (NaN stays NaN).
+    #[must_use]
+    pub fn clamp(&self, q_rad: f32) -> f32 {
+        q_rad.clamp(self.lower_rad, self.upper_rad)
+    }
 }
 
 /// A position servo on one joint (MJCF `<position>`, or a `<general>` that is exactly one):

@@ -294,7 +294,7 @@ impl JointServo {
                 let servo = joint.servo.as_ref().ok_or_else(|| refuse("position actuator"))?;
                 let [lo, hi] = servo.force_range_nm.ok_or_else(|| refuse("actuator force range"))?;
                 Ok(Self {
-                    limit: JointLimit { lower_rad: limit.lower_rad, upper_rad: limit.upper_rad },
+                    limit,
                     kp_nm_per_rad: servo.kp_nm_per_rad,
                     kv_nms_per_rad: servo.kv_nms_per_rad + joint.damping_nms_per_rad,
                     torque_cap_nm: lo.abs().max(hi.abs()),

@@ -59,28 +59,8 @@ pub const fn joint_index(finger: usize, joint: usize) -> usize {
     finger * JOINTS_PER_FINGER + joint
 }
 
-/// Range of motion of one joint, in radians.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JointLimit {
-    /// Smallest allowed angle.
-    pub lower_rad: f32,
-    /// Largest allowed angle.
-    pub upper_rad: f32,
-}
-
-impl JointLimit {
-    /// Whether `q_rad` lies within the closed range.
-    #[must_use]
-    pub fn contains(&self, q_rad: f32) -> bool {
-        (self.lower_rad..=self.upper_rad).contains(&q_rad)
-    }
-
-    /// `q_rad` clamped into the range (NaN stays NaN).
-    #[must_use]
-    pub fn clamp(&self, q_rad: f32) -> f32 {
-        q_rad.clamp(self.lower_rad, self.upper_rad)
-    }
-}
+/// Range of motion of one joint, in radians: the hand description's.
+pub use vge_hand::JointLimit;
 
 /// One finger: a roll joint at the knuckle, then two flexion joints, links hanging down.
 ///
