@@ -17,7 +17,7 @@ fn the_shipped_hands_are_summarised_with_their_own_sizes() {
     let (ok, out, err) = inspect("allegro");
     assert!(ok, "{err}");
     assert!(out.contains("16 joints, 4 fingers"), "{out}");
-    assert!(out.contains("observation: full 60 floats, proprio 32 floats; action 16 floats"), "{out}");
+    assert!(out.contains("observation: full 60 floats (with fingertip contacts), proprio 32 floats (joints only); action 16 floats"), "{out}");
     assert!(out.contains("thj3") && out.contains("start grasp: -0.255"), "{out}");
     let (ok, out, err) = inspect("vge15");
     assert!(ok, "{err}");

@@ -58,7 +58,7 @@ pub use kinematics::{
 };
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
-pub use observation::{FingertipReading, OBS_DIM, build_observation};
+pub use observation::{FingertipReading, OBS_DIM, ObservationLayout, ObservationSet, build_observation};
 pub use policy_interface::check_policy_interface;
 #[cfg(feature = "physics")]
 pub use recording::{EpisodeRecorder, RecordingError};

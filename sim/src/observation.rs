@@ -56,6 +56,83 @@ pub fn check_layout<'a>(slices: impl IntoIterator<Item = (&'a str, usize, usize)
     Err(format!("the policy observes [{}], the hand provides [{}]", show(&got), show(&want)))
 }
 
+/// Which readings a policy observes, named in a config: what the hand measures decides which
+/// it can run on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObservationSet {
+    /// Joint angles, joint targets and, per fingertip, the contact point, normal and force:
+    /// the paper's observation, for a hand with fingertip sensing.
+    Full,
+    /// Joint angles and targets now and at the last `history` control steps: what a hand
+    /// that measures joint positions only (a stock Allegro) can give.
+    Proprio {
+        /// Past control steps observed besides the current one.
+        history: usize,
+    },
+}
+
+/// The named slices of an observation for a hand of `num_joints` joints and `num_fingers`
+/// fingertips: the sizes come from the hand, the names are what a policy file carries.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ObservationLayout {
+    slices: Vec<(&'static str, Range<usize>)>,
+}
+
+/// The slices that need fingertip sensing.
+const CONTACT_SLICES: [&str; 3] = ["contact_position_m", "contact_normal", "contact_force_n"];
+
+impl ObservationLayout {
+    /// The layout of `set` for a hand of `num_joints` joints and `num_fingers` fingertips.
+    #[must_use]
+    pub fn new(set: ObservationSet, num_joints: usize, num_fingers: usize) -> Self {
+        let sizes: Vec<(&'static str, usize)> = match set {
+            ObservationSet::Full => vec![
+                ("q_rad", num_joints),
+                ("q_target_rad", num_joints),
+                (CONTACT_SLICES[0], 3 * num_fingers),
+                (CONTACT_SLICES[1], 3 * num_fingers),
+                (CONTACT_SLICES[2], num_fingers),
+            ],
+            ObservationSet::Proprio { history } => {
+                let mut sizes = vec![("q_rad", num_joints), ("q_target_rad", num_joints)];
+                if history > 0 {
+                    sizes.push(("q_rad_past", history * num_joints));
+                    sizes.push(("q_target_rad_past", history * num_joints));
+                }
+                sizes
+            }
+        };
+        let mut start = 0;
+        let slices = sizes
+            .into_iter()
+            .map(|(name, len)| {
+                let range = start..start + len;
+                start += len;
+                (name, range)
+            })
+            .collect();
+        Self { slices }
+    }
+
+    /// The named slices, in order.
+    #[must_use]
+    pub fn slices(&self) -> &[(&'static str, Range<usize>)] {
+        &self.slices
+    }
+
+    /// Length of the observation vector.
+    #[must_use]
+    pub fn dim(&self) -> usize {
+        self.slices.last().map_or(0, |(_, r)| r.end)
+    }
+
+    /// Whether an observation of this layout needs fingertip contact sensing.
+    #[must_use]
+    pub fn needs_tip_sensing(&self) -> bool {
+        self.slices.iter().any(|(name, _)| CONTACT_SLICES.contains(name))
+    }
+}
+
 /// One fingertip's contact reading, in plain arrays so that non-simulator callers (the
 /// CAN bridge) need no math library.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -103,6 +180,25 @@ mod tests {
         assert_eq!(OBS_CONTACT_NORMAL.end, OBS_CONTACT_FORCE.start);
         assert_eq!(OBS_CONTACT_FORCE.end, OBS_DIM);
         assert_eq!(OBS_CONTACT_POSITION.len(), 3 * NUM_FINGERS);
+    }
+
+    #[test]
+    fn the_full_layout_of_vge15_is_the_65_float_observation_and_other_hands_get_their_own_sizes() {
+        let full = ObservationLayout::new(ObservationSet::Full, NUM_JOINTS, NUM_FINGERS);
+        let want: Vec<(&str, Range<usize>)> = OBS_LAYOUT.to_vec();
+        assert_eq!(full.slices(), want.as_slice());
+        assert_eq!(full.dim(), OBS_DIM);
+        assert!(full.needs_tip_sensing());
+        // The Allegro: 16 joints, 4 fingertips.
+        let allegro = ObservationLayout::new(ObservationSet::Full, 16, 4);
+        assert_eq!(allegro.dim(), 2 * 16 + 7 * 4);
+        let proprio = ObservationLayout::new(ObservationSet::Proprio { history: 2 }, 16, 4);
+        assert_eq!(proprio.dim(), 2 * 16 + 2 * 2 * 16);
+        assert!(!proprio.needs_tip_sensing());
+        let names: Vec<&str> = proprio.slices().iter().map(|(n, _)| *n).collect();
+        assert_eq!(names, ["q_rad", "q_target_rad", "q_rad_past", "q_target_rad_past"]);
+        let now = ObservationLayout::new(ObservationSet::Proprio { history: 0 }, 16, 4);
+        assert_eq!((now.dim(), now.slices().len()), (32, 2));
     }
 
     #[test]

@@ -3,6 +3,7 @@
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use vge_hand::Hand;
+use vge_sim::{ObservationLayout, ObservationSet};
 
 /// Read a hand's description (an MJCF file and the TOML beside it) as the simulator does.
 #[derive(Debug, Args)]
@@ -44,12 +45,12 @@ fn summary(hand: &Hand) -> String {
     let sha: String = hand.description_sha256().iter().take(8).map(|b| format!("{b:02x}")).collect();
     let (n, f) = (hand.num_joints(), hand.num_fingers());
     let _ = writeln!(out, "hand {} (description sha256 {sha}...): {n} joints, {f} fingers", hand.name());
-    // The observation vge builds (q, q_target, and per fingertip point, normal and force).
+    let size = |set| ObservationLayout::new(set, n, f).dim();
     let _ = writeln!(
         out,
-        "observation: full {} floats, proprio {} floats; action {n} floats",
-        2 * n + 7 * f,
-        2 * n
+        "observation: full {} floats (with fingertip contacts), proprio {} floats (joints only); action {n} floats",
+        size(ObservationSet::Full),
+        size(ObservationSet::Proprio { history: 0 })
     );
     let _ = writeln!(out, "fingers:");
     for finger in hand.fingers() {
