@@ -67,6 +67,43 @@ fn each_table1_config_is_the_base_with_its_own_keys() {
     }
 }
 
+/// The protocol has one default: `cube-base.toml` is `Config::default` with a name and plain
+/// RL as its method, so a changed default changes the protocol in one place.
+#[test]
+fn the_protocol_base_is_the_defaults() {
+    let path = repo().join("configs/cube-base.toml");
+    let table: toml::Table = std::fs::read_to_string(&path).expect("cube-base.toml").parse().expect("TOML");
+    let keys: Vec<&str> = table.keys().map(String::as_str).collect();
+    assert_eq!(keys, ["method", "name"], "cube-base.toml writes only its name and method");
+    let loaded = load_config(&path, &[]).expect("cube-base.toml loads");
+    let defaults =
+        parse_with_overrides("name = \"cube-base\"\nmethod = \"rl\"\n", "defaults", &[]).expect("defaults");
+    assert_eq!(loaded, defaults);
+}
+
+/// Every shipped config names a base and only what differs from it: at most 25 lines each.
+#[test]
+fn every_shipped_config_is_short_and_built_on_a_base() {
+    let mut files = Vec::new();
+    for dir in ["configs", "configs/variants"] {
+        for entry in std::fs::read_dir(repo().join(dir)).expect("configs") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                files.push(path);
+            }
+        }
+    }
+    assert!(files.len() > 30, "{} configs found", files.len());
+    for path in files {
+        let text = std::fs::read_to_string(&path).expect("config");
+        let lines = text.lines().count();
+        assert!(lines <= 25, "{}: {lines} lines", path.display());
+        let table: toml::Table = text.parse().expect("TOML");
+        let is_base = path.ends_with("configs/cube-base.toml");
+        assert!(is_base || table.contains_key("base"), "{} names no base", path.display());
+    }
+}
+
 #[test]
 fn a_base_merges_under_the_file_table_by_table_and_chains() {
     let dir = temp_dir("merge");
