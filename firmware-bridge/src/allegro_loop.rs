@@ -13,7 +13,7 @@
 //! What the loop does not trust, and what it does then:
 //! - no complete set of position frames for `position_timeout`: halt (watchdog);
 //! - a position outside its joint's range by more than `plausibility_margin_rad`, or a jump of
-//!   more than `max_jump_rad` from the last trusted set: the set is dropped (no torques that
+//!   more than `max_jump_rad` from the previous set: the set is dropped (no torques that
 //!   period, the hand keeps the last ones) and counted; the loop halts if that persists for
 //!   `persist_limit` sets (implausible_state);
 //! - a target source that errs or proposes a non-finite target: the safe targets are held;
@@ -97,7 +97,7 @@ pub struct AllegroLoopConfig {
     pub position_timeout: Duration,
     /// How far outside its range a measured joint may read before it is implausible.
     pub plausibility_margin_rad: f32,
-    /// Largest change of a joint's position between two trusted sets.
+    /// Largest change of a joint's position from one set to the next.
     pub max_jump_rad: f32,
     /// Implausible sets, failing target updates or unsent torque sets in a row that halt.
     pub persist_limit: u32,
@@ -106,6 +106,9 @@ pub struct AllegroLoopConfig {
     /// How often to ask the hand for its status (fault bits); `None`: never.
     pub status_period: Option<Duration>,
 }
+
+/// Frames taken from the bus before the loop acts on what they said: ten periods' traffic.
+const RX_BUDGET: usize = 100;
 
 /// The control period the loop sets: the hand's position period.
 pub const PERIOD: Duration = Duration::from_millis(CONTROL_PERIOD_MS as u64);
@@ -179,6 +182,9 @@ pub struct AllegroReport {
     pub error_frames: ErrorFrameCounts,
     /// Position sets dropped as implausible.
     pub implausible_sets: u64,
+    /// Complete position sets skipped because a newer one was already queued (the host had
+    /// fallen behind the hand).
+    pub superseded_sets: u64,
     /// Joint torques the encoder clipped, summed over joints and sets.
     pub torque_clips: u64,
     /// Largest torque the PD law asked for (N m), before the clip.
@@ -217,6 +223,7 @@ impl AllegroReport {
             bad_frames: 0,
             error_frames: ErrorFrameCounts::default(),
             implausible_sets: 0,
+            superseded_sets: 0,
             torque_clips: 0,
             max_torque_nm: 0.0,
             tx_dropped: 0,
@@ -272,6 +279,7 @@ impl AllegroReport {
             ("error_frames", json!(self.error_frames.total())),
             ("error_frames_bus_off", json!(self.error_frames.bus_off)),
             ("implausible_sets", json!(self.implausible_sets)),
+            ("superseded_sets", json!(self.superseded_sets)),
             ("torque_clips", json!(self.torque_clips)),
             ("max_torque_nm", round(f64::from(self.max_torque_nm), 4)),
             ("tx_dropped", json!(self.tx_dropped)),
@@ -568,6 +576,9 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
     let mut targets = filter.last_safe_rad();
     let mut cycle = PositionCycle::new();
     let mut last_set_at = started.at;
+    // The previous complete set as read, and sets read since the last trusted one.
+    let mut last_read = started.q_rad;
+    let mut sets_since_trusted = 0u32;
     let mut first_set_at = None;
     let mut next_update = started.at;
     let mut next_status = config.status_period.map(|p| started.at + p);
@@ -642,18 +653,42 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
         }
         // Short waits, so a stop request is seen within 10 ms whatever the bus does.
         let wait = wake.saturating_duration_since(Instant::now()).min(Duration::from_millis(10));
-        let report = match io.recv(wait)? {
-            Some(r) => r,
-            None => continue,
-        };
-        let p = match report {
-            Report::Position(p) => p,
-            Report::Status(s) | Report::Info(Info { status: s, .. }) if s.fault() => {
-                break (StopReason::NodeFault, format!("the hand reports {}", status_text(s)));
+        // Everything queued, not just the next frame: a host that fell behind acts on the
+        // newest complete set and skips the older ones, rather than answering each in turn
+        // with torques ever further behind the hand.
+        let mut received = io.recv(wait)?;
+        let mut newest = None;
+        let mut before_newest = last_read;
+        let mut fault = None;
+        let mut taken = 0;
+        while let Some(report) = received {
+            match report {
+                Report::Position(p) => {
+                    if let Some(q) = cycle.push(&p) {
+                        if newest.is_some() {
+                            io.report.superseded_sets += 1;
+                        }
+                        newest = Some(q);
+                        before_newest = std::mem::replace(&mut last_read, q);
+                        sets_since_trusted += 1;
+                    }
+                }
+                Report::Status(s) | Report::Info(Info { status: s, .. }) if s.fault() => {
+                    fault = Some(s);
+                    break;
+                }
+                _ => {}
             }
-            _ => continue,
-        };
-        let Some(q) = cycle.push(&p) else { continue };
+            taken += 1;
+            if taken >= RX_BUDGET {
+                break;
+            }
+            received = io.recv(Duration::ZERO)?;
+        }
+        if let Some(s) = fault {
+            break (StopReason::NodeFault, format!("the hand reports {}", status_text(s)));
+        }
+        let Some(q) = newest else { continue };
         let read_at = Instant::now();
         let interval = read_at.duration_since(last_set_at);
         last_set_at = read_at;
@@ -666,7 +701,11 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
         first_set_at.get_or_insert(read_at);
         io.report.final_q_rad = q;
 
-        if let Some(why) = implausible(&q, &state.q_rad, config) {
+        // Jumps are measured from the previous set as read, trusted or not: a one-set spike is
+        // dropped on its way up and down, and a joint that really moved while sets were lost
+        // is trusted again from its second set, instead of every later set looking like a
+        // jump from a stale reading.
+        if let Some(why) = implausible(&q, &before_newest, config) {
             io.report.implausible_sets += 1;
             if implausible_run.record(true, config.persist_limit) {
                 break (StopReason::ImplausibleState, why);
@@ -675,10 +714,12 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
         }
         implausible_run.record(false, config.persist_limit);
         let a = config.velocity_smoothing;
+        let dt_s = period_s * sets_since_trusted as f32;
         for ((dq_est, q_new), q_old) in state.dq_radps.iter_mut().zip(&q).zip(&state.q_rad) {
-            *dq_est = a * (q_new - q_old) / period_s + (1.0 - a) * *dq_est;
+            *dq_est = a * (q_new - q_old) / dt_s + (1.0 - a) * *dq_est;
         }
         state.q_rad = q;
+        sets_since_trusted = 0;
 
         let tau: [f32; NUM_JOINTS] = std::array::from_fn(|k| {
             config.kp_nm_per_rad[k] * (targets[k] - q[k]) - config.kv_nms_per_rad[k] * state.dq_radps[k]

@@ -35,20 +35,28 @@ impl<L: AllegroLink> AllegroLink for Tap<L> {
     }
 }
 
-struct Run {
+struct Run<P: AllegroPlant = InertiaPlant> {
     report: Result<AllegroReport, allegro_loop::AllegroLoopError>,
     host_frames: Vec<AllegroFrame>,
-    emulator: AllegroHandEmulator<InertiaPlant>,
+    emulator: AllegroHandEmulator<P>,
 }
 
 /// The loop against an emulated hand of inertias starting at `q0`, with `config` changed by
-/// `tweak`; the emulator runs until the loop is done. `silence_after_sets`: the hand stops
-/// reporting after that many position sets (a hand that went quiet).
+/// `tweak`; the emulator runs until the loop is done.
 fn run_against_inertias(
     targets: [f32; NUM_JOINTS],
     q0: [f32; NUM_JOINTS],
     tweak: impl FnOnce(&mut AllegroLoopConfig),
 ) -> Run {
+    run_against(InertiaPlant::at(q0), targets, tweak)
+}
+
+/// The loop holding `targets` against an emulated hand of `plant`.
+fn run_against<P: AllegroPlant + Send + 'static>(
+    plant: P,
+    targets: [f32; NUM_JOINTS],
+    tweak: impl FnOnce(&mut AllegroLoopConfig),
+) -> Run<P> {
     let hand = AllegroHand::shipped().expect("allegro");
     let mut config = AllegroLoopConfig::new(&hand);
     // Generous: a loaded test machine must not trip the watchdog in tests about other things.
@@ -58,7 +66,7 @@ fn run_against_inertias(
     let done = Arc::new(AtomicBool::new(false));
     let hand_done = done.clone();
     let emulator = thread::spawn(move || {
-        let mut e = AllegroHandEmulator::new(EmulatedHand::default(), InertiaPlant::at(q0));
+        let mut e = AllegroHandEmulator::new(EmulatedHand::default(), plant);
         serve(&mut hand_end, &mut e, Duration::from_secs(5), &hand_done).expect("emulator link");
         e
     });
@@ -215,6 +223,41 @@ fn implausible_positions_are_dropped_then_halt() {
     assert_eq!(report.cycles, 0, "no torque from an implausible reading");
     assert_eq!(report.implausible_sets, 11);
     assert_eq!(ids(&run.host_frames[run.host_frames.len() - 6..]), SHUTDOWN_IDS);
+}
+
+/// Inertias whose joint 6 reads 0.5 rad off for one position set, as a sensor glitch: the
+/// set sent 31-33 ms after the servos went on (steps are 3 ms once the period is set, so one
+/// step ends in that window).
+struct Spike {
+    plant: InertiaPlant,
+    on_ms: u64,
+}
+
+impl AllegroPlant for Spike {
+    fn step(&mut self, servo_on: bool, tau_nm: &[f32; NUM_JOINTS], ms: u32) {
+        self.plant.step(servo_on, tau_nm, ms);
+        if servo_on {
+            self.on_ms += u64::from(ms);
+        }
+    }
+    fn q_rad(&self) -> [f32; NUM_JOINTS] {
+        let mut q = self.plant.q_rad();
+        if (31..=33).contains(&self.on_ms) {
+            q[6] += 0.5;
+        }
+        q
+    }
+}
+
+#[test]
+fn a_one_set_glitch_is_dropped_on_its_way_up_and_down_and_the_loop_runs_on() {
+    let hand = AllegroHand::shipped().expect("allegro");
+    let plant = Spike { plant: InertiaPlant::at(hand.start_grasp_rad), on_ms: 0 };
+    let run = run_against(plant, hand.start_grasp_rad, |c| c.max_cycles = Some(100));
+    let report = run.report.expect("the loop ran");
+    assert_eq!(report.stop_reason, StopReason::StepsReached, "{}", report.stop_detail);
+    assert_eq!(report.implausible_sets, 2, "the spike, and the set after it jumping back");
+    assert_eq!(report.cycles, 100);
 }
 
 #[test]

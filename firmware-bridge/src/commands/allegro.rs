@@ -104,10 +104,12 @@ fn print_report(r: &AllegroReport, extra: &[(&str, Value)]) -> anyhow::Result<()
         );
     }
     out!(
-        "rate:    {:.2} Hz achieved of {:.2} Hz; {} late position sets (> 1.5 periods apart)",
+        "rate:    {:.2} Hz achieved of {:.2} Hz; {} late position sets (> 1.5 periods apart), {} skipped \
+         for a newer one",
         r.achieved_rate_hz,
         1.0 / PERIOD.as_secs_f64(),
-        r.late_position_sets
+        r.late_position_sets,
+        r.superseded_sets
     );
     out!(
         "jitter:  |set interval - 3 ms| p50 {:.1} us, p99 {:.1} us, max {:.1} us",
