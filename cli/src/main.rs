@@ -12,8 +12,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use commands::{
-    bench, compare, controller, eval, export, hand, import, inspect, plot, robustness, score, screen, ship, sweep,
-    train,
+    bench, compare, controller, eval, export, hand, import, inspect, plot, robustness, score, screen, ship,
+    sweep, train,
 };
 
 /// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
