@@ -32,6 +32,7 @@ pub fn sim(e: SimError) -> PyErr {
         | SimError::NonFiniteAction { .. }
         | SimError::InvalidConfig(_)
         | SimError::BatchLength { .. } => PyValueError::new_err(e.to_string()),
+        SimError::Hand(_) => HandError::new_err(e.to_string()),
         SimError::NotReset | SimError::NonFiniteState(_) | SimError::Kinematics(_) => {
             PyRuntimeError::new_err(e.to_string())
         }
