@@ -537,7 +537,7 @@ impl HandWorld {
         // joint, at the description's pose), their colliders, then its joints. The palm's
         // colliders (what is welded to the world) go on one fixed body after the fingers.
         let mut rigid: Vec<Option<RigidBodyHandle>> = vec![None; n];
-        let mut colliders_of_joint: Vec<Vec<(usize, ColliderHandle)>> = vec![Vec::new(); n];
+        let mut colliders_of_joint: Vec<Vec<((usize, usize), ColliderHandle)>> = vec![Vec::new(); n];
         let mut joints: Vec<Option<JointHandles>> = vec![None; n];
         for finger in hand.fingers() {
             let Some(first) = joints_desc.get(finger.joints.start) else { continue };
@@ -588,7 +588,7 @@ impl HandWorld {
                     let pose = pose_in_rigid_body * geom.pose_in_body;
                     let c = builder.position(iso_to_pose(&pose) * shape_frame);
                     let handle = world.colliders.insert_with_parent(c, rigid_of(joint)?, &mut world.bodies);
-                    colliders_of_joint[joint].push((b * 1_000 + g, handle));
+                    colliders_of_joint[joint].push(((b, g), handle));
                 }
             }
             // Joints: the parent's frame of the hinge = the body's pose in its parent, then the
@@ -674,7 +674,7 @@ impl HandWorld {
                     finger.name
                 )));
             };
-            let key = finger.tip_body * 1_000 + g;
+            let key = (finger.tip_body, g);
             let mut tip = None;
             let mut links = Vec::new();
             for j in finger.joints.clone() {
