@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use thiserror::Error;
 use vge_sim::observation::{OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q};
-use vge_sim::{Env, EnvConfig, SimError};
+use vge_sim::{Env, EnvConfig, NUM_JOINTS, SimError};
 
 use crate::node_supervisor::NodeSupervisor;
 use crate::protocol::*;
@@ -196,8 +196,8 @@ impl SimHand {
     /// The state frames of `fingers`' nodes, from the latest observation.
     fn state_frames(&self, fingers: &[FingerId], seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
         let state = self.env.privileged();
-        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or_else(|| vec![0.0; 15]);
-        let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
+        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or_else(|| vec![0.0; NUM_JOINTS]);
+        let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; NUM_JOINTS]);
         let hand = &self.env.config().hand;
         let kp = self.env.config().physics.motor_stiffness_nm_per_rad;
         let caps = hand.torque_caps_nm();
