@@ -10,6 +10,8 @@
 //! finger_names = ["thumb", "index"]         # default: the fingertip names
 //! palm = "palm"                             # a body name
 //! start_grasp = "grasp"                     # a keyframe name
+//! object_width_m = 0.065                    # the object the hand is sized for: a cube's side
+//! object_mass_kg = 0.1                      # and its mass (both or neither)
 //! ```
 //! Without `fingertips` (or without a TOML), the fingertips are the sites whose name starts with
 //! [`FINGERTIP_SITE_PREFIX`] (`fingertip`), in file order; a hand with neither is refused. No
@@ -82,7 +84,7 @@ pub use model::{
     Body, ContactExclude, Finger, Geom, GeomMass, GeomShape, Inertial, Joint, JointLimit, Keyframe,
     PhysicsOptions, PositionServo, Site,
 };
-pub use spec::FINGERTIP_SITE_PREFIX;
+pub use spec::{FINGERTIP_SITE_PREFIX, NominalObject};
 
 /// The largest hand file (XML or TOML) read: Menagerie's hand files are tens of kilobytes.
 pub const MAX_FILE_BYTES: u64 = 4 << 20;
@@ -101,6 +103,7 @@ pub struct Hand {
     options: PhysicsOptions,
     palm: Option<usize>,
     start_grasp: Option<usize>,
+    nominal_object: Option<NominalObject>,
 }
 
 /// Reads a regular file of at most [`MAX_FILE_BYTES`]; `Ok(None)` if it does not exist and
@@ -194,6 +197,7 @@ impl Hand {
             options: parsed.options,
             palm: resolved.palm,
             start_grasp: resolved.start_grasp,
+            nominal_object: resolved.nominal_object,
         })
     }
 
@@ -274,6 +278,12 @@ impl Hand {
     #[must_use]
     pub fn start_grasp_rad(&self) -> Option<Vec<f32>> {
         self.start_grasp.and_then(|k| self.keyframes.get(k)).map(|k| k.qpos_rad.clone())
+    }
+
+    /// The object the hand is sized for, if the TOML gives it.
+    #[must_use]
+    pub fn nominal_object(&self) -> Option<NominalObject> {
+        self.nominal_object
     }
 
     /// The index of the joint named `name`.

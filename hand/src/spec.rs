@@ -14,7 +14,7 @@ use crate::model::{Finger, GeomShape};
 pub const FINGERTIP_SITE_PREFIX: &str = "fingertip";
 
 /// What the TOML may say; every key is optional, and an unknown key is refused.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct Spec {
     /// Site or body names, one per finger, in finger order.
@@ -25,6 +25,10 @@ pub(crate) struct Spec {
     pub(crate) palm: Option<String>,
     /// The keyframe that is the hand's start grasp.
     pub(crate) start_grasp: Option<String>,
+    /// The width of the object the hand is sized for (m): a cube's side.
+    pub(crate) object_width_m: Option<f32>,
+    /// That object's mass (kg).
+    pub(crate) object_mass_kg: Option<f32>,
 }
 
 impl Spec {
@@ -39,6 +43,17 @@ pub(crate) struct Resolved {
     pub(crate) fingers: Vec<Finger>,
     pub(crate) palm: Option<usize>,
     pub(crate) start_grasp: Option<usize>,
+    pub(crate) nominal_object: Option<NominalObject>,
+}
+
+/// The object a hand is sized for, as its TOML gives it: the task's default object is a cube
+/// of this width and mass, and the other shapes share its width.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NominalObject {
+    /// Width (m): a cube's side, twice the inradius of the other shapes.
+    pub width_m: f32,
+    /// Mass (kg).
+    pub mass_kg: f32,
 }
 
 /// Where a fingertip name points.
@@ -131,7 +146,24 @@ pub(crate) fn resolve(
             }
         })
         .transpose()?;
-    Ok(Resolved { fingers, palm, start_grasp })
+    let nominal_object = match (spec.object_width_m, spec.object_mass_kg) {
+        (None, None) => None,
+        (Some(width_m), Some(mass_kg)) => {
+            let ok = |v: f32, max: f32| v.is_finite() && v > 0.0 && v <= max;
+            if !ok(width_m, 0.3) || !ok(mass_kg, 10.0) {
+                return Err(spec_error(format!(
+                    "object_width_m = {width_m}, object_mass_kg = {mass_kg}: need 0 < width <= 0.3 m and 0 < mass <= 10 kg"
+                )));
+            }
+            Some(NominalObject { width_m, mass_kg })
+        }
+        _ => {
+            return Err(spec_error(
+                "object_width_m and object_mass_kg go together: set both or neither".to_owned(),
+            ));
+        }
+    };
+    Ok(Resolved { fingers, palm, start_grasp, nominal_object })
 }
 
 fn body_named(parsed: &Parsed, name: &str) -> Option<usize> {

@@ -13,15 +13,14 @@ or from Python: `vge.recording.to_rerun("F.jsonl", "F.rrd")`.
 One row per control step, on two timelines: `step` (control steps since the reset, 1 for the
 state after the first action) and `sim_time` (s). Entities (world frame: z up, SI units):
 
-- `world/hand/<finger>/<link>` (`roll`, `proximal`, `distal`): the link body's pose, as a
-  transform; the proximal and distal links carry their capsules and `.../distal/tip` the
-  fingertip sphere.
+- `world/hand/<finger>/link<j>` (one per joint `j` of the finger): the pose of the body the
+  joint moves, as a transform, carrying its collision geoms (`.../geom<g>/shape`).
 - `world/object`: the object's pose, as a transform, and its shape.
 - `world/contacts/fingertip_points`, `world/contacts/link_points`: contact points of the
   fingertip spheres and of the link capsules with the object, labelled by finger.
 - `world/contacts/fingertip_normal_force_1cm_per_N`, `..._link_normal_force_1cm_per_N`: the
   normal force on the object at each contact point, as arrows of 1 cm per newton.
-- `action/<finger>/<joint>_rad`: the step's 15 joint-target changes.
+- `action/<finger>/joint<j>_rad`: the step's joint-target changes, one per joint.
 - `reward_rad_per_s`: the step's reward; `object_rotation_about_z_rad`: the object's rotation
   about world z since the reset (what the success test measures).
 
@@ -38,10 +37,8 @@ from pathlib import Path
 
 #: The header's `format` and `version` this reader understands.
 FORMAT = "vge episode"
-VERSION = 1
+VERSION = 2
 
-LINK_NAMES = ("roll", "proximal", "distal")
-JOINT_NAMES = ("roll", "flex_prox", "flex_dist")
 #: One colour per finger, so that contacts tell which finger made them.
 FINGER_COLORS = ((230, 85, 13), (49, 130, 189), (49, 163, 84), (117, 107, 177), (214, 39, 40))
 OBJECT_COLOR = (190, 190, 190)
@@ -101,9 +98,9 @@ def _draw(header: dict, steps: list[dict], rrd, spawn: bool):
     for row in steps:
         rec.set_time("step", sequence=row["step"])
         rec.set_time("sim_time", duration=row["sim_time_s"])
-        for f, finger in enumerate(fingers):
-            for k, link in enumerate(LINK_NAMES):
-                rec.log(f"world/hand/{finger}/{link}", _transform(rr, row["links"][3 * f + k]))
+        for finger in header["fingers"]:
+            for j in finger["joints"]:
+                rec.log(f"world/hand/{finger['name']}/link{j}", _transform(rr, row["links"][j]))
         rec.log("world/object", _transform(rr, row["object"]))
         for kind in ("fingertip", "link"):
             contacts = row[f"{kind}_contacts"]
@@ -120,9 +117,9 @@ def _draw(header: dict, steps: list[dict], rrd, spawn: bool):
                 f"world/contacts/{kind}_normal_force_1cm_per_N",
                 rr.Arrows3D(vectors=forces, origins=points, colors=colors),
             )
-        for f, finger in enumerate(fingers):
-            for j, joint in enumerate(JOINT_NAMES):
-                rec.log(f"action/{finger}/{joint}_rad", rr.Scalars(row["action_rad"][3 * f + j]))
+        for finger in header["fingers"]:
+            for j in finger["joints"]:
+                rec.log(f"action/{finger['name']}/joint{j}_rad", rr.Scalars(row["action_rad"][j]))
         rec.log("reward_rad_per_s", rr.Scalars(row["reward"]))
         rec.log("object_rotation_about_z_rad", rr.Scalars(row["rotation_about_z_rad"]))
     rec.flush()
@@ -138,17 +135,27 @@ def _log_geometry(rr, rec, header: dict) -> None:
     for f, finger in enumerate(header["fingers"]):
         color = FINGER_COLORS[f % len(FINGER_COLORS)]
         name = finger["name"]
-        # Links point along their frame's -z; a capsule runs from its origin along +z.
-        for link, length in (("proximal", finger["proximal_length_m"]), ("distal", finger["distal_length_m"])):
-            capsule = rr.Capsules3D(
-                lengths=[length], radii=[finger["link_radius_m"]], translations=[[0, 0, -length]], colors=[color]
-            )
-            rec.log(f"world/hand/{name}/{link}", capsule, static=True)
-        tip = rr.Ellipsoids3D(
-            centers=[[0, 0, -finger["distal_length_m"]]], radii=[finger["tip_radius_m"]], colors=[color]
-        )
-        rec.log(f"world/hand/{name}/distal/tip", tip, static=True)
+        # Each link's collision geoms, placed in the frame of the body its joint moves.
+        for j in finger["joints"]:
+            for g, geom in enumerate(header["link_geoms"][j]):
+                path = f"world/hand/{name}/link{j}/geom{g}"
+                rec.log(path, _transform(rr, geom["pose"]), static=True)
+                rec.log(f"{path}/shape", _geom_shape(rr, geom, color), static=True)
     rec.log("world/object", _object_shape(rr, header["object"]), static=True)
+
+
+def _geom_shape(rr, geom: dict, color):
+    """One collision geom in its own frame (MuJoCo's conventions: capsules and cylinders on z)."""
+    shape, size = geom["shape"], geom["size_m"]
+    if shape == "sphere":
+        return rr.Ellipsoids3D(centers=[[0, 0, 0]], radii=[size[0]], colors=[color])
+    if shape == "capsule":
+        return rr.Capsules3D(lengths=[2 * size[1]], radii=[size[0]], translations=[[0, 0, -size[1]]], colors=[color])
+    if shape == "cylinder":
+        return rr.Cylinders3D(lengths=[2 * size[1]], radii=[size[0]], colors=[color])
+    if shape == "box":
+        return rr.Boxes3D(half_sizes=[size], colors=[color])
+    raise RecordingError(f"link geom shape {shape!r}: this reader draws sphere, capsule, cylinder and box")
 
 
 def _object_shape(rr, obj: dict):

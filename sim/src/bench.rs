@@ -9,7 +9,6 @@ use rayon::prelude::*;
 
 use crate::env::{Env, EnvConfig};
 use crate::error::SimError;
-use crate::kinematics::NUM_JOINTS;
 
 /// What to measure.
 #[derive(Debug, Clone, PartialEq)]
@@ -88,35 +87,38 @@ impl SimBench {
 }
 
 /// Deterministic small action for step `k` of world `w` (a SplitMix-style hash).
-fn action(w: usize, k: usize, max: f32) -> [f32; NUM_JOINTS] {
-    std::array::from_fn(|j| {
-        let mut x = (w as u64) << 40 ^ (k as u64) << 8 ^ j as u64;
-        x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        x ^= x >> 31;
-        let u = (x >> 40) as f32 / (1u64 << 24) as f32;
-        0.2 * max * (2.0 * u - 1.0)
-    })
+fn action(w: usize, k: usize, joints: usize, max: f32) -> Vec<f32> {
+    (0..joints)
+        .map(|j| {
+            let mut x = (w as u64) << 40 ^ (k as u64) << 8 ^ j as u64;
+            x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            x ^= x >> 31;
+            let u = (x >> 40) as f32 / (1u64 << 24) as f32;
+            0.2 * max * (2.0 * u - 1.0)
+        })
+        .collect()
 }
 
 /// The first world's actions for `steps` control steps at `max_action_rad`, as rows of
-/// [`NUM_JOINTS`] little-endian f32: the table the Python loops that are timed against this
+/// `joints` little-endian f32: the table the Python loops that are timed against this
 /// bench (scripts/bench_mujoco.py, python/examples/bench_loop.py) replay, written here so that
 /// no second copy of the hash has to agree with this one.
 #[must_use]
-pub fn first_world_actions_f32_le(steps: usize, max_action_rad: f32) -> Vec<u8> {
-    (0..steps).flat_map(|k| action(0, k, max_action_rad)).flat_map(f32::to_le_bytes).collect()
+pub fn first_world_actions_f32_le(steps: usize, joints: usize, max_action_rad: f32) -> Vec<u8> {
+    (0..steps).flat_map(|k| action(0, k, joints, max_action_rad)).flat_map(f32::to_le_bytes).collect()
 }
 
 /// Runs `steps` control steps on `env`, resetting when an episode ends; returns resets.
 fn drive(env: &mut Env, w: usize, steps: usize) -> Result<usize, SimError> {
     let max = env.config().max_action_rad;
+    let joints = env.config().hand.num_joints();
     let mut resets = 0;
     let mut seed = w as u64 * 1_000_003;
     env.reset(seed)?;
     for k in 0..steps {
-        let r = env.step(&action(w, k, max))?;
+        let r = env.step(&action(w, k, joints, max))?;
         if r.terminated || r.truncated {
             seed += 1;
             resets += 1;
@@ -175,16 +177,17 @@ mod tests {
     #[test]
     fn the_written_action_table_is_the_first_worlds_actions_row_by_row() {
         let max = EnvConfig::default().max_action_rad;
-        let bytes = first_world_actions_f32_le(3, max);
-        assert_eq!(bytes.len(), 3 * NUM_JOINTS * 4);
+        let joints = 15;
+        let bytes = first_world_actions_f32_le(3, joints, max);
+        assert_eq!(bytes.len(), 3 * joints * 4);
         let floats: Vec<f32> =
             bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-        for (k, row) in floats.chunks_exact(NUM_JOINTS).enumerate() {
-            assert_eq!(row, action(0, k, max), "row {k}");
+        for (k, row) in floats.chunks_exact(joints).enumerate() {
+            assert_eq!(row, action(0, k, joints, max), "row {k}");
             assert!(row.iter().all(|a| a.abs() <= 0.2 * max), "row {k}: {row:?}");
         }
         // Rows differ: the table is not one action repeated.
-        assert_ne!(floats[..NUM_JOINTS], floats[NUM_JOINTS..2 * NUM_JOINTS]);
+        assert_ne!(floats[..joints], floats[joints..2 * joints]);
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! Gymnasium-shaped environment: `reset(seed) -> (obs, info)`,
 //! `step(action) -> StepResult { obs, reward, terminated, truncated, info }`.
 //!
-//! - Action: 15 joint-target deltas (rad), each clipped to
+//! - Action: one joint-target delta (rad) per joint of the hand, each clipped to
 //!   [`EnvConfig::max_action_rad`]; the new targets are clipped to the joint limits.
-//! - Observation: [`crate::observation`] (65 floats), with the configured noise.
+//! - Observation: [`crate::observation`]'s full observation (its size from the hand: 65
+//!   floats for vge15), with the configured noise.
 //! - Reward: the object's angular velocity about world z (rad/s) averaged over the control
 //!   period (its yaw change divided by the period), while at least
 //!   [`EnvConfig::reward_min_contacts`] fingertips touch it, else 0. It is clipped to
@@ -24,23 +25,27 @@
 //! env's own ChaCha8 generator, seeded in [`Env::reset`]: same seed and actions, same
 //! bits.
 
+use std::sync::Arc;
+
 use nalgebra::{Isometry3, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use vge_hand::Hand;
 
 use crate::action::DEFAULT_MAX_ACTION_RAD;
 use crate::angle::rotation_about_z_rad;
 use crate::episode::{EpisodeOutcome, EpisodeTracker};
 use crate::error::SimError;
-use crate::kinematics::{HandModel, JOINTS_PER_FINGER, NUM_FINGERS, NUM_JOINTS, joint_index};
 use crate::objects::ObjectConfig;
-use crate::observation::{FingertipReading, OBS_DIM, build_observation};
+use crate::observation::{FingertipReading, ObservationLayout, ObservationSet, build_observation};
 use crate::world::{ContactReading, HandWorld, JointServo, ObjectState, PhysicsConfig};
 
-/// How the initial grasp is made: the fingers close (both flexions together) until they
-/// touch the object, found geometrically by bisection on the closing angle; their targets
-/// are then set `squeeze_rad` further, the object is held in place for `hold_s` while
-/// the grip builds, then released and left to settle for `settle_s`.
+/// How the initial grasp is made. A hand whose file names a start grasp (a keyframe) starts
+/// there; otherwise each finger closes (every joint after its first together) until it
+/// touches the object, found geometrically by bisection on the closing angle. The targets
+/// of every joint after each finger's first are then set `squeeze_rad` further, the object
+/// is held in place for `hold_s` while the grip builds, then released and left to settle
+/// for `settle_s`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GraspConfig {
     /// Extra flexion of the targets past first contact (rad); the motor torque caps then
@@ -50,10 +55,11 @@ pub struct GraspConfig {
     pub hold_s: f32,
     /// Time the released object settles in the grasp before the episode starts (s).
     pub settle_s: f32,
-    /// Randomise which fingers grasp: with probability 0.5 one of the four non-thumb
-    /// fingers stays open (it stays at q = 0).
+    /// Randomise which fingers grasp: with probability 0.5 one of the fingers not named
+    /// `thumb` stays open (its joints at 0, clamped to their ranges).
     pub randomize_fingers: bool,
-    /// Uniform noise (rad, +-) on the roll angles and on the closing flexions.
+    /// Uniform noise (rad, +-) on each finger's first joint (its roll or spread) and, opening
+    /// only, on its closing joints.
     pub pose_noise_rad: f32,
 }
 
@@ -114,8 +120,11 @@ pub const MAX_EPISODE_STEPS: usize = 1_000_000;
 /// Everything that defines an environment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnvConfig {
-    /// The hand (shared with the controllers).
-    pub hand: HandModel,
+    /// The hand, as its description file gives it (shared with the controllers).
+    pub hand: Arc<Hand>,
+    /// Each joint's servo, in the hand's joint order: the description's, changed by the
+    /// task's knobs ([`Self::set_motor_torque_cap_nm`], [`Self::set_motor_stiffness_nm_per_rad`]).
+    pub servos: Vec<JointServo>,
     /// Physics parameters (rate, solver, contacts, motors).
     pub physics: PhysicsConfig,
     /// The object.
@@ -189,11 +198,31 @@ impl DomainRandomization {
 }
 
 impl Default for EnvConfig {
+    /// vge's own hand ([`crate::hands::vge15`]) and the 10 cm cube it is sized for.
     fn default() -> Self {
-        Self {
-            hand: HandModel::default(),
+        // The shipped file is compiled in and read by every test: it cannot fail at run time.
+        #[allow(clippy::expect_used)]
+        let hand = crate::hands::vge15().expect("the shipped vge15 hand reads");
+        #[allow(clippy::expect_used)]
+        Self::for_hand(hand).expect("the shipped vge15 hand has a servo on every joint")
+    }
+}
+
+impl EnvConfig {
+    /// The task's defaults on `hand`: its servos as its file gives them, and a cube of the
+    /// size and mass its file names (else the 10 cm, 0.15 kg cube).
+    pub fn for_hand(hand: Arc<Hand>) -> Result<Self, SimError> {
+        let servos = JointServo::from_description(&hand)?;
+        let mut object = ObjectConfig::default();
+        if let Some(nominal) = hand.nominal_object() {
+            object.width_m = nominal.width_m;
+            object.mass_kg = nominal.mass_kg;
+        }
+        Ok(Self {
+            hand,
+            servos,
             physics: PhysicsConfig::default(),
-            object: ObjectConfig::default(),
+            object,
             control_hz: 20.0,
             max_action_rad: DEFAULT_MAX_ACTION_RAD,
             episode_length_steps: 400,
@@ -207,7 +236,7 @@ impl Default for EnvConfig {
             randomization: DomainRandomization::default(),
             noise: NoiseConfig::default(),
             perturbation: PerturbationConfig::default(),
-        }
+        })
     }
 }
 
@@ -216,21 +245,32 @@ fn round_steps(duration_s: f32, hz: f32) -> usize {
 }
 
 impl EnvConfig {
-    /// The servo of each joint: the hand's joint limits and torque caps, the physics'
-    /// motor stiffness and damping (the knobs a task sets).
+    /// Sets every joint's motor torque cap in proportion, so that the smallest cap (vge15:
+    /// the four fingers' 0.3 N m; the thumb's 0.45 goes with it) becomes `cap_nm`: the cap
+    /// sets the grip force.
+    pub fn set_motor_torque_cap_nm(&mut self, cap_nm: f32) {
+        let smallest = self.servos.iter().map(|s| s.torque_cap_nm).fold(f32::INFINITY, f32::min);
+        for servo in &mut self.servos {
+            // The smallest caps become `cap_nm` exactly, not through a ratio of 1.
+            servo.torque_cap_nm = if servo.torque_cap_nm == smallest {
+                cap_nm
+            } else {
+                servo.torque_cap_nm * (cap_nm / smallest)
+            };
+        }
+    }
+
+    /// Sets every joint's motor stiffness (N m/rad).
+    pub fn set_motor_stiffness_nm_per_rad(&mut self, kp: f32) {
+        for servo in &mut self.servos {
+            servo.kp_nm_per_rad = kp;
+        }
+    }
+
+    /// The observation's layout: the full set, sized by the hand.
     #[must_use]
-    pub fn servos(&self) -> Vec<JointServo> {
-        self.hand
-            .joint_limits()
-            .iter()
-            .zip(self.hand.torque_caps_nm())
-            .map(|(limit, cap)| JointServo {
-                limit: *limit,
-                kp_nm_per_rad: self.physics.motor_stiffness_nm_per_rad,
-                kv_nms_per_rad: self.physics.motor_damping_nms_per_rad,
-                torque_cap_nm: cap,
-            })
-            .collect()
+    pub fn observation_layout(&self) -> ObservationLayout {
+        ObservationLayout::new(ObservationSet::Full, self.hand.num_joints(), self.hand.num_fingers())
     }
 
     /// Physics steps per control step (rounded: `(1/30)/(1/240)` in f32 is not 8).
@@ -249,13 +289,17 @@ impl EnvConfig {
     pub fn validate(&self) -> Result<(), SimError> {
         self.physics.validate()?;
         self.object.validate()?;
-        for (i, f) in self.hand.fingers.iter().enumerate() {
-            if let Some(c) = f.torque_caps_nm.iter().find(|c| !(c.is_finite() && **c > 0.0)) {
-                return Err(SimError::InvalidConfig(format!(
-                    "hand: finger {i} ({}) motor torque cap {c} N m: needs a positive number",
-                    f.name
-                )));
-            }
+        let joints = self.hand.joints();
+        if self.servos.len() != joints.len() {
+            return Err(SimError::InvalidConfig(format!(
+                "{} servos for the {} joints of hand {}",
+                self.servos.len(),
+                joints.len(),
+                self.hand.name()
+            )));
+        }
+        for (servo, joint) in self.servos.iter().zip(joints) {
+            servo.validate(&joint.name)?;
         }
         let bad = |what: &str, v: f32| Err(SimError::InvalidConfig(format!("{what} {v}")));
         if !(self.control_hz.is_finite()
@@ -313,9 +357,11 @@ impl EnvConfig {
         for (what, n) in
             [("min_contacts", self.min_contacts), ("reward_min_contacts", self.reward_min_contacts)]
         {
-            if n > NUM_FINGERS {
+            let fingers = self.hand.num_fingers();
+            if n > fingers {
                 return Err(SimError::InvalidConfig(format!(
-                    "{what} = {n} contacts: the hand has {NUM_FINGERS} fingertips"
+                    "{what} = {n} contacts: the hand {} has {fingers} fingertips",
+                    self.hand.name()
                 )));
             }
         }
@@ -338,10 +384,10 @@ impl EnvConfig {
 }
 
 /// What `reset` reports besides the observation.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ResetInfo {
-    /// Which fingers were closed on the object.
-    pub grasping_fingers: [bool; NUM_FINGERS],
+    /// Which fingers were closed on the object, in finger order.
+    pub grasping_fingers: Vec<bool>,
     /// Fingertips touching the object after settling.
     pub num_tip_contacts: usize,
     /// Object height after settling (m), its position against gravity (world z with the
@@ -350,13 +396,13 @@ pub struct ResetInfo {
 }
 
 /// What `step` reports besides observation and reward.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct StepInfo {
     /// Fingertips touching the object.
     pub num_tip_contacts: usize,
     /// Which fingertips touch the object, in finger order (contact switches are read off
     /// these).
-    pub tip_contacts: [bool; NUM_FINGERS],
+    pub tip_contacts: Vec<bool>,
     /// Object angular velocity about world z (rad/s) at the end of the step, unclipped.
     pub object_angvel_z_rad_per_s: f32,
     /// Object rotation about world z during this step (rad; [`crate::rotation_about_z_rad`]).
@@ -372,8 +418,8 @@ pub struct StepInfo {
 /// The Gymnasium step tuple.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepResult {
-    /// Observation after the step.
-    pub obs: [f32; OBS_DIM],
+    /// Observation after the step ([`EnvConfig::observation_layout`]).
+    pub obs: Vec<f32>,
     /// Reward of the step.
     pub reward: f32,
     /// The episode ended (drop or lost grasp).
@@ -385,17 +431,17 @@ pub struct StepResult {
 }
 
 /// Noise-free state for controllers and evaluation (the IGM/CS controllers build J_S and
-/// G_S from `q` and `contacts` with [`crate::kinematics`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// G_S from `q` and `contacts` with the hand's kinematics).
+#[derive(Debug, Clone, PartialEq)]
 pub struct PrivilegedState {
     /// Object pose and velocity.
     pub object: ObjectState,
-    /// Joint angles (rad).
-    pub q_rad: [f32; NUM_JOINTS],
+    /// Joint angles (rad), in the hand's joint order.
+    pub q_rad: Vec<f32>,
     /// Joint targets (rad).
-    pub q_target_rad: [f32; NUM_JOINTS],
-    /// Fingertip contacts (point, normal, force).
-    pub contacts: [Option<ContactReading>; NUM_FINGERS],
+    pub q_target_rad: Vec<f32>,
+    /// Fingertip contacts (point, normal, force), in finger order.
+    pub contacts: Vec<Option<ContactReading>>,
 }
 
 impl PrivilegedState {
@@ -403,6 +449,12 @@ impl PrivilegedState {
     #[must_use]
     pub fn num_tip_contacts(&self) -> usize {
         self.contacts.iter().filter(|c| c.is_some()).count()
+    }
+
+    /// Which fingertips touch the object, in finger order.
+    #[must_use]
+    pub fn tip_contacts(&self) -> Vec<bool> {
+        self.contacts.iter().map(Option::is_some).collect()
     }
 }
 
@@ -417,7 +469,7 @@ pub struct Env {
     reference_height_m: f32,
     steps: usize,
     /// Actions waiting out `randomization.action_latency_steps`, oldest first.
-    in_flight: std::collections::VecDeque<[f32; NUM_JOINTS]>,
+    in_flight: std::collections::VecDeque<Vec<f32>>,
 }
 
 /// A standard normal draw (Box-Muller; deterministic given the generator).
@@ -495,16 +547,23 @@ impl Env {
     }
 
     /// Rebuilds the world, closes the fingers on the object and lets it settle.
-    pub fn reset(&mut self, seed: u64) -> Result<([f32; OBS_DIM], ResetInfo), SimError> {
+    pub fn reset(&mut self, seed: u64) -> Result<(Vec<f32>, ResetInfo), SimError> {
         self.rng = ChaCha8Rng::seed_from_u64(seed);
         let cfg = &self.config;
+        let hand = Arc::clone(&cfg.hand);
         let grasp = cfg.grasp;
-        let mut grasping = [true; NUM_FINGERS];
+        let fingers = hand.fingers();
+        let mut grasping = vec![true; fingers.len()];
         if grasp.randomize_fingers && self.rng.random::<f32>() < 0.5 {
-            let skip = 1 + (self.rng.random::<u32>() % (NUM_FINGERS as u32 - 1)) as usize;
-            grasping[skip] = false;
+            // One of the fingers that do not oppose the others may stay open (vge15: finger 0
+            // is the thumb, so this draws 1 + r % 4 as it always has).
+            let open_able: Vec<usize> = (0..fingers.len()).filter(|f| fingers[*f].name != "thumb").collect();
+            if open_able.len() > 1 {
+                let skip = open_able[(self.rng.random::<u32>() % open_able.len() as u32) as usize];
+                grasping[skip] = false;
+            }
         }
-        let mut noise = [0.0f32; 2 * NUM_FINGERS];
+        let mut noise = vec![0.0f32; 2 * fingers.len()];
         if grasp.pose_noise_rad > 0.0 {
             for v in &mut noise {
                 *v = self.rng.random_range(-grasp.pose_noise_rad..=grasp.pose_noise_rad);
@@ -513,32 +572,43 @@ impl Env {
         let mut object = cfg.object;
         object.mass_kg *= DomainRandomization::draw(&mut self.rng, cfg.randomization.mass_scale);
         object.friction *= DomainRandomization::draw(&mut self.rng, cfg.randomization.friction_scale);
-        let q0 = [0.0f32; NUM_JOINTS];
-        let description = crate::hands::vge15()?;
+        let q0 = vec![0.0f32; hand.num_joints()];
         let mut world =
-            HandWorld::new(&description, &cfg.servos(), &cfg.physics, &object, &q0, &Isometry3::identity())?;
+            HandWorld::new(&hand, &cfg.servos, &cfg.physics, &object, &q0, &Isometry3::identity())?;
         world.set_object_fixed(true);
+        let keyframe = hand.start_grasp_rad();
         let mut q = q0;
-        for finger in 0..NUM_FINGERS {
-            if !grasping[finger] {
+        for (f, finger) in fingers.iter().enumerate() {
+            if !grasping[f] {
                 continue;
             }
-            let roll = cfg.hand.fingers[finger].joint_limits[0].clamp(noise[2 * finger]);
-            match close_finger(&world, &cfg.hand, finger, roll)? {
-                Some(s) => {
-                    let s = s + noise[2 * finger + 1].min(0.0);
-                    q[joint_index(finger, 0)] = roll;
-                    q[joint_index(finger, 1)] = s;
-                    q[joint_index(finger, 2)] = s;
+            let first = finger.joints.start;
+            let closing = finger.joints.clone().skip(1);
+            if let Some(start) = &keyframe {
+                // The file's grasp, turned by the noise and opened (never closed) by it.
+                q[first] = cfg.servos[first].limit.clamp(start[first] + noise[2 * f]);
+                for j in closing {
+                    q[j] = cfg.servos[j].limit.clamp(start[j] + noise[2 * f + 1].min(0.0));
                 }
-                None => grasping[finger] = false,
+                continue;
+            }
+            let roll = cfg.servos[first].limit.clamp(noise[2 * f]);
+            match close_finger(&world, &cfg.servos, f, finger.joints.len(), roll)? {
+                Some(s) => {
+                    let s = s + noise[2 * f + 1].min(0.0);
+                    q[first] = roll;
+                    for j in closing {
+                        q[j] = s;
+                    }
+                }
+                None => grasping[f] = false,
             }
         }
         world.set_joint_positions(&q)?;
         let mut target = q;
-        for finger in (0..NUM_FINGERS).filter(|f| grasping[*f]) {
-            for j in 1..JOINTS_PER_FINGER {
-                target[joint_index(finger, j)] += grasp.squeeze_rad;
+        for (_, finger) in fingers.iter().enumerate().filter(|(f, _)| grasping[*f]) {
+            for j in finger.joints.clone().skip(1) {
+                target[j] += grasp.squeeze_rad;
             }
         }
         world.set_joint_targets(&target);
@@ -553,12 +623,13 @@ impl Env {
         if !world.is_finite() {
             return Err(SimError::NonFiniteState("after the initial grasp".to_owned()));
         }
+        let joints = hand.num_joints();
         self.world = Some(world);
         self.external_force_n = Vector3::zeros();
         self.steps = 0;
         self.in_flight.clear();
         self.in_flight
-            .extend(std::iter::repeat_n([0.0; NUM_JOINTS], self.config.randomization.action_latency_steps));
+            .extend(std::iter::repeat_n(vec![0.0; joints], self.config.randomization.action_latency_steps));
         let state = self.read_state()?;
         self.reference_height_m = self.height_m(&state);
         let info = ResetInfo {
@@ -566,8 +637,8 @@ impl Env {
             num_tip_contacts: state.num_tip_contacts(),
             object_height_m: self.reference_height_m,
         };
-        self.state = Some(state);
         let obs = self.observe(&state);
+        self.state = Some(state);
         Ok((obs, info))
     }
 
@@ -579,27 +650,23 @@ impl Env {
 
     fn read_state(&self) -> Result<PrivilegedState, SimError> {
         let world = self.world.as_ref().ok_or(SimError::NotReset)?;
-        let contacts = world.fingertip_contacts();
-        let contacts: [Option<ContactReading>; NUM_FINGERS] = contacts.try_into().map_err(|c: Vec<_>| {
-            SimError::InvalidConfig(format!("{} fingertips, expected {NUM_FINGERS}", c.len()))
-        })?;
         Ok(PrivilegedState {
             object: world.object_state(),
-            q_rad: joint_array(&world.joint_positions())?,
-            q_target_rad: joint_array(world.joint_targets())?,
-            contacts,
+            q_rad: world.joint_positions(),
+            q_target_rad: world.joint_targets().to_vec(),
+            contacts: world.fingertip_contacts(),
         })
     }
 
-    fn observe(&mut self, state: &PrivilegedState) -> [f32; OBS_DIM] {
+    fn observe(&mut self, state: &PrivilegedState) -> Vec<f32> {
         let noise = self.config.noise;
-        let mut q = state.q_rad;
+        let mut q = state.q_rad.clone();
         if noise.q_std_rad > 0.0 {
             for v in &mut q {
                 *v += noise.q_std_rad * gaussian(&mut self.rng);
             }
         }
-        let mut readings = [None; NUM_FINGERS];
+        let mut readings = vec![None; state.contacts.len()];
         for (slot, contact) in readings.iter_mut().zip(&state.contacts) {
             let Some(c) = contact else { continue };
             let mut p = c.position_m;
@@ -624,30 +691,29 @@ impl Env {
         build_observation(&q, &state.q_target_rad, &readings)
     }
 
-    /// Validates an action: 15 finite entries.
-    pub fn check_action(action: &[f32]) -> Result<[f32; NUM_JOINTS], SimError> {
-        let a: [f32; NUM_JOINTS] = action
-            .try_into()
-            .map_err(|_| SimError::ActionLength { got: action.len(), expected: NUM_JOINTS })?;
-        if let Some(index) = a.iter().position(|v| !v.is_finite()) {
-            return Err(SimError::NonFiniteAction { index, value: a[index] });
-        }
-        Ok(a)
+    /// Validates an action: one finite entry per joint of the hand.
+    pub fn check_action(&self, action: &[f32]) -> Result<(), SimError> {
+        check_action(&self.config.hand, action)
     }
 
     /// One control step: apply the clipped target deltas, advance the physics, observe.
     pub fn step(&mut self, action: &[f32]) -> Result<StepResult, SimError> {
-        let mut action = Self::check_action(action)?;
+        self.check_action(action)?;
+        let mut action = action.to_vec();
         if self.config.randomization.action_latency_steps > 0 {
             self.in_flight.push_back(action);
-            action = self.in_flight.pop_front().unwrap_or([0.0; NUM_JOINTS]);
+            action = self.in_flight.pop_front().unwrap_or_else(|| vec![0.0; self.config.hand.num_joints()]);
         }
         let cfg = &self.config;
         let max = cfg.max_action_rad;
         let n_physics = cfg.physics_steps_per_control();
         let world = self.world.as_mut().ok_or(SimError::NotReset)?;
-        let current = joint_array(world.joint_targets())?;
-        let target: [f32; NUM_JOINTS] = std::array::from_fn(|k| current[k] + action[k].clamp(-max, max));
+        let target: Vec<f32> = world
+            .joint_targets()
+            .iter()
+            .zip(&action)
+            .map(|(current, a)| current + a.clamp(-max, max))
+            .collect();
         world.set_joint_targets(&target);
         let pert = cfg.perturbation;
         if pert.is_active() && self.rng.random::<f32>() < pert.change_probability {
@@ -694,15 +760,15 @@ impl Env {
         let truncated = !terminated && self.steps >= cfg.episode_length_steps;
         let info = StepInfo {
             num_tip_contacts: n_contacts,
-            tip_contacts: state.contacts.map(|c| c.is_some()),
+            tip_contacts: state.tip_contacts(),
             object_angvel_z_rad_per_s: wz,
             object_rotation_z_rad: rotation_z_rad,
             object_height_m: height,
             dropped,
             step: self.steps,
         };
-        self.state = Some(state);
         let obs = self.observe(&state);
+        self.state = Some(state);
         Ok(StepResult { obs, reward, terminated, truncated, info })
     }
 }
@@ -714,7 +780,7 @@ impl Env {
     /// A tracker for the episode the last reset began.
     pub fn episode_tracker(&self) -> Result<EpisodeTracker, SimError> {
         let s = self.privileged().ok_or(SimError::NotReset)?;
-        Ok(EpisodeTracker::start(s.contacts.map(|c| c.is_some())))
+        Ok(EpisodeTracker::start(&s.tip_contacts()))
     }
 
     /// Resets with `seed`, then steps with `act(env, obs)` until the env ends the episode (a
@@ -723,7 +789,7 @@ impl Env {
     pub fn run_episode<E: From<SimError>>(
         &mut self,
         seed: u64,
-        mut act: impl FnMut(&Self, &[f32; OBS_DIM]) -> Result<[f32; NUM_JOINTS], E>,
+        mut act: impl FnMut(&Self, &[f32]) -> Result<Vec<f32>, E>,
         mut on_step: impl FnMut(&Self, &StepResult, &EpisodeTracker),
     ) -> Result<EpisodeOutcome, E> {
         let (mut obs, _) = self.reset(seed)?;
@@ -731,7 +797,7 @@ impl Env {
         loop {
             let action = act(self, &obs)?;
             let r = self.step(&action)?;
-            tracker.record(r.reward, r.info.object_rotation_z_rad, r.info.tip_contacts);
+            tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts);
             on_step(self, &r, &tracker);
             if r.terminated || r.truncated {
                 return Ok(tracker.outcome(r.terminated));
@@ -741,21 +807,37 @@ impl Env {
     }
 }
 
-/// A joint vector of the 15-DOF layout the env still works in.
-fn joint_array(v: &[f32]) -> Result<[f32; NUM_JOINTS], SimError> {
-    v.try_into().map_err(|_| SimError::ActionLength { got: v.len(), expected: NUM_JOINTS })
+/// Validates an action for `hand`: one finite entry per joint.
+pub fn check_action(hand: &Hand, action: &[f32]) -> Result<(), SimError> {
+    let expected = hand.num_joints();
+    if action.len() != expected {
+        return Err(SimError::ActionLength { got: action.len(), expected });
+    }
+    if let Some(index) = action.iter().position(|v| !v.is_finite()) {
+        return Err(SimError::NonFiniteAction { index, value: action[index] });
+    }
+    Ok(())
 }
 
-/// Closing angle `s` (both flexions = s) at which `finger`, at roll `roll`, first touches
-/// the object; `None` when it never does within the flexion limit.
+/// Closing angle `s` (every joint after the first = s) at which finger `finger` of
+/// `num_joints` joints, its first at `roll`, first touches the object; `None` when it never
+/// does within its second joint's range.
 fn close_finger(
     world: &HandWorld,
-    hand: &HandModel,
+    servos: &[JointServo],
     finger: usize,
+    num_joints: usize,
     roll: f32,
 ) -> Result<Option<f32>, SimError> {
-    let limit = hand.fingers[finger].joint_limits[1];
-    let dist = |s: f32| world.finger_object_distance_m(finger, &[roll, s, s]);
+    let first = world.hand().fingers()[finger].joints.start;
+    let Some(limit) = servos.get(first + 1).map(|s| s.limit).filter(|_| num_joints >= 2) else {
+        return Ok(None);
+    };
+    let dist = |s: f32| {
+        let mut q = vec![s; num_joints];
+        q[0] = roll;
+        world.finger_object_distance_m(finger, &q)
+    };
     let step = 0.02;
     let mut lo = 0.0f32.max(limit.lower_rad);
     if dist(lo)? <= 0.0 {

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::{
-    DomainRandomization, EnvConfig, HandOrientation, NUM_FINGERS, NoiseConfig, ObjectConfig, ObjectShape,
+    DomainRandomization, EnvConfig, HandOrientation, NoiseConfig, ObjectConfig, ObjectShape,
     PerturbationConfig,
 };
 
@@ -36,6 +36,11 @@ impl InvalidEnvSection {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct EnvSection {
+    /// The hand: a shipped hand's name (`"vge15"`, the default, or `"allegro"`) or the path
+    /// of an MJCF file (the TOML beside it is read too; see `docs/hands.md`). The object
+    /// is sized as the hand's file says.
+    #[serde(skip_serializing_if = "is_default_hand")]
+    pub hand: String,
     pub objects: Vec<ObjectShape>,
     pub control_hz: f32,
     pub episode_length: usize,
@@ -135,6 +140,15 @@ pub struct EnvSection {
     pub finger_collisions: bool,
 }
 
+/// The hand a config without `hand` means.
+pub const DEFAULT_HAND: &str = "vge15";
+
+/// Keeps the default hand out of the serialised section, so that configs from before the key
+/// existed keep their hash.
+fn is_default_hand(hand: &String) -> bool {
+    hand == DEFAULT_HAND
+}
+
 /// Keeps the default orientation out of the serialised section, as [`is_zero`] does.
 fn is_palm_down(o: &HandOrientation) -> bool {
     *o == HandOrientation::PalmDown
@@ -166,6 +180,7 @@ impl Default for EnvSection {
     fn default() -> Self {
         let env = EnvConfig::default();
         Self {
+            hand: DEFAULT_HAND.to_owned(),
             objects: vec![ObjectShape::Cube],
             control_hz: env.control_hz,
             episode_length: env.episode_length_steps,
@@ -201,12 +216,17 @@ impl Default for EnvSection {
 }
 
 impl EnvSection {
-    /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length).
-    pub fn env_config(&self, index: usize) -> EnvConfig {
-        let mut env = EnvConfig::default();
+    /// The sim's configuration for object `index` of [`Self::objects`] (modulo its length);
+    /// refused when the hand does not load.
+    pub fn env_config(&self, index: usize) -> Result<EnvConfig, InvalidEnvSection> {
+        let hand =
+            crate::hands::load(&self.hand).map_err(|e| InvalidEnvSection::new(format!("env.hand: {e}")))?;
+        let mut env =
+            EnvConfig::for_hand(hand).map_err(|e| InvalidEnvSection::new(format!("env.hand: {e}")))?;
         let object =
             self.objects.get(index % self.objects.len().max(1)).copied().unwrap_or(ObjectShape::Cube);
-        env.object = ObjectConfig::of(object);
+        // The shape the key names, at the width and mass the hand is sized for.
+        env.object = ObjectConfig { shape: object, ..env.object };
         env.control_hz = self.control_hz;
         env.episode_length_steps = self.episode_length;
         env.max_action_rad = self.max_action_rad;
@@ -238,14 +258,14 @@ impl EnvSection {
             env.object.friction = friction;
         }
         if let Some(cap_nm) = self.motor_torque_cap_nm {
-            env.hand.set_finger_torque_cap_nm(cap_nm);
+            env.set_motor_torque_cap_nm(cap_nm);
         }
         if let Some(kp) = self.motor_stiffness_nm_per_rad {
-            env.physics.motor_stiffness_nm_per_rad = kp;
+            env.set_motor_stiffness_nm_per_rad(kp);
         }
         env.physics.hand_orientation = self.hand_orientation;
         env.physics.finger_collisions = self.finger_collisions;
-        env
+        Ok(env)
     }
 }
 
@@ -256,14 +276,18 @@ impl EnvSection {
         if self.objects.is_empty() {
             return Err(InvalidEnvSection::new("env.objects must name at least one object"));
         }
+        let hand =
+            crate::hands::load(&self.hand).map_err(|e| InvalidEnvSection::new(format!("env.hand: {e}")))?;
+        let fingers = hand.num_fingers();
         // Checked here, before the sim's own check, so the message names the key the user wrote.
         for (key, n) in [
             ("env.terminate_below_contacts", self.terminate_below_contacts),
             ("env.reward_min_contacts", self.reward_min_contacts),
         ] {
-            if n > NUM_FINGERS {
+            if n > fingers {
                 return Err(InvalidEnvSection::new(format!(
-                    "{key} = {n}: the hand has {NUM_FINGERS} fingertips"
+                    "{key} = {n}: the hand {} has {fingers} fingertips",
+                    hand.name()
                 )));
             }
         }
@@ -301,7 +325,7 @@ impl EnvSection {
             )));
         }
         for i in 0..self.objects.len() {
-            self.env_config(i).validate().map_err(|e| InvalidEnvSection::new(format!("env: {e}")))?;
+            self.env_config(i)?.validate().map_err(|e| InvalidEnvSection::new(format!("env: {e}")))?;
         }
         if self.max_action_rad.is_nan() || self.max_action_rad <= 0.0 {
             return Err(InvalidEnvSection::new("env.max_action_rad must be > 0"));
@@ -370,8 +394,8 @@ mod tests {
     #[test]
     fn the_keys_are_the_fields_in_order() {
         let keys = EnvSection::keys();
-        assert_eq!(keys.len(), 28, "{keys:?}");
-        assert_eq!((keys[0], keys[27]), ("objects", "finger_collisions"));
+        assert_eq!(keys.len(), 29, "{keys:?}");
+        assert_eq!((keys[0], keys[28]), ("hand", "finger_collisions"));
         // Every key the default section writes is one of them, and an unknown one is refused.
         let written = serde_json::to_value(EnvSection::default()).expect("json");
         let written = written.as_object().expect("an object");
@@ -385,6 +409,21 @@ mod tests {
     fn the_default_section_builds_the_sims_env_with_the_protocols_grasp_noise() {
         let mut expected = EnvConfig::default();
         expected.grasp.pose_noise_rad = PROTOCOL_GRASP_POSE_NOISE_RAD;
-        assert_eq!(EnvSection::default().env_config(0), expected);
+        assert_eq!(EnvSection::default().env_config(0), Ok(expected));
+    }
+
+    #[test]
+    fn a_hand_is_named_or_a_path_and_sizes_the_object_and_an_unknown_one_is_refused() {
+        let allegro = EnvSection { hand: "allegro".to_owned(), ..EnvSection::default() };
+        let env = allegro.env_config(0).expect("allegro");
+        assert_eq!((env.hand.num_joints(), env.servos.len()), (16, 16));
+        assert_eq!((env.object.width_m, env.object.mass_kg), (0.065, 0.1));
+        assert!(allegro.validate().is_ok());
+        let err =
+            EnvSection { hand: "alegro".to_owned(), ..EnvSection::default() }.validate().expect_err("typo");
+        assert!(err.0.contains("env.hand") && err.0.contains("allegro"), "{err}");
+        let too_many = EnvSection { reward_min_contacts: 5, ..allegro };
+        let err = too_many.validate().expect_err("4 fingertips");
+        assert!(err.0.contains("4 fingertips"), "{err}");
     }
 }

@@ -8,7 +8,6 @@
 
 use serde::Serialize;
 
-use crate::NUM_FINGERS;
 use crate::gait::ContactSwitches;
 
 /// One episode's figures.
@@ -50,13 +49,13 @@ pub struct EpisodeTracker {
 impl EpisodeTracker {
     /// An episode that starts with fingertips `touching`.
     #[must_use]
-    pub fn start(touching: [bool; NUM_FINGERS]) -> Self {
+    pub fn start(touching: &[bool]) -> Self {
         Self { switches: ContactSwitches::new(touching), ..Self::default() }
     }
 
     /// Records one step: its reward, the object's rotation about world z during it and the
     /// fingertips touching after it. Returns the contact switches completed on this step.
-    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: [bool; NUM_FINGERS]) -> u32 {
+    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: &[bool]) -> u32 {
         self.episode_return += f64::from(reward);
         self.rotation_rad += f64::from(rotation_z_rad);
         self.contact_sum += touching.iter().filter(|&&t| t).count() as u64;
@@ -96,10 +95,10 @@ mod tests {
 
     #[test]
     fn turns_add_up() {
-        let mut t = EpisodeTracker::start([true; NUM_FINGERS]);
+        let mut t = EpisodeTracker::start(&[true; 5]);
         // 0.3 rad per step, 25 steps: 7.5 rad, more than a turn.
         for _ in 0..25 {
-            t.record(1.0, 0.3, [true; NUM_FINGERS]);
+            t.record(1.0, 0.3, &[true; 5]);
         }
         let o = t.outcome(false);
         assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
@@ -111,13 +110,13 @@ mod tests {
     #[test]
     fn contacts_average_and_switches_count() {
         let touching = [true, true, true, true, false];
-        let mut t = EpisodeTracker::start(touching);
+        let mut t = EpisodeTracker::start(&touching);
         let detached = [false, true, true, true, false];
         let mut completed = 0;
         for _ in 0..crate::gait::MIN_DETACH_STEPS {
-            completed += t.record(0.0, 0.0, detached);
+            completed += t.record(0.0, 0.0, &detached);
         }
-        completed += t.record(0.0, 0.0, touching);
+        completed += t.record(0.0, 0.0, &touching);
         let o = t.outcome(false);
         assert_eq!((completed, o.contact_switches), (1, 1));
         assert!((o.mean_contacts - (3.0 * 3.0 + 4.0) / 4.0).abs() < 1e-12);

@@ -1,9 +1,10 @@
-//! Simulator crate of vge: the 15-DOF fingertip-grasp hand and its objects.
+//! Simulator crate of vge: a hand read from its description file ([`hands`], `vge_hand::Hand`)
+//! and the objects it turns.
 //!
-//! The hand is described once, as data ([`kinematics::HandModel`]), and every consumer
-//! (the rapier3d world, the in-grasp controllers) derives what it needs from that data
-//! through the same forward kinematics, so the physics and the controllers cannot
-//! disagree about where a fingertip is.
+//! The hand is described once, as data (an MJCF file), and every consumer (the rapier3d
+//! world, the observation and action sizes, the in-grasp controllers) derives what it needs
+//! from that data through the same forward kinematics, so the physics and the controllers
+//! cannot disagree about where a fingertip is or how many there are.
 //!
 //! # Features
 //! - `physics` (default): the rapier3d world and everything built on it ([`world`],
@@ -46,7 +47,7 @@ pub use angle::rotation_about_z_rad;
 #[cfg(feature = "physics")]
 pub use env::{
     DomainRandomization, Env, EnvConfig, GraspConfig, NoiseConfig, PerturbationConfig, PrivilegedState,
-    ResetInfo, StepInfo, StepResult,
+    ResetInfo, StepInfo, StepResult, check_action,
 };
 #[cfg(feature = "physics")]
 pub use env_keys::EnvSection;
@@ -58,7 +59,9 @@ pub use kinematics::{
 };
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
-pub use observation::{FingertipReading, OBS_DIM, ObservationLayout, ObservationSet, build_observation};
+pub use observation::{
+    FingertipReading, ObservationLayout, ObservationSet, ProprioHistory, build_observation,
+};
 pub use policy_interface::check_policy_interface;
 #[cfg(feature = "physics")]
 pub use recording::{EpisodeRecorder, RecordingError};

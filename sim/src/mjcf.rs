@@ -36,32 +36,30 @@ use std::fmt::Write as _;
 use nalgebra::{Isometry3, UnitQuaternion};
 
 use crate::error::SimError;
-use crate::kinematics::{HandModel, JOINT_NAMES, NUM_JOINTS};
+use crate::kinematics::{HandModel, JOINT_NAMES};
 use crate::objects::{ObjectConfig, ObjectShape};
-use crate::world::{HandWorld, PhysicsConfig};
+use crate::world::{HandWorld, JointServo, PhysicsConfig};
 
 /// A held grasp to start MuJoCo from (the rapier world's state after `Env::reset`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GraspKeyframe {
     /// Joint angles (rad), finger-major.
-    pub q_rad: [f32; NUM_JOINTS],
+    pub q_rad: Vec<f32>,
     /// Motor targets (rad), finger-major.
-    pub q_target_rad: [f32; NUM_JOINTS],
+    pub q_target_rad: Vec<f32>,
     /// Object pose (world).
     pub object_pose: Isometry3<f32>,
 }
 
 impl GraspKeyframe {
-    /// The current state of `world` (a hand of the 15-DOF layout).
-    pub fn of(world: &HandWorld) -> Result<Self, SimError> {
-        let joints = |v: &[f32]| -> Result<[f32; NUM_JOINTS], SimError> {
-            v.try_into().map_err(|_| SimError::ActionLength { got: v.len(), expected: NUM_JOINTS })
-        };
-        Ok(Self {
-            q_rad: joints(&world.joint_positions())?,
-            q_target_rad: joints(world.joint_targets())?,
+    /// The current state of `world`.
+    #[must_use]
+    pub fn of(world: &HandWorld) -> Self {
+        Self {
+            q_rad: world.joint_positions(),
+            q_target_rad: world.joint_targets().to_vec(),
             object_pose: world.object_state().pose,
-        })
+        }
     }
 }
 
@@ -70,6 +68,8 @@ impl GraspKeyframe {
 pub struct MjcfSettings<'a> {
     /// The hand (geometry, limits, torque caps).
     pub hand: &'a HandModel,
+    /// Its servos (stiffness and damping; the caps are the hand's).
+    pub servos: &'a [JointServo],
     /// Physics parameters (gravity, motors, density, friction).
     pub physics: &'a PhysicsConfig,
     /// The object (cube, sphere or cylinder: MuJoCo has no convex hulls without meshes).
@@ -90,7 +90,14 @@ fn quat(q: &UnitQuaternion<f32>) -> String {
 /// The MJCF document: one fixed base body per finger (as in the rapier world), the object
 /// on a free joint, one position actuator per joint, and the keyframe `grasp`.
 pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<String, SimError> {
-    let MjcfSettings { hand, physics, object, timestep_s } = *settings;
+    let MjcfSettings { hand, servos, physics, object, timestep_s } = *settings;
+    let Some(servo) = servos.first() else {
+        return Err(SimError::InvalidConfig("no servos".to_owned()));
+    };
+    let (kp, kv) = (servo.kp_nm_per_rad, servo.kv_nms_per_rad);
+    if grasp.q_rad.len() != hand.joint_limits().len() || grasp.q_target_rad.len() != grasp.q_rad.len() {
+        return Err(SimError::ActionLength { got: grasp.q_rad.len(), expected: hand.joint_limits().len() });
+    }
     if !(timestep_s.is_finite() && timestep_s > 0.0) {
         return Err(SimError::InvalidConfig(format!("MuJoCo time step {timestep_s} s")));
     }
@@ -109,7 +116,7 @@ pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<S
     };
     let friction = physics.finger_friction;
     // The smallest joint inertia at which MuJoCo's explicit motor spring is stable (module docs).
-    let armature = physics.motor_stiffness_nm_per_rad * timestep_s * timestep_s / 4.0;
+    let armature = kp * timestep_s * timestep_s / 4.0;
     // contype/conaffinity: the hand touches the object (and, with `finger_collisions`, other
     // fingers: MuJoCo skips parent-child pairs, as rapier's joints do), as rapier's groups.
     let hand_affinity = if physics.finger_collisions { 3 } else { 2 };
@@ -182,16 +189,12 @@ pub fn hand_mjcf(settings: &MjcfSettings<'_>, grasp: &GraspKeyframe) -> Result<S
             let _ = writeln!(
                 w,
                 r#"    <position name="f{i}_{name}" joint="f{i}_{name}" kp="{}" kv="{}" ctrllimited="true" ctrlrange="{} {}" forcelimited="true" forcerange="{} {cap}"/>"#,
-                physics.motor_stiffness_nm_per_rad,
-                physics.motor_damping_nms_per_rad,
-                l.lower_rad,
-                l.upper_rad,
-                -cap,
+                kp, kv, l.lower_rad, l.upper_rad, -cap,
             );
         }
     }
     let _ = writeln!(w, "  </actuator>");
-    let joints = |v: &[f32; NUM_JOINTS]| v.iter().map(f32::to_string).collect::<Vec<_>>().join(" ");
+    let joints = |v: &[f32]| v.iter().map(f32::to_string).collect::<Vec<_>>().join(" ");
     let r = o.rotation;
     let _ = writeln!(
         w,
@@ -217,11 +220,27 @@ pub fn settled_grasp_mjcf(
     seed: u64,
     timestep_s: f32,
 ) -> Result<String, SimError> {
+    if env.hand.name() != "vge15" {
+        return Err(SimError::InvalidConfig(format!(
+            "the MuJoCo benchmark's model is written for vge15 only, not {}",
+            env.hand.name()
+        )));
+    }
     let mut sim = crate::env::Env::new(env.clone())?;
     sim.reset(seed)?;
     let world = sim.world().ok_or_else(|| SimError::InvalidConfig("no world after reset".to_owned()))?;
-    let settings = MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s };
-    hand_mjcf(&settings, &GraspKeyframe::of(world)?)
+    let mut hand = HandModel::default();
+    if let Some(smallest) = env.servos.iter().map(|s| s.torque_cap_nm).reduce(f32::min) {
+        hand.set_finger_torque_cap_nm(smallest);
+    }
+    let settings = MjcfSettings {
+        hand: &hand,
+        servos: &env.servos,
+        physics: &env.physics,
+        object: &env.object,
+        timestep_s,
+    };
+    hand_mjcf(&settings, &GraspKeyframe::of(world))
 }
 
 #[cfg(test)]
@@ -234,8 +253,8 @@ mod tests {
     fn the_model_has_every_joint_actuator_and_the_settled_grasp_as_keyframe() {
         let env = EnvConfig::default();
         let xml = settled_grasp_mjcf(&env, 0, 1.0 / 240.0).unwrap();
-        assert_eq!(xml.matches(r#"type="hinge""#).count(), NUM_JOINTS);
-        assert_eq!(xml.matches("<position ").count(), NUM_JOINTS);
+        assert_eq!(xml.matches(r#"type="hinge""#).count(), 15);
+        assert_eq!(xml.matches("<position ").count(), 15);
         assert_eq!(xml.matches(r#"type="sphere""#).count(), 5, "one fingertip per finger");
         // The keyframe holds 15 joint angles and the object's 7 pose numbers, then 15 targets.
         let key = xml.lines().find(|l| l.contains("<key ")).unwrap();
@@ -245,20 +264,19 @@ mod tests {
             key[start..end].split(' ').map(|v| v.parse().unwrap()).collect()
         };
         let (qpos, ctrl) = (attr("qpos"), attr("ctrl"));
-        assert_eq!((qpos.len(), ctrl.len()), (NUM_JOINTS + 7, NUM_JOINTS));
+        assert_eq!((qpos.len(), ctrl.len()), (15 + 7, 15));
         // A settled grasp: fingers flexed onto the object, targets squeezed past the angles.
         let mut sim = crate::env::Env::new(env.clone()).unwrap();
         sim.reset(0).unwrap();
         let world = sim.world().unwrap();
-        assert_eq!(&qpos[..NUM_JOINTS], &world.joint_positions()[..]);
+        assert_eq!(&qpos[..15], &world.joint_positions()[..]);
         assert_eq!(&ctrl[..], world.joint_targets());
         assert!(qpos[1] > 0.1, "thumb flexed: {}", qpos[1]);
         assert!(ctrl[1] > qpos[1], "squeezed past contact");
         // Joint ranges are radians (MJCF's default unit is degrees), and hold the grasp.
         assert!(xml.contains(r#"<compiler angle="radian"/>"#));
         assert!(xml.contains(r#"range="-0.3 1.6""#));
-        let limits = env.hand.joint_limits();
-        assert!(qpos[..NUM_JOINTS].iter().zip(limits).all(|(q, l)| l.contains(*q)));
+        assert!(qpos[..15].iter().zip(&env.servos).all(|(q, s)| s.limit.contains(*q)));
     }
 
     #[test]

@@ -1,60 +1,23 @@
-//! The policy observation: exactly [`OBS_DIM`] = 65 `f32`, built from raw readings only
-//! (joint angles, joint targets, per-fingertip contacts), so that the simulator and the
-//! deployment bridge (which gets the same readings over CAN) build it with this one
-//! function.
+//! The policy observation, built from raw readings only (joint angles, joint targets,
+//! per-fingertip contacts), so that the simulator and the deployment bridge (which gets the
+//! same readings over CAN) build it with these functions. Its sizes come from the hand.
 //!
-//! Layout (named slices; all world frame, SI units):
+//! Layout of the [`ObservationSet::Full`] observation of a hand of J joints and F fingertips
+//! (named slices, in order; all world frame, SI units; 65 floats for vge15, 60 for the Allegro):
 //!
-//! | slice | content |
-//! |---|---|
-//! | [`OBS_Q`] = 0..15 | joint angles q (rad), finger-major |
-//! | [`OBS_Q_TARGET`] = 15..30 | joint position targets (rad) |
-//! | [`OBS_CONTACT_POSITION`] = 30..45 | per fingertip contact point (m), 5 x 3 |
-//! | [`OBS_CONTACT_NORMAL`] = 45..60 | per fingertip unit normal, fingertip into object, 5 x 3 |
-//! | [`OBS_CONTACT_FORCE`] = 60..65 | per fingertip normal force magnitude (N) |
+//! | slice | length | content |
+//! |---|---|---|
+//! | `q_rad` | J | joint angles q (rad), in the hand's joint order |
+//! | `q_target_rad` | J | joint position targets (rad) |
+//! | `contact_position_m` | 3F | per fingertip contact point (m) |
+//! | `contact_normal` | 3F | per fingertip unit normal, fingertip into object |
+//! | `contact_force_n` | F | per fingertip normal force magnitude (N) |
 //!
 //! A fingertip out of contact contributes zeros to the last three slices.
+//! [`ObservationSet::Proprio`] keeps the first two and adds the last `history` of each.
 
+use std::collections::VecDeque;
 use std::ops::Range;
-
-use crate::kinematics::{NUM_FINGERS, NUM_JOINTS};
-
-/// Length of the observation vector.
-pub const OBS_DIM: usize = 65;
-/// Joint angles (rad), finger-major.
-pub const OBS_Q: Range<usize> = 0..15;
-/// Joint position targets (rad), finger-major.
-pub const OBS_Q_TARGET: Range<usize> = 15..30;
-/// Contact points (m, world), three per fingertip.
-pub const OBS_CONTACT_POSITION: Range<usize> = 30..45;
-/// Contact normals (unit, world, from the fingertip into the object), three per fingertip.
-pub const OBS_CONTACT_NORMAL: Range<usize> = 45..60;
-/// Normal force magnitudes (N), one per fingertip.
-pub const OBS_CONTACT_FORCE: Range<usize> = 60..65;
-
-/// The observation's named slices, in order: the names a policy file carries
-/// (`obs_layout`) and that the bridge and eval check before they run one.
-pub const OBS_LAYOUT: [(&str, Range<usize>); 5] = [
-    ("q_rad", OBS_Q),
-    ("q_target_rad", OBS_Q_TARGET),
-    ("contact_position_m", OBS_CONTACT_POSITION),
-    ("contact_normal", OBS_CONTACT_NORMAL),
-    ("contact_force_n", OBS_CONTACT_FORCE),
-];
-
-/// Whether a policy's observation layout (`(name, start, end)` per slice, in order) is the
-/// one [`build_observation`] fills; `Err` says where they differ.
-pub fn check_layout<'a>(slices: impl IntoIterator<Item = (&'a str, usize, usize)>) -> Result<(), String> {
-    let got: Vec<(&str, usize, usize)> = slices.into_iter().collect();
-    let want: Vec<(&str, usize, usize)> = OBS_LAYOUT.iter().map(|(n, r)| (*n, r.start, r.end)).collect();
-    if got == want {
-        return Ok(());
-    }
-    let show = |v: &[(&str, usize, usize)]| {
-        v.iter().map(|(n, a, b)| format!("{n} {a}..{b}")).collect::<Vec<_>>().join(", ")
-    };
-    Err(format!("the policy observes [{}], the hand provides [{}]", show(&got), show(&want)))
-}
 
 /// Which readings a policy observes, named in a config: what the hand measures decides which
 /// it can run on.
@@ -131,7 +94,64 @@ impl ObservationLayout {
     pub fn needs_tip_sensing(&self) -> bool {
         self.slices.iter().any(|(name, _)| CONTACT_SLICES.contains(name))
     }
+
+    /// The range of the slice named `name`, if the layout has it.
+    #[must_use]
+    pub fn range(&self, name: &str) -> Option<Range<usize>> {
+        self.slices.iter().find(|(n, _)| *n == name).map(|(_, r)| r.clone())
+    }
+
+    /// Whether a policy's observation layout (`(name, start, end)` per slice, in order) is
+    /// this one; `Err` says where they differ.
+    pub fn check<'a>(&self, slices: impl IntoIterator<Item = (&'a str, usize, usize)>) -> Result<(), String> {
+        let got: Vec<(&str, usize, usize)> = slices.into_iter().collect();
+        let want: Vec<(&str, usize, usize)> = self.slices.iter().map(|(n, r)| (*n, r.start, r.end)).collect();
+        if got == want {
+            return Ok(());
+        }
+        let show = |v: &[(&str, usize, usize)]| {
+            v.iter().map(|(n, a, b)| format!("{n} {a}..{b}")).collect::<Vec<_>>().join(", ")
+        };
+        Err(format!("the policy observes [{}], the hand provides [{}]", show(&got), show(&want)))
+    }
 }
+
+impl ObservationSet {
+    /// The name a config and a policy file use: `full`, or `proprio` with its history as
+    /// `proprio:K` (K past control steps; `proprio` alone is K = 0).
+    #[must_use]
+    pub fn name(&self) -> String {
+        match self {
+            Self::Full => "full".to_owned(),
+            Self::Proprio { history: 0 } => "proprio".to_owned(),
+            Self::Proprio { history } => format!("proprio:{history}"),
+        }
+    }
+
+    /// Reads [`Self::name`]'s spelling; the error names what is accepted.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let refuse = || {
+            format!(
+                "observation set `{text}`: expected `full`, `proprio` or `proprio:K` (K past steps, 0-64)"
+            )
+        };
+        match text {
+            "full" => Ok(Self::Full),
+            "proprio" => Ok(Self::Proprio { history: 0 }),
+            _ => {
+                let k = text.strip_prefix("proprio:").ok_or_else(refuse)?;
+                let history: usize = k.parse().map_err(|_| refuse())?;
+                if history > MAX_HISTORY {
+                    return Err(refuse());
+                }
+                Ok(Self::Proprio { history })
+            }
+        }
+    }
+}
+
+/// The longest proprioceptive history a layout takes (control steps): 3.2 s at 20 Hz.
+pub const MAX_HISTORY: usize = 64;
 
 /// One fingertip's contact reading, in plain arrays so that non-simulator callers (the
 /// CAN bridge) need no math library.
@@ -145,27 +165,79 @@ pub struct FingertipReading {
     pub force_n: f32,
 }
 
-/// Builds the 65-float observation from raw readings (see the module docs for the
-/// layout). `contacts[i]` is `None` when fingertip `i` does not touch the object.
+/// Builds the [`ObservationSet::Full`] observation from raw readings (see the module docs
+/// for the layout): `q_rad` and `q_target_rad` of the hand's J joints, `contacts[i]` `None`
+/// when fingertip `i` does not touch the object.
 #[must_use]
 pub fn build_observation(
-    q_rad: &[f32; NUM_JOINTS],
-    q_target_rad: &[f32; NUM_JOINTS],
-    contacts: &[Option<FingertipReading>; NUM_FINGERS],
-) -> [f32; OBS_DIM] {
-    let mut obs = [0.0; OBS_DIM];
-    obs[OBS_Q].copy_from_slice(q_rad);
-    obs[OBS_Q_TARGET].copy_from_slice(q_target_rad);
+    q_rad: &[f32],
+    q_target_rad: &[f32],
+    contacts: &[Option<FingertipReading>],
+) -> Vec<f32> {
+    let (joints, fingers) = (q_rad.len(), contacts.len());
+    let mut obs = vec![0.0; 2 * joints + 7 * fingers];
+    obs[..joints].copy_from_slice(q_rad);
+    obs[joints..2 * joints].copy_from_slice(&q_target_rad[..joints.min(q_target_rad.len())]);
+    let (positions, normals, forces) = (2 * joints, 2 * joints + 3 * fingers, 2 * joints + 6 * fingers);
     for (i, contact) in contacts.iter().enumerate() {
         if let Some(c) = contact {
-            let p = OBS_CONTACT_POSITION.start + 3 * i;
-            let n = OBS_CONTACT_NORMAL.start + 3 * i;
-            obs[p..p + 3].copy_from_slice(&c.position_m);
-            obs[n..n + 3].copy_from_slice(&c.normal);
-            obs[OBS_CONTACT_FORCE.start + i] = c.force_n;
+            obs[positions + 3 * i..positions + 3 * i + 3].copy_from_slice(&c.position_m);
+            obs[normals + 3 * i..normals + 3 * i + 3].copy_from_slice(&c.normal);
+            obs[forces + i] = c.force_n;
         }
     }
     obs
+}
+
+/// The [`ObservationSet::Proprio`] observation: joint angles and targets now and at the
+/// last `history` control steps, newest first. At an episode's start the past is the
+/// present repeated (a hand at rest), so the first observation has the full size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProprioHistory {
+    history: usize,
+    /// (q, q_target) of past steps, newest first, at most `history`.
+    past: VecDeque<(Vec<f32>, Vec<f32>)>,
+}
+
+impl ProprioHistory {
+    /// A history of `history` past steps, empty until [`Self::start`].
+    #[must_use]
+    pub fn new(history: usize) -> Self {
+        Self { history, past: VecDeque::with_capacity(history + 1) }
+    }
+
+    /// Starts an episode at (`q_rad`, `q_target_rad`) and returns its first observation.
+    pub fn start(&mut self, q_rad: &[f32], q_target_rad: &[f32]) -> Vec<f32> {
+        self.past.clear();
+        for _ in 0..self.history {
+            self.past.push_back((q_rad.to_vec(), q_target_rad.to_vec()));
+        }
+        self.observe(q_rad, q_target_rad)
+    }
+
+    /// The observation at (`q_rad`, `q_target_rad`) after one more control step; the
+    /// present then joins the past.
+    pub fn step(&mut self, q_rad: &[f32], q_target_rad: &[f32]) -> Vec<f32> {
+        let obs = self.observe(q_rad, q_target_rad);
+        if self.history > 0 {
+            self.past.pop_back();
+            self.past.push_front((q_rad.to_vec(), q_target_rad.to_vec()));
+        }
+        obs
+    }
+
+    fn observe(&self, q_rad: &[f32], q_target_rad: &[f32]) -> Vec<f32> {
+        let mut obs = Vec::with_capacity(2 * q_rad.len() * (1 + self.history));
+        obs.extend_from_slice(q_rad);
+        obs.extend_from_slice(q_target_rad);
+        for (q, _) in &self.past {
+            obs.extend_from_slice(q);
+        }
+        for (_, t) in &self.past {
+            obs.extend_from_slice(t);
+        }
+        obs
+    }
 }
 
 #[cfg(test)]
@@ -173,21 +245,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn slices_tile_the_vector() {
-        assert_eq!(OBS_Q.end, OBS_Q_TARGET.start);
-        assert_eq!(OBS_Q_TARGET.end, OBS_CONTACT_POSITION.start);
-        assert_eq!(OBS_CONTACT_POSITION.end, OBS_CONTACT_NORMAL.start);
-        assert_eq!(OBS_CONTACT_NORMAL.end, OBS_CONTACT_FORCE.start);
-        assert_eq!(OBS_CONTACT_FORCE.end, OBS_DIM);
-        assert_eq!(OBS_CONTACT_POSITION.len(), 3 * NUM_FINGERS);
-    }
-
-    #[test]
     fn the_full_layout_of_vge15_is_the_65_float_observation_and_other_hands_get_their_own_sizes() {
-        let full = ObservationLayout::new(ObservationSet::Full, NUM_JOINTS, NUM_FINGERS);
-        let want: Vec<(&str, Range<usize>)> = OBS_LAYOUT.to_vec();
-        assert_eq!(full.slices(), want.as_slice());
-        assert_eq!(full.dim(), OBS_DIM);
+        let full = ObservationLayout::new(ObservationSet::Full, 15, 5);
+        let names: Vec<(&str, Range<usize>)> = full.slices().to_vec();
+        assert_eq!(
+            names,
+            [
+                ("q_rad", 0..15),
+                ("q_target_rad", 15..30),
+                ("contact_position_m", 30..45),
+                ("contact_normal", 45..60),
+                ("contact_force_n", 60..65)
+            ]
+        );
         assert!(full.needs_tip_sensing());
         // The Allegro: 16 joints, 4 fingertips.
         let allegro = ObservationLayout::new(ObservationSet::Full, 16, 4);
@@ -199,22 +269,53 @@ mod tests {
         assert_eq!(names, ["q_rad", "q_target_rad", "q_rad_past", "q_target_rad_past"]);
         let now = ObservationLayout::new(ObservationSet::Proprio { history: 0 }, 16, 4);
         assert_eq!((now.dim(), now.slices().len()), (32, 2));
+        let err = full.check(proprio.slices().iter().map(|(n, r)| (*n, r.start, r.end))).expect_err("other");
+        assert!(err.contains("q_rad_past"), "{err}");
+    }
+
+    #[test]
+    fn observation_sets_read_back_their_names_and_refuse_others() {
+        for set in [
+            ObservationSet::Full,
+            ObservationSet::Proprio { history: 0 },
+            ObservationSet::Proprio { history: 3 },
+        ] {
+            assert_eq!(ObservationSet::parse(&set.name()), Ok(set));
+        }
+        for bad in ["", "Full", "proprio:", "proprio:x", "proprio:65", "proprio:-1"] {
+            assert!(ObservationSet::parse(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]
     fn contacts_land_in_their_slots_and_absent_ones_are_zero() {
-        let q = std::array::from_fn(|j| j as f32);
-        let t = std::array::from_fn(|j| -(j as f32));
-        let mut contacts = [None; NUM_FINGERS];
+        let q: Vec<f32> = (0..15).map(|j| j as f32).collect();
+        let t: Vec<f32> = (0..15).map(|j| -(j as f32)).collect();
+        let mut contacts = [None; 5];
         contacts[2] =
             Some(FingertipReading { position_m: [1.0, 2.0, 3.0], normal: [0.0, 1.0, 0.0], force_n: 4.5 });
         let obs = build_observation(&q, &t, &contacts);
-        assert_eq!(obs[OBS_Q.start + 3], 3.0);
-        assert_eq!(obs[OBS_Q_TARGET.start + 3], -3.0);
+        assert_eq!(obs.len(), ObservationLayout::new(ObservationSet::Full, 15, 5).dim());
+        assert_eq!(obs[3], 3.0);
+        assert_eq!(obs[15 + 3], -3.0);
         assert_eq!(&obs[36..39], &[1.0, 2.0, 3.0]);
         assert_eq!(&obs[51..54], &[0.0, 1.0, 0.0]);
         assert_eq!(obs[62], 4.5);
         assert!(obs[30..36].iter().chain(&obs[39..51]).chain(&obs[54..62]).all(|v| *v == 0.0));
         assert_eq!(obs[64], 0.0);
+    }
+
+    #[test]
+    fn the_proprio_history_shifts_newest_first_and_starts_from_the_present() {
+        let layout = ObservationLayout::new(ObservationSet::Proprio { history: 2 }, 2, 1);
+        let mut h = ProprioHistory::new(2);
+        let first = h.start(&[1.0, 2.0], &[3.0, 4.0]);
+        assert_eq!(first, [1.0, 2.0, 3.0, 4.0, 1.0, 2.0, 1.0, 2.0, 3.0, 4.0, 3.0, 4.0]);
+        assert_eq!(first.len(), layout.dim());
+        let second = h.step(&[5.0, 6.0], &[7.0, 8.0]);
+        assert_eq!(second, [5.0, 6.0, 7.0, 8.0, 1.0, 2.0, 1.0, 2.0, 3.0, 4.0, 3.0, 4.0]);
+        let third = h.step(&[9.0, 10.0], &[11.0, 12.0]);
+        assert_eq!(third, [9.0, 10.0, 11.0, 12.0, 5.0, 6.0, 1.0, 2.0, 7.0, 8.0, 3.0, 4.0]);
+        assert_eq!(ProprioHistory::new(0).start(&[1.0], &[2.0]), [1.0, 2.0]);
     }
 }

@@ -8,19 +8,20 @@
 //! prebuilt, so vge writes the data and Python draws it ([`FORMAT`] version [`VERSION`]).
 //!
 //! The first line is the header: `format`, `version`, `control_dt_s`, `force_arrow_m_per_n`,
-//! `fingers` (per finger: `name`, `proximal_length_m`, `distal_length_m`, `link_radius_m`,
-//! `tip_radius_m`) and `object` (`shape`, `width_m`, and for the polyhedra the collider's
+//! `hand` (its name), `fingers` (per finger: `name`, `joints`: its links' indices),
+//! `link_geoms` (per link, the collision geoms of the body its joint moves, in that body's
+//! frame: `shape` `sphere`/`capsule`/`cylinder`/`box`, `size_m` as MuJoCo's `size`, `pose`)
+//! and `object` (`shape`, `width_m`, and for the polyhedra the collider's
 //! hull as `mesh_vertices_m` and `mesh_triangles`). Then one line per control step, the
 //! state after it (world frame: z up, SI units, poses as `[x, y, z, qx, qy, qz, qw]`):
 //!
 //! - `step` (control steps since the reset, 1 for the state after the first action) and
 //!   `sim_time_s`;
-//! - `links`: the 15 link bodies' poses, finger by finger (`roll`, `proximal`, `distal`),
-//!   in [`FINGER_NAMES`] order; a link points along its frame's -z;
+//! - `links`: the poses of the bodies the hand's joints move, in joint order;
 //! - `object`: the object's pose;
 //! - `fingertip_contacts`, `link_contacts`: `{finger, point_m, normal_force_n}` per contact
 //!   with the object, the force on the object as a vector (N);
-//! - `action_rad`: the step's 15 joint-target changes: the policy's output in `vge eval`,
+//! - `action_rad`: the step's joint-target changes (one per joint): the policy's output in `vge eval`,
 //!   the change the bridge commanded (after its safety filter) in `vge-bridge`;
 //! - `reward`: the step's reward; `rotation_about_z_rad`: the object's rotation about world
 //!   z since the reset (what the success test measures).
@@ -35,14 +36,13 @@ use thiserror::Error;
 
 use crate::env::{Env, EnvConfig, StepResult};
 use crate::error::SimError;
-use crate::kinematics::{FINGER_NAMES, NUM_JOINTS};
 use crate::objects::{ObjectConfig, ObjectShape};
 use crate::world::{ContactReading, HandWorld};
 
 /// The header's `format`.
 pub const FORMAT: &str = "vge episode";
 /// The header's `version`; a reader refuses another.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// Length of a contact-force arrow per newton of force (m/N) in the viewer: a grip of a few
 /// newtons draws arrows of a few centimetres beside the 10 cm cube.
@@ -73,17 +73,49 @@ struct Header<'a> {
     version: u32,
     control_dt_s: f64,
     force_arrow_m_per_n: f32,
+    hand: &'a str,
     fingers: Vec<FingerHeader<'a>>,
+    link_geoms: Vec<Vec<GeomHeader>>,
     object: ObjectHeader,
 }
 
 #[derive(Serialize)]
 struct FingerHeader<'a> {
     name: &'a str,
-    proximal_length_m: f32,
-    distal_length_m: f32,
-    link_radius_m: f32,
-    tip_radius_m: f32,
+    joints: Vec<usize>,
+}
+
+#[derive(Serialize)]
+struct GeomHeader {
+    shape: &'static str,
+    size_m: Vec<f32>,
+    pose: [f32; 7],
+}
+
+/// The collision geoms of the body joint `joint` moves, for drawing.
+fn link_geoms(hand: &vge_hand::Hand, joint: usize) -> Vec<GeomHeader> {
+    use vge_hand::GeomShape;
+    let Some(body) = hand.joints().get(joint).and_then(|j| hand.bodies().get(j.body)) else {
+        return Vec::new();
+    };
+    body.geoms
+        .iter()
+        .filter(|g| g.collides())
+        .filter_map(|g| {
+            let (shape, size_m) = match &g.shape {
+                GeomShape::Sphere { radius_m } => ("sphere", vec![*radius_m]),
+                GeomShape::Capsule { radius_m, half_length_m } => {
+                    ("capsule", vec![*radius_m, *half_length_m])
+                }
+                GeomShape::Cylinder { radius_m, half_length_m } => {
+                    ("cylinder", vec![*radius_m, *half_length_m])
+                }
+                GeomShape::Box { half_extents_m } => ("box", half_extents_m.iter().copied().collect()),
+                GeomShape::VisualMesh { .. } => return None,
+            };
+            Some(GeomHeader { shape, size_m, pose: pose7(&g.pose_in_body) })
+        })
+        .collect()
 }
 
 #[derive(Serialize)]
@@ -104,7 +136,7 @@ struct StepRow<'a> {
     object: [f32; 7],
     fingertip_contacts: Vec<ContactRow>,
     link_contacts: Vec<ContactRow>,
-    action_rad: &'a [f32; NUM_JOINTS],
+    action_rad: &'a [f32],
     reward: f32,
     rotation_about_z_rad: f64,
 }
@@ -147,19 +179,14 @@ impl EpisodeRecorder {
             version: VERSION,
             control_dt_s,
             force_arrow_m_per_n: FORCE_ARROW_M_PER_N,
+            hand: config.hand.name(),
             fingers: config
                 .hand
-                .fingers
+                .fingers()
                 .iter()
-                .zip(FINGER_NAMES)
-                .map(|(f, name)| FingerHeader {
-                    name,
-                    proximal_length_m: f.proximal_length_m,
-                    distal_length_m: f.distal_length_m,
-                    link_radius_m: f.link_radius_m,
-                    tip_radius_m: f.tip_radius_m,
-                })
+                .map(|f| FingerHeader { name: &f.name, joints: f.joints.clone().collect() })
                 .collect(),
+            link_geoms: (0..config.hand.num_joints()).map(|j| link_geoms(&config.hand, j)).collect(),
             object: object_header(&config.object)?,
         };
         recorder.write_line(&header)?;
@@ -177,14 +204,15 @@ impl EpisodeRecorder {
     pub fn record_step(
         &mut self,
         env: &Env,
-        action: &[f32; NUM_JOINTS],
+        action: &[f32],
         result: &StepResult,
     ) -> Result<(), RecordingError> {
         let world = env.world().ok_or(RecordingError::NotReset)?;
         let step = result.info.step as u64;
         self.rotation_rad += f64::from(result.info.object_rotation_z_rad);
-        let mut links = Vec::with_capacity(NUM_JOINTS);
-        for joint in 0..NUM_JOINTS {
+        let joints = env.config().hand.num_joints();
+        let mut links = Vec::with_capacity(joints);
+        for joint in 0..joints {
             links.push(pose7(&world.link_pose(joint)?));
         }
         let (fingertip_contacts, link_contacts) = contacts(world);

@@ -8,8 +8,6 @@ use rayon::prelude::*;
 
 use crate::env::{Env, EnvConfig, ResetInfo, StepResult};
 use crate::error::SimError;
-use crate::kinematics::NUM_JOINTS;
-use crate::observation::OBS_DIM;
 
 /// A batch of environments.
 #[derive(Debug)]
@@ -43,7 +41,7 @@ impl VecEnv {
     }
 
     /// Resets every environment, `seeds[i]` for environment `i`.
-    pub fn reset(&mut self, seeds: &[u64]) -> Result<Vec<([f32; OBS_DIM], ResetInfo)>, SimError> {
+    pub fn reset(&mut self, seeds: &[u64]) -> Result<Vec<(Vec<f32>, ResetInfo)>, SimError> {
         if seeds.len() != self.envs.len() {
             return Err(SimError::BatchLength { got: seeds.len(), expected: self.envs.len() });
         }
@@ -51,25 +49,28 @@ impl VecEnv {
     }
 
     /// Resets environment `index` alone.
-    pub fn reset_one(&mut self, index: usize, seed: u64) -> Result<([f32; OBS_DIM], ResetInfo), SimError> {
+    pub fn reset_one(&mut self, index: usize, seed: u64) -> Result<(Vec<f32>, ResetInfo), SimError> {
         let expected = self.envs.len();
         self.envs.get_mut(index).ok_or(SimError::BatchLength { got: index + 1, expected })?.reset(seed)
     }
 
-    /// Steps every environment; `actions` is row-major, 15 entries per environment. The
-    /// whole batch is validated before any world moves.
+    /// Joints per action row: the hand's (every env shares one config).
+    #[must_use]
+    pub fn action_dim(&self) -> usize {
+        self.envs.first().map_or(0, |e| e.config().hand.num_joints())
+    }
+
+    /// Steps every environment; `actions` is row-major, one entry per joint per environment.
+    /// The whole batch is validated before any world moves.
     pub fn step(&mut self, actions: &[f32]) -> Result<Vec<StepResult>, SimError> {
-        let expected = self.envs.len() * NUM_JOINTS;
-        if actions.len() != expected {
+        let joints = self.action_dim();
+        let expected = self.envs.len() * joints;
+        if actions.len() != expected || joints == 0 {
             return Err(SimError::ActionLength { got: actions.len(), expected });
         }
-        for row in actions.chunks_exact(NUM_JOINTS) {
-            Env::check_action(row)?;
+        for (env, row) in self.envs.iter().zip(actions.chunks_exact(joints)) {
+            env.check_action(row)?;
         }
-        self.envs
-            .par_iter_mut()
-            .zip(actions.par_chunks_exact(NUM_JOINTS))
-            .map(|(env, a)| env.step(a))
-            .collect()
+        self.envs.par_iter_mut().zip(actions.par_chunks_exact(joints)).map(|(env, a)| env.step(a)).collect()
     }
 }

@@ -44,10 +44,6 @@ pub struct PhysicsConfig {
     pub contact_damping_ratio: f32,
     /// Friction coefficient of the fingers (combined with the object's by average).
     pub finger_friction: f32,
-    /// Motor stiffness (N*m/rad, `ForceBased`); the torque caps of the hand model bound it.
-    pub motor_stiffness_nm_per_rad: f32,
-    /// Motor damping (N*m*s/rad).
-    pub motor_damping_nms_per_rad: f32,
     /// Density of the finger links.
     pub link_density_kg_per_m3: f32,
     /// Gravity magnitude; its direction in the hand's frame is set by `hand_orientation`.
@@ -74,8 +70,6 @@ impl Default for PhysicsConfig {
             contact_natural_frequency_hz: 120.0,
             contact_damping_ratio: 10.0,
             finger_friction: 0.8,
-            motor_stiffness_nm_per_rad: 20.0,
-            motor_damping_nms_per_rad: 0.1,
             link_density_kg_per_m3: 1000.0,
             gravity_m_per_s2: 9.81,
             hand_orientation: HandOrientation::PalmDown,
@@ -97,7 +91,6 @@ impl PhysicsConfig {
         for (name, v) in [
             ("contact natural frequency", self.contact_natural_frequency_hz),
             ("contact damping ratio", self.contact_damping_ratio),
-            ("motor stiffness", self.motor_stiffness_nm_per_rad),
             ("link density", self.link_density_kg_per_m3),
             ("contact prediction distance", self.contact_prediction_distance_m),
         ] {
@@ -105,11 +98,7 @@ impl PhysicsConfig {
                 return Err(SimError::InvalidConfig(format!("{name} {v}")));
             }
         }
-        for (name, v) in [
-            ("finger friction", self.finger_friction),
-            ("motor damping", self.motor_damping_nms_per_rad),
-            ("gravity", self.gravity_m_per_s2),
-        ] {
+        for (name, v) in [("finger friction", self.finger_friction), ("gravity", self.gravity_m_per_s2)] {
             if !v.is_finite() || v < 0.0 {
                 return Err(SimError::InvalidConfig(format!("{name} {v}")));
             }
@@ -303,7 +292,7 @@ impl JointServo {
             .collect()
     }
 
-    fn validate(&self, joint: &str) -> Result<(), SimError> {
+    pub(crate) fn validate(&self, joint: &str) -> Result<(), SimError> {
         let JointLimit { lower_rad, upper_rad } = self.limit;
         let ok = lower_rad.is_finite()
             && upper_rad.is_finite()

@@ -119,3 +119,28 @@ fn torque_driven_joints_turn_the_way_they_are_pushed_and_return_to_their_servos(
     bad[3] = f32::NAN;
     assert!(world.set_joint_torques(&bad).is_err());
 }
+
+#[test]
+fn the_allegro_env_starts_from_its_file_grasp_with_observations_and_actions_of_its_own_size() {
+    let hand = vge_sim::hands::load("allegro").expect("allegro");
+    let config = vge_sim::EnvConfig::for_hand(hand).expect("config");
+    assert_eq!((config.object.width_m, config.object.mass_kg), (0.065, 0.1), "the file's cube");
+    let layout = config.observation_layout();
+    assert_eq!(layout.dim(), 2 * 16 + 7 * 4);
+    let mut env = vge_sim::Env::new(config).expect("env");
+    let (obs, info) = env.reset(3).expect("reset");
+    assert_eq!(obs.len(), layout.dim());
+    assert_eq!(info.grasping_fingers, [true; 4]);
+    assert!(info.num_tip_contacts >= 3, "{info:?}");
+    // Held still for 2 s (40 control steps at 20 Hz): no drop, the object stays in the grasp.
+    let mut contacts = Vec::new();
+    for _ in 0..40 {
+        let r = env.step(&[0.0; 16]).expect("step");
+        assert_eq!(r.obs.len(), layout.dim());
+        assert!(!r.terminated, "dropped at step {}", r.info.step);
+        contacts.push(r.info.num_tip_contacts);
+    }
+    assert!(contacts.iter().all(|n| *n >= 3), "fingertips touching: {contacts:?}");
+    // Its action has 16 entries, not vge15's 15.
+    assert!(env.step(&[0.0; 15]).is_err());
+}

@@ -18,20 +18,29 @@ use python_env::python;
 fn mujoco_holds_the_settled_grasp_on_five_fingertips() {
     // One reset gives both the model's keyframe and rapier's height to compare with.
     let env = EnvConfig::default();
+    let hand = vge_sim::HandModel::default();
     let mut sim = vge_sim::Env::new(env.clone()).expect("env");
     sim.reset(0).expect("reset");
     let world = sim.world().expect("world");
     let keyframe_z = world.object_state().pose.translation.vector.z;
-    let settings =
-        MjcfSettings { hand: &env.hand, physics: &env.physics, object: &env.object, timestep_s: 1.0 / 240.0 };
-    let xml = hand_mjcf(&settings, &GraspKeyframe::of(world).expect("keyframe")).expect("model");
+    let settings = MjcfSettings {
+        hand: &hand,
+        servos: &env.servos,
+        physics: &env.physics,
+        object: &env.object,
+        timestep_s: 1.0 / 240.0,
+    };
+    let xml = hand_mjcf(&settings, &GraspKeyframe::of(world)).expect("model");
     let dir = std::env::temp_dir().join(format!("vge-mjcf-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let model = dir.join("hand.xml");
     std::fs::write(&model, &xml).expect("write model");
     let actions = dir.join("actions.f32");
-    std::fs::write(&actions, vge_sim::bench::first_world_actions_f32_le(200, env.max_action_rad))
-        .expect("write actions");
+    std::fs::write(
+        &actions,
+        vge_sim::bench::first_world_actions_f32_le(200, env.hand.num_joints(), env.max_action_rad),
+    )
+    .expect("write actions");
 
     let harness = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scripts/bench_mujoco.py");
     let out = Command::new(python())

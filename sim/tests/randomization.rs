@@ -30,7 +30,7 @@ fn the_object_mass_is_drawn_per_episode_from_its_range_and_seeded() {
 fn an_action_takes_effect_after_the_latency() {
     let mut env = env_with(DomainRandomization { action_latency_steps: 2, ..DomainRandomization::default() });
     env.reset(1).expect("reset");
-    let targets = |env: &Env| env.privileged().expect("state").q_target_rad;
+    let targets = |env: &Env| env.privileged().expect("state").q_target_rad.clone();
     let before = targets(&env);
     let mut push = [0.0f32; NUM_JOINTS];
     push[0] = 0.04;

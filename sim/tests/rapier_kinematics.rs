@@ -10,7 +10,7 @@ fn world_at(q: &[f32; NUM_JOINTS]) -> HandWorld {
     // The object far away so nothing touches.
     let far = Isometry3::translation(0.0, 0.0, -1.0);
     let hand = vge_sim::hands::vge15().expect("vge15");
-    let servos = EnvConfig::default().servos();
+    let servos = EnvConfig::default().servos;
     HandWorld::new(&hand, &servos, &PhysicsConfig::default(), &ObjectConfig::default(), q, &far)
         .expect("world")
 }
@@ -90,7 +90,7 @@ fn fingertip_jacobian_matches_finite_differences_of_the_rapier_world() {
 fn grasp_map_matches_finite_differences_of_the_rapier_object() {
     let mut env = Env::new(EnvConfig::default()).expect("env");
     env.reset(2).expect("reset");
-    let state = *env.privileged().expect("state");
+    let state = env.privileged().expect("state").clone();
     let contacts: Vec<_> = state.contacts.iter().flatten().copied().collect();
     assert!(contacts.len() >= 3);
     let points: Vec<Vector3<f32>> = contacts.iter().map(|c| c.position_m).collect();

@@ -4,7 +4,7 @@
 //! (`rrd_summary.py`, rerun-sdk 0.36.3, which scripts/test.sh installs in .deps/py) with every
 //! entity, one row per control step. A path ending in `.rrd` is refused with the way to get one.
 
-use vge_sim::{Env, EnvConfig, EpisodeRecorder, NUM_JOINTS, ObjectShape, RecordingError};
+use vge_sim::{Env, EnvConfig, EpisodeRecorder, ObjectShape, RecordingError};
 
 #[path = "../../tests/support/python.rs"]
 mod python_env;
@@ -14,21 +14,27 @@ use python_env::recording_summary;
 fn a_recorded_episode_reads_back_with_every_entity_and_one_row_per_step() {
     let dir = std::env::temp_dir().join(format!("vge-sim-recording-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    for shape in [ObjectShape::Cube, ObjectShape::Dodecahedron] {
-        let mut config = EnvConfig::default();
+    let allegro =
+        EnvConfig::for_hand(vge_sim::hands::load("allegro").expect("allegro")).expect("allegro env");
+    for (mut config, shape) in [
+        (EnvConfig::default(), ObjectShape::Cube),
+        (EnvConfig::default(), ObjectShape::Dodecahedron),
+        (allegro, ObjectShape::Cube),
+    ] {
         config.object.shape = shape;
         config.episode_length_steps = 8;
-        let path = dir.join(format!("{shape}.jsonl"));
+        let hand = std::sync::Arc::clone(&config.hand);
+        let path = dir.join(format!("{}-{shape}.jsonl", hand.name()));
         let mut recorder = EpisodeRecorder::create(&path, &config).expect("recording");
         // Fingers close a little every step, so the contacts change.
-        let action = [0.01f32; NUM_JOINTS];
+        let action = vec![0.01f32; config.hand.num_joints()];
         let mut rewards = Vec::new();
         let mut rotation_rad = 0.0f64;
         let outcome = Env::new(config)
             .expect("env")
             .run_episode::<vge_sim::SimError>(
                 0,
-                |_, _| Ok(action),
+                |_, _| Ok(action.clone()),
                 |env, r, _| {
                     recorder.record_step(env, &action, r).expect("step recorded");
                     rewards.push(r.reward);
@@ -46,11 +52,14 @@ fn a_recorded_episode_reads_back_with_every_entity_and_one_row_per_step() {
         assert_eq!(lines.len(), 9, "a header and 8 steps");
         assert_eq!(lines[0]["format"], "vge episode");
         assert_eq!(lines[0]["object"]["shape"], shape.to_string());
-        assert_eq!(lines[0]["fingers"].as_array().expect("fingers").len(), 5);
+        assert_eq!(lines[0]["hand"], hand.name());
+        assert_eq!(lines[0]["fingers"].as_array().expect("fingers").len(), hand.num_fingers());
+        assert_eq!(lines[0]["link_geoms"].as_array().expect("link geoms").len(), hand.num_joints());
         assert_eq!(lines[0]["object"].get("mesh_vertices_m").is_some(), shape == ObjectShape::Dodecahedron);
         for (k, line) in lines[1..].iter().enumerate() {
             assert_eq!(line["step"], k as u64 + 1);
-            assert_eq!(line["links"].as_array().expect("links").len(), 15);
+            assert_eq!(line["links"].as_array().expect("links").len(), hand.num_joints());
+            assert_eq!(line["action_rad"].as_array().expect("actions").len(), hand.num_joints());
             // f32 written as its shortest decimal: read back exactly as f32.
             assert_eq!(line["reward"].as_f64().expect("reward") as f32, rewards[k]);
         }
@@ -70,7 +79,7 @@ fn a_recorded_episode_reads_back_with_every_entity_and_one_row_per_step() {
             .sum();
         assert!(force > 0.0, "{contact}");
 
-        let doc = recording_summary(&path, &dir.join(format!("{shape}.rrd")));
+        let doc = recording_summary(&path, &dir.join(format!("{}-{shape}.rrd", hand.name())));
         let steps: Vec<u64> = (1..=8).collect();
         assert_eq!(doc["steps"], serde_json::json!(steps), "{shape}");
         assert!((doc["sim_time_s"].as_f64().expect("sim_time") - 8.0 * 0.05).abs() < 1e-6, "{doc}");
@@ -84,12 +93,10 @@ fn a_recorded_episode_reads_back_with_every_entity_and_one_row_per_step() {
         let expected_shape =
             if shape == ObjectShape::Cube { "Boxes3D:half_sizes" } else { "Mesh3D:vertex_positions" };
         assert!(object["static"].as_array().expect("static").iter().any(|c| c == expected_shape), "{object}");
-        for finger in ["thumb", "index", "middle", "ring", "little"] {
-            for link in ["roll", "proximal", "distal"] {
-                per_step(&format!("/world/hand/{finger}/{link}"));
-            }
-            for joint in ["roll", "flex_prox", "flex_dist"] {
-                per_step(&format!("/action/{finger}/{joint}_rad"));
+        for finger in hand.fingers() {
+            for j in finger.joints.clone() {
+                per_step(&format!("/world/hand/{}/link{j}", finger.name));
+                per_step(&format!("/action/{}/joint{j}_rad", finger.name));
             }
         }
         for contacts in [

@@ -5,7 +5,7 @@
 //! two fingertips apart), and bad values are refused naming the field.
 
 use nalgebra::{Isometry3, Vector3};
-use vge_sim::kinematics::{FINGER_TORQUE_CAP_NM, THUMB_TORQUE_CAP_NM, joint_index};
+use vge_sim::kinematics::joint_index;
 use vge_sim::{
     Env, EnvConfig, HandModel, HandOrientation, HandWorld, NUM_FINGERS, NUM_JOINTS, ObjectConfig,
     PhysicsConfig,
@@ -87,18 +87,20 @@ fn grip_force_n(config: EnvConfig) -> f32 {
 
 #[test]
 fn a_doubled_torque_cap_squeezes_harder_and_keeps_the_thumbs_proportion() {
-    let mut hand = HandModel::default();
-    let default_caps = hand.torque_caps_nm();
-    hand.set_finger_torque_cap_nm(FINGER_TORQUE_CAP_NM);
-    assert_eq!(hand.torque_caps_nm(), default_caps, "the default cap gives the default hand");
-    hand.set_finger_torque_cap_nm(2.0 * FINGER_TORQUE_CAP_NM);
-    let caps = hand.torque_caps_nm();
-    assert!((caps[joint_index(0, 1)] - 2.0 * THUMB_TORQUE_CAP_NM).abs() < 1e-6, "{caps:?}");
-    assert!((caps[joint_index(1, 1)] - 2.0 * FINGER_TORQUE_CAP_NM).abs() < 1e-6, "{caps:?}");
+    // vge15's file: 0.3 N m on the four fingers, 0.45 on the thumb (joints 0-2).
+    let caps = |c: &EnvConfig| c.servos.iter().map(|s| s.torque_cap_nm).collect::<Vec<_>>();
+    let mut env = EnvConfig::default();
+    let default_caps = caps(&env);
+    env.set_motor_torque_cap_nm(0.3);
+    assert_eq!(caps(&env), default_caps, "the default cap gives the default hand");
+    env.set_motor_torque_cap_nm(0.6);
+    let doubled_caps = caps(&env);
+    assert!((doubled_caps[1] - 0.9).abs() < 1e-6, "{doubled_caps:?}");
+    assert!((doubled_caps[4] - 0.6).abs() < 1e-6, "{doubled_caps:?}");
 
     let base = grip_force_n(config_with(|_| {}));
-    let doubled = grip_force_n(config_with(|c| c.hand = hand.clone()));
-    let stiffer = grip_force_n(config_with(|c| c.physics.motor_stiffness_nm_per_rad = 5.0));
+    let doubled = grip_force_n(config_with(|c| c.set_motor_torque_cap_nm(0.6)));
+    let stiffer = grip_force_n(config_with(|c| c.set_motor_stiffness_nm_per_rad(5.0)));
     println!("grip: default {base} N, cap x2 {doubled} N, stiffness 5 {stiffer} N");
     assert!(doubled > 1.5 * base, "cap x2: {doubled} N against {base} N");
     assert!(stiffer < base, "a softer motor squeezes less within 0.05 rad: {stiffer} N against {base} N");
@@ -110,7 +112,7 @@ fn free_fall(orientation: HandOrientation, steps: usize) -> Vector3<f32> {
     let physics = PhysicsConfig { hand_orientation: orientation, ..PhysicsConfig::default() };
     let mut world = HandWorld::new(
         &vge_sim::hands::vge15().expect("vge15"),
-        &EnvConfig::default().servos(),
+        &EnvConfig::default().servos,
         &physics,
         &ObjectConfig::default(),
         &[0.0; NUM_JOINTS],
@@ -171,7 +173,7 @@ fn the_side_on_drop_test_follows_gravity() {
 fn closest_tips_m(finger_collisions: bool, flex: f32, roll: f32) -> f32 {
     let physics = PhysicsConfig { finger_collisions, ..PhysicsConfig::default() };
     let hand = vge_sim::hands::vge15().expect("vge15");
-    let servos = EnvConfig::default().servos();
+    let servos = EnvConfig::default().servos;
     let away = Isometry3::translation(0.0, 0.0, -1.0);
     let mut world =
         HandWorld::new(&hand, &servos, &physics, &ObjectConfig::default(), &[0.0; NUM_JOINTS], &away)
@@ -219,10 +221,10 @@ fn bad_values_are_refused_naming_the_field() {
     assert!(negative_mass.contains("mass") && negative_mass.contains("-0.4"), "{negative_mass}");
     let friction = refused(|c| c.object.friction = -0.5);
     assert!(friction.contains("friction"), "{friction}");
-    let cap = refused(|c| c.hand.set_finger_torque_cap_nm(0.0));
+    let cap = refused(|c| c.set_motor_torque_cap_nm(0.0));
     assert!(cap.contains("torque cap"), "{cap}");
-    let stiffness = refused(|c| c.physics.motor_stiffness_nm_per_rad = f32::NAN);
-    assert!(stiffness.contains("motor stiffness"), "{stiffness}");
+    let stiffness = refused(|c| c.set_motor_stiffness_nm_per_rad(f32::NAN));
+    assert!(stiffness.contains("kp > 0"), "{stiffness}");
     let orientation = "upside_down".parse::<HandOrientation>().expect_err("unknown");
     assert!(orientation.contains("hand_orientation") && orientation.contains("side_on"), "{orientation}");
     for o in HandOrientation::ALL {
