@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::{
-    DomainRandomization, EnvConfig, HandOrientation, NoiseConfig, ObjectConfig, ObjectShape,
+    DomainRandomization, EnvConfig, HandOrientation, NoiseConfig, ObjectConfig, ObjectShape, ObservationSet,
     PerturbationConfig,
 };
 
@@ -41,6 +41,12 @@ pub struct EnvSection {
     /// is sized as the hand's file says.
     #[serde(skip_serializing_if = "is_default_hand")]
     pub hand: String,
+    /// What the policy (the actor) observes: `"full"` (the default: joints, targets and each
+    /// fingertip's contact) or `"proprio"` / `"proprio:K"` (joints and targets now and at
+    /// the last K control steps: what a hand without fingertip sensors, like a stock Allegro,
+    /// measures). The critic and the controllers see the full state in training either way.
+    #[serde(skip_serializing_if = "is_full_observation")]
+    pub observation: String,
     pub objects: Vec<ObjectShape>,
     pub control_hz: f32,
     pub episode_length: usize,
@@ -140,6 +146,11 @@ pub struct EnvSection {
     pub finger_collisions: bool,
 }
 
+/// Keeps the full observation (the default) out of the serialised section.
+fn is_full_observation(observation: &String) -> bool {
+    observation == "full"
+}
+
 /// The hand a config without `hand` means.
 pub const DEFAULT_HAND: &str = "vge15";
 
@@ -181,6 +192,7 @@ impl Default for EnvSection {
         let env = EnvConfig::default();
         Self {
             hand: DEFAULT_HAND.to_owned(),
+            observation: "full".to_owned(),
             objects: vec![ObjectShape::Cube],
             control_hz: env.control_hz,
             episode_length: env.episode_length_steps,
@@ -270,6 +282,12 @@ impl EnvSection {
 }
 
 impl EnvSection {
+    /// The observation set `observation` names.
+    pub fn observation_set(&self) -> Result<ObservationSet, InvalidEnvSection> {
+        ObservationSet::parse(&self.observation)
+            .map_err(|e| InvalidEnvSection::new(format!("env.observation: {e}")))
+    }
+
     /// Checks every key; the message names the key (`env.KEY`). Last, every object's sim
     /// configuration must pass the sim's own check.
     pub fn validate(&self) -> Result<(), InvalidEnvSection> {
@@ -278,6 +296,7 @@ impl EnvSection {
         }
         let hand =
             crate::hands::load(&self.hand).map_err(|e| InvalidEnvSection::new(format!("env.hand: {e}")))?;
+        self.observation_set()?;
         let fingers = hand.num_fingers();
         // Checked here, before the sim's own check, so the message names the key the user wrote.
         for (key, n) in [
@@ -394,8 +413,8 @@ mod tests {
     #[test]
     fn the_keys_are_the_fields_in_order() {
         let keys = EnvSection::keys();
-        assert_eq!(keys.len(), 29, "{keys:?}");
-        assert_eq!((keys[0], keys[28]), ("hand", "finger_collisions"));
+        assert_eq!(keys.len(), 30, "{keys:?}");
+        assert_eq!((keys[0], keys[29]), ("hand", "finger_collisions"));
         // Every key the default section writes is one of them, and an unknown one is refused.
         let written = serde_json::to_value(EnvSection::default()).expect("json");
         let written = written.as_object().expect("an object");
@@ -422,6 +441,11 @@ mod tests {
         let err =
             EnvSection { hand: "alegro".to_owned(), ..EnvSection::default() }.validate().expect_err("typo");
         assert!(err.0.contains("env.hand") && err.0.contains("allegro"), "{err}");
+        let proprio = EnvSection { observation: "proprio:3".to_owned(), ..allegro.clone() };
+        assert_eq!(proprio.observation_set(), Ok(ObservationSet::Proprio { history: 3 }));
+        let err =
+            EnvSection { observation: "touch".to_owned(), ..allegro.clone() }.validate().expect_err("bad");
+        assert!(err.0.contains("env.observation"), "{err}");
         let too_many = EnvSection { reward_min_contacts: 5, ..allegro };
         let err = too_many.validate().expect_err("4 fingertips");
         assert!(err.0.contains("4 fingertips"), "{err}");

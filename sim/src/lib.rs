@@ -60,7 +60,7 @@ pub use kinematics::{
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{
-    FingertipReading, ObservationLayout, ObservationSet, ProprioHistory, build_observation,
+    FingertipReading, ObservationLayout, ObservationSet, Observer, ProprioHistory, build_observation,
 };
 pub use policy_interface::check_policy_interface;
 #[cfg(feature = "physics")]

@@ -240,6 +240,94 @@ impl ProprioHistory {
     }
 }
 
+/// A policy's observation made from the env's full one ([`build_observation`]): the full
+/// observation itself, or its joint angles and targets with their history. The same code
+/// feeds a policy in training, evaluation and on the bridge.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observer {
+    set: ObservationSet,
+    num_joints: usize,
+    history: ProprioHistory,
+}
+
+impl Observer {
+    /// An observer of `set` for a hand of `num_joints` joints.
+    #[must_use]
+    pub fn new(set: ObservationSet, num_joints: usize) -> Self {
+        let history = match set {
+            ObservationSet::Full => 0,
+            ObservationSet::Proprio { history } => history,
+        };
+        Self { set, num_joints, history: ProprioHistory::new(history) }
+    }
+
+    /// The set it observes.
+    #[must_use]
+    pub fn set(&self) -> ObservationSet {
+        self.set
+    }
+
+    /// The policy's first observation of an episode, from the env's full one.
+    pub fn start(&mut self, full: &[f32]) -> Vec<f32> {
+        match self.set {
+            ObservationSet::Full => full.to_vec(),
+            ObservationSet::Proprio { .. } => {
+                let (q, target) = self.joints(full);
+                self.history.start(q, target)
+            }
+        }
+    }
+
+    /// The policy's observation after a control step, from the env's full one.
+    pub fn step(&mut self, full: &[f32]) -> Vec<f32> {
+        match self.set {
+            ObservationSet::Full => full.to_vec(),
+            ObservationSet::Proprio { .. } => {
+                let (q, target) = self.joints(full);
+                self.history.step(q, target)
+            }
+        }
+    }
+
+    /// The joint angles and targets at the front of a full observation (empty if it is short).
+    fn joints<'a>(&self, full: &'a [f32]) -> (&'a [f32], &'a [f32]) {
+        let j = self.num_joints;
+        (full.get(..j).unwrap_or(&[]), full.get(j..2 * j).unwrap_or(&[]))
+    }
+}
+
+impl ObservationSet {
+    /// The set whose layout a policy file declares (its `obs_layout` slice names and ranges)
+    /// for a hand of `num_joints` joints and `num_fingers` fingertips: refused when it is
+    /// neither set's layout.
+    pub fn of_layout(
+        slices: &[(&str, usize, usize)],
+        num_joints: usize,
+        num_fingers: usize,
+    ) -> Result<Self, String> {
+        let past =
+            slices.iter().find(|(n, _, _)| *n == "q_rad_past").map_or(0, |(_, a, b)| b.saturating_sub(*a));
+        let candidates = if slices.iter().any(|(n, _, _)| CONTACT_SLICES.contains(n)) {
+            vec![Self::Full]
+        } else if num_joints > 0 && past % num_joints == 0 {
+            vec![Self::Proprio { history: past / num_joints }]
+        } else {
+            Vec::new()
+        };
+        for set in candidates {
+            let layout = ObservationLayout::new(set, num_joints, num_fingers);
+            if layout.check(slices.iter().copied()).is_ok() {
+                return Ok(set);
+            }
+        }
+        let shown: Vec<String> = slices.iter().map(|(n, a, b)| format!("{n} {a}..{b}")).collect();
+        Err(format!(
+            "the policy observes [{}]: neither the full nor a proprio observation of a hand of {num_joints} joints and {num_fingers} fingertips",
+            shown.join(", ")
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -317,5 +405,29 @@ mod tests {
         let third = h.step(&[9.0, 10.0], &[11.0, 12.0]);
         assert_eq!(third, [9.0, 10.0, 11.0, 12.0, 5.0, 6.0, 1.0, 2.0, 7.0, 8.0, 3.0, 4.0]);
         assert_eq!(ProprioHistory::new(0).start(&[1.0], &[2.0]), [1.0, 2.0]);
+    }
+
+    #[test]
+    fn an_observer_feeds_either_set_from_the_full_observation_and_a_layout_names_its_set() {
+        let contacts =
+            [Some(FingertipReading { position_m: [1.0; 3], normal: [0.0, 0.0, 1.0], force_n: 2.0 })];
+        let full0 = build_observation(&[0.1, 0.2], &[0.3, 0.4], &contacts);
+        let full1 = build_observation(&[0.5, 0.6], &[0.7, 0.8], &contacts);
+        let mut same = Observer::new(ObservationSet::Full, 2);
+        assert_eq!((same.start(&full0), same.step(&full1)), (full0.clone(), full1.clone()));
+        let mut proprio = Observer::new(ObservationSet::Proprio { history: 1 }, 2);
+        assert_eq!(proprio.start(&full0), [0.1, 0.2, 0.3, 0.4, 0.1, 0.2, 0.3, 0.4]);
+        assert_eq!(proprio.step(&full1), [0.5, 0.6, 0.7, 0.8, 0.1, 0.2, 0.3, 0.4]);
+        for set in [
+            ObservationSet::Full,
+            ObservationSet::Proprio { history: 0 },
+            ObservationSet::Proprio { history: 3 },
+        ] {
+            let layout = ObservationLayout::new(set, 16, 4);
+            let slices: Vec<(&str, usize, usize)> =
+                layout.slices().iter().map(|(n, r)| (*n, r.start, r.end)).collect();
+            assert_eq!(ObservationSet::of_layout(&slices, 16, 4), Ok(set));
+            assert!(ObservationSet::of_layout(&slices, 15, 5).is_err(), "another hand's sizes");
+        }
     }
 }
