@@ -3,11 +3,13 @@
 //! CS drives its switching finger along its trajectory ([`super::cs`]); IGM acts on the
 //! fingertips in contact *other than* the switching finger (its J_S has zero columns for
 //! that finger, so the two terms touch disjoint joints), for the whole trajectory, also
-//! after the finger has touched down again. When CS cannot start (fewer than 4 contacts)
-//! FG is IGM alone on all contacts; when IGM has no action mid-switch (fewer than 3 other
+//! after the finger has touched down again. When CS cannot start (fewer than 4 contacts, or
+//! no finger can leave) FG is IGM alone on all contacts; when IGM has no action mid-switch (fewer than 3 other
 //! contacts, or a QP error) FG is CS alone. Only when neither acts is there no action.
 
-use vge_sim::{HandModel, NUM_JOINTS};
+use std::sync::Arc;
+
+use vge_hand::Hand;
 
 use super::cs::{CsConfig, CsController};
 use super::igm::{IgmConfig, IgmController, fit_to_joint_limits, tip_contacts};
@@ -25,8 +27,8 @@ pub struct FgController {
 impl FgController {
     /// FG on `hand` from the two controllers' configurations.
     #[must_use]
-    pub fn new(hand: HandModel, igm: IgmConfig, cs: CsConfig) -> Self {
-        Self { igm: IgmController::new(hand.clone(), igm), cs: CsController::new(hand, cs) }
+    pub fn new(hand: Arc<Hand>, igm: IgmConfig, cs: CsConfig) -> Self {
+        Self { igm: IgmController::new(Arc::clone(&hand), igm), cs: CsController::new(hand, cs) }
     }
 }
 
@@ -40,11 +42,8 @@ impl Controller for FgController {
         self.cs.reset(rng);
     }
 
-    fn act(
-        &mut self,
-        input: &ControllerInput,
-        rng: &mut dyn rand::Rng,
-    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+    fn act(&mut self, input: &ControllerInput, rng: &mut dyn rand::Rng) -> Result<Vec<f32>, ControllerError> {
+        input.check_sizes(&self.igm.hand)?;
         let total = match self.cs.raw_step(input, rng) {
             Ok((finger, cs_delta)) => {
                 let contacts = tip_contacts(input, Some(finger));
@@ -59,7 +58,7 @@ impl Controller for FgController {
                     Ok(out) => {
                         let igm_delta =
                             fit_to_joint_limits(&self.igm.hand, &input.q_target_rad, &out, &self.igm.config);
-                        std::array::from_fn(|j| igm_delta[j] + cs_delta[j])
+                        igm_delta.iter().zip(&cs_delta).map(|(i, c)| i + c).collect()
                     }
                     Err(_) => cs_delta,
                 }

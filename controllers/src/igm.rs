@@ -3,8 +3,10 @@
 //!
 //! For the k >= 3 fingertips in contact (points p_i, normals n_i into the object, measured
 //! normal forces c_i in N), at the measured joints q:
-//! 1. J_S (3k x 15, [`HandModel::stacked_jacobian`] at the actual contact points) and
-//!    G (6 x 3k, [`vge_sim::grasp_map`] about the object centre).
+//! 1. J_S (3k x n for a hand of n joints: row block i is the Jacobian of the contact point
+//!    as a point of finger i's tip body, [`Hand::fingertip_jacobian_at_point`], zero outside
+//!    that finger's joints) and G (6 x 3k, [`crate::grasp_map`] about the object centre),
+//!    both in f64.
 //! 2. c* from the contact-force QP ([`contact_force_qp`]), normalised so that one
 //!    `c*_j = 1`. **Which minimiser**: the QP's optimum is often not unique (on the cube
 //!    two opposing fingers alone balance it, and so does every mix with the other opposing
@@ -33,16 +35,18 @@
 //! J_S has zero columns for fingers not in the contact set, so psi is exactly zero on
 //! them: FG can add a switching finger's trajectory on top without interference.
 
+use std::sync::Arc;
+
 use nalgebra::{DMatrix, DVector, Vector3};
-use vge_sim::{Contact, HandModel, NUM_JOINTS, grasp_map};
+use vge_hand::Hand;
 
 use super::qp::{ContactForces, MIN_CONTACTS, contact_force_qp, nearest_balanced_forces};
-use super::{Controller, ControllerError, ControllerInput, limit_to_joint_range};
+use super::{Controller, ControllerError, ControllerInput, grasp_map, limit_to_joint_range};
 
 /// One fingertip contact for [`igm_step`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TipContact {
-    /// Which finger touches (0..5).
+    /// Which finger touches (an index into the hand's fingers).
     pub finger: usize,
     /// Contact point, world frame (m).
     pub point_m: Vector3<f32>,
@@ -133,12 +137,12 @@ impl IgmConfig {
 /// Everything one IGM step computed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IgmOutput {
-    /// psi = dq_stable + dq_rot after the per-step clip (rad, 15 joints).
-    pub delta_rad: [f32; NUM_JOINTS],
+    /// psi = dq_stable + dq_rot after the per-step clip (rad, one entry per joint).
+    pub delta_rad: Vec<f32>,
     /// dq_stable before the clip.
-    pub dq_stable_rad: [f32; NUM_JOINTS],
+    pub dq_stable_rad: Vec<f32>,
     /// dq_rot before the clip.
-    pub dq_rot_rad: [f32; NUM_JOINTS],
+    pub dq_rot_rad: Vec<f32>,
     /// The QP's answer, in the order of the contacts given.
     pub forces: ContactForces,
     /// Desired forces f*_i = s c*_i (N), same order.
@@ -161,15 +165,16 @@ pub fn damped_least_squares(jacobian: &DMatrix<f64>, rhs: &DVector<f64>, lambda:
     jacobian.transpose() * y
 }
 
-fn to_array(v: &DVector<f64>) -> [f32; NUM_JOINTS] {
-    std::array::from_fn(|j| v[j] as f32)
+fn to_f32(v: &DVector<f64>) -> Vec<f32> {
+    v.iter().map(|&x| x as f32).collect()
 }
 
 /// One IGM step (module docs) for `contacts` (k >= 3, at most one per finger for a
-/// meaningful J_S) on an object centred at `object_position_m`, at joints `q_rad`.
+/// meaningful J_S) on an object centred at `object_position_m`, at joints `q_rad` (one per
+/// joint of `hand`).
 pub fn igm_step(
-    hand: &HandModel,
-    q_rad: &[f32; NUM_JOINTS],
+    hand: &Hand,
+    q_rad: &[f32],
     contacts: &[TipContact],
     object_position_m: Vector3<f32>,
     config: &IgmConfig,
@@ -177,7 +182,8 @@ pub fn igm_step(
     if contacts.len() < MIN_CONTACTS {
         return Err(ControllerError::TooFewContacts { got: contacts.len(), need: MIN_CONTACTS });
     }
-    let mut kin_contacts = Vec::with_capacity(contacts.len());
+    let q: Vec<f64> = q_rad.iter().map(|&v| f64::from(v)).collect();
+    let mut jacobian = DMatrix::zeros(3 * contacts.len(), hand.num_joints());
     let mut points = Vec::with_capacity(contacts.len());
     let mut normals = Vec::with_capacity(contacts.len());
     let mut measured = Vec::with_capacity(contacts.len());
@@ -185,16 +191,16 @@ pub fn igm_step(
         if !c.force_n.is_finite() {
             return Err(ControllerError::NonFinite(format!("force of contact {i}")));
         }
-        let tip = hand.fingertip_position_m(c.finger, &hand.finger_joints(c.finger, q_rad)?)?;
-        kin_contacts.push(Contact { finger: c.finger, offset_from_tip_m: c.point_m - tip });
-        points.push(c.point_m);
+        let point = c.point_m.cast::<f64>();
+        let block = hand.fingertip_jacobian_at_point(c.finger, &q, &point)?;
+        jacobian.view_mut((3 * i, 0), (3, block.ncols())).copy_from(&block);
+        points.push(point);
         let inward = object_position_m - c.point_m;
         let n = if c.normal.dot(&inward) < 0.0 { -c.normal } else { c.normal };
         normals.push(n.cast::<f64>());
         measured.push(f64::from(c.force_n.max(0.0)));
     }
-    let jacobian = hand.stacked_jacobian(&kin_contacts, q_rad)?.cast::<f64>();
-    let grasp = grasp_map(&points, object_position_m)?.cast::<f64>();
+    let grasp = grasp_map(&points, object_position_m.cast::<f64>())?;
 
     let forces = contact_force_qp(&grasp, &normals)?;
     let k = contacts.len() as f64;
@@ -237,9 +243,9 @@ pub fn igm_step(
         return Err(ControllerError::NonFinite("IGM joint step".to_owned()));
     }
     Ok(IgmOutput {
-        delta_rad: to_array(&(psi * clip_scale)),
-        dq_stable_rad: to_array(&dq_stable),
-        dq_rot_rad: to_array(&dq_rot),
+        delta_rad: to_f32(&(psi * clip_scale)),
+        dq_stable_rad: to_f32(&dq_stable),
+        dq_rot_rad: to_f32(&dq_rot),
         target_forces_n: targets.iter().map(|&t| t as f32).collect(),
         forces,
         clip_scale: clip_scale as f32,
@@ -249,7 +255,8 @@ pub fn igm_step(
 /// IGM's step at the joint limits: the rotation term is scaled down (uniformly, by the
 /// largest factor in [0, 1]) so that no joint target `q' + dq_stable + s dq_rot` passes
 /// within `limit_margin_rad` of its limit, then the per-step clip is applied and the
-/// targets are kept inside the limits ([`limit_to_joint_range`]).
+/// targets are kept inside the limits ([`limit_to_joint_range`]). A joint without a range
+/// does not restrict the rotation.
 ///
 /// Clamping joint by joint instead bends the fingertip motion once the first joint (a
 /// roll, on the cube) saturates: the other fingers keep turning, the grasp tears and the
@@ -258,31 +265,35 @@ pub fn igm_step(
 /// which is where the paper's IGM ends too ("before reaching joint limits").
 #[must_use]
 pub fn fit_to_joint_limits(
-    hand: &HandModel,
-    q_target_rad: &[f32; NUM_JOINTS],
+    hand: &Hand,
+    q_target_rad: &[f32],
     out: &IgmOutput,
     config: &IgmConfig,
-) -> [f32; NUM_JOINTS] {
-    let limits = hand.joint_limits();
+) -> Vec<f32> {
     let margin = config.limit_margin_rad.max(0.0);
     let mut s = 1.0f32;
-    for j in 0..NUM_JOINTS {
-        let base = q_target_rad[j] + out.dq_stable_rad[j];
-        let rot = out.dq_rot_rad[j];
+    for (j, joint) in hand.joints().iter().enumerate() {
+        let (Some(limit), Some(&target), Some(&stable), Some(&rot)) =
+            (joint.limit, q_target_rad.get(j), out.dq_stable_rad.get(j), out.dq_rot_rad.get(j))
+        else {
+            continue;
+        };
+        let base = target + stable;
         // The bound the rotation moves towards; a target already past it may not go further.
         let room = if rot > 0.0 {
-            (limits[j].upper_rad - margin - base).max(0.0)
+            (limit.upper_rad - margin - base).max(0.0)
         } else if rot < 0.0 {
-            (base - limits[j].lower_rad - margin).max(0.0)
+            (base - limit.lower_rad - margin).max(0.0)
         } else {
             continue;
         };
         s = s.min(room / rot.abs());
     }
-    let psi: [f32; NUM_JOINTS] = std::array::from_fn(|j| out.dq_stable_rad[j] + s * out.dq_rot_rad[j]);
+    let psi: Vec<f32> = out.dq_stable_rad.iter().zip(&out.dq_rot_rad).map(|(st, rot)| st + s * rot).collect();
     let largest = psi.iter().fold(0.0f32, |m, v| m.max(v.abs()));
     let clip = if largest > config.max_delta_rad { config.max_delta_rad / largest } else { 1.0 };
-    limit_to_joint_range(hand, q_target_rad, &psi.map(|v| v * clip))
+    let clipped: Vec<f32> = psi.iter().map(|v| v * clip).collect();
+    limit_to_joint_range(hand, q_target_rad, &clipped)
 }
 
 /// The contacts of `input` as [`TipContact`]s, leaving out finger `exclude`.
@@ -294,7 +305,12 @@ pub fn tip_contacts(input: &ControllerInput, exclude: Option<usize>) -> Vec<TipC
         .enumerate()
         .filter(|(f, _)| Some(*f) != exclude)
         .filter_map(|(finger, c)| {
-            c.map(|c| TipContact { finger, point_m: c.point_m, normal: c.normal, force_n: c.force_n })
+            c.as_ref().map(|c| TipContact {
+                finger,
+                point_m: c.point_m,
+                normal: c.normal,
+                force_n: c.force_n,
+            })
         })
         .collect()
 }
@@ -304,7 +320,7 @@ pub fn tip_contacts(input: &ControllerInput, exclude: Option<usize>) -> Vec<TipC
 #[derive(Debug, Clone)]
 pub struct IgmController {
     /// The hand the kinematics are taken from (the env's).
-    pub hand: HandModel,
+    pub hand: Arc<Hand>,
     /// IGM parameters.
     pub config: IgmConfig,
 }
@@ -312,7 +328,7 @@ pub struct IgmController {
 impl IgmController {
     /// IGM on `hand` with `config`.
     #[must_use]
-    pub fn new(hand: HandModel, config: IgmConfig) -> Self {
+    pub fn new(hand: Arc<Hand>, config: IgmConfig) -> Self {
         Self { hand, config }
     }
 
@@ -322,7 +338,8 @@ impl IgmController {
         &self,
         input: &ControllerInput,
         contacts: &[TipContact],
-    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+    ) -> Result<Vec<f32>, ControllerError> {
+        input.check_sizes(&self.hand)?;
         let out = igm_step(&self.hand, &input.q_rad, contacts, input.object_position_m, &self.config)?;
         Ok(fit_to_joint_limits(&self.hand, &input.q_target_rad, &out, &self.config))
     }
@@ -339,7 +356,7 @@ impl Controller for IgmController {
         &mut self,
         input: &ControllerInput,
         _rng: &mut dyn rand::Rng,
-    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+    ) -> Result<Vec<f32>, ControllerError> {
         self.step_on(input, &tip_contacts(input, None))
     }
 }

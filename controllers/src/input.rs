@@ -6,7 +6,7 @@
 //! field. A reading with a non-finite or zero normal, or a non-finite point or force, is
 //! dropped (treated as no contact) rather than handed to the QP; forces are clamped at 0.
 
-use vge_sim::{ContactReading, NUM_FINGERS, PrivilegedState};
+use vge_sim::{ContactReading, PrivilegedState};
 
 use super::{ControllerInput, FingerContact};
 
@@ -27,12 +27,14 @@ impl ControllerInput {
     /// What a controller sees of the env's noise-free state (module docs).
     #[must_use]
     pub fn from_privileged(state: &PrivilegedState) -> Self {
-        let contacts: [Option<FingerContact>; NUM_FINGERS] =
-            std::array::from_fn(|f| state.contacts[f].as_ref().and_then(FingerContact::from_reading));
         Self {
-            q_rad: state.q_rad,
-            q_target_rad: state.q_target_rad,
-            contacts,
+            q_rad: state.q_rad.clone(),
+            q_target_rad: state.q_target_rad.clone(),
+            contacts: state
+                .contacts
+                .iter()
+                .map(|c| c.as_ref().and_then(FingerContact::from_reading))
+                .collect(),
             object_position_m: state.object.pose.translation.vector,
             object_orientation: state.object.pose.rotation,
         }

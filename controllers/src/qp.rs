@@ -6,7 +6,7 @@
 //! subject   c_j = 1 for one j        (rules out the trivial c = 0)
 //! ```
 //!
-//! G is the 6 x 3k grasp map of [`vge_sim::grasp_map`] (`w = G f`), `n_i` the unit normals
+//! G is the 6 x 3k grasp map of [`crate::grasp_map`] (`w = G f`), `n_i` the unit normals
 //! pointing *into* the object (the direction a fingertip pushes), N = blockdiag(n_i).
 //!
 //! **Which j.** The paper only asks that some c_j = 1. We solve the QP once for each j
@@ -382,14 +382,9 @@ pub fn bench_contact_force_qp(k: usize, iterations: usize) -> Result<f64, QpErro
     Ok(start.elapsed().as_secs_f64() * 1e6 / iterations as f64)
 }
 
-/// G (6 x 3k) in f64 with the convention of [`vge_sim::grasp_map`] (`w = G f`).
+/// G (6 x 3k) in f64 with the convention of [`crate::grasp_map`] (`w = G f`), without its
+/// finiteness check (the QP checks G itself).
 #[must_use]
 pub fn grasp_map_f64(points: &[Vector3<f64>], object_position: Vector3<f64>) -> DMatrix<f64> {
-    let mut g = DMatrix::zeros(6, 3 * points.len());
-    for (i, p) in points.iter().enumerate() {
-        let r = p - object_position;
-        g.fixed_view_mut::<3, 3>(0, 3 * i).copy_from(&nalgebra::Matrix3::identity());
-        g.fixed_view_mut::<3, 3>(3, 3 * i).copy_from(&r.cross_matrix());
-    }
-    g
+    crate::grasp::grasp_map_unchecked(points, &object_position)
 }

@@ -19,7 +19,7 @@ use std::time::Instant;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use vge_sim::{Env, EnvConfig, NUM_JOINTS, ObjectConfig, ObjectShape, SimError, StepResult};
+use vge_sim::{Env, EnvConfig, ObjectConfig, ObjectShape, SimError, StepResult};
 
 use super::{Controller, ControllerInput, CsConfig, CsController, FgController, IgmConfig, IgmController};
 
@@ -102,18 +102,18 @@ impl Default for RolloutOptions {
 }
 
 /// One control step as [`run_episode`] saw it.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct StepTrace {
     /// Control step, 1-based (after the step).
     pub step: usize,
-    /// The action applied (zero when the controller had none).
-    pub action: [f32; NUM_JOINTS],
+    /// The action applied (zero when the controller had none), one entry per joint.
+    pub action: Vec<f32>,
     /// Whether the controller had an action.
     pub acted: bool,
     /// Fingertips touching the object after the step.
     pub contacts: usize,
-    /// Which fingertips touch after the step.
-    pub in_contact: [bool; vge_sim::NUM_FINGERS],
+    /// Which fingertips touch after the step, one entry per finger.
+    pub in_contact: Vec<bool>,
     /// Object rotation about z since the episode began (rad, unwrapped).
     pub rotation_rad: f32,
     /// Reward of the step.
@@ -160,27 +160,28 @@ pub fn run_episode(
     let mut controller_s = Vec::with_capacity(env.config().episode_length_steps);
     let mut no_action_steps = 0;
     // What the controller did this step, for the trace.
-    let last = std::cell::Cell::new(([0.0f32; NUM_JOINTS], false, 0.0f64));
-    let act = |env: &Env, _: &[f32; vge_sim::OBS_DIM]| {
+    let joints = env.config().hand.num_joints();
+    let last = std::cell::RefCell::new((vec![0.0f32; joints], false, 0.0f64));
+    let act = |env: &Env, _: &[f32]| {
         let state = env.privileged().ok_or(SimError::NotReset)?;
         let start = Instant::now();
         let acted = controller.act(&ControllerInput::from_privileged(state), &mut rng);
         let elapsed = start.elapsed().as_secs_f64();
         controller_s.push(elapsed);
         no_action_steps += usize::from(acted.is_err());
-        let action = acted.as_ref().copied().unwrap_or([0.0; NUM_JOINTS]);
-        last.set((action, acted.is_ok(), elapsed));
+        let action = acted.as_ref().map_or_else(|_| vec![0.0; joints], Clone::clone);
+        *last.borrow_mut() = (action.clone(), acted.is_ok(), elapsed);
         Ok::<_, SimError>(action)
     };
     let trace = |env: &Env, r: &StepResult, tracker: &vge_sim::EpisodeTracker| {
-        let (action, acted, controller_s) = last.get();
+        let (action, acted, controller_s) = last.borrow().clone();
         on_step(
             &StepTrace {
                 step: r.info.step,
                 action,
                 acted,
                 contacts: r.info.num_tip_contacts,
-                in_contact: r.info.tip_contacts,
+                in_contact: r.info.tip_contacts.clone(),
                 rotation_rad: tracker.rotation_rad() as f32,
                 reward: r.reward,
                 controller_s,
