@@ -36,7 +36,9 @@
 //! the hand's start grasp, else the middle of the joint's range; vge15: roll 0) when the
 //! finger's lateral target is more than `0.05` rad off it, which is where IGM's rotation
 //! leaves the fingers (it rolls them with the object), so the switch restores range;
-//! otherwise it is drawn at random. Other fingers get zero.
+//! otherwise it is drawn at random, or, with [`LateralDirection::CentreElseTowardsObject`],
+//! it is the way that moves the contact point towards the object's centre line. Other
+//! fingers get zero.
 
 use std::sync::Arc;
 
@@ -53,6 +55,23 @@ pub const OPPOSING_NORMALS_MAX_COS: f32 = 0.5;
 /// Lateral offset from the centre (rad) beyond which the lateral move goes back towards it.
 const OFF_CENTRE_RAD: f32 = 0.05;
 
+/// Which way a switching finger moves sideways (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LateralDirection {
+    /// Back towards the lateral joint's centre when more than 0.05 rad off it, else a fair
+    /// coin: the rule CS was tuned with on vge15, whose fingers close onto its cube at roll 0
+    /// (+- the grasp noise) with room on both sides.
+    CentreElseRandom,
+    /// Back towards the centre when more than 0.05 rad off it, else the way that moves the
+    /// contact point towards the object's centre line: the contact's offset from the object
+    /// centre, less its part along the normal, against the lateral joint's Jacobian column.
+    /// For a grasp a file places near the object's edges: the Allegro's three fingers share
+    /// one face of its 65 mm cube, the outer two 8 mm inside its edges, and a random
+    /// outward move carried their tips off the face (2 of 20 seeded switches; none this
+    /// way).
+    CentreElseTowardsObject,
+}
+
 /// Parameters of CS.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CsConfig {
@@ -68,19 +87,28 @@ pub struct CsConfig {
     pub open_fraction: f32,
     /// Contacts that must remain on the other fingers for a finger to be chosen.
     pub min_remaining_contacts: usize,
+    /// Which way the finger moves sideways.
+    pub lateral: LateralDirection,
 }
 
 impl CsConfig {
-    /// The defaults at `env`'s control period.
+    /// The defaults at `env`'s control period, moving sideways towards the object
+    /// ([`LateralDirection::CentreElseTowardsObject`]) on a hand whose file names its start
+    /// grasp (the Allegro), at random as tuned on one that closes its fingers itself (vge15).
     #[must_use]
     pub fn for_env(env: &vge_sim::EnvConfig) -> Self {
-        Self { control_period_s: env.control_dt_s(), ..Self::default() }
+        let lateral = if env.hand.start_grasp_rad().is_some() {
+            LateralDirection::CentreElseTowardsObject
+        } else {
+            LateralDirection::CentreElseRandom
+        };
+        Self { control_period_s: env.control_dt_s(), lateral, ..Self::default() }
     }
 }
 
 impl Default for CsConfig {
     /// H = 50 steps at 0.05 s (2.5 s, the env's 20 Hz), speeds in [0.1, 0.4] rad/s, 40 %
-    /// detach, keep 3. Tuned on the env (vge15, cube, 20 seeded single switches): the grasp
+    /// detach, keep 3, sideways at random unless off centre. Tuned on the env (vge15, cube, 20 seeded single switches): the grasp
     /// squeezes 0.05 rad past first contact and the other fingers push the object after a
     /// retreating tip, so the detach phase must open the proximal flexion by well over
     /// that at the slowest speed. H = 20 (8 detach steps, >= 0.04 rad) broke and remade
@@ -94,6 +122,7 @@ impl Default for CsConfig {
             speed_max_rad_s: 0.4,
             open_fraction: 0.4,
             min_remaining_contacts: 3,
+            lateral: LateralDirection::CentreElseRandom,
         }
     }
 }
@@ -294,6 +323,25 @@ impl CsController {
         Ok(out)
     }
 
+    /// +1 or -1: the sign of a `lateral` joint motion that moves `finger`'s contact point
+    /// towards the object's centre line ([`LateralDirection::CentreElseTowardsObject`]).
+    fn towards_object(
+        &self,
+        input: &ControllerInput,
+        finger: usize,
+        lateral: usize,
+    ) -> Result<f32, ControllerError> {
+        let Some(contact) = input.contacts.get(finger).and_then(Option::as_ref) else {
+            return Ok(1.0);
+        };
+        let q: Vec<f64> = input.q_rad.iter().map(|&v| f64::from(v)).collect();
+        let jacobian = self.hand.fingertip_jacobian_at_point(finger, &q, &contact.point_m.cast::<f64>())?;
+        let offset = (contact.point_m - input.object_position_m).cast::<f64>();
+        let normal = contact.normal.cast::<f64>().try_normalize(1e-9).unwrap_or_else(Vector3::zeros);
+        let tangential = offset - normal * offset.dot(&normal);
+        Ok(if jacobian.column(lateral).dot(&tangential) > 0.0 { -1.0 } else { 1.0 })
+    }
+
     /// Draw a new trajectory for `input` (module docs), without starting it.
     pub fn draw_profile(
         &self,
@@ -317,10 +365,19 @@ impl CsController {
         let off_centre = input.q_target_rad[joints.lateral] - lateral_centre_rad(&self.hand, joints.lateral);
         let sign = if off_centre.abs() > OFF_CENTRE_RAD {
             -off_centre.signum()
-        } else if rng.random_bool(0.5) {
-            1.0
         } else {
-            -1.0
+            match self.config.lateral {
+                LateralDirection::CentreElseRandom => {
+                    if rng.random_bool(0.5) {
+                        1.0
+                    } else {
+                        -1.0
+                    }
+                }
+                LateralDirection::CentreElseTowardsObject => {
+                    self.towards_object(input, finger, joints.lateral)?
+                }
+            }
         };
         let h = self.config.horizon_steps.max(1);
         let open = ((self.config.open_fraction * h as f32).round() as usize).clamp(1, h);

@@ -35,7 +35,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
 use vge_hand::{Hand, HandError};
 
-pub use cs::{CsConfig, CsController, CsPlan, CsProfile};
+pub use cs::{CsConfig, CsController, CsPlan, CsProfile, LateralDirection, SwitchJoints};
 pub use fg::FgController;
 pub use grasp::grasp_map;
 pub use igm::{ForceScaling, ForceSelection, IgmConfig, IgmController, IgmOutput, TipContact, igm_step};

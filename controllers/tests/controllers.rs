@@ -1,17 +1,19 @@
-//! The controllers' math on the shared hand kinematics: contact-force QP, IGM's rotation
-//! and stability terms, CS trajectories, FG superposition. (Tests on the rapier env come
-//! when the env exists.)
+//! The controllers' math on the hand's kinematics (vge15 read from its file): contact-force
+//! QP, grasp map, IGM's rotation and stability terms, CS trajectories, FG superposition.
+//! The controllers on the rapier env: `controllers_sim.rs`.
 
-use nalgebra::{DMatrix, UnitQuaternion, Vector3};
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use vge_controllers::qp::grasp_map_f64;
 use vge_controllers::{
     Controller, ControllerError, ControllerInput, CsConfig, CsController, FgController, FingerContact,
-    IgmConfig, IgmController, QpError, TipContact, contact_force_qp, igm::damped_least_squares, igm_step,
+    IgmConfig, IgmController, QpError, TipContact, contact_force_qp, grasp_map, igm::damped_least_squares,
+    igm_step, limit_to_joint_range,
 };
-use vge_sim::kinematics::joint_index;
-use vge_sim::{HandModel, NOMINAL_CUBE_SIDE_M, NUM_FINGERS, NUM_JOINTS};
+use vge_hand::Hand;
 
 // ---------------------------------------------------------------- QP
 
@@ -129,46 +131,99 @@ fn qp_degenerate_sets_are_typed_errors() {
 // The QP's and the controllers' cost per call: `vge bench controllers` (timings
 // live in benchmarks, not tests).
 
+// ---------------------------------------------------------------- grasp map
+
+#[test]
+fn grasp_map_maps_forces_to_wrenches_and_twists_to_point_velocities() {
+    let points =
+        [Vector3::new(0.05f64, 0.0, 0.01), Vector3::new(-0.05, 0.02, 0.0), Vector3::new(0.0, -0.05, 0.0)];
+    let centre = Vector3::new(0.0, 0.0, 0.01);
+    let g = grasp_map(&points, centre).expect("finite");
+    assert_eq!(g, grasp_map_f64(&points, centre));
+    assert_eq!((g.nrows(), g.ncols()), (6, 9));
+    // A push along -x on +x at the centre's height: a force, no torque.
+    let mut f = DVector::zeros(9);
+    f[0] = -1.0;
+    let w = &g * &f;
+    assert!((w - DVector::from_vec(vec![-1.0, 0.0, 0.0, 0.0, 0.0, 0.0])).norm() < 1e-12);
+    // Turning about +z at 1 rad/s moves the +x point along +y at 5 cm/s.
+    let v = g.transpose() * DVector::from_vec(vec![0.0, 0.0, 0.0, 0.0, 0.0, 1.0]);
+    assert!((v[1] - 0.05).abs() < 1e-12 && v[0].abs() < 1e-12, "{v:?}");
+    let nan = [Vector3::new(f32::NAN, 0.0, 0.0)];
+    assert!(matches!(grasp_map(&nan, Vector3::zeros()), Err(ControllerError::NonFinite(_))));
+}
+
 // ---------------------------------------------------------------- hand at a grasp
 
-fn touching_flexion(hand: &HandModel, finger: usize) -> f32 {
-    hand.flexion_touching_nominal_cube(finger).expect("valid finger").expect("the finger reaches the cube")
+fn vge15() -> Arc<Hand> {
+    vge_sim::hands::vge15().expect("the shipped vge15 hand")
+}
+
+/// Joint `joint` (0 = roll, 1 = proximal flexion, 2 = distal flexion) of vge15's `finger`.
+fn joint_index(hand: &Hand, finger: usize, joint: usize) -> usize {
+    let joints = hand.fingers()[finger].joints.clone();
+    assert!(joint < joints.len());
+    joints.start + joint
+}
+
+fn tips(hand: &Hand, q: &[f32]) -> Vec<Vector3<f32>> {
+    hand.fingertip_positions_m(q).expect("valid joints")
+}
+
+/// Equal flexion on both flexion joints (roll 0) at which `finger`'s tip sphere touches the
+/// nearest face of the hand's nominal cube at the origin, by bisection on the kinematics.
+fn touching_flexion(hand: &Hand, finger: usize) -> f32 {
+    let half = f64::from(hand.nominal_object().expect("vge15 names its cube").width_m) / 2.0;
+    let radius = f64::from(hand.fingers()[finger].tip_radius_m.expect("a tip sphere"));
+    let gap = |s: f64| {
+        let mut q = vec![0.0f64; hand.num_joints()];
+        q[joint_index(hand, finger, 1)] = s;
+        q[joint_index(hand, finger, 2)] = s;
+        let tip = hand.fingertip_positions_m(&q).expect("valid")[finger];
+        tip.x.abs().max(tip.y.abs()) - (half + radius)
+    };
+    let (mut lo, mut hi) = (0.0, 1.2);
+    assert!(gap(lo) > 0.0 && gap(hi) <= 0.0, "finger {finger} does not reach the cube");
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if gap(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)) as f32
 }
 
 struct Grasp {
-    hand: HandModel,
-    q: [f32; NUM_JOINTS],
+    hand: Arc<Hand>,
+    q: Vec<f32>,
     contacts: Vec<TipContact>,
 }
 
 /// All five fingertips touching the cube's faces; contact point on the face, normal into
 /// the cube (given *outward* on purpose: the controllers must orient it), force `force_n`.
 fn cube_grasp(force_n: f32) -> Grasp {
-    let hand = HandModel::default();
-    let half = NOMINAL_CUBE_SIDE_M / 2.0;
-    let mut q = [0.0; NUM_JOINTS];
-    let mut contacts = Vec::new();
-    for finger in 0..NUM_FINGERS {
+    let hand = vge15();
+    let half = hand.nominal_object().expect("cube").width_m / 2.0;
+    let mut q = vec![0.0; hand.num_joints()];
+    for finger in 0..hand.num_fingers() {
         let s = touching_flexion(&hand, finger);
-        q[joint_index(finger, 1)] = s;
-        q[joint_index(finger, 2)] = s;
-        let tip = hand.fingertip_position_m(finger, &[0.0, s, s]).expect("valid");
+        q[joint_index(&hand, finger, 1)] = s;
+        q[joint_index(&hand, finger, 2)] = s;
+    }
+    let mut contacts = Vec::new();
+    for (finger, tip) in tips(&hand, &q).into_iter().enumerate() {
         let outward = if tip.x.abs() >= tip.y.abs() {
             Vector3::new(tip.x.signum(), 0.0, 0.0)
         } else {
             Vector3::new(0.0, tip.y.signum(), 0.0)
         };
-        let point = tip - outward * hand.fingers[finger].tip_radius_m;
+        let point = tip - outward * hand.fingers()[finger].tip_radius_m.expect("sphere");
         assert!((point.x.abs().max(point.y.abs()) - half).abs() < 1e-4);
         contacts.push(TipContact { finger, point_m: point, normal: outward, force_n });
     }
     Grasp { hand, q, contacts }
-}
-
-fn tips(hand: &HandModel, q: &[f32; NUM_JOINTS]) -> Vec<Vector3<f32>> {
-    (0..NUM_FINGERS)
-        .map(|f| hand.fingertip_position_m(f, &hand.finger_joints(f, q).expect("ok")).expect("ok"))
-        .collect()
 }
 
 fn rotation_only(config: IgmConfig) -> IgmConfig {
@@ -184,34 +239,28 @@ fn check_rotation(reverse: bool) {
     }
     let out = igm_step(&g.hand, &g.q, &g.contacts, Vector3::zeros(), &config).expect("igm");
     assert_eq!(out.delta_rad, out.dq_rot_rad, "stability term must be off");
-    // Least-squares residual of J_S dq_rot = G^T do, relative.
-    let kin: Vec<_> = g
-        .contacts
-        .iter()
-        .map(|c| {
-            let tip = g
-                .hand
-                .fingertip_position_m(c.finger, &g.hand.finger_joints(c.finger, &g.q).expect("ok"))
-                .expect("ok");
-            vge_sim::Contact { finger: c.finger, offset_from_tip_m: c.point_m - tip }
-        })
-        .collect();
-    let js = g.hand.stacked_jacobian(&kin, &g.q).expect("ok").cast::<f64>();
-    let points: Vec<_> = g.contacts.iter().map(|c| c.point_m).collect();
-    let grasp = vge_sim::grasp_map(&points, Vector3::zeros()).expect("ok").cast::<f64>();
-    let twist = nalgebra::DVector::from_iterator(6, config.object_delta.iter().map(|&v| f64::from(v)));
+    // Least-squares residual of J_S dq_rot = G^T do, relative, with J_S at the contact points.
+    let q64: Vec<f64> = g.q.iter().map(|&v| f64::from(v)).collect();
+    let mut js = DMatrix::zeros(3 * g.contacts.len(), g.hand.num_joints());
+    for (i, c) in g.contacts.iter().enumerate() {
+        let block = g.hand.fingertip_jacobian_at_point(c.finger, &q64, &c.point_m.cast::<f64>()).expect("ok");
+        js.view_mut((3 * i, 0), (3, g.hand.num_joints())).copy_from(&block);
+    }
+    let points: Vec<_> = g.contacts.iter().map(|c| c.point_m.cast::<f64>()).collect();
+    let grasp = grasp_map(&points, Vector3::zeros()).expect("ok");
+    let twist = DVector::from_iterator(6, config.object_delta.iter().map(|&v| f64::from(v)));
     let wanted = grasp.transpose() * twist;
-    let dq = nalgebra::DVector::from_iterator(NUM_JOINTS, out.dq_rot_rad.iter().map(|&v| f64::from(v)));
+    let dq = DVector::from_iterator(g.hand.num_joints(), out.dq_rot_rad.iter().map(|&v| f64::from(v)));
     let rel = (&js * &dq - &wanted).norm() / wanted.norm();
     assert!(rel < 0.1, "relative residual {rel}");
 
     // Move the joints in the kinematics: each tip's displacement follows its G^T do row
     // block and turns about +z in the commanded sense.
-    let q_after: [f32; NUM_JOINTS] = std::array::from_fn(|j| g.q[j] + out.dq_rot_rad[j]);
+    let q_after: Vec<f32> = g.q.iter().zip(&out.dq_rot_rad).map(|(q, d)| q + d).collect();
     let before = tips(&g.hand, &g.q);
     let after = tips(&g.hand, &q_after);
     let sense = if reverse { -1.0 } else { 1.0 };
-    for finger in 0..NUM_FINGERS {
+    for finger in 0..g.hand.num_fingers() {
         let moved = (after[finger] - before[finger]).cast::<f64>();
         let want = wanted.fixed_rows::<3>(3 * finger).into_owned();
         assert!(
@@ -262,14 +311,14 @@ fn igm_stability_pushes_where_force_is_missing() {
     let mut weak = balanced.clone();
     weak[0].force_n *= 0.5;
     let out = igm_step(&g.hand, &g.q, &weak, Vector3::zeros(), &config).expect("igm");
-    let q_after: [f32; NUM_JOINTS] = std::array::from_fn(|j| g.q[j] + out.delta_rad[j]);
+    let q_after: Vec<f32> = g.q.iter().zip(&out.delta_rad).map(|(q, d)| q + d).collect();
     let moved = tips(&g.hand, &q_after)[0] - tips(&g.hand, &g.q)[0];
     assert!(moved.x > 1e-4, "thumb moved {moved:?}");
     assert!(moved.y.abs() < 0.2 * moved.x && moved.z.abs() < 0.2 * moved.x, "thumb moved {moved:?}");
     // Fingers not in the contact set do not move.
     for f in [1, 4] {
-        for j in 0..3 {
-            assert_eq!(out.delta_rad[joint_index(f, j)], 0.0);
+        for j in g.hand.fingers()[f].joints.clone() {
+            assert_eq!(out.delta_rad[j], 0.0);
         }
     }
 }
@@ -288,7 +337,7 @@ fn igm_clips_and_rejects_too_few_contacts() {
 #[test]
 fn damped_least_squares_matches_the_formula() {
     let j = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 2.0, 0.0, 1.0, 1.0]);
-    let rhs = nalgebra::DVector::from_vec(vec![1.0, -1.0]);
+    let rhs = DVector::from_vec(vec![1.0, -1.0]);
     let lambda: f64 = 0.3;
     let dq = damped_least_squares(&j, &rhs, lambda);
     // Same as the normal-equations form (J^T J + lambda^2 I)^-1 J^T rhs.
@@ -299,10 +348,30 @@ fn damped_least_squares_matches_the_formula() {
     assert!((dq - other).norm() < 1e-12);
 }
 
+#[test]
+fn joint_range_limits_come_from_the_hand_file() {
+    let hand = vge15();
+    let n = hand.num_joints();
+    // Roll range is +-0.5 rad: from 0.45 only 0.05 more; a target past it may come back.
+    let mut target = vec![0.0; n];
+    target[0] = 0.45;
+    target[1] = 1.7;
+    let mut delta = vec![0.0; n];
+    delta[0] = 0.2;
+    delta[1] = 0.1;
+    delta[2] = -0.05;
+    let limited = limit_to_joint_range(&hand, &target, &delta);
+    assert!((limited[0] - 0.05).abs() < 1e-6, "{limited:?}");
+    assert_eq!(limited[1], 0.0, "already past its upper limit: may not go further");
+    assert_eq!(limited[2], -0.05);
+    delta[1] = -0.2;
+    assert!((limit_to_joint_range(&hand, &target, &delta)[1] + 0.2).abs() < 1e-6, "back towards the range");
+}
+
 // ---------------------------------------------------------------- controllers on an input
 
 fn input_from(g: &Grasp, in_contact: &[usize]) -> ControllerInput {
-    let mut contacts = [None; NUM_FINGERS];
+    let mut contacts = vec![None; g.hand.num_fingers()];
     for c in &g.contacts {
         if in_contact.contains(&c.finger) {
             contacts[c.finger] =
@@ -310,16 +379,16 @@ fn input_from(g: &Grasp, in_contact: &[usize]) -> ControllerInput {
         }
     }
     ControllerInput {
-        q_rad: g.q,
-        q_target_rad: g.q,
+        q_rad: g.q.clone(),
+        q_target_rad: g.q.clone(),
         contacts,
         object_position_m: Vector3::zeros(),
         object_orientation: UnitQuaternion::identity(),
     }
 }
 
-fn run_cs(seed: u64, input: &ControllerInput, steps: usize) -> (Vec<usize>, Vec<[f32; NUM_JOINTS]>) {
-    let mut cs = CsController::new(HandModel::default(), CsConfig::default());
+fn run_cs(seed: u64, input: &ControllerInput, steps: usize) -> (Vec<usize>, Vec<Vec<f32>>) {
+    let mut cs = CsController::new(vge15(), CsConfig::default());
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     cs.reset(&mut rng);
     let mut fingers = Vec::new();
@@ -335,6 +404,7 @@ fn run_cs(seed: u64, input: &ControllerInput, steps: usize) -> (Vec<usize>, Vec<
 #[test]
 fn cs_follows_one_finger_for_h_steps_within_the_speed_range() {
     let g = cube_grasp(1.0);
+    let hand = &g.hand;
     let input = input_from(&g, &[0, 1, 2, 3, 4]);
     let config = CsConfig::default();
     let h = config.horizon_steps;
@@ -349,14 +419,15 @@ fn cs_follows_one_finger_for_h_steps_within_the_speed_range() {
         let f = fingers[0];
         let open = (config.open_fraction * h as f32).round() as usize;
         let mut flex_total = 0.0;
+        let (roll_j, prox_j, dist_j) =
+            (joint_index(hand, f, 0), joint_index(hand, f, 1), joint_index(hand, f, 2));
         for (step, delta) in deltas[..h].iter().enumerate() {
             for (j, &d) in delta.iter().enumerate() {
-                if j / 3 != f {
+                if !hand.fingers()[f].joints.contains(&j) {
                     assert_eq!(d, 0.0, "seed {seed}: joint {j} of another finger moved");
                 }
             }
-            let (roll, prox, dist) =
-                (delta[joint_index(f, 0)] / dt, delta[joint_index(f, 1)] / dt, delta[joint_index(f, 2)] / dt);
+            let (roll, prox, dist) = (delta[roll_j] / dt, delta[prox_j] / dt, delta[dist_j] / dt);
             assert_eq!(dist, 0.0, "distal flexion must be held");
             assert!((0.1 - 1e-5..=0.4 + 1e-5).contains(&prox.abs()), "flexion speed {prox}");
             if step < open {
@@ -366,7 +437,7 @@ fn cs_follows_one_finger_for_h_steps_within_the_speed_range() {
                 assert!(prox > 0.0, "attach closes the flexion");
                 assert_eq!(roll, 0.0);
             }
-            flex_total += delta[joint_index(f, 1)];
+            flex_total += delta[prox_j];
         }
         assert!(flex_total > 0.0, "ends closed past the start, {flex_total}");
     }
@@ -392,49 +463,85 @@ fn cs_keeps_three_other_contacts() {
         assert_ne!(fingers[0], 2, "seed {seed}: chose a finger not in contact");
     }
     // Three contacts: switching any would leave two.
-    let mut cs = CsController::new(HandModel::default(), CsConfig::default());
+    let mut cs = CsController::new(vge15(), CsConfig::default());
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let three = input_from(&g, &[0, 2, 3]);
     assert_eq!(cs.act(&three, &mut rng), Err(ControllerError::TooFewContacts { got: 3, need: 4 }));
 }
 
 #[test]
+fn cs_never_leaves_contacts_that_all_push_one_way() {
+    // Every finger but the thumb moved onto the +x face (pushing along -x): the thumb is
+    // the only contact opposing them, so it must stay.
+    let mut g = cube_grasp(1.0);
+    for c in g.contacts.iter_mut().filter(|c| c.finger != 0) {
+        c.point_m.x = 0.05;
+        c.normal = Vector3::x();
+    }
+    let input = input_from(&g, &[0, 1, 2, 3, 4]);
+    for seed in 0..30 {
+        let (fingers, _) = run_cs(seed, &input, 1);
+        assert_ne!(fingers[0], 0, "seed {seed}: lifted the only finger opposing the others");
+    }
+    let only_one_way = input_from(&g, &[1, 2, 3, 4]);
+    let mut cs = CsController::new(vge15(), CsConfig::default());
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    assert_eq!(cs.act(&only_one_way, &mut rng), Err(ControllerError::NoFingerToSwitch { contacts: 4 }));
+}
+
+#[test]
 fn cs_rolls_back_towards_centre() {
     let g = cube_grasp(1.0);
     let mut input = input_from(&g, &[0, 1, 2, 3, 4]);
-    for f in 0..NUM_FINGERS {
-        input.q_target_rad[joint_index(f, 0)] = 0.3;
+    for f in 0..g.hand.num_fingers() {
+        input.q_target_rad[joint_index(&g.hand, f, 0)] = 0.3;
     }
     for seed in 0..10 {
         let (fingers, deltas) = run_cs(seed, &input, 1);
-        assert!(deltas[0][joint_index(fingers[0], 0)] < 0.0);
+        assert!(deltas[0][joint_index(&g.hand, fingers[0], 0)] < 0.0);
     }
+}
+
+#[test]
+fn controllers_refuse_inputs_of_another_hand_size() {
+    let g = cube_grasp(1.0);
+    let mut input = input_from(&g, &[0, 1, 2, 3, 4]);
+    input.q_rad.push(0.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let want = Err(ControllerError::InputSize { what: "q_rad", expected: 15, got: 16 });
+    assert_eq!(IgmController::new(vge15(), IgmConfig::default()).act(&input, &mut rng), want);
+    assert_eq!(CsController::new(vge15(), CsConfig::default()).act(&input, &mut rng), want);
+    assert_eq!(
+        FgController::new(vge15(), IgmConfig::default(), CsConfig::default()).act(&input, &mut rng),
+        want
+    );
 }
 
 #[test]
 fn fg_is_igm_on_the_others_plus_cs_on_the_switching_finger() {
     let g = cube_grasp(1.0);
     let input = input_from(&g, &[0, 1, 2, 3, 4]);
-    let hand = HandModel::default();
-    let mut fg = FgController::new(hand.clone(), IgmConfig::default(), CsConfig::default());
+    let hand = vge15();
+    let mut fg = FgController::new(Arc::clone(&hand), IgmConfig::default(), CsConfig::default());
     let mut rng = ChaCha8Rng::seed_from_u64(3);
     fg.reset(&mut rng);
     let total = fg.act(&input, &mut rng).expect("fg acts");
+    assert_eq!(total.len(), hand.num_joints());
     // Replay the same draws on a separate CS.
     let (fingers, deltas) = run_cs(3, &input, 1);
     let f = fingers[0];
     let others: Vec<_> = g.contacts.iter().filter(|c| c.finger != f).copied().collect();
     let igm = igm_step(&hand, &g.q, &others, Vector3::zeros(), &IgmConfig::default()).expect("igm");
-    for j in 0..NUM_JOINTS {
+    for j in 0..hand.num_joints() {
         let expect = igm.delta_rad[j] + deltas[0][j];
         assert!((total[j] - expect).abs() < 1e-6, "joint {j}: {} vs {expect}", total[j]);
-        if j / 3 == f {
+        if hand.fingers()[f].joints.contains(&j) {
             assert_eq!(igm.delta_rad[j], 0.0, "IGM must not drive the switching finger");
         }
     }
     // With three contacts CS cannot start: FG is IGM alone.
     let three = input_from(&g, &[0, 2, 3]);
-    let mut fresh = FgController::new(hand.clone(), IgmConfig::default(), CsConfig::default());
+    let mut fresh = FgController::new(Arc::clone(&hand), IgmConfig::default(), CsConfig::default());
     let mut igm_ctl = IgmController::new(hand, IgmConfig::default());
     assert_eq!(fresh.act(&three, &mut rng), igm_ctl.act(&three, &mut rng));
     assert!(fresh.cs.plan().is_none());

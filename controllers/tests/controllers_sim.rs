@@ -1,21 +1,42 @@
 //! The controllers on the real simulator (rapier world, clarabel QP), seeded: IGM turns the
-//! cube, CS breaks and remakes a contact, FG does both. Short episodes keep the suite fast.
+//! cube, CS breaks and remakes a contact, FG does both; on vge15 (five fingers of three
+//! joints) and on the Allegro (four of four). Short episodes keep the suite fast.
 
+use std::sync::Arc;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use vge_controllers::rollout::{self, ControllerKind, RolloutOptions, run_episode};
-use vge_controllers::{Controller, ControllerInput, CsConfig, CsController, IgmConfig, IgmController};
-use vge_sim::{Env, EnvConfig, NUM_FINGERS, ObjectShape};
+use vge_controllers::{
+    Controller, ControllerInput, CsConfig, CsController, FgController, IgmConfig, IgmController,
+};
+use vge_hand::Hand;
+use vge_sim::{Env, EnvConfig, ObjectShape};
 
-/// The default env with a little grasp-pose noise so that seeds differ.
+/// The default env (vge15) with a little grasp-pose noise so that seeds differ.
 fn env_config(steps: usize) -> EnvConfig {
     let mut c = EnvConfig { episode_length_steps: steps, ..EnvConfig::default() };
     c.grasp.pose_noise_rad = 0.02;
     c
 }
 
-fn igm_run(config: IgmConfig, seed: u64, steps: usize) -> (f32, usize, bool) {
-    let mut env = Env::new(env_config(steps)).expect("env");
-    let mut igm = IgmController::new(env.config().hand.clone(), config);
-    let mut min_contacts = NUM_FINGERS;
+fn allegro() -> Arc<Hand> {
+    vge_sim::hands::load("allegro").expect("the shipped Allegro")
+}
+
+/// The Allegro's env: its start grasp on its 65 mm cube, with the same grasp-pose noise.
+fn allegro_config(steps: usize) -> EnvConfig {
+    let mut c = EnvConfig::for_hand(allegro()).expect("the Allegro has a servo on every joint");
+    c.episode_length_steps = steps;
+    c.grasp.pose_noise_rad = 0.02;
+    c
+}
+
+/// One IGM episode: (rotation, fewest contacts, dropped).
+fn igm_run(env_config: EnvConfig, config: IgmConfig, seed: u64) -> (f32, usize, bool) {
+    let mut env = Env::new(env_config).expect("env");
+    let mut igm = IgmController::new(Arc::clone(&env.config().hand), config);
+    let mut min_contacts = usize::MAX;
     let stats = run_episode(&mut env, &mut igm, seed, |t, _| min_contacts = min_contacts.min(t.contacts))
         .expect("episode");
     assert_eq!(stats.no_action_steps, 0, "IGM had no action on some steps");
@@ -27,7 +48,7 @@ fn igm_turns_the_cube_both_ways_within_three_seconds() {
     let steps = 60; // 3 s at 20 Hz
     for seed in 0..3 {
         for (sign, config) in [(1.0f32, IgmConfig::default()), (-1.0, IgmConfig::default().reversed())] {
-            let (rotation, min_contacts, dropped) = igm_run(config, seed, steps);
+            let (rotation, min_contacts, dropped) = igm_run(env_config(steps), config, seed);
             println!("IGM seed {seed} do {sign:+}: rotation {rotation:+.3} rad, min contacts {min_contacts}");
             assert!(!dropped, "seed {seed}: dropped");
             assert!(min_contacts >= 3, "seed {seed}: {min_contacts} contacts");
@@ -37,37 +58,71 @@ fn igm_turns_the_cube_both_ways_within_three_seconds() {
 }
 
 /// One switching trajectory of CS on seed `seed`, then `hold` steps of zero action.
-/// Returns (finger's contact broke, was remade and held at the end, object not dropped,
-/// contact counts per step).
-fn cs_trial(config: CsConfig, seed: u64, hold: usize) -> (bool, bool, bool, Vec<usize>, Option<usize>) {
-    let mut env = Env::new(env_config(config.horizon_steps + hold)).expect("env");
+struct CsTrial {
+    /// The switching finger's contact broke at some step.
+    broke: bool,
+    /// It broke and touched again at the end.
+    remade: bool,
+    /// The env did not terminate (no drop).
+    alive: bool,
+    /// Fewest contacts of the other fingers while the switching finger was off.
+    others_min_while_off: usize,
+    /// Contacts per step.
+    counts: Vec<usize>,
+    finger: usize,
+}
+
+impl CsTrial {
+    fn succeeded(&self) -> bool {
+        self.broke && self.remade && self.alive
+    }
+}
+
+/// `None` when CS cannot start on the grasp the reset made (too few contacts).
+fn cs_trial(env_config: EnvConfig, config: CsConfig, seed: u64, hold: usize) -> Option<CsTrial> {
+    let steps = config.horizon_steps + hold;
+    let mut env = Env::new(EnvConfig { episode_length_steps: steps, ..env_config }).expect("env");
     env.reset(seed).expect("reset");
-    let mut cs = CsController::new(env.config().hand.clone(), config);
-    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
+    let joints = env.config().hand.num_joints();
+    let mut cs = CsController::new(Arc::clone(&env.config().hand), config);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     cs.reset(&mut rng);
-    let (mut broke, mut finger, mut counts, mut alive) = (false, None, Vec::new(), true);
+    let input = ControllerInput::from_privileged(env.privileged().expect("state"));
+    let first = cs.act(&input, &mut rng).ok()?;
+    let finger = cs.switching_finger().expect("a finger was chosen");
+    let mut t = CsTrial {
+        broke: false,
+        remade: false,
+        alive: true,
+        others_min_while_off: usize::MAX,
+        counts: vec![],
+        finger,
+    };
     let mut in_contact_now = false;
-    for step in 0..config.horizon_steps + hold {
-        let state = env.privileged().expect("state");
-        let action = if step < config.horizon_steps {
-            let input = ControllerInput::from_privileged(state);
-            let a = cs.act(&input, &mut rng).expect("CS acts on a 5-finger grasp");
-            finger = finger.or(cs.switching_finger());
-            a
+    for step in 0..steps {
+        let action = if step == 0 {
+            first.clone()
+        } else if step < config.horizon_steps {
+            let input = ControllerInput::from_privileged(env.privileged().expect("state"));
+            cs.act(&input, &mut rng).expect("CS follows its trajectory")
         } else {
-            [0.0; vge_sim::NUM_JOINTS]
+            vec![0.0; joints]
         };
+        assert_eq!(action.len(), joints);
         let r = env.step(&action).expect("step");
-        let f = finger.expect("a finger was chosen");
-        in_contact_now = env.privileged().expect("state").contacts[f].is_some();
-        broke |= !in_contact_now;
-        counts.push(r.info.num_tip_contacts);
+        in_contact_now = r.info.tip_contacts[finger];
+        t.broke |= !in_contact_now;
+        if !in_contact_now {
+            t.others_min_while_off = t.others_min_while_off.min(r.info.num_tip_contacts);
+        }
+        t.counts.push(r.info.num_tip_contacts);
         if r.terminated {
-            alive = false;
+            t.alive = false;
             break;
         }
     }
-    (broke, broke && in_contact_now, alive, counts, finger)
+    t.remade = t.broke && in_contact_now;
+    Some(t)
 }
 
 #[test]
@@ -75,16 +130,106 @@ fn cs_breaks_and_remakes_one_contact_in_most_trials() {
     let config = CsConfig::for_env(&env_config(1));
     let mut ok = 0;
     for seed in 0..20 {
-        let (broke, remade, alive, counts, finger) = cs_trial(config, seed, 5);
-        let success = broke && remade && alive;
-        ok += usize::from(success);
+        let t = cs_trial(env_config(1), config, seed, 5).expect("CS acts on a five-finger grasp");
+        ok += usize::from(t.succeeded());
         println!(
-            "CS seed {seed} finger {:?}: broke {broke} remade {remade} held {alive} contacts {counts:?}",
-            finger
+            "CS seed {seed} finger {}: broke {} remade {} held {} contacts {:?}",
+            t.finger, t.broke, t.remade, t.alive, t.counts
         );
     }
     println!("CS: {ok}/20 switches succeeded");
     assert!(ok >= 16, "only {ok}/20 switches succeeded");
+}
+
+// ---------------------------------------------------------------- vge15's CS as it was
+
+/// CS as it was written for the 15-joint hand before hands were files: joint `3 f + j`,
+/// the fixed `[roll, flex_prox, flex_dist]` profile (detach `[v_r, -v_f, 0]`, attach
+/// `[0, v_f, 0]`), every finger in contact a candidate, roll limits +-0.5 rad and flexion
+/// -0.3..1.6 rad. The reference the derived profile must equal on vge15, bit for bit.
+struct Vge15CsAsBefore {
+    config: CsConfig,
+    plan: Option<(usize, f32, f32, usize)>,
+}
+
+impl Vge15CsAsBefore {
+    fn act(&mut self, input: &ControllerInput, rng: &mut dyn rand::Rng) -> Option<Vec<f32>> {
+        let c = self.config;
+        let (finger, roll_v, flex, h) = match self.plan {
+            Some(p) => p,
+            None => {
+                let in_contact = input.fingers_in_contact();
+                if in_contact.len() < c.min_remaining_contacts + 1 {
+                    return None;
+                }
+                let finger = in_contact[rng.random_range(0..in_contact.len())];
+                let roll_speed = rng.random_range(c.speed_min_rad_s..=c.speed_max_rad_s);
+                let flex_speed = rng.random_range(c.speed_min_rad_s..=c.speed_max_rad_s);
+                let roll = input.q_target_rad[3 * finger];
+                let sign = if roll.abs() > 0.05 {
+                    -roll.signum()
+                } else if rng.random_bool(0.5) {
+                    1.0
+                } else {
+                    -1.0
+                };
+                (finger, sign * roll_speed, flex_speed, 0)
+            }
+        };
+        let open = ((c.open_fraction * c.horizon_steps as f32).round() as usize).clamp(1, c.horizon_steps);
+        let v = if h < open { [roll_v, -flex, 0.0] } else { [0.0, flex, 0.0] };
+        let mut delta = [0.0f32; 15];
+        for (j, vj) in v.iter().enumerate() {
+            delta[3 * finger + j] = vj * c.control_period_s;
+        }
+        self.plan = (h + 1 < c.horizon_steps).then_some((finger, roll_v, flex, h + 1));
+        Some(
+            (0..15)
+                .map(|j| {
+                    let (lo, hi) = if j % 3 == 0 { (-0.5f32, 0.5f32) } else { (-0.3, 1.6) };
+                    let t = input.q_target_rad[j];
+                    (t + delta[j]).clamp(lo.min(t), hi.max(t)) - t
+                })
+                .collect(),
+        )
+    }
+}
+
+#[test]
+fn vge15_cs_actions_are_those_of_the_fixed_profile_bit_for_bit() {
+    let hand = vge_sim::hands::vge15().expect("vge15");
+    let names = ["roll", "flex_prox", "flex_dist"];
+    for (f, finger) in hand.fingers().iter().enumerate() {
+        for (j, name) in names.iter().enumerate() {
+            assert_eq!(hand.joints()[3 * f + j].name, format!("{}.{name}", finger.name));
+        }
+    }
+    // Long episodes, so that switches that fail and leave four contacts are included.
+    let steps = 300;
+    let mut compared = 0usize;
+    for seed in 0..6 {
+        let mut env = Env::new(env_config(steps)).expect("env");
+        env.reset(seed).expect("reset");
+        let config = CsConfig::for_env(env.config());
+        let mut cs = CsController::new(Arc::clone(&hand), config);
+        let mut before = Vge15CsAsBefore { config, plan: None };
+        let mut rng_new = ChaCha8Rng::seed_from_u64(seed);
+        let mut rng_old = ChaCha8Rng::seed_from_u64(seed);
+        for _ in 0..steps {
+            let input = ControllerInput::from_privileged(env.privileged().expect("state"));
+            let new = cs.act(&input, &mut rng_new).ok();
+            let old = before.act(&input, &mut rng_old);
+            let bits =
+                |a: &Option<Vec<f32>>| a.as_ref().map(|v| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>());
+            assert_eq!(bits(&new), bits(&old), "seed {seed} step {compared}");
+            compared += 1;
+            let r = env.step(&new.unwrap_or_else(|| vec![0.0; 15])).expect("step");
+            if r.terminated {
+                break;
+            }
+        }
+    }
+    println!("{compared} CS actions equal to the fixed profile's, bit for bit");
 }
 
 /// FG's figures, reported. FG is not drop-free on the env; with the tuned IGM and CS it
@@ -141,4 +286,68 @@ fn controller_kind_serialises_as_configs_spell_it() {
         assert_eq!(serde_json::from_str::<ControllerKind>(&json).expect("deserialise"), kind);
     }
     assert!(serde_json::from_str::<ControllerKind>("\"FG\"").is_err(), "case-sensitive, as configs were");
+}
+
+// ---------------------------------------------------------------- the Allegro
+
+#[test]
+fn allegro_igm_turns_the_cube_about_z_without_a_drop_in_two_seconds() {
+    let steps = 40; // 2 s at 20 Hz
+    for seed in 0..3 {
+        for (sign, config) in [(1.0f32, IgmConfig::default()), (-1.0, IgmConfig::default().reversed())] {
+            let (rotation, min_contacts, dropped) = igm_run(allegro_config(steps), config, seed);
+            println!(
+                "Allegro IGM seed {seed} do {sign:+}: rotation {rotation:+.3} rad, min contacts {min_contacts}"
+            );
+            assert!(!dropped, "seed {seed}: dropped");
+            assert!(min_contacts >= 3, "seed {seed}: {min_contacts} contacts");
+            assert!(sign * rotation > 0.05, "seed {seed} sign {sign}: rotation {rotation}");
+        }
+    }
+}
+
+#[test]
+fn allegro_cs_lifts_one_finger_off_and_back_while_the_other_three_hold() {
+    let config = CsConfig::for_env(&allegro_config(1));
+    // The first 10 seeds whose grasp has all four fingertips on the cube (the noisy grasp
+    // leaves one off now and then, and CS then has no finger to spare).
+    let (mut trials, mut ok) = (0, 0);
+    for seed in 0..20 {
+        let Some(t) = cs_trial(allegro_config(1), config, seed, 5) else {
+            println!("Allegro CS seed {seed}: fewer than four contacts after the grasp");
+            continue;
+        };
+        let success = t.succeeded() && t.others_min_while_off >= 3;
+        println!(
+            "Allegro CS seed {seed} finger {}: broke {} remade {} held {} others while off >= {} contacts {:?}",
+            t.finger, t.broke, t.remade, t.alive, t.others_min_while_off, t.counts
+        );
+        assert_ne!(t.finger, 3, "seed {seed}: lifted the thumb, the only finger opposing the others");
+        ok += usize::from(success);
+        trials += 1;
+        if trials == 10 {
+            break;
+        }
+    }
+    println!("Allegro CS: {ok}/{trials} switches succeeded");
+    assert_eq!(trials, 10, "too few grasps with four contacts");
+    assert!(ok >= 8, "only {ok}/{trials} switches succeeded");
+}
+
+#[test]
+fn allegro_fg_acts_with_one_finite_entry_per_joint() {
+    let env_config = allegro_config(60);
+    let hand = Arc::clone(&env_config.hand);
+    assert_eq!(hand.num_joints(), 16);
+    let mut env = Env::new(env_config.clone()).expect("env");
+    let mut fg = FgController::new(hand, IgmConfig::default(), CsConfig::for_env(&env_config));
+    let mut acted = 0;
+    let stats = run_episode(&mut env, &mut fg, 1, |t, _| {
+        assert_eq!(t.action.len(), 16);
+        assert!(t.action.iter().all(|v| v.is_finite()), "{:?}", t.action);
+        acted += usize::from(t.acted);
+    })
+    .expect("episode");
+    println!("Allegro FG: {stats:?}");
+    assert!(acted * 2 >= stats.steps, "FG acted on {acted} of {} steps", stats.steps);
 }
