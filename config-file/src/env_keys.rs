@@ -117,7 +117,8 @@ impl EnvKeys {
     /// The sim's configuration for env `index` (object `objects[index % len]`), as the lab
     /// builds it, and validated.
     pub fn env_config(&self, index: usize, origin: &str) -> Result<EnvConfig, EnvKeysError> {
-        let env = self.0.env_config(index);
+        let invalid = |message: String| EnvKeysError::Invalid { origin: origin.to_owned(), message };
+        let env = self.0.env_config(index).map_err(|e| invalid(e.to_string()))?;
         env.validate()
             .map_err(|e| EnvKeysError::Invalid { origin: origin.to_owned(), message: e.to_string() })?;
         Ok(env)
@@ -135,7 +136,10 @@ mod tests {
     #[test]
     fn defaults_are_the_sections() {
         let keys = EnvKeys::from_table(toml::Table::new(), "test").expect("keys");
-        assert_eq!(keys.env_config(0, "test").expect("config"), EnvSection::default().env_config(0));
+        assert_eq!(
+            keys.env_config(0, "test").expect("config"),
+            EnvSection::default().env_config(0).expect("default")
+        );
     }
 
     #[test]

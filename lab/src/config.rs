@@ -392,7 +392,9 @@ use vge_config_file::memory::{ENV_BYTES, bytes_text, machine_memory_bytes};
 /// What a training env keeps per step of its episode: the reward (for the Monte-Carlo
 /// returns), and the executed action and controller calls that replay an episode in progress
 /// after a stop (`vge_trainer`'s checkpoint).
-const EPISODE_STEP_BYTES: u64 = 4 + 4 * vge_sim::NUM_JOINTS as u64 + 2 * 8;
+fn episode_step_bytes(joints: u64) -> u64 {
+    4 + 4 * joints + 2 * 8
+}
 
 /// One evaluation episode's outcome as an evaluation keeps it.
 const EVAL_EPISODE_BYTES: u64 = 256;
@@ -402,6 +404,12 @@ fn invalid(msg: impl Into<String>) -> ConfigError {
 }
 
 impl Config {
+    /// The sim's configuration of env `index` ([`vge_sim::EnvSection::env_config`]): refused
+    /// when the hand does not load (a hand file may change after the config was checked).
+    pub fn env_config(&self, index: usize) -> Result<vge_sim::EnvConfig, vge_sim::SimError> {
+        self.env.env_config(index).map_err(|e| vge_sim::SimError::Hand(e.to_string()))
+    }
+
     /// Parses TOML text (no overrides).
     pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
         parse_with_overrides(text, "<string>", &[])
@@ -512,13 +520,14 @@ impl Config {
     /// The largest allocations of a training run of this config, each estimated from the
     /// sizes that set it: (the keys, bytes). What [`Self::validate`] and
     /// [`Self::check_fits_memory`] bound before anything is allocated.
-    pub fn memory_estimate(&self) -> Vec<(&'static str, u64)> {
-        let (obs, act) = (vge_sim::OBS_DIM as u64, vge_sim::NUM_JOINTS as u64);
+    pub fn memory_estimate(&self) -> Result<Vec<(&'static str, u64)>, ConfigError> {
+        let env = self.env.env_config(0).map_err(|e| invalid(e.to_string()))?;
+        let (obs, act) = (env.observation_layout().dim() as u64, env.hand.num_joints() as u64);
         // A transition: obs, next obs, action, BC action, and 4 scalars, as f32.
         let replay = (self.sac.buffer_size as u64).saturating_mul((2 * obs + 2 * act + 4) * 4);
         // Each env, and its episode's records.
-        let per_env =
-            ENV_BYTES.saturating_add((self.env.episode_length as u64).saturating_mul(EPISODE_STEP_BYTES));
+        let per_env = ENV_BYTES
+            .saturating_add((self.env.episode_length as u64).saturating_mul(episode_step_bytes(act)));
         let envs = (self.num_envs as u64).saturating_mul(per_env);
         // The actor and twin critics with their targets, Adam's moments and gradients (about
         // 12 copies of the parameters), and a minibatch's activations through them (about 24
@@ -534,26 +543,26 @@ impl Config {
             .saturating_add((self.sac.batch as u64).saturating_mul(units).saturating_mul(24 * 4));
         let eval =
             (self.run.eval_episodes.max(self.run.score_episodes) as u64).saturating_mul(EVAL_EPISODE_BYTES);
-        vec![
+        Ok(vec![
             ("sac.buffer_size", replay),
             ("num_envs, env.episode_length", envs),
             ("sac.hidden, sac.batch", nets),
             ("run.eval_episodes, run.score_episodes", eval),
-        ]
+        ])
     }
 
     /// [`Self::memory_estimate`] as one sentence: the total and its parts.
-    fn memory_text(&self) -> (u64, String) {
-        let parts = self.memory_estimate();
+    fn memory_text(&self) -> Result<(u64, String), ConfigError> {
+        let parts = self.memory_estimate()?;
         let total = parts.iter().fold(0u64, |sum, (_, b)| sum.saturating_add(*b));
         let shown: Vec<String> = parts.iter().map(|(k, b)| format!("{k}: {}", bytes_text(*b))).collect();
-        (total, format!("about {} ({})", bytes_text(total), shown.join(", ")))
+        Ok((total, format!("about {} ({})", bytes_text(total), shown.join(", "))))
     }
 
     /// The sizes against [`MAX_RUN_BYTES`], independent of the machine the config is read on
     /// (a login node checks what a cluster's nodes will run).
     fn validate_sizes(&self) -> Result<(), ConfigError> {
-        let (total, text) = self.memory_text();
+        let (total, text) = self.memory_text()?;
         if total > MAX_RUN_BYTES {
             return Err(invalid(format!(
                 "this run would hold {text}, more than the {} vge allows a run: a size is wrong",
@@ -569,7 +578,7 @@ impl Config {
     /// all there is.
     pub fn check_fits_memory(&self) -> Result<(), ConfigError> {
         let Some(machine) = machine_memory_bytes() else { return Ok(()) };
-        let (total, text) = self.memory_text();
+        let (total, text) = self.memory_text()?;
         if total > machine {
             return Err(invalid(format!(
                 "this run would hold {text}, more than this machine's {} of memory (MemTotal in \

@@ -11,14 +11,14 @@
 //! seed *learns* when its final policy succeeds in at least [`LEARNED_SUCCESS_RATE`] of the
 //! episodes.
 
-use std::cell::Cell;
+use std::cell::RefCell;
 use std::path::Path;
 
 use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
 use vge_runtime::Policy;
-use vge_sim::{Env, EnvConfig, EpisodeTracker, NUM_JOINTS, OBS_DIM, ObjectShape, SimError, StepResult};
+use vge_sim::{Env, EnvConfig, EpisodeTracker, ObjectShape, SimError, StepResult};
 
 /// Episodes of the success test.
 pub const SUCCESS_TEST_EPISODES: usize = 20;
@@ -84,8 +84,9 @@ impl EvalReport {
 
 pub use vge_sim::EpisodeOutcome;
 
-/// A policy: fills the action for an observation (shared by the episodes run side by side).
-pub type PolicyFn<'a> = dyn Fn(&[f32; OBS_DIM], &mut [f32; NUM_JOINTS]) -> Result<(), String> + Sync + 'a;
+/// A policy: fills the action (one entry per joint of the env's hand) for an observation
+/// (shared by the episodes run side by side).
+pub type PolicyFn<'a> = dyn Fn(&[f32], &mut [f32]) -> Result<(), String> + Sync + 'a;
 
 /// The success test's env: `env` with episodes of `episode_s` and initial grasps randomised
 /// by `grasp_noise_rad`.
@@ -148,10 +149,10 @@ pub fn run_episode_traced(
     env_config: &EnvConfig,
     seed: u64,
     policy: &PolicyFn<'_>,
-    mut on_step: impl FnMut([bool; vge_sim::NUM_FINGERS], f64),
+    mut on_step: impl FnMut(&[bool], f64),
 ) -> Result<EpisodeOutcome, EvalError> {
     run_episode_observed(env_config, seed, policy, |_, _, r, tracker| {
-        on_step(r.info.tip_contacts, tracker.rotation_rad())
+        on_step(&r.info.tip_contacts, tracker.rotation_rad())
     })
 }
 
@@ -161,18 +162,19 @@ pub fn run_episode_observed(
     env_config: &EnvConfig,
     seed: u64,
     policy: &PolicyFn<'_>,
-    mut on_step: impl FnMut(&Env, &[f32; NUM_JOINTS], &StepResult, &EpisodeTracker),
+    mut on_step: impl FnMut(&Env, &[f32], &StepResult, &EpisodeTracker),
 ) -> Result<EpisodeOutcome, EvalError> {
     let mut env = Env::new(env_config.clone())?;
     // `act` chooses the action and `on_step` sees its outcome: both closures read this.
-    let last_action = Cell::new([0.0f32; NUM_JOINTS]);
-    let act = |_: &Env, obs: &[f32; OBS_DIM]| {
-        let mut action = [0.0f32; NUM_JOINTS];
+    let joints = env_config.hand.num_joints();
+    let last_action = RefCell::new(vec![0.0f32; joints]);
+    let act = |_: &Env, obs: &[f32]| {
+        let mut action = vec![0.0f32; joints];
         policy(obs, &mut action).map_err(EvalError::Policy)?;
-        last_action.set(action);
+        last_action.borrow_mut().clone_from(&action);
         Ok::<_, EvalError>(action)
     };
-    env.run_episode(seed, act, |env, r, tracker| on_step(env, &last_action.get(), r, tracker))
+    env.run_episode(seed, act, |env, r, tracker| on_step(env, &last_action.borrow(), r, tracker))
 }
 
 /// Means over episode outcomes.
@@ -362,9 +364,10 @@ pub fn eval_policy_bytes_per_object(
 /// contact and the object's rotation (for `vge eval --plot`'s gait diagram).
 pub fn trace_policy_bytes(bytes: &[u8], env: &EnvConfig, seed: u64) -> Result<GaitTrace, EvalError> {
     with_runtime_policy(bytes, env, |env, policy| {
-        let mut trace = GaitTrace { dt_s: 1.0 / env.control_hz, ..GaitTrace::default() };
+        let finger_names = env.hand.fingers().iter().map(|f| f.name.clone()).collect();
+        let mut trace = GaitTrace { dt_s: 1.0 / env.control_hz, finger_names, ..GaitTrace::default() };
         let outcome = run_episode_traced(env, seed, policy, |contacts, rotation| {
-            trace.tip_contacts.push(contacts);
+            trace.tip_contacts.push(contacts.to_vec());
             trace.rotation_rad.push(rotation);
         })?;
         trace.outcome = outcome;
@@ -402,8 +405,10 @@ pub fn record_policy_bytes(
 pub struct GaitTrace {
     /// Control period (s).
     pub dt_s: f32,
+    /// The hand's fingers, in finger order.
+    pub finger_names: Vec<String>,
     /// Which fingertips touch the object after each step.
-    pub tip_contacts: Vec<[bool; vge_sim::NUM_FINGERS]>,
+    pub tip_contacts: Vec<Vec<bool>>,
     /// The object's rotation about z since the start, after each step (rad).
     pub rotation_rad: Vec<f64>,
     pub outcome: EpisodeOutcome,
@@ -417,7 +422,8 @@ fn with_runtime_policy<T>(
     f: impl FnOnce(&EnvConfig, &PolicyFn<'_>) -> Result<T, EvalError>,
 ) -> Result<T, EvalError> {
     let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
-    vge_sim::check_policy_interface(&info).map_err(EvalError::Policy)?;
+    vge_sim::check_policy_interface(&info, &env.hand, &env.observation_layout())
+        .map_err(EvalError::Policy)?;
     let env = at_control_rate(env, info.control_hz);
     // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
     let aligned = vge_runtime::AlignedBytes::new(bytes);

@@ -10,8 +10,6 @@ use plotters::prelude::*;
 use crate::eval::{EvalError, GaitTrace};
 use crate::plot::{PlotError, draw_err};
 
-use vge_sim::kinematics::FINGER_NAMES as FINGERS;
-
 /// The area one chart is drawn on.
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
@@ -61,21 +59,22 @@ fn draw_panel(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Result
 /// Contacts: finger f's bar spans [f + 0.15, f + 0.85] wherever it touches.
 fn draw_contacts(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Result<(), PlotError> {
     let dt = f64::from(trace.dt_s);
+    let fingers = &trace.finger_names;
     let mut contacts = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 22))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..t_end, 0.0..FINGERS.len() as f64)
+        .build_cartesian_2d(0.0..t_end, 0.0..fingers.len() as f64)
         .map_err(draw_err)?;
     contacts
         .configure_mesh()
         .disable_y_mesh()
-        .y_labels(FINGERS.len() * 2 + 1)
+        .y_labels(fingers.len() * 2 + 1)
         .y_label_formatter(&|y| {
             let i = (y - 0.5).round();
-            if (y - 0.5 - i).abs() < 1e-6 && (0.0..FINGERS.len() as f64).contains(&i) {
-                FINGERS[i as usize].to_owned()
+            if (y - 0.5 - i).abs() < 1e-6 && (0.0..fingers.len() as f64).contains(&i) {
+                fingers[i as usize].clone()
             } else {
                 String::new()
             }
@@ -83,7 +82,7 @@ fn draw_contacts(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Res
         .x_desc("time (s)")
         .draw()
         .map_err(draw_err)?;
-    for (f, _) in FINGERS.iter().enumerate() {
+    for f in 0..fingers.len() {
         let color = Palette99::pick(f).to_rgba();
         let y = f as f64;
         contacts
@@ -96,11 +95,11 @@ fn draw_contacts(area: &Area, trace: &GaitTrace, title: &str, t_end: f64) -> Res
 }
 
 /// The runs of steps `[start, end)` in which finger `f` touches the object.
-fn contact_runs(tip_contacts: &[[bool; vge_sim::NUM_FINGERS]], f: usize) -> Vec<(usize, usize)> {
+fn contact_runs(tip_contacts: &[Vec<bool>], f: usize) -> Vec<(usize, usize)> {
     let mut runs = Vec::new();
     let mut start = None;
     for (k, c) in tip_contacts.iter().enumerate() {
-        match (c[f], start) {
+        match (c.get(f).copied().unwrap_or(false), start) {
             (true, None) => start = Some(k),
             (false, Some(s)) => {
                 runs.push((s, k));

@@ -4,29 +4,23 @@
 
 use vge_export::{ObsNorm, ObsSlice, PolicyMeta, Provenance};
 use vge_sim::EnvConfig;
-use vge_sim::kinematics::JOINT_NAMES;
-use vge_sim::observation::{OBS_DIM, OBS_LAYOUT};
+use vge_sim::observation::ObservationLayout;
 
 fn slice(name: &str, range: std::ops::Range<usize>) -> ObsSlice {
-    // The observation is 65 floats: the casts are exact.
+    // An observation is a few hundred floats at most: the casts are exact.
     ObsSlice::new(name, range.start as u32..range.end as u32)
 }
 
-/// Metadata of a hand policy trained on `env`: named observation slices (as
-/// `vge_sim::observation` lays them out), `finger.joint` action names, actions scaled to the
-/// env's largest joint-target change per step, and the env's control rate.
-pub fn hand_policy_meta(env: &EnvConfig, provenance: Provenance) -> PolicyMeta {
-    let action_names = env
-        .hand
-        .fingers
-        .iter()
-        .flat_map(|f| JOINT_NAMES.iter().map(move |j| format!("{}.{j}", f.name)))
-        .collect::<Vec<_>>();
+/// Metadata of a hand policy trained on `env` that observes `layout`: its named observation
+/// slices, the hand's joint names as action names, actions scaled to the env's largest
+/// joint-target change per step, and the env's control rate.
+pub fn hand_policy_meta(env: &EnvConfig, layout: &ObservationLayout, provenance: Provenance) -> PolicyMeta {
+    let action_names = vge_sim::action::action_names(&env.hand);
     let act_dim = action_names.len();
     PolicyMeta {
-        obs_layout: OBS_LAYOUT.iter().map(|(name, range)| slice(name, range.clone())).collect(),
+        obs_layout: layout.slices().iter().map(|(name, range)| slice(name, range.clone())).collect(),
         action_names,
-        obs_norm: ObsNorm::identity(OBS_DIM),
+        obs_norm: ObsNorm::identity(layout.dim()),
         action_scale: vec![env.max_action_rad; act_dim],
         action_offset: vec![0.0; act_dim],
         control_hz: env.control_hz,

@@ -65,20 +65,20 @@ pub fn run_config(dir: &Path) -> Result<Config, RunEvalError> {
 /// without the disturbances it may train with (a config with domain randomisation is judged
 /// by the same test as any other), `run.eval_episode_s` long, grasps randomised by
 /// `run.eval_grasp_noise_rad`.
-pub(crate) fn success_test_env_of(config: &Config, index: usize) -> EnvConfig {
+pub(crate) fn success_test_env_of(config: &Config, index: usize) -> Result<EnvConfig, EvalError> {
     let run = &config.run;
-    crate::eval::success_test_env(&task_env(config, index), run.eval_episode_s, run.eval_grasp_noise_rad)
+    Ok(crate::eval::success_test_env(&task_env(config, index)?, run.eval_episode_s, run.eval_grasp_noise_rad))
 }
 
 /// The task of a run's object `index` (of `env.objects`): its object, hand, physics and reward,
 /// without the disturbances it may train with.
-fn task_env(config: &Config, index: usize) -> EnvConfig {
-    crate::eval::without_training_disturbances(&config.env.env_config(index))
+fn task_env(config: &Config, index: usize) -> Result<EnvConfig, EvalError> {
+    Ok(crate::eval::without_training_disturbances(&config.env_config(index)?))
 }
 
 /// The task a run's policies are judged on, one env per object it trains on (in the order of
 /// [`training_objects`], [`task_env`] each). `vge ship` and `vge screen` measure policies on these.
-pub fn task_envs(config: &Config) -> Vec<EnvConfig> {
+pub fn task_envs(config: &Config) -> Result<Vec<EnvConfig>, EvalError> {
     training_objects(config).into_iter().map(|(index, _)| task_env(config, index)).collect()
 }
 
@@ -110,11 +110,12 @@ fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<Obj
     let objects = training_objects(config);
     if let [(index, object)] = objects.as_slice() {
         // One object: the single-object test as it always ran.
-        let env = success_test_env_of(config, *index);
+        let env = success_test_env_of(config, *index)?;
         let report = crate::eval::eval_policy_bytes(bytes, &env, episodes, eval_seed)?;
         return Ok(ObjectsReport { overall: report.clone(), per_object: vec![(*object, report)] });
     }
-    let envs: Vec<EnvConfig> = objects.iter().map(|&(i, _)| success_test_env_of(config, i)).collect();
+    let envs: Vec<EnvConfig> =
+        objects.iter().map(|&(i, _)| success_test_env_of(config, i)).collect::<Result<_, _>>()?;
     Ok(crate::eval::eval_policy_bytes_per_object(bytes, &envs, episodes, eval_seed)?)
 }
 
@@ -497,7 +498,7 @@ mod tests {
         config.env.mass_scale = [0.8, 1.2];
         config.env.action_latency_steps = 1;
         config.env.drop_penalty = 30.0;
-        let env = success_test_env_of(&config, 0);
+        let env = success_test_env_of(&config, 0).expect("env");
         let nominal = EnvConfig::default();
         assert_eq!(env.noise, nominal.noise);
         assert_eq!(env.perturbation, nominal.perturbation);
@@ -549,7 +550,7 @@ mod tests {
         assert!(is_multi_object(&config));
         let envs: Vec<ObjectShape> = training_objects(&config)
             .iter()
-            .map(|&(i, _)| success_test_env_of(&config, i).object.shape)
+            .map(|&(i, _)| success_test_env_of(&config, i).expect("env").object.shape)
             .collect();
         assert_eq!(envs, vec![Cube, Sphere]);
         config.env.objects = vec![Sphere, Sphere];

@@ -163,7 +163,7 @@ struct PlannedPolicy {
 }
 
 impl PlannedPolicy {
-    fn read(dir: &Path, file: &str, step: u64) -> Result<Self, ScoreError> {
+    fn read(dir: &Path, file: &str, step: u64, env: &EnvConfig) -> Result<Self, ScoreError> {
         let path = dir.join(file);
         let bytes =
             crate::read_limits::read_bounded(&path, vge_export::MAX_FILE_LEN as u64).map_err(|e| {
@@ -176,7 +176,7 @@ impl PlannedPolicy {
                     },
                 }
             })?;
-        check_policy(&path, &bytes)?;
+        check_policy(&path, &bytes, env)?;
         Ok(Self { file: file.to_owned(), step, bytes })
     }
 
@@ -191,11 +191,11 @@ impl PlannedPolicy {
 /// A policy file the evaluator can run on the hand: valid (framing, checksum, fields) and
 /// of the hand's observation and action layouts. Checked before any episode runs, so that a
 /// bad file fails at once, not after the others' episodes.
-fn check_policy(path: &Path, bytes: &[u8]) -> Result<(), ScoreError> {
+fn check_policy(path: &Path, bytes: &[u8], env: &EnvConfig) -> Result<(), ScoreError> {
     let bad = |message: String| ScoreError::Policy { path: path.to_owned(), message };
     let info =
         vge_runtime::policy::inspect(bytes).map_err(|e| bad(format!("not a valid policy file: {e}")))?;
-    vge_sim::check_policy_interface(&info).map_err(bad)
+    vge_sim::check_policy_interface(&info, &env.hand, &env.observation_layout()).map_err(bad)
 }
 
 /// The fields of `best-eval.json` and `final-eval.json` the score reads.
@@ -228,11 +228,12 @@ fn run_config(dir: &Path) -> Result<Config, ScoreError> {
 
 /// The envs the run's policies are scored in: its success test's ([`crate::eval`]), one per
 /// object it trains on, without training disturbances.
-fn score_envs(config: &Config) -> Vec<EnvConfig> {
+fn score_envs(config: &Config, dir: &Path) -> Result<Vec<EnvConfig>, ScoreError> {
     crate::run_eval::training_objects(config)
         .into_iter()
         .map(|(index, _)| crate::run_eval::success_test_env_of(config, index))
-        .collect()
+        .collect::<Result<_, _>>()
+        .map_err(|e| ScoreError::RunFile { path: dir.join(crate::run_dir::CONFIG), message: e.to_string() })
 }
 
 /// Refuses held-out episodes that would meet the validation or test episodes training drew
@@ -254,6 +255,7 @@ pub fn check_held_out(config: &Config, first: u64, episodes: usize) -> Result<()
 fn plan(
     dir: &Path,
     notes: &mut Notes,
+    env: &EnvConfig,
 ) -> Result<(Option<PlannedPolicy>, PlannedPolicy, Vec<PlannedPolicy>), ScoreError> {
     if !dir.join(crate::run_dir::CONFIG).is_file() {
         return Err(ScoreError::RunFile {
@@ -270,11 +272,11 @@ fn plan(
         });
     }
     let final_step = read_json::<FinalEvalSteps>(&final_eval)?.env_steps;
-    let final_policy = PlannedPolicy::read(dir, crate::run_dir::POLICY, final_step)?;
+    let final_policy = PlannedPolicy::read(dir, crate::run_dir::POLICY, final_step, env)?;
     let best_eval = dir.join(crate::run_dir::BEST_EVAL);
     let selected = if best_eval.is_file() {
         let step = read_json::<BestEvalStep>(&best_eval)?.selected_step;
-        Some(PlannedPolicy::read(dir, crate::run_dir::POLICY_BEST, step)?)
+        Some(PlannedPolicy::read(dir, crate::run_dir::POLICY_BEST, step, env)?)
     } else {
         notes.push("no best-eval.json: the run has no model selection (no periodic snapshots)".to_owned());
         None
@@ -293,7 +295,7 @@ fn plan(
     let last = &steps[steps.len().saturating_sub(LAST_SNAPSHOTS)..];
     let files: Vec<(String, u64)> = last.iter().map(|s| (format!("snapshots/policy-{s}.vgep"), *s)).collect();
     let snapshots = if last.len() == LAST_SNAPSHOTS && files.iter().all(|(f, _)| dir.join(f).is_file()) {
-        files.iter().map(|(f, s)| PlannedPolicy::read(dir, f, *s)).collect::<Result<Vec<_>, _>>()?
+        files.iter().map(|(f, s)| PlannedPolicy::read(dir, f, *s, env)).collect::<Result<Vec<_>, _>>()?
     } else {
         notes.push(format!(
             "the last {LAST_SNAPSHOTS} periodic snapshots are not all kept: no last_snapshots"
@@ -360,9 +362,13 @@ pub fn score_run(
     }
     let config = run_config(dir)?;
     let mut notes = Notes::new();
-    let (selected, final_policy, snapshots) = plan(dir, &mut notes)?;
+    let envs = score_envs(&config, dir)?;
+    let task = envs.first().ok_or_else(|| ScoreError::RunFile {
+        path: dir.join(crate::run_dir::CONFIG),
+        message: "no object to score on".to_owned(),
+    })?;
+    let (selected, final_policy, snapshots) = plan(dir, &mut notes, task)?;
     check_held_out(&config, options.seed, options.episodes)?;
-    let envs = score_envs(&config);
     if !options.force {
         // A score.json that cannot be read is scored again (and replaced).
         if let Ok(Some(existing)) = read_score(dir)

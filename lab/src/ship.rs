@@ -137,7 +137,7 @@ pub fn screen(
     options: &ScreenOptions,
     mut on_row: impl FnMut(&ScreenRow),
 ) -> Result<Vec<ScreenRow>, ShipError> {
-    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?);
+    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?)?;
     let success_envs = success_test_envs(&bases);
     let pushes = RobustnessOptions {
         episodes: options.episodes,
@@ -348,7 +348,7 @@ pub fn ship(
     // Measured before anything is written: a policy that cannot be read replaces nothing.
     let bytes = eval::read_policy_file(&source)?;
     let provenance = provenance_line(&bytes)?;
-    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?);
+    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?)?;
     let success_envs = success_test_envs(&bases);
     let success_test =
         eval::eval_policy_bytes_per_object(&bytes, &success_envs, options.success_episodes, 0)?;

@@ -22,9 +22,11 @@ fn main() -> anyhow::Result<()> {
         apply_override(&mut config, o)?;
     }
     tch::set_num_threads(2);
-    let mut replay = ReplayBuffer::new(1_000_000, 65, 15)?;
+    let learner_config = LearnerConfig::for_hand(&config)?;
+    let (rows, actions) = (learner_config.columns.row_dim() as usize, learner_config.net.act_dim as usize);
+    let mut replay = ReplayBuffer::new(1_000_000, rows, actions)?;
     replay.load(&dir.join("checkpoint/replay.bin"))?;
-    let mut sac = learner::build_seeded(LearnerConfig::for_hand(&config), Device::Cpu, 0)?;
+    let mut sac = learner::build_seeded(learner_config, Device::Cpu, 0)?;
     if config.sac.normalize_obs {
         let (m, s) = replay.obs_stats(1e-2);
         sac.set_obs_normalisation(&m, &s);

@@ -28,7 +28,6 @@
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use thiserror::Error;
-use vge_sim::{NUM_JOINTS, OBS_DIM};
 
 use crate::replay::Source;
 use vge_controllers::{Controller, ControllerInput};
@@ -136,7 +135,7 @@ pub enum ControllerCall {
 }
 
 /// Min-twin Q-values of `(obs, action)` rows, one per row.
-pub type QFn<'a> = dyn FnMut(&[[f32; OBS_DIM]], &[[f32; NUM_JOINTS]]) -> Result<Vec<f32>, String> + 'a;
+pub type QFn<'a> = dyn FnMut(&[&[f32]], &[&[f32]]) -> Result<Vec<f32>, String> + 'a;
 
 /// Why the behaviour policy cannot decide.
 #[derive(Debug, Error, PartialEq)]
@@ -152,11 +151,11 @@ pub enum BehaviourError {
 /// One env's decision: the action to execute, who chose it, and the controller action the
 /// BC loss clones at this state (VGE+BC: the executed controller action; RL+BC: the
 /// controller's proposal; otherwise none).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Decision {
-    pub action: [f32; NUM_JOINTS],
+    pub action: Vec<f32>,
     pub source: Source,
-    pub bc_target: Option<[f32; NUM_JOINTS]>,
+    pub bc_target: Option<Vec<f32>>,
 }
 
 /// What the behaviour policy needs to know at one step.
@@ -164,10 +163,10 @@ pub struct Decision {
 pub struct StepContext<'a> {
     /// Training step (env transitions so far, all envs together).
     pub step: u64,
-    /// Observations, one per env.
-    pub obs: &'a [[f32; OBS_DIM]],
+    /// The critic's observations, one per env.
+    pub obs: &'a [Vec<f32>],
     /// The learner's (behaviour) action per env.
-    pub learner: &'a [[f32; NUM_JOINTS]],
+    pub learner: &'a [Vec<f32>],
     /// The controllers' view of each env (privileged state); `None` if unavailable.
     pub inputs: &'a [Option<ControllerInput>],
 }
@@ -245,7 +244,7 @@ impl Behaviour {
         let mut out: Vec<Decision> = ctx
             .learner
             .iter()
-            .map(|a| Decision { action: *a, source: Source::Learner, bc_target: None })
+            .map(|a| Decision { action: a.clone(), source: Source::Learner, bc_target: None })
             .collect();
         self.stats.steps += n as u64;
         if !self.controller_active(ctx.step) {
@@ -265,7 +264,7 @@ impl Behaviour {
             if d.source == Source::Controller {
                 self.stats.controller_steps += 1;
                 if bc {
-                    d.bc_target = Some(d.action);
+                    d.bc_target = Some(d.action.clone());
                 }
             }
         }
@@ -286,7 +285,7 @@ impl Behaviour {
         let n = ctx.obs.len();
         let vge = matches!(self.method, Method::Vge | Method::VgeBc);
         // Envs drawing a source this step, and for VGE the controller's proposal.
-        let mut drawing: Vec<(usize, Option<[f32; NUM_JOINTS]>)> = Vec::new();
+        let mut drawing: Vec<(usize, Option<Vec<f32>>)> = Vec::new();
         for i in 0..n.min(self.segments.len()) {
             if self.segments[i].remaining > 0 {
                 continue;
@@ -306,7 +305,8 @@ impl Behaviour {
             let p = fge_probability(&self.fge, ctx.step);
             drawing.iter().map(|_| p).collect()
         };
-        for (&(i, proposal), &p) in drawing.iter().zip(&probs) {
+        let drawn: Vec<usize> = drawing.iter().map(|d| d.0).collect();
+        for ((i, proposal), &p) in drawing.into_iter().zip(&probs) {
             let u: f64 = rng.random();
             self.stats.selections += 1;
             if vge {
@@ -334,7 +334,7 @@ impl Behaviour {
             }
             self.segments[i].remaining -= 1;
         }
-        Ok(drawing.iter().map(|d| d.0).collect())
+        Ok(drawn)
     }
 
     /// The envs inside a segment follow its source for one more step.
@@ -367,17 +367,17 @@ impl Behaviour {
     fn vge_probabilities(
         &self,
         ctx: &StepContext<'_>,
-        drawing: &[(usize, Option<[f32; NUM_JOINTS]>)],
+        drawing: &[(usize, Option<Vec<f32>>)],
         q: &mut QFn<'_>,
     ) -> Result<Vec<f64>, BehaviourError> {
         let rows: Vec<usize> = drawing.iter().filter(|d| d.1.is_some()).map(|d| d.0).collect();
         let k = rows.len();
         let mut values = Vec::new();
         if k > 0 {
-            let mut obs: Vec<[f32; OBS_DIM]> = rows.iter().map(|&i| ctx.obs[i]).collect();
+            let mut obs: Vec<&[f32]> = rows.iter().map(|&i| ctx.obs[i].as_slice()).collect();
             obs.extend_from_within(..);
-            let mut acts: Vec<[f32; NUM_JOINTS]> = rows.iter().map(|&i| ctx.learner[i]).collect();
-            acts.extend(drawing.iter().filter_map(|d| d.1));
+            let mut acts: Vec<&[f32]> = rows.iter().map(|&i| ctx.learner[i].as_slice()).collect();
+            acts.extend(drawing.iter().filter_map(|d| d.1.as_deref()));
             values = q(&obs, &acts).map_err(|message| BehaviourError::QQuery { step: ctx.step, message })?;
             if values.len() != 2 * k {
                 return Err(BehaviourError::QCount { step: ctx.step, got: values.len(), expected: 2 * k });
@@ -386,7 +386,8 @@ impl Behaviour {
         let mut next = 0;
         drawing
             .iter()
-            .map(|&(env, proposal)| {
+            .map(|(env, proposal)| {
+                let env = *env;
                 if proposal.is_none() {
                     return Ok(0.0);
                 }
@@ -406,7 +407,7 @@ impl Behaviour {
         i: usize,
         ctx: &StepContext<'_>,
         controllers: &mut [EnvController],
-    ) -> Option<[f32; NUM_JOINTS]> {
+    ) -> Option<Vec<f32>> {
         let (Some(EnvController { controller, rng, calls }), Some(Some(input))) =
             (controllers.get_mut(i), ctx.inputs.get(i))
         else {

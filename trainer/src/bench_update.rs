@@ -43,14 +43,13 @@ pub fn flops_per_update(spec: &NetSpec, batch: i64) -> f64 {
 
 fn random_batch(spec: &NetSpec, batch: i64) -> Batch {
     let opts = (Kind::Float, Device::Cpu);
-    Batch {
-        obs: Tensor::randn([batch, spec.obs_dim], opts),
-        action: Tensor::rand([batch, spec.act_dim], opts) * 2.0 - 1.0,
-        reward: Tensor::randn([batch, 1], opts),
-        next_obs: Tensor::randn([batch, spec.obs_dim], opts),
-        done: Tensor::zeros([batch, 1], opts),
-        bc: None,
-    }
+    Batch::new(
+        Tensor::randn([batch, spec.obs_dim], opts),
+        Tensor::rand([batch, spec.act_dim], opts) * 2.0 - 1.0,
+        Tensor::randn([batch, 1], opts),
+        Tensor::randn([batch, spec.obs_dim], opts),
+        Tensor::zeros([batch, 1], opts),
+    )
 }
 
 /// Runs `warmup` then `updates` updates of the learner `config` on random batches. The

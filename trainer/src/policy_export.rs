@@ -6,7 +6,7 @@ use vge_export::{ActorSpec, ExportError, ObsNorm, Provenance, export_policy};
 use vge_lab::config::Config;
 pub use vge_lab::policy_meta::hand_policy_meta;
 use vge_sim::EnvConfig;
-use vge_sim::observation::OBS_DIM;
+use vge_sim::observation::{ObservationLayout, ObservationSet};
 
 use crate::learner::Learner;
 use crate::train::TrainError;
@@ -21,26 +21,31 @@ pub fn export_actor(config: &Config, learner: &dyn Learner, steps: u64) -> Resul
         seed: config.seed,
         steps,
     };
-    Ok(export_hand_actor(learner.actor_vs(), &hidden, &config.env.env_config(0), provenance)?)
+    let env = config.env_config(0)?;
+    let set = config.env.observation_set().map_err(|e| vge_sim::SimError::InvalidConfig(e.to_string()))?;
+    Ok(export_hand_actor(learner.actor_vs(), &hidden, &env, set, provenance)?)
 }
 
 /// Policy-file bytes of the actor in `actor_vs` (variables `actor.*`, as `nets::GaussianActor`
-/// names them) for the hand of `env`.
+/// names them) for the hand of `env`, observing `set`.
 pub fn export_hand_actor(
     actor_vs: &VarStore,
     hidden: &[usize],
     env: &EnvConfig,
+    set: ObservationSet,
     provenance: Provenance,
 ) -> Result<Vec<u8>, ExportError> {
-    let spec = ActorSpec { obs_dim: OBS_DIM, hidden: hidden.to_vec(), act_dim: vge_sim::NUM_JOINTS };
-    let mut meta = hand_policy_meta(env, provenance);
+    let layout = ObservationLayout::new(set, env.hand.num_joints(), env.hand.num_fingers());
+    let obs_dim = layout.dim();
+    let spec = ActorSpec { obs_dim, hidden: hidden.to_vec(), act_dim: env.hand.num_joints() };
+    let mut meta = hand_policy_meta(env, &layout, provenance);
     // The actor's normaliser (`nets::ObsNormaliser`), when it has one, goes into the file so
     // the runtime normalises and clips exactly as the actor did in training.
     let vars = actor_vs.variables();
     if let (Some(mean), Some(std)) = (vars.get("actor.obs_mean"), vars.get("actor.obs_std")) {
         let to_vec = |t: &tch::Tensor| Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).view(-1));
         match (to_vec(mean), to_vec(std)) {
-            (Ok(mean), Ok(std)) if mean.len() == OBS_DIM && std.len() == OBS_DIM => {
+            (Ok(mean), Ok(std)) if mean.len() == obs_dim && std.len() == obs_dim => {
                 meta.obs_norm = ObsNorm { mean, std, clip: Some(crate::nets::OBS_CLIP as f32) };
             }
             _ => {

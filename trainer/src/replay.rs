@@ -213,14 +213,7 @@ impl ReplayBuffer {
         let n = n as i64;
         let t = |v: &[f32], cols: usize| Tensor::from_slice(v).view([n, cols as i64]);
         let bc = bc.map(|beta| BcTerm { beta, mask: t(&mask, 1), action: t(&bc_action, a) });
-        Batch {
-            obs: t(&obs, o),
-            action: t(&action, a),
-            reward: t(&reward, 1),
-            next_obs: t(&next_obs, o),
-            done: t(&done, 1),
-            bc,
-        }
+        Batch { bc, ..Batch::new(t(&obs, o), t(&action, a), t(&reward, 1), t(&next_obs, o), t(&done, 1)) }
     }
 
     /// Writes the filled part (raw little-endian f32 after a small header) to `path`.

@@ -78,6 +78,7 @@ pub fn train_point_mass(
     let config = LearnerConfig {
         algorithm,
         net: NetSpec { obs_dim: 2, act_dim: 1, hidden: vec![64, 64] },
+        columns: crate::learner::ObsColumns::whole(2),
         action_scale: vec![1.0],
         gamma: 0.9,
         tau: 0.01,

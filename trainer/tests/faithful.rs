@@ -14,8 +14,12 @@ use tch::{Device, Kind, Tensor};
 use vge_controllers::{ControllerInput, IgmConfig};
 use vge_lab::config::{Config, apply_override, load_config};
 use vge_lab::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
+use vge_sim::Env;
 use vge_sim::gait::ContactSwitches;
-use vge_sim::{Env, NUM_JOINTS, OBS_DIM};
+
+/// vge15's observation and action sizes (the shipped config's hand).
+const OBS_DIM: usize = 65;
+const NUM_JOINTS: usize = 15;
 use vge_trainer::behaviour::{Behaviour, BehaviourError, EnvController, StepContext};
 use vge_trainer::nets::{GaussianActor, NetSpec};
 use vge_trainer::replay::{ReplayBuffer, Source};
@@ -30,7 +34,7 @@ fn shipped_vge_config() -> Config {
 }
 
 /// A critic that prefers the controller's rows (the second half) by 100.
-fn prefer_controller(_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]) -> Result<Vec<f32>, String> {
+fn prefer_controller(_: &[&[f32]], a: &[&[f32]]) -> Result<Vec<f32>, String> {
     let k = a.len() / 2;
     Ok((0..a.len()).map(|i| if i >= k { 100.0 } else { 0.0 }).collect())
 }
@@ -39,7 +43,7 @@ fn prefer_controller(_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]) -> Result<Ve
 fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() {
     let config = shipped_vge_config();
     let h = config.vge.horizon;
-    let env_config = config.env.env_config(0);
+    let env_config = config.env_config(0).expect("env");
     let mut completed = Vec::new();
     for seed in 0..4u64 {
         let mut env = Env::new(env_config.clone()).expect("env");
@@ -56,15 +60,16 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
         }];
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let start = env.privileged().expect("state");
-        let mut switches = ContactSwitches::new(start.contacts.map(|c| c.is_some()));
-        let learner = [[0.0f32; NUM_JOINTS]];
+        let mut switches = ContactSwitches::new(&start.tip_contacts());
+        let learner = [vec![0.0f32; env_config.hand.num_joints()]];
         for step in 0..h as u64 {
             let inputs = [env.privileged().map(ControllerInput::from_privileged)];
-            let ctx = StepContext { step, obs: &[obs], learner: &learner, inputs: &inputs };
+            let ctx =
+                StepContext { step, obs: std::slice::from_ref(&obs), learner: &learner, inputs: &inputs };
             let d = behaviour.act(&ctx, &mut controllers, &mut prefer_controller, &mut rng).expect("decide");
             assert_eq!(d[0].source, Source::Controller, "seed {seed} step {step}: the pick lasts H steps");
             let r = env.step(&d[0].action).expect("step");
-            switches.update(r.info.tip_contacts);
+            switches.update(&r.info.tip_contacts);
             obs = r.obs;
             assert!(!r.terminated, "seed {seed}: dropped at step {step}");
         }
@@ -79,12 +84,12 @@ fn a_controller_pick_under_vge_completes_a_detach_and_reattach_within_h_steps() 
 #[test]
 fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
     let config = shipped_vge_config();
-    let env_config = config.env.env_config(0);
+    let env_config = config.env_config(0).expect("env");
     let mut env = Env::new(env_config.clone()).expect("env");
     let (obs, _) = env.reset(0).expect("reset");
     let inputs = [env.privileged().map(ControllerInput::from_privileged)];
-    let learner = [[0.0f32; NUM_JOINTS]];
-    let ctx = StepContext { step: 7, obs: &[obs], learner: &learner, inputs: &inputs };
+    let learner = [vec![0.0f32; env_config.hand.num_joints()]];
+    let ctx = StepContext { step: 7, obs: std::slice::from_ref(&obs), learner: &learner, inputs: &inputs };
     let mut controllers = vec![EnvController {
         controller: vge_controllers::ControllerKind::Fg.build(
             &env_config,
@@ -96,11 +101,11 @@ fn a_failed_or_non_finite_q_query_stops_vge_instead_of_falling_back() {
     }];
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config.clone() });
-    let mut failing = |_: &[[f32; OBS_DIM]], _: &[[f32; NUM_JOINTS]]| Err("critic gone".to_owned());
+    let mut failing = |_: &[&[f32]], _: &[&[f32]]| Err("critic gone".to_owned());
     let e = b.act(&ctx, &mut controllers, &mut failing, &mut rng).expect_err("failed query");
     assert!(matches!(e, BehaviourError::QQuery { step: 7, .. }), "{e}");
     let mut b = Behaviour::from_config(&Config { num_envs: 1, ..config });
-    let mut nan = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| Ok(vec![f32::NAN; a.len()]);
+    let mut nan = |_: &[&[f32]], a: &[&[f32]]| Ok(vec![f32::NAN; a.len()]);
     let e = b.act(&ctx, &mut controllers, &mut nan, &mut rng).expect_err("NaN Q");
     assert!(matches!(e, BehaviourError::QNonFinite { step: 7, env: 0, .. }), "{e}");
 }

@@ -107,19 +107,19 @@ fn first_twin_alone_equals_the_batched_pass_with_and_without_layer_norm() {
 
 fn fixed_batch(spec: &NetSpec) -> Batch {
     let opts = (Kind::Float, Device::Cpu);
-    Batch {
-        obs: Tensor::randn([128, spec.obs_dim], opts),
-        action: Tensor::rand([128, spec.act_dim], opts) * 2.0 - 1.0,
-        reward: Tensor::randn([128, 1], opts),
-        next_obs: Tensor::randn([128, spec.obs_dim], opts),
-        done: Tensor::ones([128, 1], opts),
-        bc: None,
-    }
+    Batch::new(
+        Tensor::randn([128, spec.obs_dim], opts),
+        Tensor::rand([128, spec.act_dim], opts) * 2.0 - 1.0,
+        Tensor::randn([128, 1], opts),
+        Tensor::randn([128, spec.obs_dim], opts),
+        Tensor::ones([128, 1], opts),
+    )
 }
 
 fn config(entropy: EntropyCoef) -> LearnerConfig {
     LearnerConfig {
         algorithm: Algorithm::Sac,
+        columns: vge_trainer::learner::ObsColumns::whole(small_spec().obs_dim),
         net: small_spec(),
         action_scale: vec![1.0; 3],
         gamma: 0.9,
@@ -319,7 +319,8 @@ fn bf16_updates_track_f32_ones_and_acting_stays_f32(algorithm: Algorithm) {
                 algorithm,
                 matmul,
                 entropy: EntropyCoef::Fixed(0.0),
-                ..LearnerConfig::hand_default(0.05)
+                ..LearnerConfig::for_hand(&vge_lab::config::Config::default())
+                    .expect("the default run's sizes")
             };
             learner::build_seeded(config, Device::Cpu, 3).expect("learner")
         };

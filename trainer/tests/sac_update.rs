@@ -425,7 +425,7 @@ fn one_sac_alpha0_update_equals_the_textbook_update() {
     let config =
         vge_lab::config::load_config(std::path::Path::new(runs_config), &["algorithm=sac".to_owned()])
             .expect("the runs' config");
-    let learner_config = LearnerConfig::for_hand(&config);
+    let learner_config = LearnerConfig::for_hand(&config).expect("sizes");
     assert_eq!(learner_config.entropy, EntropyCoef::Fixed(0.0), "the runs' SAC has a fixed alpha of 0");
     let mut sac = learner::build_seeded(learner_config, Device::Cpu, SEED).expect("sac");
     let (obs_dim, act_dim) = (sac.config().net.obs_dim, sac.config().net.act_dim);

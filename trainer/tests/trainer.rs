@@ -9,7 +9,8 @@ use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
 use vge_controllers::{Controller, ControllerError, ControllerInput};
 use vge_lab::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
-use vge_sim::{NUM_JOINTS, OBS_DIM};
+/// vge15's joints: the behaviour tests' action size (any size would do).
+const JOINTS: usize = 15;
 use vge_trainer::behaviour::{
     Behaviour, EnvController, QFn, StepContext, bc_beta, fge_probability, p_controller,
 };
@@ -64,17 +65,17 @@ impl Controller for Constant {
         &mut self,
         _input: &ControllerInput,
         _rng: &mut dyn rand::Rng,
-    ) -> Result<[f32; NUM_JOINTS], ControllerError> {
+    ) -> Result<Vec<f32>, ControllerError> {
         self.calls.fetch_add(1, Ordering::SeqCst);
-        Ok([0.05; NUM_JOINTS])
+        Ok(vec![0.05; JOINTS])
     }
 }
 
 fn dummy_input() -> ControllerInput {
     ControllerInput {
-        q_rad: [0.0; NUM_JOINTS],
-        q_target_rad: [0.0; NUM_JOINTS],
-        contacts: [None; vge_sim::NUM_FINGERS],
+        q_rad: vec![0.0; JOINTS],
+        q_target_rad: vec![0.0; JOINTS],
+        contacts: vec![None; 5],
         object_position_m: nalgebra::Vector3::zeros(),
         object_orientation: nalgebra::UnitQuaternion::identity(),
     }
@@ -99,17 +100,17 @@ fn rig() -> Rig {
     }
 }
 
-const LEARNER: [f32; NUM_JOINTS] = [-0.05; NUM_JOINTS];
+const LEARNER: [f32; JOINTS] = [-0.05; JOINTS];
 
 fn step_once(b: &mut Behaviour, r: &mut Rig, step: u64, q: &mut QFn<'_>) -> Source {
-    let obs = [[0.0f32; OBS_DIM]];
-    let learner = [LEARNER];
+    let obs = [vec![0.0f32; 65]];
+    let learner = [LEARNER.to_vec()];
     let inputs = [Some(dummy_input())];
     let ctx = StepContext { step, obs: &obs, learner: &learner, inputs: &inputs };
     let out = b.act(&ctx, &mut r.controllers, q, &mut r.rng).expect("decide");
     assert_eq!(out.len(), 1);
     if out[0].source == Source::Controller {
-        assert_eq!(out[0].action, [0.05; NUM_JOINTS]);
+        assert_eq!(out[0].action, [0.05; JOINTS]);
     } else {
         assert_eq!(out[0].action, LEARNER);
     }
@@ -125,7 +126,7 @@ fn vge_follows_a_preferred_controller_for_exactly_h_steps() {
     // learner's action wins by as much.
     let draws = Arc::new(AtomicUsize::new(0));
     let d = draws.clone();
-    let mut q = move |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+    let mut q = move |o: &[&[f32]], a: &[&[f32]]| -> Result<Vec<f32>, String> {
         assert_eq!(o.len(), 2, "one learner row and one controller row");
         assert_eq!(a[0], LEARNER, "learner rows first");
         let sign = if d.fetch_add(1, Ordering::SeqCst) == 0 { 1.0 } else { -1.0 };
@@ -163,7 +164,7 @@ fn after_the_hard_stop_the_controller_is_never_queried() {
         let fge = FgeSection { p_start: 1.0, p_end: 1.0, decay_start: 0, decay_end: 0 };
         let mut b = Behaviour::new(method, 3, hard_stop, fge, 1);
         let mut r = rig();
-        let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+        let mut q = |_: &[&[f32]], a: &[&[f32]]| -> Result<Vec<f32>, String> {
             Ok(a.iter().map(|row| 100.0 * row.iter().sum::<f32>()).collect())
         };
         for s in 0..hard_stop {
@@ -181,9 +182,7 @@ fn after_the_hard_stop_the_controller_is_never_queried() {
 #[test]
 fn rl_never_queries_and_fge_follows_its_schedule() {
     let mut r = rig();
-    let mut q = |_: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
-        Ok(vec![0.0; a.len()])
-    };
+    let mut q = |_: &[&[f32]], a: &[&[f32]]| -> Result<Vec<f32>, String> { Ok(vec![0.0; a.len()]) };
     let mut b = Behaviour::new(Method::Rl, 1, u64::MAX, FgeSection::default(), 1);
     for s in 0..100 {
         assert_eq!(step_once(&mut b, &mut r, s, &mut q), Source::Learner);
@@ -223,6 +222,7 @@ fn small_learner(algorithm: Algorithm) -> Box<dyn Learner> {
     let config = LearnerConfig {
         algorithm,
         net: NetSpec { obs_dim: 4, act_dim: 2, hidden: vec![16, 16] },
+        columns: vge_trainer::learner::ObsColumns::whole(4),
         action_scale: vec![0.5, 0.5],
         gamma: 0.9,
         tau: 0.05,
@@ -327,14 +327,13 @@ fn bc_raises_the_likelihood_of_valuable_controller_actions() {
     let mut sac = small_sac();
     let obs = Tensor::randn([64, 4], (Kind::Float, Device::Cpu));
     let action = Tensor::full([64, 2], 0.3, (Kind::Float, Device::Cpu));
-    let fit = vge_trainer::learner::Batch {
-        obs: obs.shallow_clone(),
-        action: action.shallow_clone(),
-        reward: Tensor::full([64, 1], 2.0, (Kind::Float, Device::Cpu)),
-        next_obs: obs.shallow_clone(),
-        done: Tensor::ones([64, 1], (Kind::Float, Device::Cpu)),
-        bc: None,
-    };
+    let fit = vge_trainer::learner::Batch::new(
+        obs.shallow_clone(),
+        action.shallow_clone(),
+        Tensor::full([64, 1], 2.0, (Kind::Float, Device::Cpu)),
+        obs.shallow_clone(),
+        Tensor::ones([64, 1], (Kind::Float, Device::Cpu)),
+    );
     for _ in 0..200 {
         sac.update(&fit);
     }
@@ -470,7 +469,10 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     assert_eq!(c.sac.batch, 128);
     assert_eq!(c.method, Method::Fge);
     assert_eq!(c.sac.hidden, vec![64, 64]);
-    assert!(matches!(vge_trainer::learner::LearnerConfig::for_hand(&c).entropy, EntropyCoef::Auto { .. }));
+    assert!(matches!(
+        vge_trainer::learner::LearnerConfig::for_hand(&c).expect("sizes").entropy,
+        EntropyCoef::Auto { .. }
+    ));
     let mut d = Config::default();
     apply_override(&mut d, "vge.horizon=3").expect("override");
     assert_eq!(d.vge.horizon, 3);
@@ -508,16 +510,16 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     let magnitude =
         ["env.perturb_force_magnitude_n=1.47".to_owned(), "env.perturb_ramp_steps=1000".to_owned()];
     let loaded = load_config(&path, &magnitude).expect("a ramped magnitude");
-    assert_eq!(loaded.env.env_config(0).perturbation.force_magnitude_n, 1.47);
+    assert_eq!(loaded.env.env_config(0).expect("env").perturbation.force_magnitude_n, 1.47);
     refuse_all(&pushed("env.perturb_force_magnitude_n=1.0"), "set one");
     // Left out of the serialised config when off, so older configs keep their hash.
     assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_ramp_start"));
     assert!(!Config::default().to_toml_string().expect("toml").contains("perturb_force_magnitude_n"));
     // The reward's contact threshold reaches the sim; the paper's 3 is not written out.
     let four = load_config(&path, &["env.reward_min_contacts=4".to_owned()]).expect("4 contacts");
-    assert_eq!(four.env.env_config(0).reward_min_contacts, 4);
+    assert_eq!(four.env.env_config(0).expect("env").reward_min_contacts, 4);
     assert!(four.to_toml_string().expect("toml").contains("reward_min_contacts = 4"));
-    assert_eq!(Config::default().env.env_config(0).reward_min_contacts, 3);
+    assert_eq!(Config::default().env.env_config(0).expect("env").reward_min_contacts, 3);
     assert!(!Config::default().to_toml_string().expect("toml").contains("reward_min_contacts"));
     refuse("env.reward_min_contacts=6", "env.reward_min_contacts = 6");
     refuse("env.terminate_below_contacts=6", "env.terminate_below_contacts = 6");
@@ -525,7 +527,7 @@ fn overrides_apply_and_bad_configs_are_refused_clearly() {
     // hashes of configs from before the key stay), written when chosen.
     let bf16 = load_config(&path, &["sac.matmul=\"bf16\"".to_owned()]).expect("bf16");
     assert_eq!(
-        vge_trainer::learner::LearnerConfig::for_hand(&bf16).matmul,
+        vge_trainer::learner::LearnerConfig::for_hand(&bf16).expect("sizes").matmul,
         vge_trainer::nets::MatmulPrecision::Bf16
     );
     assert!(bf16.to_toml_string().expect("toml").contains("matmul = \"bf16\""));
@@ -668,7 +670,7 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     assert!(std::fs::read(again_dir.join("policy.vgep")).expect("policy") == full_policy);
     let report = vge_lab::eval::eval_policy_file(
         &full_dir.join("policy.vgep"),
-        &tiny_config(140).env.env_config(0),
+        &tiny_config(140).env.env_config(0).expect("env"),
         1,
         0,
     )

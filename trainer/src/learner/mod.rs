@@ -23,9 +23,11 @@ use tch::{Device, Kind, Tensor};
 use crate::nets::{GaussianActor, MatmulPrecision, NetSpec, TwinCritic};
 use crate::optim::{Adam, flatten_storage};
 
+mod obs_columns;
 mod soft_actor_critic;
 mod td3;
 
+pub use obs_columns::ObsColumns;
 pub use soft_actor_critic::SoftActorCritic;
 pub use td3::Td3;
 
@@ -75,7 +77,11 @@ impl Algorithm {
 #[derive(Debug, Clone, PartialEq)]
 pub struct LearnerConfig {
     pub algorithm: Algorithm,
+    /// The critics' networks (`obs_dim`: the env's full observation); the actor's are the
+    /// same but for its input, `columns.actor_dim()`.
     pub net: NetSpec,
+    /// Which columns of a stored observation row the critic and the actor see.
+    pub columns: ObsColumns,
     pub action_scale: Vec<f32>,
     pub gamma: f64,
     /// Polyak factor of the target critic: target ← τ·critic + (1-τ)·target.
@@ -95,11 +101,16 @@ pub struct LearnerConfig {
 }
 
 impl LearnerConfig {
-    /// The learner of a run config, for the hand (obs 65, action 15): the `[sac]` section's
-    /// sizes and rates, `algorithm`, and `[td3]` for TD3.
-    pub fn for_hand(config: &vge_lab::config::Config) -> Self {
+    /// The learner of a run config: its hand's sizes (observation, action, the actor's
+    /// observation set), the `[sac]` section's sizes and rates, `algorithm`, and `[td3]` for
+    /// TD3. Refused when the config's hand does not load.
+    pub fn for_hand(config: &vge_lab::config::Config) -> Result<Self, vge_sim::SimError> {
         use vge_lab::config::{AlgorithmName, Alpha, AlphaName};
-        let act = vge_sim::NUM_JOINTS as i64;
+        let env = config.env_config(0)?;
+        let set =
+            config.env.observation_set().map_err(|e| vge_sim::SimError::InvalidConfig(e.to_string()))?;
+        let columns = ObsColumns::of(&env, set);
+        let act = env.hand.num_joints() as i64;
         let sac = &config.sac;
         let entropy = match sac.alpha {
             Alpha::Fixed(a) => EntropyCoef::Fixed(a),
@@ -112,9 +123,10 @@ impl LearnerConfig {
             AlgorithmName::Sac => Algorithm::Sac,
             AlgorithmName::Td3 => Algorithm::td3_of(&config.td3),
         };
-        Self {
+        Ok(Self {
             algorithm,
-            net: NetSpec { obs_dim: vge_sim::OBS_DIM as i64, act_dim: act, hidden: sac.hidden.clone() },
+            net: NetSpec { obs_dim: columns.critic_dim, act_dim: act, hidden: sac.hidden.clone() },
+            columns,
             action_scale: vec![config.env.max_action_rad; act as usize],
             gamma: sac.gamma,
             tau: sac.tau,
@@ -125,27 +137,13 @@ impl LearnerConfig {
             min_policy_std: sac.min_policy_std,
             actor_hold_updates: sac.actor_hold_updates,
             matmul: sac.matmul,
-        }
+        })
     }
-}
 
-impl LearnerConfig {
-    /// The paper's sizes for the hand: obs 65, action 15, 256x256 networks.
-    pub fn hand_default(max_delta_rad: f32) -> Self {
-        Self {
-            algorithm: Algorithm::Sac,
-            net: NetSpec { obs_dim: 65, act_dim: 15, hidden: vec![256, 256] },
-            action_scale: vec![max_delta_rad; 15],
-            gamma: 0.99,
-            tau: 0.005,
-            actor_lr: 3e-4,
-            critic_lr: 3e-4,
-            entropy: EntropyCoef::Auto { target_entropy: -15.0, initial: 0.1 },
-            critic_layer_norm: true,
-            min_policy_std: 0.0,
-            actor_hold_updates: 0,
-            matmul: MatmulPrecision::F32,
-        }
+    /// The actor's networks: the critics' sizes with the actor's observation as input.
+    #[must_use]
+    pub fn actor_net(&self) -> NetSpec {
+        NetSpec { obs_dim: self.columns.actor_dim(), ..self.net.clone() }
     }
 }
 
@@ -176,13 +174,17 @@ pub struct BcTerm {
 /// close to the bound (atanh(1 - 1e-6) = 7.3, tens of σ away) swamps the gradient.
 pub const BC_TARGET_MAX_UNIT: f64 = 0.995;
 
-/// One minibatch of transitions; rewards and `done` are `[batch, 1]`.
+/// One minibatch of transitions; rewards and `done` are `[batch, 1]`. `obs` and `next_obs`
+/// are what the critics see, `actor_obs` and `next_actor_obs` what the actor sees (the same
+/// tensors unless the actor observes less: [`ObsColumns`]).
 #[derive(Debug)]
 pub struct Batch {
     pub obs: Tensor,
+    pub actor_obs: Tensor,
     pub action: Tensor,
     pub reward: Tensor,
     pub next_obs: Tensor,
+    pub next_actor_obs: Tensor,
     /// 1 where the episode terminated (no bootstrap), 0 otherwise (including truncation).
     pub done: Tensor,
     /// The BC term, when the method uses it.
@@ -197,7 +199,28 @@ fn bc_target(bc: &BcTerm, scale: &Tensor) -> Tensor {
 impl Batch {
     /// A batch without a BC term.
     pub fn new(obs: Tensor, action: Tensor, reward: Tensor, next_obs: Tensor, done: Tensor) -> Self {
-        Self { obs, action, reward, next_obs, done, bc: None }
+        let (actor_obs, next_actor_obs) = (obs.shallow_clone(), next_obs.shallow_clone());
+        Self { obs, actor_obs, action, reward, next_obs, next_actor_obs, done, bc: None }
+    }
+
+    /// This batch of stored rows split as `columns` says (the actor's and the critics' parts
+    /// of `obs` and `next_obs`; the rest shared).
+    #[must_use]
+    pub fn split(&self, columns: &ObsColumns) -> Self {
+        Self {
+            obs: columns.critic_of(&self.obs),
+            actor_obs: columns.actor_of(&self.obs),
+            action: self.action.shallow_clone(),
+            reward: self.reward.shallow_clone(),
+            next_obs: columns.critic_of(&self.next_obs),
+            next_actor_obs: columns.actor_of(&self.next_obs),
+            done: self.done.shallow_clone(),
+            bc: self.bc.as_ref().map(|bc| BcTerm {
+                beta: bc.beta,
+                mask: bc.mask.shallow_clone(),
+                action: bc.action.shallow_clone(),
+            }),
+        }
     }
 }
 
@@ -276,7 +299,7 @@ impl ActorCritic {
     /// redraws them from a seed.
     fn new(config: LearnerConfig, device: Device) -> Result<Self, tch::TchError> {
         let actor_vs = nn::VarStore::new(device);
-        let actor = GaussianActor::new(&actor_vs.root(), &config.net, &config.action_scale)
+        let actor = GaussianActor::new(&actor_vs.root(), &config.actor_net(), &config.action_scale)
             .with_min_std(config.min_policy_std);
         let critic_vs = nn::VarStore::new(device);
         let critic =
@@ -360,11 +383,12 @@ impl ActorCritic {
         self.target.set_matmul_precision(precision);
     }
 
-    /// `(obs - mean) / std` in the actor, the critics and the target critics.
-    fn set_obs_normalisation(&mut self, mean: &Tensor, std: &Tensor) {
-        self.actor.obs_norm.set(mean, std);
-        self.critic.obs_norm.set(mean, std);
-        self.target.obs_norm.set(mean, std);
+    /// `(obs - mean) / std` in the actor (its statistics) and in the critics and the target
+    /// critics (theirs).
+    fn set_obs_normalisation(&mut self, actor: (&Tensor, &Tensor), critic: (&Tensor, &Tensor)) {
+        self.actor.obs_norm.set(actor.0, actor.1);
+        self.critic.obs_norm.set(critic.0, critic.1);
+        self.target.obs_norm.set(critic.0, critic.1);
     }
 
     /// One gradient step of both critics towards `r + γ (1 − done) q_next`; returns the
@@ -464,8 +488,9 @@ pub trait Learner: Send + std::fmt::Debug {
         None
     }
 
-    /// Sets the observation normalisation of the networks beyond the shared ones.
-    fn set_own_obs_normalisation(&mut self, _mean: &Tensor, _std: &Tensor) {}
+    /// Sets the observation normalisation of the networks beyond the shared ones (actors: the
+    /// actor's statistics).
+    fn set_own_obs_normalisation(&mut self, _actor_mean: &Tensor, _actor_std: &Tensor) {}
 
     /// The var stores beyond the shared ones that a checkpoint holds, with their file names.
     fn own_stores(&self) -> Vec<(&'static str, &nn::VarStore)> {
@@ -521,22 +546,34 @@ pub trait Learner: Send + std::fmt::Debug {
         let precision = self.config().matmul;
         self.core_mut().set_matmul_precision(precision);
         self.set_own_matmul_precision(precision);
+        let split;
+        let batch = if self.config().columns.is_whole() {
+            batch
+        } else {
+            split = batch.split(&self.config().columns);
+            &split
+        };
         let stats = self.update_step(batch);
         self.core_mut().set_matmul_precision(MatmulPrecision::F32);
         self.set_own_matmul_precision(MatmulPrecision::F32);
         stats
     }
 
-    /// Sets the observation normalisation of every network to `(obs - mean) / std`. Each
-    /// slice has `obs_dim` entries; `std` entries must be > 0.
+    /// Sets the observation normalisation of every network to `(obs - mean) / std`, from the
+    /// statistics of stored rows (each slice has `columns.row_dim()` entries; `std` entries
+    /// must be > 0): the critics take theirs, the actor its columns'.
     fn set_obs_normalisation(&mut self, mean: &[f32], std: &[f32]) {
-        let dim = self.config().net.obs_dim as usize;
+        let columns = self.config().columns.clone();
+        let dim = columns.row_dim() as usize;
         assert!(mean.len() == dim && std.len() == dim, "normalisation of {dim} observations");
         assert!(std.iter().all(|&s| s > 0.0 && s.is_finite()), "std must be positive and finite");
         let device = self.actor_vs().device();
-        let (m, s) = (Tensor::from_slice(mean).to_device(device), Tensor::from_slice(std).to_device(device));
-        self.core_mut().set_obs_normalisation(&m, &s);
-        self.set_own_obs_normalisation(&m, &s);
+        let tensor = |v: &[f32]| Tensor::from_slice(v).to_device(device);
+        let critic_dim = columns.critic_dim as usize;
+        let (cm, cs) = (tensor(&mean[..critic_dim]), tensor(&std[..critic_dim]));
+        let (am, a_s) = (tensor(&columns.actor_values(mean)), tensor(&columns.actor_values(std)));
+        self.core_mut().set_obs_normalisation((&am, &a_s), (&cm, &cs));
+        self.set_own_obs_normalisation(&am, &a_s);
     }
 
     /// The files [`Self::save`] writes into a checkpoint folder, in the order it writes them.

@@ -87,7 +87,7 @@ impl Learner for SoftActorCritic {
         // log π is needed for a non-zero or tuned α only.
         let with_log_prob = alpha != 0.0 || self.log_alpha.is_some();
         let q_next: Tensor = tch::no_grad(|| {
-            let next = self.core.actor.sample_opt(&batch.next_obs, eps_next.as_ref(), with_log_prob);
+            let next = self.core.actor.sample_opt(&batch.next_actor_obs, eps_next.as_ref(), with_log_prob);
             let q_next = self.core.target.min_q(&batch.next_obs, &next.action);
             match next.log_prob.filter(|_| alpha != 0.0) {
                 Some(log_prob) => q_next - alpha * log_prob,
@@ -103,7 +103,7 @@ impl Learner for SoftActorCritic {
             let (pi, bc_loss) = match (&batch.bc, &bc_weight) {
                 (Some(bc), Some(weight)) => {
                     let (pi, log_prob_data) = self.core.actor.sample_and_log_prob_of(
-                        &batch.obs,
+                        &batch.actor_obs,
                         &bc_target(bc, self.core.actor.action_scale()),
                         eps_pi.as_ref(),
                         with_log_prob,
@@ -111,7 +111,7 @@ impl Learner for SoftActorCritic {
                     let bc_loss = (weight * log_prob_data).mean(Kind::Float) * -bc.beta;
                     (pi, Some(bc_loss))
                 }
-                _ => (self.core.actor.sample_opt(&batch.obs, eps_pi.as_ref(), with_log_prob), None),
+                _ => (self.core.actor.sample_opt(&batch.actor_obs, eps_pi.as_ref(), with_log_prob), None),
             };
             let q_pi = self.core.critic.min_q(&batch.obs, &pi.action);
             let rl_loss = match &pi.log_prob {

@@ -28,7 +28,7 @@ struct TargetActor {
 impl TargetActor {
     fn new(online: &nn::VarStore, config: &LearnerConfig) -> Result<Self, tch::TchError> {
         let mut vs = nn::VarStore::new(online.device());
-        let actor = GaussianActor::new(&vs.root(), &config.net, &config.action_scale);
+        let actor = GaussianActor::new(&vs.root(), &config.actor_net(), &config.action_scale);
         vs.copy(online)?;
         let online_vars = online.variables();
         let mut named: Vec<(String, Tensor)> = vs
@@ -152,8 +152,8 @@ impl Learner for Td3 {
 
         let q_next: Tensor = tch::no_grad(|| {
             let noise = (eps * noise_std).clamp(-noise_clip, noise_clip);
-            let next =
-                (target_actor.deterministic(&batch.next_obs) / &scale + noise).clamp(-1.0, 1.0) * &scale;
+            let next = (target_actor.deterministic(&batch.next_actor_obs) / &scale + noise).clamp(-1.0, 1.0)
+                * &scale;
             self.core.target.min_q(&batch.next_obs, &next)
         });
         let (critic_loss, q) = self.core.critic_step(batch, &q_next);
@@ -161,7 +161,7 @@ impl Learner for Td3 {
         let mut bc_value = 0.0;
         if actor_step {
             self.core.critic_vs.freeze();
-            let mu = self.core.actor.deterministic(&batch.obs);
+            let mu = self.core.actor.deterministic(&batch.actor_obs);
             let rl_loss = -self.core.critic.q1(&batch.obs, &mu).mean(Kind::Float);
             let actor_loss = match (&batch.bc, &bc_weight) {
                 (Some(bc), Some(weight)) => {

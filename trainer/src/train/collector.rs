@@ -6,13 +6,13 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tch::Tensor;
-use vge_sim::{Env, EpisodeTracker, NUM_JOINTS, NoiseConfig, OBS_DIM, PerturbationConfig, SimError};
+use vge_sim::{Env, EpisodeTracker, NoiseConfig, Observer, PerturbationConfig, SimError};
 
 use super::TrainError;
 use super::in_progress::{EnvInProgress, EpisodeLog, InProgress};
 use super::metrics::{TrainingObjects, Window};
 use crate::behaviour::{Behaviour, ControllerCall, Decision, EnvController, StepContext};
-use crate::learner::{Learner, mix_seed, standard_normal};
+use crate::learner::{Learner, ObsColumns, mix_seed, standard_normal};
 use crate::replay::ReplayBuffer;
 use vge_controllers::{ControllerInput, IgmConfig};
 use vge_lab::config::Config;
@@ -39,8 +39,12 @@ struct Disturbances {
 /// One training env and what the collector knows of it.
 struct EnvSlot {
     env: Env,
-    /// Its current observation.
-    obs: [f32; OBS_DIM],
+    /// Its current observation (the env's full one: what the critic sees).
+    obs: Vec<f32>,
+    /// What the actor sees of it ([`Observer`]: the same, or joints with their history).
+    observer: Observer,
+    /// The actor's current observation.
+    actor_obs: Vec<f32>,
     episode: EnvEpisode,
     /// What replays its episode so far ([`super::in_progress`]).
     log: EpisodeLog,
@@ -52,6 +56,10 @@ pub(super) struct Collector {
     slots: Vec<EnvSlot>,
     /// Env `i`'s controller, for the methods that query one (empty for RL).
     controllers: Vec<EnvController>,
+    /// How a stored row splits between the critic and the actor.
+    columns: ObsColumns,
+    /// Entries of an action (the hand's joints).
+    act_dim: usize,
     max_action_rad: f32,
     seed: u64,
     /// The disturbance curricula (`env.perturb_ramp_steps`, `env.noise_ramp_steps`), when on.
@@ -117,7 +125,11 @@ impl Collector {
     /// The envs of `config`, not reset yet ([`Self::reset_all`]).
     pub fn new(config: &Config) -> Result<Self, TrainError> {
         let n = config.num_envs;
-        let env_configs: Vec<_> = (0..n).map(|i| config.env.env_config(i)).collect();
+        let env_configs = (0..n).map(|i| config.env_config(i)).collect::<Result<Vec<_>, _>>()?;
+        let set = config.env.observation_set().map_err(|e| SimError::InvalidConfig(e.to_string()))?;
+        let first = env_configs.first().ok_or_else(|| SimError::InvalidConfig("no envs".to_owned()))?;
+        let columns = ObsColumns::of(first, set);
+        let act_dim = first.hand.num_joints();
         let controllers = match config.controller.filter(|_| config.method.queries_controller()) {
             Some(kind) => env_configs
                 .iter()
@@ -144,9 +156,12 @@ impl Collector {
             .map(|c| {
                 let full =
                     Disturbances { noise: c.noise, push: c.perturbation, drop_penalty: c.drop_penalty };
+                let observer = Observer::new(set, c.hand.num_joints());
                 Ok(EnvSlot {
                     env: Env::new(c)?,
-                    obs: [0.0; OBS_DIM],
+                    obs: Vec::new(),
+                    observer,
+                    actor_obs: Vec::new(),
                     episode: EnvEpisode::default(),
                     log: EpisodeLog::default(),
                     full,
@@ -157,6 +172,8 @@ impl Collector {
             ramp,
             slots,
             controllers,
+            columns,
+            act_dim,
             max_action_rad: config.env.max_action_rad,
             seed: config.seed,
             objects: TrainingObjects::new(&config.env.objects, n),
@@ -173,14 +190,10 @@ impl Collector {
         &self.objects
     }
 
-    /// Every env's current observation, env by env.
-    fn observations(&self) -> Vec<[f32; OBS_DIM]> {
-        self.slots.iter().map(|s| s.obs).collect()
-    }
-
-    /// Every env's current observation as one `[envs, obs]` tensor.
-    pub fn observation_tensor(&self) -> Tensor {
-        Tensor::from_slice(self.observations().as_flattened()).view([self.len() as i64, OBS_DIM as i64])
+    /// Every env's current actor observation as one `[envs, actor obs]` tensor.
+    pub fn actor_observation_tensor(&self) -> Tensor {
+        let flat: Vec<f32> = self.slots.iter().flat_map(|s| s.actor_obs.iter().copied()).collect();
+        Tensor::from_slice(&flat).view([self.len() as i64, self.columns.actor_dim()])
     }
 
     /// Tells the disturbance curricula how many env steps training has taken: episodes
@@ -229,6 +242,7 @@ impl Collector {
             |(slot, seed)| -> Result<(), SimError> {
                 if let Some(seed) = seed {
                     slot.obs = slot.env.reset(*seed)?.0;
+                    slot.actor_obs = slot.observer.start(&slot.obs);
                     slot.episode = EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::new() };
                 }
                 Ok(())
@@ -246,16 +260,16 @@ impl Collector {
         step: u64,
         random_steps: u64,
         rng: &mut ChaCha8Rng,
-    ) -> Result<Vec<[f32; NUM_JOINTS]>, TrainError> {
-        let (n, max) = (self.len(), self.max_action_rad);
+    ) -> Result<Vec<Vec<f32>>, TrainError> {
+        let (n, max, act) = (self.len(), self.max_action_rad, self.act_dim);
         if step < random_steps {
-            return Ok((0..n).map(|_| std::array::from_fn(|_| rng.random_range(-max..=max))).collect());
+            return Ok((0..n).map(|_| (0..act).map(|_| rng.random_range(-max..=max)).collect()).collect());
         }
         let mut noise_rng = ChaCha8Rng::seed_from_u64(mix_seed(self.seed, step, SALT_ACT) as u64);
-        let eps = standard_normal(&mut noise_rng, n as i64, NUM_JOINTS as i64);
-        let t = self.observation_tensor();
+        let eps = standard_normal(&mut noise_rng, n as i64, act as i64);
+        let t = self.actor_observation_tensor();
         let v = Vec::<f32>::try_from(learner.behaviour_action(&t, &eps).contiguous().view(-1))?;
-        Ok(v.chunks_exact(NUM_JOINTS).map(|c| std::array::from_fn(|j| c[j])).collect())
+        Ok(v.chunks_exact(act).map(<[f32]>::to_vec).collect())
     }
 
     /// The executed action of every env: the behaviour policy's choice between the learner's
@@ -266,7 +280,7 @@ impl Collector {
         behaviour: &mut Behaviour,
         learner: &dyn Learner,
         step: u64,
-        proposals: &[[f32; NUM_JOINTS]],
+        proposals: &[Vec<f32>],
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<Decision>, TrainError> {
         let inputs: Vec<Option<ControllerInput>> = if behaviour.controller_active(step) {
@@ -274,12 +288,14 @@ impl Collector {
         } else {
             vec![None; self.len()]
         };
-        let obs = self.observations();
+        let obs: Vec<Vec<f32>> = self.slots.iter().map(|s| s.obs.clone()).collect();
         let ctx = StepContext { step, obs: &obs, learner: proposals, inputs: &inputs };
-        let mut q = |o: &[[f32; OBS_DIM]], a: &[[f32; NUM_JOINTS]]| -> Result<Vec<f32>, String> {
+        let (critic_dim, act_dim) = (self.columns.critic_dim, self.act_dim as i64);
+        let mut q = |o: &[&[f32]], a: &[&[f32]]| -> Result<Vec<f32>, String> {
             let rows = o.len() as i64;
-            let ot = Tensor::from_slice(o.as_flattened()).view([rows, OBS_DIM as i64]);
-            let at = Tensor::from_slice(a.as_flattened()).view([rows, NUM_JOINTS as i64]);
+            let flat = |v: &[&[f32]]| v.iter().flat_map(|r| r.iter().copied()).collect::<Vec<f32>>();
+            let ot = Tensor::from_slice(&flat(o)).view([rows, critic_dim]);
+            let at = Tensor::from_slice(&flat(a)).view([rows, act_dim]);
             Vec::<f32>::try_from(learner.q_of(&ot, &at).view(-1)).map_err(|e| e.to_string())
         };
         let mut decisions = behaviour.act(&ctx, &mut self.controllers, &mut q, rng)?;
@@ -318,17 +334,21 @@ impl Collector {
             if let Some(c) = self.controllers.get_mut(i) {
                 slot.log.calls.extend(c.calls.drain(..).map(|call| (at, call)));
             }
-            slot.log.actions.push(d.action);
-            let bc_target = d.bc_target.as_ref().map(|b| b.as_slice());
-            replay.push(&slot.obs, &d.action, r.reward, &r.obs, r.terminated, d.source, bc_target)?;
+            slot.log.actions.push(d.action.clone());
+            let bc_target = d.bc_target.as_deref();
+            let next_actor_obs = slot.observer.step(&r.obs);
+            let row = self.columns.row(&slot.obs, &slot.actor_obs);
+            let next_row = self.columns.row(&r.obs, &next_actor_obs);
+            replay.push(&row, &d.action, r.reward, &next_row, r.terminated, d.source, bc_target)?;
             let episode = &mut slot.episode;
             window.switches += u64::from(episode.tracker.record(
                 r.reward,
                 r.info.object_rotation_z_rad,
-                r.info.tip_contacts,
+                &r.info.tip_contacts,
             ));
             episode.rewards.push(r.reward);
-            slot.obs = r.obs;
+            slot.obs = r.obs.clone();
+            slot.actor_obs = next_actor_obs;
             if r.terminated || r.truncated {
                 let outcome = episode.tracker.outcome(r.terminated);
                 window.add_episode(&outcome, &episode.rewards, gamma);
@@ -348,9 +368,13 @@ impl Collector {
             .slots
             .iter()
             .enumerate()
-            .map(|(i, s)| EnvInProgress { log: s.log.clone(), segment: behaviour.segment(i), obs: s.obs })
+            .map(|(i, s)| EnvInProgress {
+                log: s.log.clone(),
+                segment: behaviour.segment(i),
+                obs: s.obs.clone(),
+            })
             .collect();
-        InProgress { envs }
+        InProgress { obs_dim: self.columns.critic_dim as usize, act_dim: self.act_dim, envs }
     }
 
     /// Puts every env back into its episode in progress at a checkpoint (in place of a
@@ -445,6 +469,7 @@ fn replay(
     let log = &saved.log;
     let bad = |what: String| TrainError::Resume(format!("env {i}'s episode in progress: {what}"));
     slot.obs = slot.env.reset(log.env_seed)?.0;
+    slot.actor_obs = slot.observer.start(&slot.obs);
     slot.episode =
         EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::with_capacity(log.actions.len()) };
     let mut calls = log.calls.iter().peekable();
@@ -471,14 +496,16 @@ fn replay(
             return Err(bad(format!("step {k} out of order")));
         }
         let r = slot.env.step(action)?;
-        slot.episode.tracker.record(r.reward, r.info.object_rotation_z_rad, r.info.tip_contacts);
+        slot.episode.tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts);
         slot.episode.rewards.push(r.reward);
+        slot.actor_obs = slot.observer.step(&r.obs);
         slot.obs = r.obs;
         if r.terminated || r.truncated {
             // The trainer's generator must not move here (that would change every draw after
             // it): the new episode's seeds come from the old one's.
             let (env_seed, controller_seed) = (log.env_seed ^ REPLAY_ENDED_SALT, log.controller_seed);
             slot.obs = slot.env.reset(env_seed)?.0;
+            slot.actor_obs = slot.observer.start(&slot.obs);
             slot.episode = EnvEpisode { tracker: slot.env.episode_tracker()?, rewards: Vec::new() };
             if let Some(c) = controller {
                 c.rng = ChaCha8Rng::seed_from_u64(controller_seed);
@@ -517,8 +544,8 @@ mod tests {
             apply_override(&mut config, o).expect(o);
         }
         config.validate().expect("valid");
-        let learner =
-            learner::build_seeded(LearnerConfig::for_hand(&config), Device::Cpu, 0).expect("learner");
+        let learner = learner::build_seeded(LearnerConfig::for_hand(&config).expect("sizes"), Device::Cpu, 0)
+            .expect("learner");
         tch::no_grad(|| {
             for (_, mut t) in learner.actor_vs().variables() {
                 let _ = t.fill_(f64::NAN);

@@ -9,18 +9,17 @@
 //! bookkeeping and its controller where the stopped run left them. The behaviour policy's
 //! segment of each env and its observation (to check the replay against) are saved beside it.
 //!
-//! The file is little-endian: the magic `VGEEPI01`, the number of envs (u32), then per env
-//! its seeds and ramp step (3 x u64), its segment (source u8, steps left u64, controller
-//! stale u8), its observation (`OBS_DIM` x f32), its actions (u32 count, `NUM_JOINTS` x f32
-//! each) and its controller calls (u32 count, each the episode step u32 and the kind u8).
-//! Every count is checked against the bytes left before anything is allocated.
-
-use vge_sim::{NUM_JOINTS, OBS_DIM};
+//! The file is little-endian: the magic `VGEEPI02`, the observation's and the action's
+//! lengths (u32 each: the hand's), the number of envs (u32), then per env its seeds and ramp
+//! step (3 x u64), its segment (source u8, steps left u64, controller stale u8), its
+//! observation (obs x f32), its actions (u32 count, act x f32 each) and its controller calls
+//! (u32 count, each the episode step u32 and the kind u8). Every count is checked against the
+//! bytes left before anything is allocated.
 
 use crate::behaviour::{ControllerCall, Segment};
 use crate::replay::Source;
 
-const MAGIC: &[u8; 8] = b"VGEEPI01";
+const MAGIC: &[u8; 8] = b"VGEEPI02";
 
 /// One env's episode since its reset: what replays it.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -32,7 +31,7 @@ pub(super) struct EpisodeLog {
     /// Env steps of training when the episode began: its disturbance levels (curricula).
     pub ramp_step: u64,
     /// The executed actions, one per step of the episode so far.
-    pub actions: Vec<[f32; NUM_JOINTS]>,
+    pub actions: Vec<Vec<f32>>,
     /// The controller's calls, each with the episode step it was made before (on the state
     /// that step started from), in order.
     pub calls: Vec<(u32, ControllerCall)>,
@@ -44,12 +43,16 @@ pub(super) struct EnvInProgress {
     pub log: EpisodeLog,
     pub segment: Segment,
     /// Its observation when the checkpoint was written: the replay must arrive at it.
-    pub obs: [f32; OBS_DIM],
+    pub obs: Vec<f32>,
 }
 
 /// Every env's episode in progress, env by env.
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct InProgress {
+    /// The length of every env's observation (the critic's: the env's full observation).
+    pub obs_dim: usize,
+    /// The length of every action (the hand's joints).
+    pub act_dim: usize,
     pub envs: Vec<EnvInProgress>,
 }
 
@@ -57,6 +60,8 @@ impl InProgress {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut b = Vec::new();
         b.extend_from_slice(MAGIC);
+        put_u32(&mut b, self.obs_dim);
+        put_u32(&mut b, self.act_dim);
         put_u32(&mut b, self.envs.len());
         for e in &self.envs {
             for v in [e.log.env_seed, e.log.controller_seed, e.log.ramp_step] {
@@ -80,16 +85,26 @@ impl InProgress {
         b
     }
 
-    /// Parses [`Self::to_bytes`]; `Err` says what is wrong.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
+    /// Parses [`Self::to_bytes`] of a run whose observations and actions have `obs_dim` and
+    /// `act_dim` entries; `Err` says what is wrong.
+    pub fn from_bytes(bytes: &[u8], obs_dim: usize, act_dim: usize) -> Result<Self, String> {
         let mut r = Reader { bytes, at: 0 };
         if r.take(MAGIC.len())? != MAGIC {
-            return Err("not a file of episodes in progress".to_owned());
+            return Err(
+                "not a file of episodes in progress of this vge (resume it with the vge that wrote it)"
+                    .to_owned(),
+            );
+        }
+        let (file_obs, file_act) = (r.u32()? as usize, r.u32()? as usize);
+        if (file_obs, file_act) != (obs_dim, act_dim) {
+            return Err(format!(
+                "its episodes have observations of {file_obs} and actions of {file_act}, the run's {obs_dim} and {act_dim}"
+            ));
         }
         // Each env takes at least its fixed fields: a count beyond the bytes left is refused
         // before anything is allocated for it.
-        const FIXED: usize = 3 * 8 + 1 + 8 + 1 + 4 * OBS_DIM + 4 + 4;
-        let n = r.count(FIXED)?;
+        let fixed = 3 * 8 + 1 + 8 + 1 + 4 * obs_dim + 4 + 4;
+        let n = r.count(fixed)?;
         let mut envs = Vec::with_capacity(n);
         for _ in 0..n {
             let (env_seed, controller_seed, ramp_step) = (r.u64()?, r.u64()?, r.u64()?);
@@ -104,18 +119,9 @@ impl InProgress {
                 1 => true,
                 other => return Err(format!("controller state flag {other}")),
             };
-            let mut obs = [0.0f32; OBS_DIM];
-            for x in &mut obs {
-                *x = r.f32()?;
-            }
-            let actions = (0..r.count(4 * NUM_JOINTS)?)
-                .map(|_| {
-                    let mut a = [0.0f32; NUM_JOINTS];
-                    for x in &mut a {
-                        *x = r.f32()?;
-                    }
-                    Ok(a)
-                })
+            let obs = (0..obs_dim).map(|_| r.f32()).collect::<Result<Vec<_>, String>>()?;
+            let actions = (0..r.count(4 * act_dim)?)
+                .map(|_| (0..act_dim).map(|_| r.f32()).collect::<Result<Vec<_>, String>>())
                 .collect::<Result<Vec<_>, String>>()?;
             let calls = (0..r.count(5)?)
                 .map(|_| {
@@ -142,7 +148,7 @@ impl InProgress {
         if r.at != bytes.len() {
             return Err(format!("{} bytes after the last env", bytes.len() - r.at));
         }
-        Ok(Self { envs })
+        Ok(Self { obs_dim, act_dim, envs })
     }
 }
 
@@ -203,15 +209,17 @@ mod tests {
             env_seed: 7,
             controller_seed: u64::MAX,
             ramp_step: 1234,
-            actions: vec![[0.5; NUM_JOINTS], [-0.0; NUM_JOINTS], [f32::MIN_POSITIVE; NUM_JOINTS]],
+            actions: vec![vec![0.5; 4], vec![-0.0; 4], vec![f32::MIN_POSITIVE; 4]],
             calls: vec![(0, ControllerCall::Reset), (0, ControllerCall::Act), (2, ControllerCall::Act)],
         };
         let segment = Segment { source: Source::Controller, remaining: 3, controller_stale: false };
         let fresh = Segment { source: Source::Learner, remaining: 0, controller_stale: true };
         InProgress {
+            obs_dim: 6,
+            act_dim: 4,
             envs: vec![
-                EnvInProgress { log, segment, obs: [0.25; OBS_DIM] },
-                EnvInProgress { log: EpisodeLog::default(), segment: fresh, obs: [1.0; OBS_DIM] },
+                EnvInProgress { log, segment, obs: vec![0.25; 6] },
+                EnvInProgress { log: EpisodeLog::default(), segment: fresh, obs: vec![1.0; 6] },
             ],
         }
     }
@@ -220,7 +228,9 @@ mod tests {
     fn episodes_in_progress_come_back_bit_for_bit() {
         let saved = sample();
         let bytes = saved.to_bytes();
-        let back = InProgress::from_bytes(&bytes).expect("parses");
+        let back = InProgress::from_bytes(&bytes, 6, 4).expect("parses");
+        let err = InProgress::from_bytes(&bytes, 65, 15).expect_err("another hand's sizes");
+        assert!(err.contains("observations of 6"), "{err}");
         assert_eq!(back, saved);
         // -0.0 == 0.0 for PartialEq: the bits must survive too.
         assert_eq!(back.envs[0].log.actions[1][0].to_bits(), (-0.0f32).to_bits());
@@ -229,18 +239,18 @@ mod tests {
     #[test]
     fn cut_padded_or_inconsistent_files_are_refused_without_allocating_their_counts() {
         let bytes = sample().to_bytes();
-        for cut in [0, 7, 8, 11, 12, bytes.len() - 1] {
-            assert!(InProgress::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
+        for cut in [0, 7, 8, 11, 12, 19, 20, bytes.len() - 1] {
+            assert!(InProgress::from_bytes(&bytes[..cut], 6, 4).is_err(), "cut at {cut}");
         }
         let mut padded = bytes.clone();
         padded.push(0);
-        assert!(InProgress::from_bytes(&padded).expect_err("padded").contains("after the last env"));
+        assert!(InProgress::from_bytes(&padded, 6, 4).expect_err("padded").contains("after the last env"));
         // A count of u32::MAX envs is refused by the bytes left, not allocated.
         let mut huge = bytes.clone();
-        huge[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
-        assert!(InProgress::from_bytes(&huge).expect_err("count").contains("cannot hold"));
+        huge[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(InProgress::from_bytes(&huge, 6, 4).expect_err("count").contains("cannot hold"));
         let mut wrong = sample();
         wrong.envs[0].log.calls.push((9, ControllerCall::Act));
-        assert!(InProgress::from_bytes(&wrong.to_bytes()).is_err(), "a call past the episode's steps");
+        assert!(InProgress::from_bytes(&wrong.to_bytes(), 6, 4).is_err(), "a call past the episode's steps");
     }
 }

@@ -65,7 +65,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::Device;
 use thiserror::Error;
-use vge_sim::{NUM_JOINTS, OBS_DIM, SimError};
+use vge_sim::SimError;
 
 use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, bc_beta};
 use crate::checkpoint::CheckpointError;
@@ -393,8 +393,11 @@ impl<'a> Trainer<'a> {
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
         }
-        let mut learner = learner::build_seeded(LearnerConfig::for_hand(config), Device::Cpu, config.seed)?;
-        let mut replay = ReplayBuffer::new(config.sac.buffer_size, OBS_DIM, NUM_JOINTS)?;
+        let learner_config = LearnerConfig::for_hand(config)?;
+        let (row_dim, act_dim) =
+            (learner_config.columns.row_dim() as usize, learner_config.net.act_dim as usize);
+        let mut learner = learner::build_seeded(learner_config, Device::Cpu, config.seed)?;
+        let mut replay = ReplayBuffer::new(config.sac.buffer_size, row_dim, act_dim)?;
         let mut behaviour = Behaviour::from_config(config);
         let mut collector = Collector::new(config)?;
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -526,7 +529,7 @@ impl<'a> Trainer<'a> {
         if logged {
             // At the envs' current observations: no draw from any generator, so logging it
             // changes nothing of the run.
-            let log_std = self.learner.actor_mean_log_std(&self.collector.observation_tensor());
+            let log_std = self.learner.actor_mean_log_std(&self.collector.actor_observation_tensor());
             let mut values: Vec<(String, Option<f64>)> = self
                 .c
                 .window

@@ -181,9 +181,16 @@ pub(super) fn load_checkpoint(
         TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::STATE_FILE).display()))
     })?;
     let episodes = match ckpt.episodes()? {
-        Some(bytes) => Some(InProgress::from_bytes(&bytes).map_err(|e| {
-            TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::EPISODES_FILE).display()))
-        })?),
+        Some(bytes) => Some(
+            InProgress::from_bytes(
+                &bytes,
+                learner.config().net.obs_dim as usize,
+                learner.config().net.act_dim as usize,
+            )
+            .map_err(|e| {
+                TrainError::Resume(format!("{}: {e}", ckpt.dir().join(checkpoint::EPISODES_FILE).display()))
+            })?,
+        ),
         None => None,
     };
     ckpt.load(learner, state.has_replay.then_some(replay))?;
