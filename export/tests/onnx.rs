@@ -90,6 +90,7 @@ fn init_policy(seed: i64) -> Vec<u8> {
         action_offset: vec![0.0; 15],
         control_hz: hand.control_hz,
         provenance,
+        task: None,
     };
     export_policy(&vs, "actor", &spec, meta).unwrap()
 }

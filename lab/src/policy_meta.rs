@@ -31,5 +31,6 @@ pub fn hand_policy_meta(env: &EnvConfig, provenance: Provenance) -> PolicyMeta {
         action_offset: vec![0.0; act_dim],
         control_hz: env.control_hz,
         provenance,
+        task: None,
     }
 }

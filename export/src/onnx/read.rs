@@ -194,6 +194,7 @@ pub fn import(bytes: &[u8], target: &ImportTarget, options: &ImportOptions) -> R
         action_names: target.action_names.clone(),
         action_scale: scale,
         action_offset: offset,
+        task: None,
     };
     policy.to_bytes()?;
     Ok(Imported { policy, notes })
