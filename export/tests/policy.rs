@@ -132,6 +132,7 @@ fn inspect_reports_everything() {
     let text = r.to_string();
     for needle in [
         "format version 3",
+        "hand:       vge15 (no hand record), observation set: full",
         "weights:    f32",
         "runtime RAM for parameters: none",
         "ok (loadable by vge-runtime)",
@@ -185,8 +186,15 @@ fn the_task_record_round_trips_in_every_weight_type() {
     assert_eq!(vge_runtime::policy::inspect(&bare).unwrap().task, None);
     assert!(bare.len() < bytes.len());
 
+    let text = inspect::report(&bytes).unwrap().to_string();
     let sha: String = task.hand_sha256.iter().map(|b| format!("{b:02x}")).collect();
     assert_eq!(task.hand_sha256_hex(), sha);
+    for needle in [
+        format!("hand:       allegro (MJCF sha256 {sha})"),
+        "task:       observation set proprio:4, object cube, orientation unspecified".to_owned(),
+    ] {
+        assert!(text.contains(&needle), "{needle:?} not in\n{text}");
+    }
     // Version 1 cannot say which hand: refused rather than read back as vge15.
     assert!(matches!(file.to_bytes_v1(), Err(ExportError::InvalidSpec(m)) if m.contains("allegro")));
     assert!(PolicyFile { task: None, ..file }.to_bytes_v1().is_ok());
@@ -243,6 +251,8 @@ fn stored_policy_files_still_load_as_the_unrecorded_hand() {
         assert!(info.format_version <= 2 && info.task.is_none(), "{}", path.display());
     }
     let shipped = std::fs::read(root.join("policies/cube.vgep")).unwrap();
+    let text = inspect::report(&shipped).unwrap().to_string();
+    assert!(text.contains("hand:       vge15 (file predates hand records), observation set: full"), "{text}");
     let file = PolicyFile::from_bytes(&shipped).unwrap();
     let again = file.to_bytes().unwrap();
     assert_eq!(vge_runtime::policy::inspect(&again).unwrap().format_version, 3);
