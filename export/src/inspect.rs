@@ -4,6 +4,7 @@ use std::fmt;
 use std::path::Path;
 
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
+use vge_runtime::policy::{UNRECORDED_HAND, UNRECORDED_OBSERVATION_SET};
 use vge_runtime::{PolicyError, WeightType};
 
 use crate::{ExportError, PolicyFile};
@@ -38,8 +39,8 @@ impl InspectReport {
         self.policy.num_params()
     }
 
-    /// Bytes of RAM `vge_runtime::Policy::load` needs for the parameters: none for version
-    /// 2 (read in place), every `f32` for version 1 (copied).
+    /// Bytes of RAM `vge_runtime::Policy::load` needs for the parameters: none for versions
+    /// 2 and 3 (read in place), every `f32` for version 1 (copied).
     pub fn storage_bytes(&self) -> usize {
         if self.format_version >= 2 {
             return 0;
@@ -117,6 +118,27 @@ impl fmt::Display for InspectReport {
             "provenance: vge {}, config {}, seed {}, {} steps",
             pv.vge_version, pv.config_hash, pv.seed, pv.steps
         )?;
+        match &p.task {
+            Some(t) => {
+                writeln!(f, "hand:       {} (MJCF sha256 {})", t.hand, t.hand_sha256_hex())?;
+                let named = |s: &str| if s.is_empty() { "unspecified".to_owned() } else { s.to_owned() };
+                writeln!(
+                    f,
+                    "task:       observation set {}, object {}, orientation {}",
+                    t.observation_set,
+                    named(&t.object),
+                    named(&t.orientation)
+                )?;
+            }
+            None => {
+                let why =
+                    if self.format_version < 3 { "file predates hand records" } else { "no hand record" };
+                writeln!(
+                    f,
+                    "hand:       {UNRECORDED_HAND} ({why}), observation set: {UNRECORDED_OBSERVATION_SET}"
+                )?;
+            }
+        }
         writeln!(f, "control:    {} Hz", p.control_hz)?;
         let dims: Vec<String> = std::iter::once(p.obs_dim)
             .chain(p.layers.iter().map(|l| l.out_dim))

@@ -34,6 +34,7 @@ pub use layers::{ActorSpec, ExportedActor, ExportedLayer};
 #[cfg(feature = "tch")]
 pub use policy_file::export_policy;
 pub use policy_file::{
-    LayerRecord, MAX_FILE_LEN, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, read_policy_bytes,
+    LayerRecord, MAX_FILE_LEN, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, PolicyTask, Provenance,
+    read_policy_bytes,
 };
 pub use vge_runtime::{Activation, WeightType};

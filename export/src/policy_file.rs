@@ -40,6 +40,53 @@ impl ObsSlice {
     }
 }
 
+/// Which hand, observation set and task a policy was trained for: the task record of a
+/// version-3 file (`vge_runtime::policy::TaskInfo` is the borrowed view), so that a policy is
+/// refused on a hand it was not trained on. A file without one is for vge's own hand `vge15`
+/// with the `full` observation set (`vge_runtime::policy::UNRECORDED_HAND`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PolicyTask {
+    /// The hand's name (`"vge15"`, `"allegro"`): 1 to 64 bytes.
+    pub hand: String,
+    /// SHA-256 of the hand's MJCF description (`vge_hand::Hand::description_sha256`).
+    pub hand_sha256: [u8; 32],
+    /// `"full"`, `"proprio"` or `"proprio:K"` (K 1 to 64).
+    pub observation_set: String,
+    /// The object manipulated (`"cube"`); empty when unspecified. At most 64 bytes.
+    pub object: String,
+    /// The hand's orientation (`"palm_down"`); empty when unspecified. At most 64 bytes.
+    pub orientation: String,
+}
+
+impl PolicyTask {
+    /// The borrowed view the runtime reads.
+    pub fn info(&self) -> vge_runtime::policy::TaskInfo<'_> {
+        vge_runtime::policy::TaskInfo {
+            hand: &self.hand,
+            hand_sha256: &self.hand_sha256,
+            observation_set: &self.observation_set,
+            object: &self.object,
+            orientation: &self.orientation,
+        }
+    }
+
+    /// The owned copy of a record read from a file.
+    pub fn from_info(t: &vge_runtime::policy::TaskInfo<'_>) -> Self {
+        Self {
+            hand: t.hand.to_owned(),
+            hand_sha256: *t.hand_sha256,
+            observation_set: t.observation_set.to_owned(),
+            object: t.object.to_owned(),
+            orientation: t.orientation.to_owned(),
+        }
+    }
+
+    /// `hand_sha256` as 64 lowercase hex digits.
+    pub fn hand_sha256_hex(&self) -> String {
+        self.hand_sha256.iter().map(|b| format!("{b:02x}")).collect()
+    }
+}
+
 /// One dense layer as stored: `y = act(W x + b)`, `W` row-major `out_dim × in_dim`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LayerRecord {
@@ -51,7 +98,7 @@ pub struct LayerRecord {
     pub bias: Vec<f32>,
 }
 
-/// The payload of a policy file, field for field in file order.
+/// The payload of a policy file, field for field in file order (`task`, version 3's, last).
 ///
 /// `action = action_offset + action_scale * mlp(clip((obs - obs_mean) / obs_std))`, where
 /// `clip` clamps to `[-obs_clip, obs_clip]` when `obs_clip` is set.
@@ -70,6 +117,11 @@ pub struct PolicyFile {
     pub action_names: Vec<String>,
     pub action_scale: Vec<f32>,
     pub action_offset: Vec<f32>,
+    /// Which hand and task the policy is for (version 3's task record); `None` for a generic
+    /// MLP and for files older than version 3. Not in version 1's payload, whose serde
+    /// encoding this struct's is.
+    #[serde(skip)]
+    pub task: Option<PolicyTask>,
 }
 
 /// Observation normalisation `(obs - mean) / std`, then optionally clamp to `[-clip, clip]`.
@@ -101,11 +153,14 @@ pub struct PolicyMeta {
     pub action_offset: Vec<f32>,
     pub control_hz: f32,
     pub provenance: Provenance,
+    /// Which hand, observation set and task the policy was trained for; `None` for a policy
+    /// that drives no particular hand (written as a version-3 file without a task record).
+    pub task: Option<PolicyTask>,
 }
 
 impl PolicyMeta {
     /// Placeholder metadata: one slice `"obs"`, actions `"a0"`.., identity normalisation,
-    /// scale 1, offset 0.
+    /// scale 1, offset 0, no task.
     pub fn unnamed(obs_dim: usize, act_dim: usize, control_hz: f32, provenance: Provenance) -> Self {
         let obs_end = u32::try_from(obs_dim).unwrap_or(u32::MAX);
         Self {
@@ -116,6 +171,7 @@ impl PolicyMeta {
             action_offset: vec![0.0; act_dim],
             control_hz,
             provenance,
+            task: None,
         }
     }
 }
@@ -161,6 +217,7 @@ impl PolicyFile {
             action_names: meta.action_names,
             action_scale: meta.action_scale,
             action_offset: meta.action_offset,
+            task: meta.task,
         })
     }
 
@@ -194,23 +251,31 @@ impl PolicyFile {
         self.layers.iter().map(|l| l.weights.len() + l.bias.len()).sum()
     }
 
-    /// Encodes the file in the current format (version 2, `f32` weights) and checks that the
+    /// Encodes the file in the current format (version 3, `f32` weights) and checks that the
     /// `no_std` runtime accepts it; invalid metadata (a layout that does not cover the
     /// observation, a non-positive std, ...) is reported as [`ExportError::Format`].
     pub fn to_bytes(&self) -> Result<Vec<u8>, ExportError> {
         self.encode(WeightType::F32)
     }
 
-    /// Encodes the file as version 2 with the weight matrices stored as `weights` (`f16`
-    /// rounds to nearest, `i8` quantises each row with its own scale; biases, normalisation
-    /// and action scaling stay `f32`).
+    /// Encodes the file as version 3 (version 2's aligned arrays, and the task record when
+    /// `task` is set) with the weight matrices stored as `weights` (`f16` rounds to nearest,
+    /// `i8` quantises each row with its own scale; biases, normalisation and action scaling
+    /// stay `f32`).
     pub fn encode(&self, weights: WeightType) -> Result<Vec<u8>, ExportError> {
         crate::v2::encode(self, weights)
     }
 
     /// Encodes the file as version 1 (postcard payload, every array copied on load), for
-    /// readers that predate version 2.
+    /// readers that predate version 2. Refused for a file with a task record, which version 1
+    /// cannot hold: read back, it would claim vge's own hand.
     pub fn to_bytes_v1(&self) -> Result<Vec<u8>, ExportError> {
+        if let Some(task) = &self.task {
+            return Err(ExportError::InvalidSpec(format!(
+                "version 1 has no task record: a policy for hand `{}` cannot be written as version 1",
+                task.hand
+            )));
+        }
         let payload = postcard::to_allocvec(self).map_err(ExportError::Encode)?;
         let len = u32::try_from(payload.len()).map_err(|_| {
             ExportError::InvalidSpec(format!("payload of {} bytes exceeds 4 GiB", payload.len()))
@@ -224,7 +289,7 @@ impl PolicyFile {
         Ok(out)
     }
 
-    /// Decodes and fully validates a policy file of either version (the same checks as the
+    /// Decodes and fully validates a policy file of any version (the same checks as the
     /// runtime). Quantised weights come back as the `f32` values they stand for.
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, ExportError> {
         Self::decode(bytes, true).map(|(file, _)| file)
@@ -295,7 +360,7 @@ pub(crate) fn check_regular_file(path: &Path) -> std::io::Result<()> {
 }
 
 /// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`
-/// and encodes it with `meta` as a policy file (version 2, `f32` weights).
+/// and encodes it with `meta` as a policy file (version 3, `f32` weights).
 #[cfg(feature = "tch")]
 pub fn export_policy(
     vs: &VarStore,

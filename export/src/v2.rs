@@ -1,6 +1,7 @@
-//! Version-2 policy files (docs/policy-format.md): a postcard metadata block, then every array
-//! at a 16-byte aligned file offset in the layout `vge_runtime`'s kernels read in place, with
-//! the weights as `f32`, `f16` or `i8`.
+//! Version-2 and -3 policy files (docs/policy-format.md): a postcard metadata block (version 3
+//! ends it with the optional task record), then every array at a 16-byte aligned file offset
+//! in the layout `vge_runtime`'s kernels read in place, with the weights as `f32`, `f16` or
+//! `i8`. Version 3 is written; both are read.
 
 use serde::Serialize;
 use vge_runtime::format::{self, TRAILER_LEN};
@@ -8,7 +9,7 @@ use vge_runtime::policy::{RawWeights, TENSOR_ALIGN};
 use vge_runtime::{PolicyError, WeightType};
 
 use crate::ExportError;
-use crate::policy_file::{LayerRecord, ObsSlice, PolicyFile, Provenance};
+use crate::policy_file::{LayerRecord, ObsSlice, PolicyFile, PolicyTask, Provenance};
 use crate::quantise;
 
 /// The metadata block, field for field in file order.
@@ -24,6 +25,7 @@ struct Meta<'a> {
     /// `(in_dim, out_dim, activation)` per layer.
     layers: Vec<(u32, u32, u8)>,
     action_names: &'a [String],
+    task: Option<&'a PolicyTask>,
 }
 
 /// Appends zero bytes until the file offset is a multiple of [`TENSOR_ALIGN`], then `bytes`.
@@ -36,7 +38,7 @@ fn f32_bytes(values: &[f32]) -> impl Iterator<Item = u8> + '_ {
     values.iter().flat_map(|v| v.to_le_bytes())
 }
 
-/// Encodes `file` as version 2 with `weights`-typed matrices and checks that the `no_std`
+/// Encodes `file` as version 3 with `weights`-typed matrices and checks that the `no_std`
 /// runtime accepts the result.
 pub fn encode(file: &PolicyFile, weights: WeightType) -> Result<Vec<u8>, ExportError> {
     let meta = Meta {
@@ -49,6 +51,7 @@ pub fn encode(file: &PolicyFile, weights: WeightType) -> Result<Vec<u8>, ExportE
         weight_type: weights.code(),
         layers: file.layers.iter().map(|l| (l.in_dim, l.out_dim, l.activation)).collect(),
         action_names: &file.action_names,
+        task: file.task.as_ref(),
     };
     let meta = postcard::to_allocvec(&meta).map_err(ExportError::Encode)?;
     let too_big = |n: usize| ExportError::InvalidSpec(format!("policy of {n} bytes exceeds 4 GiB"));
@@ -80,7 +83,7 @@ pub fn encode(file: &PolicyFile, weights: WeightType) -> Result<Vec<u8>, ExportE
 
     let payload_len = out.len() - format::HEADER_LEN;
     let len = u32::try_from(payload_len).map_err(|_| too_big(payload_len))?;
-    out[..format::HEADER_LEN].copy_from_slice(&format::header(2, len));
+    out[..format::HEADER_LEN].copy_from_slice(&format::header(format::FORMAT_VERSION, len));
     let crc = format::crc32(&out);
     out.extend_from_slice(&crc.to_le_bytes());
     debug_assert_eq!(out.len(), format::HEADER_LEN + payload_len + TRAILER_LEN);
@@ -88,7 +91,7 @@ pub fn encode(file: &PolicyFile, weights: WeightType) -> Result<Vec<u8>, ExportE
     Ok(out)
 }
 
-/// Decodes a version-2 file into the owned model (quantised weights as the `f32` values they
+/// Decodes a version-2 or -3 file into the owned model (quantised weights as the `f32` values they
 /// stand for) and its weight type. Checks every field; the CRC only when `verify_crc`.
 pub fn decode(bytes: &[u8], verify_crc: bool) -> Result<(PolicyFile, WeightType), ExportError> {
     let mut layers = Vec::new();
@@ -112,8 +115,9 @@ pub fn decode(bytes: &[u8], verify_crc: bool) -> Result<(PolicyFile, WeightType)
             bias: raw.bias.iter().collect(),
         });
     })?;
-    if info.format_version != 2 {
-        return Err(PolicyError::UnsupportedVersion { found: info.format_version, supported: 2 }.into());
+    if info.format_version < 2 {
+        let found = info.format_version;
+        return Err(PolicyError::UnsupportedVersion { found, supported: format::FORMAT_VERSION }.into());
     }
     let file = PolicyFile {
         provenance: Provenance {
@@ -137,6 +141,7 @@ pub fn decode(bytes: &[u8], verify_crc: bool) -> Result<(PolicyFile, WeightType)
         action_names: info.action_names.iter().map(str::to_owned).collect(),
         action_scale: v.action_scale.iter().collect(),
         action_offset: v.action_offset.iter().collect(),
+        task: info.task.as_ref().map(PolicyTask::from_info),
     };
     Ok((file, info.weight_type))
 }

@@ -70,6 +70,7 @@ fn cortex_m4f_firmware_runs_exported_policy_like_host_runtime() {
             seed: 0x7E57,
             steps: 0,
         },
+        task: None,
     };
     let f32_bytes = export_policy(&vs, "actor", &spec, meta).unwrap();
     let file = PolicyFile::from_bytes(&f32_bytes).unwrap();
@@ -115,7 +116,7 @@ fn cortex_m4f_firmware_runs_exported_policy_like_host_runtime() {
             out.contains(&format!("policy file {} bytes, storage 0 f32", bytes.len())),
             "{weights}: the firmware embeds our file and reads it in place:\n{out}"
         );
-        assert!(out.contains(&format!("format 2, weights {weights}, crc32 {:08x}", info.checksum)), "{out}");
+        assert!(out.contains(&format!("format 3, weights {weights}, crc32 {:08x}", info.checksum)), "{out}");
         // In place: no weight in RAM, only the forward pass's buffers on the stack.
         let static_ram = run.value("static_ram_bytes").unwrap();
         assert!(static_ram < 1024, "{weights}: {static_ram} bytes of static RAM");

@@ -90,6 +90,7 @@ fn init_policy(seed: i64) -> Vec<u8> {
         action_offset: vec![0.0; 15],
         control_hz: hand.control_hz,
         provenance,
+        task: None,
     };
     export_policy(&vs, "actor", &spec, meta).unwrap()
 }
@@ -307,6 +308,82 @@ fn export_then_import_round_trips_exactly() {
         let (a, b) = (runtime_actions(&vgep, &obs), runtime_actions(&back, &obs));
         assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()), "{name}: actions differ");
     }
+}
+
+/// The shipped policy with a task record, as a policy file.
+fn shipped_with_task() -> Vec<u8> {
+    let task = vge_export::PolicyTask {
+        hand: "allegro".into(),
+        hand_sha256: std::array::from_fn(|i| 0xf0 ^ i as u8),
+        observation_set: "proprio:8".into(),
+        object: "cube".into(),
+        orientation: "palm_down".into(),
+    };
+    PolicyFile { task: Some(task), ..PolicyFile::from_bytes(&shipped()).unwrap() }.to_bytes().unwrap()
+}
+
+#[test]
+fn the_task_record_round_trips_through_metadata_props() {
+    use onnx_protobuf::{Message, ModelProto};
+    let vgep = shipped_with_task();
+    let original = PolicyFile::from_bytes(&vgep).unwrap();
+    let model = onnx::policy_bytes_to_onnx(&vgep).unwrap();
+    let props = ModelProto::parse_from_bytes(&model).unwrap().metadata_props;
+    let get = |k: &str| props.iter().find(|e| e.key == k).map(|e| e.value.clone());
+    assert_eq!(get(onnx::keys::HAND).as_deref(), Some("allegro"));
+    assert_eq!(get(onnx::keys::HAND_SHA256).unwrap(), original.task.as_ref().unwrap().hand_sha256_hex());
+    assert_eq!(get(onnx::keys::OBSERVATION_SET).as_deref(), Some("proprio:8"));
+    let imported = onnx::import(&model, &hand(), &options(None)).unwrap();
+    assert_eq!(imported.policy, original);
+    // A policy without a record writes no task key, and imports without one.
+    let bare = onnx::policy_bytes_to_onnx(&shipped()).unwrap();
+    let props = ModelProto::parse_from_bytes(&bare).unwrap().metadata_props;
+    assert!(!props.iter().any(|e| onnx::keys::TASK.contains(&e.key.as_str())));
+    assert_eq!(onnx::import(&bare, &hand(), &options(None)).unwrap().policy.task, None);
+}
+
+#[test]
+fn a_bad_task_key_is_refused_naming_the_key() {
+    use onnx_protobuf::{Message, ModelProto};
+    let model = onnx::policy_bytes_to_onnx(&shipped_with_task()).unwrap();
+    // The import refusal once `key` is set to `value` (Some) or removed (None).
+    let refusal = |key: &str, value: Option<&str>| {
+        let mut m = ModelProto::parse_from_bytes(&model).unwrap();
+        m.metadata_props.retain(|e| e.key != key);
+        if let Some(v) = value {
+            let mut e = onnx_protobuf::StringStringEntryProto::new();
+            (e.key, e.value) = (key.to_owned(), v.to_owned());
+            m.metadata_props.push(e);
+        }
+        let bytes = m.write_to_bytes().unwrap();
+        onnx::import(&bytes, &hand(), &options(None)).unwrap_err().to_string()
+    };
+    let long = "x".repeat(65);
+    let sha_upper = "AB".repeat(32);
+    for (key, value, why) in [
+        ("hand", Some(""), "is empty"),
+        ("hand", Some(long.as_str()), "65 bytes"),
+        ("hand_sha256", Some("abc"), "3 bytes, not 64 hex digits"),
+        ("hand_sha256", Some(&"zz".repeat(32)), "not a hex digit"),
+        ("hand_sha256", None, "missing"),
+        ("observation_set", Some("proprio:0"), "`proprio:0` is not"),
+        ("observation_set", None, "missing"),
+        ("object", Some(long.as_str()), "65 bytes"),
+        ("orientation", Some(long.as_str()), "65 bytes"),
+    ] {
+        let msg = refusal(key, value);
+        assert!(msg.starts_with(&format!("metadata_props `{key}`")) && msg.contains(why), "{key}: {msg}");
+    }
+    // A task without its hand names the first task key it has.
+    let msg = refusal("hand", None);
+    assert!(msg.starts_with("metadata_props `hand_sha256`") && msg.contains("name the hand"), "{msg}");
+    // Upper-case hex is read; object and orientation may be left out (unspecified).
+    let mut m = ModelProto::parse_from_bytes(&model).unwrap();
+    m.metadata_props.retain(|e| e.key != "object" && e.key != "orientation");
+    m.metadata_props.iter_mut().filter(|e| e.key == "hand_sha256").for_each(|e| e.value = sha_upper.clone());
+    let task =
+        onnx::import(&m.write_to_bytes().unwrap(), &hand(), &options(None)).unwrap().policy.task.unwrap();
+    assert_eq!((task.hand_sha256, task.object.as_str(), task.orientation.as_str()), ([0xab; 32], "", ""));
 }
 
 #[test]

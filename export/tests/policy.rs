@@ -5,8 +5,8 @@
 use tch::Device;
 use tch::nn::VarStore;
 use vge_export::{
-    ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor,
-    export_policy, extract_actor, inspect,
+    ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, PolicyTask, Provenance, WeightType,
+    build_actor, export_policy, extract_actor, inspect,
 };
 use vge_runtime::format::crc32;
 use vge_runtime::{AlignedBytes, HandPolicy, PolicyError, RuntimeError};
@@ -40,6 +40,7 @@ fn hand_meta() -> PolicyMeta {
             seed: 42,
             steps: 2_000_000,
         },
+        task: None,
     }
 }
 
@@ -98,7 +99,7 @@ fn round_trip_write_read() {
         assert_eq!((back.obs_mean, &back.layers[0].bias), (file.obs_mean.clone(), &file.layers[0].bias));
     }
 
-    // The no_std runtime sees the same metadata: version 2 in place from an aligned buffer,
+    // The no_std runtime sees the same metadata: version 3 in place from an aligned buffer,
     // version 1 copied into storage.
     let aligned = AlignedBytes::new(&bytes);
     let policy = HandPolicy::load(&aligned, &mut []).unwrap();
@@ -109,7 +110,8 @@ fn round_trip_write_read() {
     let info = policy.info();
     assert_eq!((info.obs_dim, info.act_dim, info.num_layers), (65, 15, 3));
     assert_eq!(info.num_params, file.num_params());
-    assert_eq!((info.format_version, info.storage_len), (2, 0));
+    assert_eq!((info.format_version, info.storage_len), (3, 0));
+    assert_eq!(info.task, None, "no task given, none recorded");
     assert_eq!(info.control_hz, 20.0);
     assert_eq!(info.obs_clip, Some(5.0));
     assert_eq!(info.provenance.config_hash, "3f2a9c0d5e6b7a81");
@@ -126,10 +128,11 @@ fn inspect_reports_everything() {
     let bytes = small_file();
     let r = inspect::report(&bytes).unwrap();
     assert!(r.checksum_ok() && r.is_valid());
-    assert_eq!((r.format_version, r.file_len, r.num_params()), (2, bytes.len(), 65 * 16 + 16 + 16 * 15 + 15));
+    assert_eq!((r.format_version, r.file_len, r.num_params()), (3, bytes.len(), 65 * 16 + 16 + 16 * 15 + 15));
     let text = r.to_string();
     for needle in [
-        "format version 2",
+        "format version 3",
+        "hand:       vge15 (no hand record), observation set: full",
         "weights:    f32",
         "runtime RAM for parameters: none",
         "ok (loadable by vge-runtime)",
@@ -149,6 +152,111 @@ fn inspect_reports_everything() {
     assert!(!r.checksum_ok() && !r.is_valid());
     assert!(r.to_string().contains("CRC-32 MISMATCH"), "{r}");
     assert!(matches!(inspect::report(&bytes[..10]), Err(ExportError::Format(PolicyError::TooShort { .. }))));
+}
+
+fn allegro_task() -> PolicyTask {
+    PolicyTask {
+        hand: "allegro".into(),
+        hand_sha256: std::array::from_fn(|i| (i * 7) as u8),
+        observation_set: "proprio:4".into(),
+        object: "cube".into(),
+        orientation: String::new(),
+    }
+}
+
+#[test]
+fn the_task_record_round_trips_in_every_weight_type() {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![16], act_dim: 15 };
+    let vs = actor_store(&spec, 8);
+    let meta = PolicyMeta { task: Some(allegro_task()), ..hand_meta() };
+    let bytes = export_policy(&vs, "actor", &spec, meta).unwrap();
+    let file = PolicyFile::from_bytes(&bytes).unwrap();
+    assert_eq!(file.task, Some(allegro_task()));
+    for weights in [WeightType::F16, WeightType::I8] {
+        let (back, _) = PolicyFile::decode(&file.encode(weights).unwrap(), true).unwrap();
+        assert_eq!(back.task, Some(allegro_task()), "{weights}");
+    }
+    let aligned = AlignedBytes::new(&bytes);
+    let policy = HandPolicy::load(&aligned, &mut []).unwrap();
+    let task = allegro_task();
+    assert_eq!(policy.info().format_version, 3);
+    assert_eq!(policy.info().task, Some(task.info()));
+    // Without a record only its absent tag is written: still version 3, no task.
+    let bare = PolicyFile { task: None, ..file.clone() }.to_bytes().unwrap();
+    assert_eq!(vge_runtime::policy::inspect(&bare).unwrap().task, None);
+    assert!(bare.len() < bytes.len());
+
+    let text = inspect::report(&bytes).unwrap().to_string();
+    let sha: String = task.hand_sha256.iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(task.hand_sha256_hex(), sha);
+    for needle in [
+        format!("hand:       allegro (MJCF sha256 {sha})"),
+        "task:       observation set proprio:4, object cube, orientation unspecified".to_owned(),
+    ] {
+        assert!(text.contains(&needle), "{needle:?} not in\n{text}");
+    }
+    // Version 1 cannot say which hand: refused rather than read back as vge15.
+    assert!(matches!(file.to_bytes_v1(), Err(ExportError::InvalidSpec(m)) if m.contains("allegro")));
+    assert!(PolicyFile { task: None, ..file }.to_bytes_v1().is_ok());
+}
+
+#[test]
+fn a_malformed_task_is_rejected_when_encoding() {
+    let spec = ActorSpec { obs_dim: 65, hidden: vec![8], act_dim: 15 };
+    let vs = actor_store(&spec, 2);
+    let enc =
+        |task: PolicyTask| export_policy(&vs, "actor", &spec, PolicyMeta { task: Some(task), ..hand_meta() });
+    let t = PolicyTask { hand: String::new(), ..allegro_task() };
+    assert!(matches!(enc(t), Err(ExportError::Format(PolicyError::TaskName { field: "task.hand", len: 0 }))));
+    let t = PolicyTask { hand: "h".repeat(65), ..allegro_task() };
+    assert!(matches!(
+        enc(t),
+        Err(ExportError::Format(PolicyError::TaskName { field: "task.hand", len: 65 }))
+    ));
+    let t = PolicyTask { orientation: "o".repeat(200), ..allegro_task() };
+    assert!(matches!(
+        enc(t),
+        Err(ExportError::Format(PolicyError::TaskName { field: "task.orientation", len: 200 }))
+    ));
+    for set in ["", "proprio:0", "proprio:65", "proprio:04", "FULL", "vision"] {
+        let t = PolicyTask { observation_set: set.into(), ..allegro_task() };
+        assert!(matches!(enc(t), Err(ExportError::Format(PolicyError::BadObservationSet { .. }))), "{set:?}");
+    }
+    let t = PolicyTask { observation_set: "full".into(), hand: "vge15".into(), ..allegro_task() };
+    assert!(enc(t).is_ok());
+}
+
+/// Every policy file stored in the repository (the shipped policy, the results' and the
+/// fixtures') is version 1 or 2 and still loads unchanged, as vge's own hand with the full
+/// observation set; re-encoded it becomes version 3 without a task record, same model.
+#[test]
+fn stored_policy_files_still_load_as_the_unrecorded_hand() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let mut stack = vec![root.join("policies"), root.join("docs/results"), root.join("tests/fixtures")];
+    let mut files = Vec::new();
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "vgep") {
+                files.push(path);
+            }
+        }
+    }
+    assert!(files.len() > 100, "{} policy files found", files.len());
+    for path in &files {
+        let bytes = std::fs::read(path).unwrap();
+        let info = vge_runtime::policy::inspect(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert!(info.format_version <= 2 && info.task.is_none(), "{}", path.display());
+    }
+    let shipped = std::fs::read(root.join("policies/cube.vgep")).unwrap();
+    let text = inspect::report(&shipped).unwrap().to_string();
+    assert!(text.contains("hand:       vge15 (file predates hand records), observation set: full"), "{text}");
+    let file = PolicyFile::from_bytes(&shipped).unwrap();
+    let again = file.to_bytes().unwrap();
+    assert_eq!(vge_runtime::policy::inspect(&again).unwrap().format_version, 3);
+    assert_eq!(PolicyFile::from_bytes(&again).unwrap(), file);
 }
 
 #[test]
@@ -192,16 +300,16 @@ fn wrong_magic_and_version_are_rejected() {
     bad[..8].copy_from_slice(b"VGEPOLCZ");
     assert!(matches!(PolicyFile::from_bytes(&bad), Err(ExportError::Format(PolicyError::BadMagic))));
     let mut bad = bytes.clone();
-    bad[8..10].copy_from_slice(&3u16.to_le_bytes());
+    bad[8..10].copy_from_slice(&4u16.to_le_bytes());
     refix(&mut bad);
     assert!(matches!(
         PolicyFile::from_bytes(&bad),
-        Err(ExportError::Format(PolicyError::UnsupportedVersion { found: 3, supported: 2 }))
+        Err(ExportError::Format(PolicyError::UnsupportedVersion { found: 4, supported: 3 }))
     ));
     let mut storage = vec![0.0f32; 4096];
     assert_eq!(
         HandPolicy::load(&bad, &mut storage).unwrap_err(),
-        PolicyError::UnsupportedVersion { found: 3, supported: 2 }
+        PolicyError::UnsupportedVersion { found: 4, supported: 3 }
     );
 }
 
@@ -248,7 +356,12 @@ fn every_truncation_and_bit_flip_is_rejected() {
         let err = HandPolicy::load(&flipped, &mut storage).unwrap_err();
         match i {
             0..8 => assert_eq!(err, PolicyError::BadMagic),
-            8..10 => assert!(matches!(err, PolicyError::UnsupportedVersion { .. })),
+            // Version 3 with bit 0 or 1 flipped is 2 or 1, versions this reader knows: the
+            // checksum catches those.
+            8 if mask <= 2 => {
+                assert!(matches!(err, PolicyError::ChecksumMismatch { .. }), "bit {bit}: {err}")
+            }
+            8..10 => assert!(matches!(err, PolicyError::UnsupportedVersion { .. }), "bit {bit}: {err}"),
             10..12 => assert!(matches!(err, PolicyError::UnsupportedFlags { .. })),
             12..16 => assert!(matches!(err, PolicyError::LengthMismatch { .. })),
             _ => assert!(matches!(err, PolicyError::ChecksumMismatch { .. }), "bit {bit}: {err}"),

@@ -31,6 +31,7 @@ fn runtime_policy_matches_tch_on_10000_observations() {
         action_offset: offset.clone(),
         control_hz: 20.0,
         provenance: Provenance { vge_version: "0.1.0".into(), config_hash: "x".into(), seed: 11, steps: 1 },
+        task: None,
     };
     // In a 16-byte aligned buffer, as the bridge and the firmware hold it: version 2's arrays
     // are read in place.

@@ -3,12 +3,12 @@
 //! root; seeds in `fuzz/seeds/`).
 //!
 //! An input starting with the magic is decoded as a whole file. Any other input is taken as a
-//! format version (its first byte: odd 1, even 2) and a payload, framed with a valid header
-//! and CRC-32 first, so that mutations get past the checksum into the postcard decoder, the
-//! version-2 array layout and the field validation. Every file is loaded from a 16-byte
-//! aligned copy (version 2 reads its arrays in place) and from a copy one byte off (which
-//! version 2 must refuse with a typed error, never a panic). Whatever loads is run on an
-//! observation taken from the input.
+//! format version (its first byte modulo 3: 1 is version 1, 2 is 2, 0 is 3) and a payload,
+//! framed with a valid header and CRC-32 first, so that mutations get past the checksum into
+//! the postcard decoder, the aligned array layout (versions 2 and 3), version 3's task record
+//! and the field validation. Every file is loaded from a 16-byte aligned copy (versions 2 and
+//! 3 read their arrays in place) and from a copy one byte off (which they must refuse with a
+//! typed error, never a panic). Whatever loads is run on an observation taken from the input.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -28,6 +28,10 @@ fn exercise(file: &[u8], storage: &mut [f32]) {
         assert_eq!(policy.obs_dim(), info.obs_dim);
         let _ = info.obs_layout.iter().count();
         let _ = info.action_names.iter().count();
+        if let Some(task) = info.task {
+            assert!(!task.hand.is_empty() && vge_runtime::policy::is_observation_set(task.observation_set));
+            let _ = (task.hand_sha256.len(), task.object.len(), task.orientation.len());
+        }
         let mut obs = [0.0f32; 64];
         for (o, c) in obs.iter_mut().zip(file.chunks_exact(4).rev()) {
             *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
@@ -47,7 +51,11 @@ fuzz_target!(|data: &[u8]| {
     } else if let Some((&version, payload)) = data.split_first()
         && let Ok(len) = u32::try_from(payload.len())
     {
-        let version = if version % 2 == 1 { 1 } else { 2 };
+        let version = match version % 3 {
+            1 => 1,
+            2 => 2,
+            _ => 3,
+        };
         let mut file = Vec::with_capacity(payload.len() + 20);
         file.extend_from_slice(&header(version, len));
         file.extend_from_slice(payload);

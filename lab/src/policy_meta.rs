@@ -25,5 +25,6 @@ pub fn hand_policy_meta(env: &EnvConfig, layout: &ObservationLayout, provenance:
         action_offset: vec![0.0; act_dim],
         control_hz: env.control_hz,
         provenance,
+        task: None,
     }
 }

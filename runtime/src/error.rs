@@ -133,6 +133,13 @@ pub enum PolicyError {
     EmptyName { field: &'static str, index: usize },
     /// The observation layout's slices are not contiguous, non-empty and covering `0..obs_dim`.
     BadLayout { index: usize },
+    /// A name in the task record (version 3) is longer than
+    /// [`MAX_TASK_NAME_LEN`](crate::policy::MAX_TASK_NAME_LEN) bytes, or the hand's is empty
+    /// (a task record always names its hand). `len` is the name's length in bytes.
+    TaskName { field: &'static str, len: usize },
+    /// The task record's observation set is not `full`, `proprio` or `proprio:K` (K from 1 to
+    /// [`MAX_PROPRIO_HISTORY`](crate::policy::MAX_PROPRIO_HISTORY), decimal, no leading zero).
+    BadObservationSet { offset: usize },
     /// A layer record holds an unknown activation code.
     UnknownActivation { layer: usize, code: u8 },
     /// The caller's storage holds fewer `f32` than the policy needs.
@@ -187,6 +194,15 @@ impl fmt::Display for PolicyError {
             Self::BadLayout { index } => write!(
                 f,
                 "observation layout entry {index} does not continue a contiguous cover of 0..obs_dim"
+            ),
+            Self::TaskName { field, len: 0 } => write!(f, "`{field}` is empty: a task record names its hand"),
+            Self::TaskName { field, len } => {
+                write!(f, "`{field}` is {len} bytes, longer than {} bytes", crate::policy::MAX_TASK_NAME_LEN)
+            }
+            Self::BadObservationSet { offset } => write!(
+                f,
+                "`task.observation_set` at payload offset {offset} is not `full`, `proprio` or `proprio:K` (K 1 to {})",
+                crate::policy::MAX_PROPRIO_HISTORY
             ),
             Self::UnknownActivation { layer, code } => {
                 write!(f, "layer {layer} has unknown activation code {code}")

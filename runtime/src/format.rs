@@ -3,7 +3,7 @@
 //! ```text
 //! offset  size  field
 //! 0       8     magic  b"VGEPOLCY"
-//! 8       2     format version, u16 little-endian (1 or 2)
+//! 8       2     format version, u16 little-endian (1, 2 or 3)
 //! 10      2     flags, u16 little-endian, must be 0
 //! 12      4     payload length N, u32 little-endian
 //! 16      N     payload: postcard encoding of the policy (see `policy.rs`)
@@ -14,8 +14,9 @@ use crate::PolicyError;
 
 /// First eight bytes of every policy file.
 pub const MAGIC: [u8; 8] = *b"VGEPOLCY";
-/// The newest format version: the one `vge-export` writes (arrays aligned, used in place).
-pub const FORMAT_VERSION: u16 = 2;
+/// The newest format version: the one `vge-export` writes (arrays aligned, used in place,
+/// and an optional task record saying which hand and observation set the policy is for).
+pub const FORMAT_VERSION: u16 = 3;
 /// The oldest version this runtime still reads (arrays copied into caller storage).
 pub const OLDEST_VERSION: u16 = 1;
 /// Bytes before the payload: magic, version, flags, payload length.

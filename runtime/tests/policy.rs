@@ -1,6 +1,6 @@
 //! Version-1 policy-file decoding against the byte-level test vector of
 //! `docs/policy-format.md` (written by hand, independently of `vge-export`'s serde encoder),
-//! and every framing error. Version 2: `policy_v2.rs`.
+//! and every framing error. Version 2: `policy_v2.rs`; version 3: `policy_v3.rs`.
 #![allow(clippy::unwrap_used, clippy::indexing_slicing)]
 
 use vge_runtime::format::{self, FORMAT_VERSION, crc32};
@@ -43,6 +43,7 @@ fn example_file_decodes_and_runs() {
     assert_eq!(info.checksum, 0x869F_80F1);
     assert_eq!(info.control_hz, 50.0);
     assert_eq!(info.obs_clip, None);
+    assert_eq!(info.task, None, "version 1 has no task record");
     let p = info.provenance;
     assert_eq!((p.vge_version, p.config_hash, p.seed, p.steps), ("0.1.0", "abc", 7, 1000));
     let layout: Vec<_> = info.obs_layout.iter().map(|s| (s.name, s.start, s.end)).collect();
@@ -102,7 +103,7 @@ fn framing_errors_are_typed() {
     let mut bad = ok.clone();
     bad[0] = b'X';
     assert_eq!(load(&bad), Err(PolicyError::BadMagic));
-    for version in [0, 3] {
+    for version in [0, 4] {
         let mut bad = ok.clone();
         bad[8] = version;
         assert_eq!(

@@ -91,6 +91,7 @@ fn example_decodes_and_runs_in_place() {
     let layout: Vec<_> = info.obs_layout.iter().map(|s| (s.name, s.start, s.end)).collect();
     assert_eq!(layout, [("q", 0, 1), ("obj", 1, 2)]);
     assert_eq!(info.action_names.iter().collect::<Vec<_>>(), ["a0"]);
+    assert_eq!(info.task, None, "version 2 has no task record");
 
     // No storage: every array is borrowed from the static.
     let policy = HandPolicy::load(&ALIGNED_EXAMPLE.0, &mut []).unwrap();

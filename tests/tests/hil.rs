@@ -314,7 +314,7 @@ fn print_timing(what: &str, report: &str) {
     );
 }
 
-/// An untrained but real policy file (format version 2, f32 weights), exported from a seeded
+/// An untrained but real policy file (format version 3, f32 weights), exported from a seeded
 /// tch actor by `vge export`.
 fn exported_policy(seed: u64) -> std::path::PathBuf {
     exported_policy_as(seed, "f32")
@@ -332,7 +332,7 @@ fn exported_policy_as(seed: u64, weights: &str) -> std::path::PathBuf {
     assert!(out.status.success(), "vge export failed: {}", String::from_utf8_lossy(&out.stderr));
     let bytes = std::fs::read(&path).expect("read the policy file");
     let info = vge_runtime::policy::inspect(&bytes).expect("a valid policy file");
-    assert_eq!((info.format_version, info.weight_type.name()), (2, weights));
+    assert_eq!((info.format_version, info.weight_type.name()), (3, weights));
     path
 }
 

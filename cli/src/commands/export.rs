@@ -34,7 +34,7 @@ pub struct ExportArgs {
     /// policy.vgep as i8 for a microcontroller; its provenance is kept.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["seed", "hidden", "steps"])]
     policy: Option<PathBuf>,
-    /// How the weight matrices are stored (format version 2): f32 (exact), f16 (half the
+    /// How the weight matrices are stored (format version 3): f32 (exact), f16 (half the
     /// flash, ~3 significant digits) or i8 (a quarter, per-row scales; inputs quantised per
     /// layer). See docs/policy-format.md.
     #[arg(long, value_enum, default_value_t = Weights::F32)]
@@ -95,7 +95,12 @@ pub fn run(args: ExportArgs) -> anyhow::Result<()> {
         return export_onnx(&args, &bytes);
     }
     std::fs::write(&args.out, &bytes).with_context(|| format!("writing {}", args.out.display()))?;
-    println!("wrote {} ({} bytes, {weights} weights, format version 2)", args.out.display(), bytes.len());
+    let version = vge_runtime::format::FORMAT_VERSION;
+    println!(
+        "wrote {} ({} bytes, {weights} weights, format version {version})",
+        args.out.display(),
+        bytes.len()
+    );
     Ok(())
 }
 

@@ -3,8 +3,8 @@
 //! [`export`] writes a policy file as one ONNX graph from the raw observation to the action
 //! the bridge sends: `Sub` (mean), `Div` (std), optionally `Clip`, one `Gemm` (+ `Relu` or
 //! `Tanh`) per layer, `Mul` (action scale) and `Add` (action offset), in opset
-//! [`OPSET_VERSION`], with the observation layout, action names, control rate and provenance
-//! in `metadata_props`. [`import`] reads an MLP actor back (as torch's exporter writes one,
+//! [`OPSET_VERSION`], with the observation layout, action names, control rate, provenance and
+//! task (hand, observation set) in `metadata_props`. [`import`] reads an MLP actor back (as torch's exporter writes one,
 //! or as [`export`] does) into a policy file for the hand, and refuses any graph the runtime
 //! cannot run exactly, naming the node.
 //!
@@ -57,10 +57,23 @@ pub mod keys {
     pub const SEED: &str = "seed";
     /// Provenance: environment steps trained (decimal).
     pub const STEPS: &str = "steps";
+    /// Task: the hand's name (1 to 64 bytes). The task keys are written only for a policy
+    /// with a task record; a file without `hand` has none (vge's own hand `vge15`, `full`).
+    pub const HAND: &str = "hand";
+    /// Task: SHA-256 of the hand's MJCF description, 64 hex digits (written lowercase).
+    pub const HAND_SHA256: &str = "hand_sha256";
+    /// Task: `full`, `proprio` or `proprio:K` (K 1 to 64).
+    pub const OBSERVATION_SET: &str = "observation_set";
+    /// Task: the object manipulated (at most 64 bytes); absent or empty when unspecified.
+    pub const OBJECT: &str = "object";
+    /// Task: the hand's orientation (at most 64 bytes); absent or empty when unspecified.
+    pub const ORIENTATION: &str = "orientation";
+    /// Every task key, `hand` first.
+    pub const TASK: [&str; 5] = [HAND, HAND_SHA256, OBSERVATION_SET, OBJECT, ORIENTATION];
 }
 
 /// Reads the ONNX model at `onnx` (at most [`MAX_ONNX_FILE_LEN`] bytes), imports it with
-/// [`import`] and writes the policy file (format version 2, `f32` weights) to `out`. Nothing
+/// [`import`] and writes the policy file (format version 3, `f32` weights) to `out`. Nothing
 /// is written when the import is refused.
 pub fn import_file(
     onnx: &Path,

@@ -26,7 +26,7 @@ use vge_runtime::format::{ACT_IDENTITY, ACT_RELU, ACT_TANH};
 
 use super::tensor::{Floats, read_floats};
 use super::{OnnxError, keys};
-use crate::{LayerRecord, ObsNorm, ObsSlice, PolicyFile, Provenance};
+use crate::{LayerRecord, ObsNorm, ObsSlice, PolicyFile, PolicyTask, Provenance};
 
 /// What an imported policy must fit: the hand's observation and actions, and the runtime's
 /// capacity (`vge_runtime::HandPolicy`: 4 layers of width 256).
@@ -194,6 +194,7 @@ pub fn import(bytes: &[u8], target: &ImportTarget, options: &ImportOptions) -> R
         action_names: target.action_names.clone(),
         action_scale: scale,
         action_offset: offset,
+        task: meta.task()?,
     };
     policy.to_bytes()?;
     Ok(Imported { policy, notes })
@@ -1047,6 +1048,64 @@ impl<'a> Metadata<'a> {
             steps,
         }))
     }
+
+    /// The task record, when the file names a hand (a file `vge export` wrote from a policy
+    /// with one); each key checked as the policy file checks its field.
+    fn task(&self) -> Result<Option<PolicyTask>, OnnxError> {
+        use vge_runtime::policy::{check_task_name, is_observation_set};
+        let Some(hand) = self.props.get(keys::HAND) else {
+            return match keys::TASK.iter().find(|k| self.props.contains_key(**k)) {
+                Some(key) => {
+                    Err(Self::bad(key, format!("a task key without `{}`: name the hand", keys::HAND)))
+                }
+                None => Ok(None),
+            };
+        };
+        let name = |key: &'static str, value: &str, required: bool| {
+            check_task_name(key, value, required)
+                .map(|()| value.to_owned())
+                .map_err(|e| Self::bad(key, e.to_string()))
+        };
+        let hand = name(keys::HAND, hand, true)?;
+        let missing =
+            |key: &str| Self::bad(key, format!("missing: the file names its hand (`{}`)", keys::HAND));
+        let sha = self.props.get(keys::HAND_SHA256).ok_or_else(|| missing(keys::HAND_SHA256))?;
+        let hand_sha256 = parse_sha256(sha).ok_or_else(|| {
+            let why = if sha.len() == 64 {
+                format!("`{sha}` holds a character that is not a hex digit")
+            } else {
+                format!("{} bytes, not 64 hex digits", sha.len())
+            };
+            Self::bad(keys::HAND_SHA256, format!("{why} (the SHA-256 of the hand's MJCF description)"))
+        })?;
+        let set = self.props.get(keys::OBSERVATION_SET).ok_or_else(|| missing(keys::OBSERVATION_SET))?;
+        if !is_observation_set(set) {
+            return Err(Self::bad(
+                keys::OBSERVATION_SET,
+                format!("`{set:.72}` is not `full`, `proprio` or `proprio:K` (K 1 to 64)"),
+            ));
+        }
+        Ok(Some(PolicyTask {
+            hand,
+            hand_sha256,
+            observation_set: (*set).to_owned(),
+            object: name(keys::OBJECT, self.props.get(keys::OBJECT).unwrap_or(&""), false)?,
+            orientation: name(keys::ORIENTATION, self.props.get(keys::ORIENTATION).unwrap_or(&""), false)?,
+        }))
+    }
+}
+
+/// 64 hex digits (either case) as 32 bytes.
+fn parse_sha256(text: &str) -> Option<[u8; 32]> {
+    let digits = text.as_bytes();
+    if digits.len() != 64 || !digits.iter().all(u8::is_ascii_hexdigit) {
+        return None;
+    }
+    let mut sha = [0u8; 32];
+    for (byte, pair) in sha.iter_mut().zip(digits.chunks_exact(2)) {
+        *byte = u8::from_str_radix(std::str::from_utf8(pair).ok()?, 16).ok()?;
+    }
+    Some(sha)
 }
 
 fn parse_layout(text: &str) -> Result<Vec<ObsSlice>, String> {

@@ -119,7 +119,7 @@ fn metadata(policy: &PolicyFile) -> Vec<StringStringEntryProto> {
         .map(|s| serde_json::json!({ "name": s.name, "start": s.start, "end": s.end }))
         .collect::<Vec<_>>();
     let p = &policy.provenance;
-    let entries = [
+    let mut entries = vec![
         (keys::OBS_LAYOUT, json(serde_json::Value::Array(layout))),
         (keys::ACTION_NAMES, json(serde_json::json!(policy.action_names))),
         (keys::OBS_DIM, policy.obs_dim.to_string()),
@@ -134,6 +134,15 @@ fn metadata(policy: &PolicyFile) -> Vec<StringStringEntryProto> {
         (keys::SEED, p.seed.to_string()),
         (keys::STEPS, p.steps.to_string()),
     ];
+    if let Some(t) = &policy.task {
+        entries.extend([
+            (keys::HAND, t.hand.clone()),
+            (keys::HAND_SHA256, t.hand_sha256_hex()),
+            (keys::OBSERVATION_SET, t.observation_set.clone()),
+            (keys::OBJECT, t.object.clone()),
+            (keys::ORIENTATION, t.orientation.clone()),
+        ]);
+    }
     entries
         .into_iter()
         .map(|(k, v)| {

@@ -14,7 +14,12 @@
 //! once into a caller-given `&mut [f32]` (size it with [`PolicyInfo::storage_len`] or
 //! [`storage_len`]; version 2 needs none, `storage_len` is 0).
 //!
-//! Names, provenance strings and layouts stay borrowed from the file bytes in both versions.
+//! **Version 3** is version 2 with an optional task record at the end of its metadata (which
+//! hand, observation set, object and orientation the policy was trained for, [`TaskInfo`]);
+//! its arrays are read in place as version 2's.
+//!
+//! Names, provenance strings, layouts and the task record stay borrowed from the file bytes in
+//! every version.
 
 use heapless::Vec;
 
@@ -23,10 +28,15 @@ use crate::{Layer, Mlp, PolicyError, RuntimeError, WeightType};
 
 mod fields;
 mod parse;
+mod task;
 
 pub use fields::{F32s, Names, ObsLayout, ObsSlice, TENSOR_ALIGN};
 use parse::parse;
 pub use parse::{RawLayer, RawWeights, Vectors};
+pub use task::{
+    MAX_PROPRIO_HISTORY, MAX_TASK_NAME_LEN, TaskInfo, UNRECORDED_HAND, UNRECORDED_OBSERVATION_SET,
+    check_task_name, is_observation_set,
+};
 
 /// Layers a [`HandPolicy`] holds at most (the trainer refuses configs beyond it).
 pub const HAND_MAX_LAYERS: usize = 4;
@@ -57,8 +67,8 @@ pub const fn storage_len(dims: &[usize]) -> usize {
     total.saturating_add(obs.saturating_mul(2)).saturating_add(act.saturating_mul(2))
 }
 
-/// Bytes a policy file may hold besides its parameter arrays: its names and provenance
-/// strings, and the header, trailer, varints and padding around its fields. Generous (the
+/// Bytes a policy file may hold besides its parameter arrays: its names, provenance strings
+/// and task record, and the header, trailer, varints and padding around its fields. Generous (the
 /// hand's names take well under 1 KiB); it bounds [`max_file_len`].
 pub const MAX_TEXT_LEN: usize = 1 << 20;
 
@@ -106,6 +116,10 @@ pub struct PolicyInfo<'a> {
     /// Observations are clamped to `[-clip, clip]` after normalisation, when set.
     pub obs_clip: Option<f32>,
     pub action_names: Names<'a>,
+    /// Which hand and observation set the policy was trained for: the task record of a
+    /// version-3 file. `None` for versions 1 and 2 and for a version-3 file without one (a
+    /// generic MLP): such a policy is for [`UNRECORDED_HAND`] with [`UNRECORDED_OBSERVATION_SET`].
+    pub task: Option<TaskInfo<'a>>,
     /// Number of layers.
     pub num_layers: usize,
     /// Widest layer input or output (the `MAX_WIDTH` a [`Policy`] needs).
@@ -114,8 +128,8 @@ pub struct PolicyInfo<'a> {
     pub num_params: usize,
     /// How the weight matrices are stored (`F32` in version 1).
     pub weight_type: WeightType,
-    /// `f32`s of storage [`Policy::load`] needs: 0 for version 2, whose arrays are borrowed
-    /// in place.
+    /// `f32`s of storage [`Policy::load`] needs: 0 for versions 2 and 3, whose arrays are
+    /// borrowed in place.
     pub storage_len: usize,
 }
 
@@ -125,8 +139,8 @@ pub fn inspect(bytes: &[u8]) -> Result<PolicyInfo<'_>, PolicyError> {
     parse(bytes, true, |_, _| Ok(())).map(|(info, _)| info)
 }
 
-/// An `f32` array of the file as the network reads it: borrowed in place (version 2, which
-/// is the only version with aligned arrays, and whose files have `storage_len` 0) or decoded
+/// An `f32` array of the file as the network reads it: borrowed in place (versions 2 and 3,
+/// the versions with aligned arrays, whose files have `storage_len` 0) or decoded
 /// into the next `storage` (version 1, whose arrays follow a varint at any offset).
 fn place<'a>(
     values: F32s<'a>,
@@ -163,10 +177,11 @@ pub struct Policy<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> {
 
 impl<'a, const MAX_LAYERS: usize, const MAX_WIDTH: usize> Policy<'a, MAX_LAYERS, MAX_WIDTH> {
     /// Validates `bytes` (magic, version, length, CRC-32, every field, finite parameters,
-    /// dimensions against `MAX_LAYERS` / `MAX_WIDTH`). A version-2 file's arrays are then
+    /// dimensions against `MAX_LAYERS` / `MAX_WIDTH`). A version-2 or -3 file's arrays are then
     /// borrowed in place (alignment checked; `storage` is not used and may be empty); a
     /// version-1 file's are decoded into the front of `storage`, which must hold at least
-    /// [`PolicyInfo::storage_len`] `f32`. Names and provenance stay borrowed from `bytes`.
+    /// [`PolicyInfo::storage_len`] `f32`. Names, provenance and the task record stay borrowed
+    /// from `bytes`.
     pub fn load(bytes: &'a [u8], storage: &'a mut [f32]) -> Result<Self, PolicyError> {
         let got = storage.len();
         let mut rest: &'a mut [f32] = storage;

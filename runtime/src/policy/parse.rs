@@ -1,8 +1,9 @@
-//! The validating parse of both format versions: one pass that checks every field and hands
+//! The validating parse of every format version: one pass that checks every field and hands
 //! each layer, parameters still in the file, to the caller.
 
 use crate::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH, Frame};
 use crate::policy::fields::{F32s, Names, ObsLayout, Reader};
+use crate::policy::task::{TaskInfo, task};
 use crate::policy::{PolicyInfo, Provenance};
 use crate::{Activation, PolicyError, RuntimeError, WeightType};
 
@@ -41,7 +42,7 @@ pub struct Vectors<'a> {
     pub action_offset: F32s<'a>,
 }
 
-/// Parses and fully validates a policy file of either version (the CRC only when
+/// Parses and fully validates a policy file of any version (the CRC only when
 /// `verify_crc`), handing each layer to `on_layer` in order.
 pub(crate) fn parse<'a>(
     bytes: &'a [u8],
@@ -51,11 +52,12 @@ pub(crate) fn parse<'a>(
     let frame = format::check_frame_with(bytes, verify_crc)?;
     match frame.version {
         1 => parse_v1(frame, on_layer),
+        // 2 or 3: `check_frame` refuses any other.
         _ => parse_v2(frame, on_layer),
     }
 }
 
-/// Fields 1-8, the same in both versions.
+/// Fields 1-8, the same in every version.
 struct Head<'a> {
     provenance: Provenance<'a>,
     control_hz: f32,
@@ -271,12 +273,14 @@ fn parse_v1<'a>(
         .num_params
         .saturating_add(head.obs_dim.saturating_mul(2))
         .saturating_add(head.act_dim.saturating_mul(2));
-    let info = info(frame, head, obs_clip, action_names, num_layers, &totals, WeightType::F32, storage_len);
+    let info =
+        info(frame, head, obs_clip, action_names, None, num_layers, &totals, WeightType::F32, storage_len);
     Ok((info, Vectors { obs_mean, obs_std, action_scale, action_offset }))
 }
 
-/// Version 2: a `u32` metadata length, the postcard metadata (no arrays), then every array
-/// at a 16-byte aligned file offset in the layout the kernels read (docs/policy-format.md).
+/// Versions 2 and 3: a `u32` metadata length, the postcard metadata (no arrays; version 3
+/// ends it with the optional task record), then every array at a 16-byte aligned file offset
+/// in the layout the kernels read (docs/policy-format.md).
 fn parse_v2<'a>(
     frame: Frame<'a>,
     mut on_layer: impl FnMut(usize, RawLayer<'a>) -> Result<(), PolicyError>,
@@ -304,6 +308,7 @@ fn parse_v2<'a>(
         layer_shape(&mut r, layer)?;
     }
     let action_names = action_names(&mut r, head.act_dim)?;
+    let task = if frame.version >= 3 { task(&mut r)? } else { None };
     if r.pos != meta_end {
         return Err(bad_meta_len);
     }
@@ -342,7 +347,7 @@ fn parse_v2<'a>(
     check_action_map(&action_scale, &action_offset, head.act_dim)?;
     end_of_payload(&r)?;
 
-    let info = info(frame, head, obs_clip, action_names, num_layers, &totals, weight_type, 0);
+    let info = info(frame, head, obs_clip, action_names, task, num_layers, &totals, weight_type, 0);
     Ok((info, Vectors { obs_mean, obs_std, action_scale, action_offset }))
 }
 
@@ -367,6 +372,7 @@ fn info<'a>(
     head: Head<'a>,
     obs_clip: Option<f32>,
     action_names: Names<'a>,
+    task: Option<TaskInfo<'a>>,
     num_layers: usize,
     totals: &Totals,
     weight_type: WeightType,
@@ -382,6 +388,7 @@ fn info<'a>(
         obs_layout: head.obs_layout,
         obs_clip,
         action_names,
+        task,
         num_layers,
         max_width: totals.max_width,
         num_params: totals.num_params,
