@@ -277,19 +277,19 @@ fn a_run_without_a_checkpoint_is_refused_with_a_typed_error() {
 #[ignore = "a measurement: writes about 1.3 GB"]
 fn measure_save_and_verify_with_a_full_replay_buffer() {
     use std::time::Instant;
-    use vge_sim::{NUM_JOINTS, OBS_DIM};
     use vge_trainer::learner;
     use vge_trainer::replay::{ReplayBuffer, Source};
 
     let c = Config::default();
     let n = c.sac.buffer_size;
-    let sac = learner::build_seeded(vge_trainer::learner::LearnerConfig::for_hand(&c), tch::Device::Cpu, 0)
-        .expect("sac");
-    let mut replay = ReplayBuffer::new(n, OBS_DIM, NUM_JOINTS).expect("replay");
-    let mut obs = [0.0f32; OBS_DIM];
-    let action = [0.1f32; NUM_JOINTS];
+    let learner_config = vge_trainer::learner::LearnerConfig::for_hand(&c).expect("sizes");
+    let (obs_dim, act_dim) = (learner_config.columns.row_dim() as usize, learner_config.net.act_dim as usize);
+    let sac = learner::build_seeded(learner_config.clone(), tch::Device::Cpu, 0).expect("sac");
+    let mut replay = ReplayBuffer::new(n, obs_dim, act_dim).expect("replay");
+    let mut obs = vec![0.0f32; obs_dim];
+    let action = vec![0.1f32; act_dim];
     for k in 0..n {
-        obs[k % OBS_DIM] = k as f32;
+        obs[k % obs_dim] = k as f32;
         replay.push(&obs, &action, 0.5, &obs, false, Source::Learner, Some(&action)).expect("push");
     }
     let root = common::temp_dir("ckpt-measure");
@@ -316,10 +316,8 @@ fn measure_save_and_verify_with_a_full_replay_buffer() {
     }
     let bytes: u64 = manifest.expect("manifest").files.iter().map(|f| f.bytes).sum();
     let t = Instant::now();
-    let mut sac2 =
-        learner::build_seeded(vge_trainer::learner::LearnerConfig::for_hand(&c), tch::Device::Cpu, 1)
-            .expect("sac");
-    let mut replay2 = ReplayBuffer::new(n, OBS_DIM, NUM_JOINTS).expect("replay");
+    let mut sac2 = learner::build_seeded(learner_config, tch::Device::Cpu, 1).expect("sac");
+    let mut replay2 = ReplayBuffer::new(n, obs_dim, act_dim).expect("replay");
     let ckpt = checkpoint::open(&root).expect("open");
     let open_s = t.elapsed().as_secs_f64();
     ckpt.load(sac2.as_mut(), Some(&mut replay2)).expect("load");

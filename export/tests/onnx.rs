@@ -65,6 +65,7 @@ fn hand() -> ImportTarget {
         control_hz: p.control_hz,
         max_layers: HAND_MAX_LAYERS,
         max_width: HAND_MAX_WIDTH,
+        task: p.task,
     }
 }
 

@@ -6,7 +6,6 @@
 use std::path::{Path, PathBuf};
 
 use vge_lab::config::{Config, load_config};
-use vge_sim::kinematics::{FINGER_TORQUE_CAP_NM, THUMB_TORQUE_CAP_NM};
 use vge_sim::{EnvConfig, HandOrientation};
 
 const VARIANT_KEYS: [&str; 6] = [
@@ -34,9 +33,10 @@ fn configs_without_the_variant_keys_serialise_as_before() {
     for key in VARIANT_KEYS {
         assert!(!text.contains(key), "{key} is written at its default, changing every config's hash");
     }
-    assert_eq!(base.env.env_config(0), EnvConfig { episode_length_steps: 400, ..base.env.env_config(0) });
+    let base_env = base.env.env_config(0).expect("env");
+    assert_eq!(base_env, EnvConfig { episode_length_steps: 400, ..base_env.clone() });
     let default_env = EnvConfig::default();
-    let env = base.env.env_config(0);
+    let env = base_env;
     assert_eq!(env.object, default_env.object);
     assert_eq!(env.hand, default_env.hand);
     assert_eq!(env.physics, default_env.physics);
@@ -45,12 +45,12 @@ fn configs_without_the_variant_keys_serialise_as_before() {
 #[test]
 fn each_variant_config_changes_its_key_only() {
     let base = load("configs/cube-fg-rl.toml", &[]).expect("base config");
-    let base_env = base.env.env_config(0);
+    let base_env = base.env.env_config(0).expect("env");
     let variant = |name: &str| {
         let config = load(&format!("configs/variants/{name}.toml"), &[]).expect(name);
         assert_eq!(config.name, format!("cube-fg-rl-{name}"));
         let text = config.to_toml_string().expect("toml");
-        (config.env.env_config(0), config, text)
+        (config.env.env_config(0).expect("env"), config, text)
     };
 
     let (env, _, text) = variant("heavy-cube");
@@ -63,11 +63,12 @@ fn each_variant_config_changes_its_key_only() {
     assert_eq!(EnvConfig { object: base_env.object, ..env }, base_env);
 
     let (env, _, _) = variant("torque-2x");
-    let caps = env.hand.torque_caps_nm();
-    assert!((caps[3] - 2.0 * FINGER_TORQUE_CAP_NM).abs() < 1e-6, "{caps:?}");
-    assert!((caps[0] - 2.0 * THUMB_TORQUE_CAP_NM).abs() < 1e-6, "{caps:?}");
-    assert_eq!(env.physics.motor_stiffness_nm_per_rad, base_env.physics.motor_stiffness_nm_per_rad);
-    assert_eq!(EnvConfig { hand: base_env.hand.clone(), ..env }, base_env);
+    // vge15's file: 0.3 N m on the fingers (joint 3: the index's first), 0.45 on the thumb's.
+    let caps: Vec<f32> = env.servos.iter().map(|s| s.torque_cap_nm).collect();
+    assert!((caps[3] - 2.0 * 0.3).abs() < 1e-6, "{caps:?}");
+    assert!((caps[0] - 2.0 * 0.45).abs() < 1e-6, "{caps:?}");
+    assert!(env.servos.iter().zip(&base_env.servos).all(|(a, b)| a.kp_nm_per_rad == b.kp_nm_per_rad));
+    assert_eq!(EnvConfig { servos: base_env.servos.clone(), ..env }, base_env);
 
     let (env, _, _) = variant("side-on");
     assert_eq!(env.physics.hand_orientation, HandOrientation::SideOn);
@@ -96,10 +97,10 @@ fn the_keys_can_be_set_from_the_command_line() {
         ],
     )
     .expect("valid overrides");
-    let env = config.env.env_config(0);
+    let env = config.env.env_config(0).expect("env");
     assert_eq!((env.object.mass_kg, env.object.friction), (0.3, 0.6));
-    assert!((env.hand.torque_caps_nm()[3] - 0.45).abs() < 1e-6);
-    assert_eq!(env.physics.motor_stiffness_nm_per_rad, 10.0);
+    assert!((env.servos[3].torque_cap_nm - 0.45).abs() < 1e-6);
+    assert!(env.servos.iter().all(|s| s.kp_nm_per_rad == 10.0));
     assert_eq!(env.physics.hand_orientation, HandOrientation::SideOn);
     assert!(env.physics.finger_collisions);
     let text = config.to_toml_string().expect("toml");

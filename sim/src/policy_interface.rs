@@ -17,6 +17,7 @@ pub fn check_policy_interface(
     hand: &Hand,
     layout: &ObservationLayout,
 ) -> Result<(), String> {
+    check_task(info, hand)?;
     let (obs_dim, act_dim) = (info.obs_dim, info.act_dim);
     let (want_obs, want_act) = (layout.dim(), hand.num_joints());
     if obs_dim != want_obs || act_dim != want_act {
@@ -30,4 +31,29 @@ pub fn check_policy_interface(
         .map_err(|e| format!("another observation layout: {e}"))?;
     crate::action::check_action_names(hand, info.action_names.iter())
         .map_err(|e| format!("other actions: {e}"))
+}
+
+/// The policy's recorded hand against `hand`: a file from before hands were recorded is
+/// vge's own hand ([`vge_runtime::policy::UNRECORDED_HAND`]); one of another hand, or of
+/// another version of this hand's description, is refused.
+fn check_task(info: &PolicyInfo<'_>, hand: &Hand) -> Result<(), String> {
+    let (name, sha) = match &info.task {
+        Some(task) => (task.hand, Some(task.hand_sha256)),
+        None => (vge_runtime::policy::UNRECORDED_HAND, None),
+    };
+    if name != hand.name() {
+        return Err(format!("the policy drives the hand {name}, not {}", hand.name()));
+    }
+    if let Some(sha) = sha
+        && *sha != hand.description_sha256()
+    {
+        let hex = |b: &[u8; 32]| b.iter().map(|x| format!("{x:02x}")).collect::<String>();
+        return Err(format!(
+            "the policy was trained on another description of the hand {name} (sha256 {}, this one's {}): \
+             its joints, gains or geometry may differ",
+            hex(sha),
+            hex(&hand.description_sha256())
+        ));
+    }
+    Ok(())
 }

@@ -13,7 +13,7 @@ use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
 use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::InProcessTransport;
 use vge_lab::config::{Config, apply_override};
-use vge_sim::{EnvConfig, NUM_JOINTS, OBS_DIM};
+use vge_sim::EnvConfig;
 use vge_trainer::nets::{GaussianActor, NetSpec};
 
 fn short_run_config() -> Config {
@@ -66,14 +66,16 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
     // 3. Parity: the runtime's forward equals tch's deterministic head of the trained actor
     //    (the final checkpoint holds it).
     let mut vs = nn::VarStore::new(Device::Cpu);
-    let spec = NetSpec { obs_dim: OBS_DIM as i64, act_dim: NUM_JOINTS as i64, hidden: vec![64, 64] };
-    let actor = GaussianActor::new(&vs.root(), &spec, &[config.env.max_action_rad; NUM_JOINTS]);
+    let env = config.env_config(0).expect("env");
+    let (obs_dim, joints) = (env.observation_layout().dim(), env.hand.num_joints());
+    let spec = NetSpec { obs_dim: obs_dim as i64, act_dim: joints as i64, hidden: vec![64, 64] };
+    let actor = GaussianActor::new(&vs.root(), &spec, &vec![config.env.max_action_rad; joints]);
     vs.load(dir.join("checkpoint").join("actor.ot")).expect("final actor checkpoint");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let mut max_diff = 0.0f32;
     for _ in 0..500 {
-        let obs: [f32; OBS_DIM] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
-        let mut action = [0.0f32; NUM_JOINTS];
+        let obs: Vec<f32> = (0..obs_dim).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let mut action = vec![0.0f32; joints];
         runner.policy.forward(&obs, &mut action).expect("finite observation");
         let expected = tch::no_grad(|| actor.deterministic(&Tensor::from_slice(&obs).unsqueeze(0)));
         let expected: Vec<f32> = Vec::try_from(expected.to_kind(Kind::Float).flatten(0, -1)).expect("f32");

@@ -35,10 +35,9 @@ pub fn export_hand_actor(
     set: ObservationSet,
     provenance: Provenance,
 ) -> Result<Vec<u8>, ExportError> {
-    let layout = ObservationLayout::new(set, env.hand.num_joints(), env.hand.num_fingers());
-    let obs_dim = layout.dim();
+    let obs_dim = ObservationLayout::new(set, env.hand.num_joints(), env.hand.num_fingers()).dim();
     let spec = ActorSpec { obs_dim, hidden: hidden.to_vec(), act_dim: env.hand.num_joints() };
-    let mut meta = hand_policy_meta(env, &layout, provenance);
+    let mut meta = hand_policy_meta(env, set, provenance);
     // The actor's normaliser (`nets::ObsNormaliser`), when it has one, goes into the file so
     // the runtime normalises and clips exactly as the actor did in training.
     let vars = actor_vs.variables();

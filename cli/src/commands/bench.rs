@@ -169,7 +169,8 @@ fn write_mjcf(path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<
 /// `vge bench sim --write-actions`.
 fn write_bench_actions(path: &std::path::Path, steps: usize) -> anyhow::Result<()> {
     anyhow::ensure!(steps > 0, "--steps must be at least 1");
-    let bytes = vge_sim::bench::first_world_actions_f32_le(steps, EnvConfig::default().max_action_rad);
+    let env = EnvConfig::default();
+    let bytes = vge_sim::bench::first_world_actions_f32_le(steps, env.hand.num_joints(), env.max_action_rad);
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {} ({steps} control steps of the bench's actions)", path.display());
     Ok(())
@@ -289,7 +290,9 @@ mod libtorch {
     ) -> anyhow::Result<()> {
         anyhow::ensure!(updates > 0, "--updates must be at least 1");
         anyhow::ensure!(batch > 0, "--batch must be at least 1");
-        let mut config = vge_trainer::learner::LearnerConfig::hand_default(0.05);
+        // The default run's networks and sizes (vge15, 256x256), SAC with alpha 0 unless --algorithm td3.
+        let mut config = vge_trainer::learner::LearnerConfig::for_hand(&vge_lab::config::Config::default())?;
+        config.algorithm = vge_trainer::learner::Algorithm::Sac;
         config.entropy = vge_trainer::learner::EntropyCoef::Fixed(0.0);
         config.critic_layer_norm = layer_norm;
         if matmul == "bf16" {

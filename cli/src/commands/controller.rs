@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
 use clap::Args;
 use vge_controllers::rollout::{self, ControllerKind, RolloutOptions};
 use vge_sim::ObjectShape;
@@ -42,6 +43,10 @@ pub struct ControllerArgs {
     /// penalty); CS's trajectory is `vge.horizon` steps. `--object` replaces its object.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// The hand, without --config: a shipped hand (vge15, allegro) or an MJCF file. The
+    /// object is the one its file is sized for.
+    #[arg(long, default_value = "vge15", conflicts_with = "config")]
+    hand: String,
     /// Override a key of --config, e.g. `--set env.object_mass_kg=0.4` (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE", requires = "config")]
     overrides: Vec<String>,
@@ -55,13 +60,28 @@ fn parse_controller_kind(s: &str) -> Result<ControllerKind, String> {
 }
 
 pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
-    let ControllerArgs { kind, object, episodes, seed, episode_s, grasp_noise_rad, config, overrides, json } =
-        args;
+    let ControllerArgs {
+        kind,
+        object,
+        episodes,
+        seed,
+        episode_s,
+        grasp_noise_rad,
+        config,
+        hand,
+        overrides,
+        json,
+    } = args;
     let mut options = RolloutOptions::default();
+    if config.is_none() {
+        let hand = vge_sim::hands::load(&hand).with_context(|| format!("--hand {hand}"))?;
+        options.env = vge_sim::EnvConfig::for_hand(hand)?;
+        options.cs = vge_controllers::CsConfig::for_env(&options.env);
+    }
     let (mut default_episode_s, mut default_grasp_noise_rad) = (10.0, 0.02);
     if let Some(path) = &config {
         let config = vge_lab::config::load_config(path, &overrides)?;
-        let env = vge_lab::eval::without_training_disturbances(&config.env.env_config(0));
+        let env = vge_lab::eval::without_training_disturbances(&config.env_config(0)?);
         options.cs = config.cs_config(&env);
         options.env = env;
         (default_episode_s, default_grasp_noise_rad) =

@@ -48,6 +48,13 @@ pub struct ExportArgs {
     /// Environment steps the actor was trained for (provenance).
     #[arg(long, default_value_t = 0)]
     steps: u64,
+    /// The hand the actor drives (--actor, --init): a shipped hand (vge15, allegro) or an
+    /// MJCF file; it sets the action's joints and the observation's sizes.
+    #[arg(long, default_value = "vge15", conflicts_with = "policy")]
+    hand: String,
+    /// What the actor observes (--actor, --init): full, proprio or proprio:K.
+    #[arg(long, default_value = "full", conflicts_with = "policy")]
+    observation: String,
     /// What to write: a vge policy file, or an ONNX model of the same policy.
     #[arg(long, value_enum, default_value_t = ExportFormat::Vgep)]
     format: ExportFormat,
@@ -139,16 +146,23 @@ fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::R
         args.hidden,
         max_layers - 1
     );
-    let env = EnvConfig::default();
+    let hand = vge_sim::hands::load(&args.hand).with_context(|| format!("--hand {}", args.hand))?;
+    let env = EnvConfig::for_hand(hand)?;
+    let set = vge_sim::ObservationSet::parse(&args.observation)
+        .map_err(|e| anyhow::anyhow!("--observation: {e}"))?;
+    let layout = vge_sim::ObservationLayout::new(set, env.hand.num_joints(), env.hand.num_fingers());
     let mut vs = nn::VarStore::new(Device::Cpu);
     let spec = vge_trainer::nets::NetSpec {
-        obs_dim: vge_sim::OBS_DIM as i64,
-        act_dim: vge_sim::NUM_JOINTS as i64,
+        obs_dim: layout.dim() as i64,
+        act_dim: env.hand.num_joints() as i64,
         hidden: args.hidden.iter().map(|&h| h as i64).collect(),
     };
     tch::manual_seed(args.seed as i64);
-    let _actor =
-        vge_trainer::nets::GaussianActor::new(&vs.root(), &spec, &[env.max_action_rad; vge_sim::NUM_JOINTS]);
+    let _actor = vge_trainer::nets::GaussianActor::new(
+        &vs.root(),
+        &spec,
+        &vec![env.max_action_rad; env.hand.num_joints()],
+    );
     let config_hash = match &args.actor {
         Some(path) => {
             vs.load(path).with_context(|| format!("loading actor variables from {}", path.display()))?;
@@ -162,7 +176,7 @@ fn export_actor(args: &ExportArgs, weights: vge_export::WeightType) -> anyhow::R
         seed: args.seed,
         steps: args.steps,
     };
-    let bytes = vge_trainer::policy_export::export_hand_actor(&vs, &args.hidden, &env, provenance)?;
+    let bytes = vge_trainer::policy_export::export_hand_actor(&vs, &args.hidden, &env, set, provenance)?;
     if weights == vge_export::WeightType::F32 {
         return Ok(bytes);
     }

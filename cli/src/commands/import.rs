@@ -14,8 +14,8 @@ use vge_sim::EnvConfig;
 ///
 /// Accepts Gemm or MatMul + Add layers with Relu or Tanh, Sub/Div normalisation in front,
 /// Mul/Add scaling behind (docs/onnx.md). Refuses anything else, naming the node, its op
-/// and why (an unsupported op, a width that is not the hand's 65 observations or 15
-/// actions, a layer wider than the runtime holds, a non-finite weight), and writes
+/// and why (an unsupported op, a width that is not the hand's observation or action size
+/// (vge15: 65 and 15), a layer wider than the runtime holds, a non-finite weight), and writes
 /// nothing then. A file of more than 64 MiB is refused unread, and a model of more than
 /// 1024 nodes, or of more Gemm and MatMul nodes than twice the layers the runtime holds, is
 /// refused from its encoding before any of it is built.
@@ -29,12 +29,12 @@ pub struct ImportArgs {
     /// Where to write the policy file.
     #[arg(long, value_name = "P.vgep")]
     out: PathBuf,
-    /// Observation mean subtracted before the actor (a text file of 65 numbers separated by
-    /// whitespace or commas, e.g. np.savetxt of a VecNormalize's obs_rms.mean), for actors
-    /// whose graph does not normalise.
+    /// Observation mean subtracted before the actor (a text file of one number per
+    /// observation, 65 for vge15's full set, separated by whitespace or commas, e.g.
+    /// np.savetxt of a VecNormalize's obs_rms.mean), for actors whose graph does not normalise.
     #[arg(long, value_name = "FILE")]
     obs_mean: Option<PathBuf>,
-    /// Observation std divided by (65 numbers, e.g. np.sqrt(obs_rms.var + epsilon)).
+    /// Observation std divided by (one number per observation, e.g. np.sqrt(obs_rms.var + epsilon)).
     #[arg(long, value_name = "FILE")]
     obs_std: Option<PathBuf>,
     /// Clamp the normalised observation to [-C, C] (a VecNormalize's clip_obs).
@@ -44,6 +44,12 @@ pub struct ImportArgs {
     /// unless it is the hand's.
     #[arg(long)]
     obs_layout: Option<String>,
+    /// The hand the actor drives: a shipped hand (vge15, allegro) or an MJCF file.
+    #[arg(long, default_value = "vge15")]
+    hand: String,
+    /// What the actor observes: full, proprio or proprio:K (its input width follows).
+    #[arg(long, default_value = "full")]
+    observation: String,
     /// What the graph's output is: `graph` (already the action: rad per control step),
     /// `hand` (Stable-Baselines3's normalised action in [-1, 1]: times the hand's largest
     /// joint-target step) or a factor. Needed when the graph has no Mul after its last layer.
@@ -51,18 +57,22 @@ pub struct ImportArgs {
     action_scale: Option<String>,
 }
 
-/// `vge import`: an ONNX MLP actor as a policy file for the default env's hand.
+/// `vge import`: an ONNX MLP actor as a policy file for a hand.
 pub fn run(args: ImportArgs) -> anyhow::Result<()> {
     use vge_export::onnx::{ActionScale, ImportOptions, ImportTarget};
-    let env = EnvConfig::default();
+    let hand = vge_sim::hands::load(&args.hand).with_context(|| format!("--hand {}", args.hand))?;
+    let env = EnvConfig::for_hand(hand)?;
+    let set = vge_sim::ObservationSet::parse(&args.observation)
+        .map_err(|e| anyhow::anyhow!("--observation: {e}"))?;
     let unknown = Provenance { vge_version: String::new(), config_hash: String::new(), seed: 0, steps: 0 };
-    let hand = vge_lab::policy_meta::hand_policy_meta(&env, unknown);
+    let hand = vge_lab::policy_meta::hand_policy_meta(&env, set, unknown);
     let target = ImportTarget {
         obs_layout: hand.obs_layout,
         action_names: hand.action_names,
         control_hz: env.control_hz,
         max_layers: vge_runtime::policy::HAND_MAX_LAYERS,
         max_width: vge_runtime::policy::HAND_MAX_WIDTH,
+        task: hand.task,
     };
     let obs_dim = target.obs_dim();
     let (mean, std) = (read_numbers(args.obs_mean.as_deref())?, read_numbers(args.obs_std.as_deref())?);

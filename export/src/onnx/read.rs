@@ -42,6 +42,9 @@ pub struct ImportTarget {
     pub max_layers: usize,
     /// Widest layer input or output the runtime holds.
     pub max_width: usize,
+    /// The task the policy is imported for (its hand, observation set, object): recorded in
+    /// the file when the model names none, and a model that names another hand is refused.
+    pub task: Option<PolicyTask>,
 }
 
 impl ImportTarget {
@@ -194,10 +197,32 @@ pub fn import(bytes: &[u8], target: &ImportTarget, options: &ImportOptions) -> R
         action_names: target.action_names.clone(),
         action_scale: scale,
         action_offset: offset,
-        task: meta.task()?,
+        task: imported_task(meta.task()?, target.task.as_ref())?,
     };
     policy.to_bytes()?;
     Ok(Imported { policy, notes })
+}
+
+/// The task a model names, checked against the one it is imported for, else that one.
+fn imported_task(
+    named: Option<PolicyTask>,
+    target: Option<&PolicyTask>,
+) -> Result<Option<PolicyTask>, OnnxError> {
+    match (named, target) {
+        (Some(named), Some(target))
+            if named.hand != target.hand || named.hand_sha256 != target.hand_sha256 =>
+        {
+            Err(OnnxError::Graph(format!(
+                "the model was exported for the hand {} ({}), not {} ({})",
+                named.hand,
+                named.hand_sha256_hex(),
+                target.hand,
+                target.hand_sha256_hex()
+            )))
+        }
+        (Some(named), _) => Ok(Some(named)),
+        (None, target) => Ok(target.cloned()),
+    }
 }
 
 fn check_opset(model: &ModelProto) -> Result<(), OnnxError> {
