@@ -4,7 +4,7 @@ use proptest::prelude::*;
 use vge_bridge::protocol::*;
 
 fn finger() -> impl Strategy<Value = FingerId> {
-    (0..NUM_FINGERS).prop_map(|i| FingerId::new(i).expect("in range"))
+    (0..MAX_FINGERS).prop_map(|i| FingerId::new(i).expect("in range"))
 }
 
 fn triple(max: f32) -> impl Strategy<Value = [f32; 3]> {
@@ -33,7 +33,7 @@ fn message() -> impl Strategy<Value = Message> {
         (finger(), triple(3.2), any::<u8>()).prop_map(|(finger, q, seq)| {
             Message::JointTarget(JointTarget { finger, q_target_rad: q, seq })
         }),
-        (prop_oneof![0u8..NUM_FINGERS, Just(HOST_NODE)], 0usize..4, any::<u8>()).prop_map(
+        (prop_oneof![0u8..MAX_FINGERS, Just(HOST_NODE)], 0usize..4, any::<u8>()).prop_map(
             |(node, s, counter)| {
                 let state = [NodeState::Booting, NodeState::Ready, NodeState::Enabled, NodeState::Fault][s];
                 Message::Heartbeat(Heartbeat { node, state, counter })
@@ -126,7 +126,7 @@ mod fd_option {
 
     fn node_state() -> impl Strategy<Value = FingerState> {
         (
-            (0..NUM_FINGERS, super::triple(3.2), super::triple(30.0), super::triple(3.2)),
+            (0..FD_NODES as u8, super::triple(3.2), super::triple(30.0), super::triple(3.2)),
             (super::triple(0.5), 0.0f32..60.0, super::triple(1.0)),
             (any::<bool>(), any::<bool>(), any::<bool>(), any::<u8>()),
         )

@@ -6,7 +6,9 @@
 //! | hand command| 0x0F0        | host -> all  | 32    | q_target[15] i16 (1e-4 rad), flags u8 (bit 0 enable), seq u8    |
 //! | node state  | 0x480 + node | node -> host | 48    | q[3], dq[3], tau[3], p[3] i16, force u16, n[3] i16, flags, seq  |
 //!
-//! Field scales are those of the classic frames. Node-state flags: bit 0 motors enabled,
+//! The hand command's layout is fixed: it carries exactly [`FD_NODES`] nodes' targets (vge15's
+//! five, 15 joints), so the FD option is for five-node hands only; another hand runs on the
+//! classic frames (the bridge refuses `--fd` for it). Field scales are those of the classic frames. Node-state flags: bit 0 motors enabled,
 //! bit 1 fault, bit 2 tip in contact; bytes 34..48 are reserved (zero). Each FD frame is
 //! equivalent to classic messages ([`FdMessage::to_classic`], [`FdMessage::from_classic`]),
 //! so the bridge's state handling and the emulators are the same for both.
@@ -16,7 +18,7 @@ use super::fields::{
     VELOCITY_RADPS_PER_COUNT, scaled3, to_u16, unscaled3,
 };
 use super::messages::*;
-use super::{FingerId, Message, NUM_FINGERS, ProtocolError};
+use super::{FingerId, JOINTS_PER_NODE, Message, ProtocolError};
 
 /// Identifier of the hand command FD frame.
 pub const FD_HAND_COMMAND_ID: u16 = 0x0F0;
@@ -30,7 +32,11 @@ pub const FD_NODE_STATE_LEN: usize = 48;
 const FLAG_ENABLED: u8 = 0x01;
 const FLAG_FAULT: u8 = 0x02;
 const FLAG_IN_CONTACT: u8 = 0x04;
-const FINGERS: usize = NUM_FINGERS as usize;
+/// Finger nodes the FD option carries: the hand command's 32 bytes hold their 15 targets.
+pub const FD_NODES: usize = 5;
+/// Joint targets in a hand command.
+pub const FD_JOINTS: usize = FD_NODES * JOINTS_PER_NODE;
+const FINGERS: usize = FD_NODES;
 
 /// An FD frame's identifier, length and payload.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,10 +52,10 @@ impl RawFdFrame {
     }
 }
 
-/// Targets for all 15 joints at once.
+/// Targets for all [`FD_JOINTS`] joints at once.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HandCommand {
-    pub q_target_rad: [f32; 15],
+    pub q_target_rad: [f32; FD_JOINTS],
     pub enable: bool,
     pub seq: u8,
 }
@@ -112,6 +118,9 @@ impl FdMessage {
                 RawFdFrame { id: FD_HAND_COMMAND_ID, len: FD_HAND_COMMAND_LEN, data }
             }
             FdMessage::NodeState(s) => {
+                if s.finger.slot() >= FD_NODES {
+                    return Err(ProtocolError::BadFinger(s.finger.index()));
+                }
                 put(&mut data, 0, scaled3("q_rad", s.q_rad, ANGLE_RAD_PER_COUNT)?);
                 put(&mut data, 6, scaled3("dq_radps", s.dq_radps, VELOCITY_RADPS_PER_COUNT)?);
                 put(&mut data, 12, scaled3("tau_nm", s.tau_nm, EFFORT_NM_PER_COUNT)?);
@@ -135,7 +144,7 @@ impl FdMessage {
             if payload.len() != FD_HAND_COMMAND_LEN {
                 return Err(ProtocolError::BadLength { id, len: payload.len() });
             }
-            let mut q_target_rad = [0.0; 15];
+            let mut q_target_rad = [0.0; FD_JOINTS];
             for f in 0..FINGERS {
                 q_target_rad[3 * f..3 * f + 3].copy_from_slice(&get3(payload, 6 * f, ANGLE_RAD_PER_COUNT));
             }
@@ -145,7 +154,7 @@ impl FdMessage {
                 seq: payload[31],
             }));
         }
-        let node = id.checked_sub(FD_NODE_STATE_BASE_ID).filter(|n| *n < u16::from(NUM_FINGERS));
+        let node = id.checked_sub(FD_NODE_STATE_BASE_ID).filter(|n| usize::from(*n) < FD_NODES);
         let Some(node) = node else { return Err(ProtocolError::UnknownId(id)) };
         if payload.len() != FD_NODE_STATE_LEN {
             return Err(ProtocolError::BadLength { id, len: payload.len() });
@@ -172,7 +181,7 @@ impl FdMessage {
         let mut out = heapless::Vec::new();
         match *self {
             FdMessage::HandCommand(c) => {
-                for finger in FingerId::all() {
+                for finger in (0..FD_NODES as u8).filter_map(|n| FingerId::new(n).ok()) {
                     let f = 3 * usize::from(finger.index());
                     let q_target_rad = [c.q_target_rad[f], c.q_target_rad[f + 1], c.q_target_rad[f + 2]];
                     let _ = out.push(Message::JointCommand(JointCommand {
@@ -246,13 +255,15 @@ impl FdPacker {
     pub fn push(&mut self, message: &Message) -> Option<FdMessage> {
         match *message {
             Message::JointCommand(c) => {
-                self.commands[usize::from(c.finger.index())] = Some(c);
+                // A node the FD option does not carry has no place in a hand command.
+                let slot = self.commands.get_mut(c.finger.slot())?;
+                *slot = Some(c);
                 let all =
                     self.commands.iter().all(|p| p.is_some_and(|p| p.seq == c.seq && p.enable == c.enable));
                 if !all {
                     return None;
                 }
-                let mut q_target_rad = [0.0; 15];
+                let mut q_target_rad = [0.0; FD_JOINTS];
                 for p in self.commands.iter().flatten() {
                     let f = 3 * usize::from(p.finger.index());
                     q_target_rad[f..f + 3].copy_from_slice(&p.q_target_rad);
@@ -270,7 +281,7 @@ impl FdPacker {
     }
 
     fn state(&mut self, finger: FingerId, set: impl FnOnce(&mut PartialState)) -> Option<FdMessage> {
-        let slot = &mut self.states[usize::from(finger.index())];
+        let slot = self.states.get_mut(finger.slot())?;
         set(slot);
         let (Some(p), Some(v), Some(e), Some(c), Some(n)) =
             (slot.position, slot.velocity, slot.effort, slot.contact, slot.normal)
@@ -295,7 +306,7 @@ impl FdPacker {
 }
 
 /// Frames per control step with the FD option: one hand command, one state per node.
-pub const FD_FRAMES_PER_STEP: u32 = 1 + NUM_FINGERS as u32;
+pub const FD_FRAMES_PER_STEP: u32 = 1 + FD_NODES as u32;
 
 /// Worst-case duration (s) of an FD data frame with an 11-bit id and `len` data bytes, bit
 /// rate switched: ~50 bits at the nominal rate (arbitration, ack, end of frame, interframe,
@@ -310,8 +321,8 @@ pub fn fd_frame_s(len: usize, nominal_bps: f64, data_bps: f64) -> f64 {
 /// Bus load of the FD option at `rate_hz` steps per second.
 pub fn fd_bus_load(rate_hz: f64, nominal_bps: f64, data_bps: f64) -> f64 {
     let step_s = fd_frame_s(FD_HAND_COMMAND_LEN, nominal_bps, data_bps)
-        + f64::from(NUM_FINGERS) * fd_frame_s(FD_NODE_STATE_LEN, nominal_bps, data_bps);
-    let heartbeats_s = 10.0 * f64::from(NUM_FINGERS + 1) * 135.0 / nominal_bps;
+        + FD_NODES as f64 * fd_frame_s(FD_NODE_STATE_LEN, nominal_bps, data_bps);
+    let heartbeats_s = 10.0 * (FD_NODES + 1) as f64 * 135.0 / nominal_bps;
     rate_hz * step_s + heartbeats_s
 }
 
@@ -323,7 +334,7 @@ mod tests {
     fn five_commands_pack_into_one_hand_command_and_back() {
         let mut packer = FdPacker::default();
         let mut packed = None;
-        for finger in FingerId::all() {
+        for finger in (0..5).map(|n| FingerId::new(n).expect("node")) {
             let q = f32::from(finger.index()) * 0.1;
             let cmd = Message::JointCommand(JointCommand {
                 finger,

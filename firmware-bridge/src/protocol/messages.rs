@@ -4,7 +4,7 @@ use super::fields::{
     ANGLE_RAD_PER_COUNT, EFFORT_NM_PER_COUNT, FORCE_N_PER_COUNT, NORMAL_PER_COUNT, POSITION_M_PER_COUNT,
     VELOCITY_RADPS_PER_COUNT, get_i16, get_i16x3, put_i16x3, scaled3, to_u16, unscaled3,
 };
-use super::{FingerId, HOST_NODE, NUM_FINGERS, ProtocolError, RawFrame, ids};
+use super::{FingerId, HOST_NODE, MAX_FINGERS, ProtocolError, RawFrame, ids};
 
 /// Joint command flag: motors powered. A command without it disables the finger.
 pub const COMMAND_ENABLE: u8 = 0x01;
@@ -232,7 +232,7 @@ impl Message {
                 frame(ids::JOINT_TARGET, t.finger.index(), d)
             }
             Message::Heartbeat(h) => {
-                if h.node >= NUM_FINGERS && h.node != HOST_NODE {
+                if h.node >= MAX_FINGERS && h.node != HOST_NODE {
                     return Err(ProtocolError::BadFinger(h.node));
                 }
                 d[0] = h.state.to_u8();
@@ -337,7 +337,9 @@ mod tests {
 
     #[test]
     fn rejects_unknown_ids_and_short_frames_without_panicking() {
-        assert_eq!(Message::decode(0x105, &[0; 8]), Err(ProtocolError::UnknownId(0x105)));
+        // Node 8 is past every hand's nodes (`MAX_FINGERS`); nodes 5 to 7 are a larger hand's.
+        assert_eq!(Message::decode(0x108, &[0; 8]), Err(ProtocolError::UnknownId(0x108)));
+        assert!(Message::decode(0x107, &[0; 8]).is_ok());
         assert_eq!(Message::decode(0x7ff, &[0; 8]), Err(ProtocolError::UnknownId(0x7ff)));
         assert_eq!(Message::decode(0x000, &[0; 8]), Err(ProtocolError::UnknownId(0x000)));
         assert_eq!(Message::decode(0x181, &[0; 7]), Err(ProtocolError::BadLength { id: 0x181, len: 7 }));

@@ -2,9 +2,11 @@
 //!
 //! `no_std`: the same code runs in the bridge and can run in a joint controller's firmware.
 //! Every frame is a classic CAN data frame with an 11-bit id and 8 data bytes; multi-byte
-//! fields are little-endian. Each finger is one node (`FingerId` 0..=4) driving its three
-//! joints (roll, proximal flexion, distal flexion) and reading its fingertip sensor. The id is
-//! a function code plus the node, CANopen-style, so that commands win arbitration:
+//! fields are little-endian. Each finger is one node driving its three joints (vge15: roll,
+//! proximal flexion, distal flexion) and reading its fingertip sensor; node `f` is the hand
+//! description's finger `f`, its joints the description's `3f..3f+3`. The hand decides how many
+//! nodes there are ([`NodeLayout`]: vge15 has five, `FingerId` 0..=4), up to [`MAX_FINGERS`].
+//! The id is a function code plus the node, CANopen-style, so that commands win arbitration:
 //!
 //! | frame            | id           | dir          | payload                                             |
 //! |------------------|--------------|--------------|-----------------------------------------------------|
@@ -48,7 +50,8 @@ pub mod filters {
     /// `CAN_EFF_FLAG | CAN_RTR_FLAG`: a filter with these in its mask and not in its id
     /// rejects extended and remote frames.
     const FLAGS: u32 = 0x8000_0000 | 0x4000_0000;
-    /// The function code's 8 ids (`code + 0..=7`): the five nodes and three unused.
+    /// The function code's 8 ids (`code + 0..=7`): every node a hand may have
+    /// ([`MAX_FINGERS`](super::MAX_FINGERS)); vge15 uses five.
     const CODE: u32 = FLAGS | 0x7F8;
     /// Exactly one id.
     const EXACT: u32 = FLAGS | 0x7FF;
@@ -79,8 +82,13 @@ pub mod filters {
     }
 }
 
-/// Fingers on the hand, one CAN node each.
-pub const NUM_FINGERS: u8 = 5;
+/// The most finger nodes a hand on this protocol may have: each function code has eight node
+/// ids (`code + 0..=7`, the receive filters' mask), and the host's node (0x0F) lies outside
+/// them. A hand's own count is its [`NodeLayout`]; fixed-capacity tables (`no_std`) hold this
+/// many.
+pub const MAX_FINGERS: u8 = 8;
+/// Joints each finger node drives: a joint command or state frame carries three.
+pub const JOINTS_PER_NODE: usize = 3;
 /// Node id of the host (the bridge) in heartbeat frames.
 pub const HOST_NODE: u8 = 0x0F;
 
@@ -102,8 +110,12 @@ pub mod ids {
 /// Errors decoding or encoding frames. Frames come from a bus: nothing here panics on them.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum ProtocolError {
-    #[error("finger id {0} out of range (0..{NUM_FINGERS})")]
+    #[error("finger id {0} out of range (0..{MAX_FINGERS})")]
     BadFinger(u8),
+    /// A hand this protocol cannot carry (fingers that are not three joints each, or more
+    /// fingers than node ids).
+    #[error("{fingers} finger nodes: the protocol carries 1 to {MAX_FINGERS}")]
+    BadNodeCount { fingers: usize },
     #[error("frame id {0:#05x} is not part of the hand protocol")]
     UnknownId(u16),
     #[error("frame id {id:#05x} has {len} data bytes, expected 8")]
@@ -117,17 +129,72 @@ pub enum ProtocolError {
 pub struct FingerId(u8);
 
 impl FingerId {
+    /// Node `index`, any of the protocol's [`MAX_FINGERS`]; whether the hand has it is the
+    /// hand's [`NodeLayout`]'s to say.
     pub fn new(index: u8) -> Result<Self, ProtocolError> {
-        if index < NUM_FINGERS { Ok(Self(index)) } else { Err(ProtocolError::BadFinger(index)) }
+        if index < MAX_FINGERS { Ok(Self(index)) } else { Err(ProtocolError::BadFinger(index)) }
     }
 
     pub fn index(self) -> u8 {
         self.0
     }
 
-    /// All fingers, in node order.
-    pub fn all() -> impl Iterator<Item = FingerId> {
-        (0..NUM_FINGERS).map(FingerId)
+    /// The node's index as a table index.
+    pub fn slot(self) -> usize {
+        usize::from(self.0)
+    }
+}
+
+/// The finger nodes of one hand on this protocol: how many (each [`JOINTS_PER_NODE`] joints),
+/// from the hand's description. vge15's is [`NodeLayout::VGE15`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct NodeLayout {
+    fingers: u8,
+}
+
+impl NodeLayout {
+    /// vge's own hand: five fingers of three joints.
+    pub const VGE15: Self = Self { fingers: 5 };
+
+    /// A hand of `fingers` nodes, 1 to [`MAX_FINGERS`].
+    pub fn new(fingers: usize) -> Result<Self, ProtocolError> {
+        match u8::try_from(fingers) {
+            Ok(n) if (1..=MAX_FINGERS).contains(&n) => Ok(Self { fingers: n }),
+            _ => Err(ProtocolError::BadNodeCount { fingers }),
+        }
+    }
+
+    pub fn num_fingers(self) -> usize {
+        usize::from(self.fingers)
+    }
+
+    pub fn num_joints(self) -> usize {
+        self.num_fingers() * JOINTS_PER_NODE
+    }
+
+    /// Whether `finger` is one of this hand's nodes.
+    pub fn has(self, finger: FingerId) -> bool {
+        finger.0 < self.fingers
+    }
+
+    /// The hand's fingers, in node order.
+    pub fn fingers(self) -> impl Iterator<Item = FingerId> {
+        (0..self.fingers).map(FingerId)
+    }
+
+    /// Frames per control step with every node reporting: one command per finger, and
+    /// position, velocity, effort, tip contact and tip normal from each.
+    pub fn frames_per_step(self) -> u32 {
+        u32::from(self.fingers) * 6
+    }
+
+    /// Fraction of a bus of `bitrate_bps` that the protocol uses at `rate_hz` control steps
+    /// per second (heartbeats at 10 Hz per node and the host's included), with worst-case bit
+    /// stuffing.
+    pub fn bus_load(self, rate_hz: f64, bitrate_bps: f64) -> f64 {
+        let heartbeats_per_s = 10.0 * f64::from(self.fingers + 1);
+        let frames_per_s = rate_hz * f64::from(self.frames_per_step()) + heartbeats_per_s;
+        frames_per_s * f64::from(WORST_CASE_FRAME_BITS) / bitrate_bps
     }
 }
 
@@ -138,21 +205,14 @@ pub struct RawFrame {
     pub data: [u8; 8],
 }
 
-/// Frames per control step with every node reporting: one command per finger, and
-/// position, velocity, effort, tip contact and tip normal from each.
-pub const FRAMES_PER_STEP: u32 = NUM_FINGERS as u32 * 6;
-
 /// Worst-case bits on the wire of a classic data frame with an 11-bit id and 8 data bytes:
 /// 44 bits of framing + 64 data bits + 3 bits interframe space, plus one stuff bit per four
 /// bits over the 98 stuffable bits (SOF to CRC).
 pub const WORST_CASE_FRAME_BITS: u32 = 44 + 64 + 3 + (34 + 64 - 1) / 4;
 
-/// Fraction of a bus of `bitrate_bps` that the protocol uses at `rate_hz` control steps per
-/// second (heartbeats at 10 Hz per node included), with worst-case bit stuffing.
+/// [`NodeLayout::bus_load`] of vge15's five nodes.
 pub fn bus_load(rate_hz: f64, bitrate_bps: f64) -> f64 {
-    let heartbeats_per_s = 10.0 * f64::from(NUM_FINGERS + 1);
-    let frames_per_s = rate_hz * f64::from(FRAMES_PER_STEP) + heartbeats_per_s;
-    frames_per_s * f64::from(WORST_CASE_FRAME_BITS) / bitrate_bps
+    NodeLayout::VGE15.bus_load(rate_hz, bitrate_bps)
 }
 
 #[cfg(test)]
@@ -162,7 +222,7 @@ mod tests {
     #[test]
     fn filters_pass_each_side_exactly_the_frames_it_reads() {
         use filters::{HOST_RX, NODE_RX, passes};
-        for f in FingerId::all() {
+        for f in (0..MAX_FINGERS).map(FingerId) {
             let n = u16::from(f.index());
             for code in [ids::FAULT, ids::JOINT_POSITION, ids::JOINT_VELOCITY, ids::JOINT_EFFORT] {
                 assert!(passes(&HOST_RX, code + n) && !passes(&NODE_RX, code + n));
@@ -189,5 +249,23 @@ mod tests {
         assert!((load - 0.1296).abs() < 1e-9, "{load}");
         // 1 kHz does not fit a classic bus: that is what the CAN FD option is for.
         assert!(bus_load(1000.0, 1e6) > 1.0);
+        // Eight nodes: (20 * 48 + 90) frames/s * 135 bits = 14.2%.
+        let eight = NodeLayout::new(8).expect("eight nodes");
+        assert!((eight.bus_load(20.0, 1e6) - 0.14175).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_hand_has_one_to_eight_nodes_and_fingers_past_its_count_are_not_its_own() {
+        assert_eq!(NodeLayout::new(5), Ok(NodeLayout::VGE15));
+        assert_eq!(NodeLayout::VGE15.num_joints(), 15);
+        assert_eq!(NodeLayout::VGE15.frames_per_step(), 30);
+        for bad in [0, 9, 300] {
+            assert_eq!(NodeLayout::new(bad), Err(ProtocolError::BadNodeCount { fingers: bad }));
+        }
+        let four = NodeLayout::new(4).expect("four");
+        let f4 = FingerId::new(4).expect("node 4 exists on the bus");
+        assert!(!four.has(f4) && NodeLayout::VGE15.has(f4));
+        assert_eq!(four.fingers().map(FingerId::index).collect::<heapless::Vec<u8, 8>>(), [0, 1, 2, 3]);
+        assert_eq!(FingerId::new(MAX_FINGERS), Err(ProtocolError::BadFinger(MAX_FINGERS)));
     }
 }
