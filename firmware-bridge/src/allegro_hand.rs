@@ -4,7 +4,7 @@
 //! simulator agree on one hand.
 
 use thiserror::Error;
-use vge_sim::kinematics::JointLimit;
+use vge_hand::JointLimit;
 
 use crate::protocol::allegro::{Finger, JOINTS_PER_FINGER, NUM_JOINTS};
 

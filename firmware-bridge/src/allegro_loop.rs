@@ -34,12 +34,14 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Map, Value, json};
 use thiserror::Error;
+use vge_hand::JointLimit;
 use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
-use vge_sim::kinematics::JointLimit;
+use vge_sim::observation::ObservationSet;
 
 use crate::allegro_hand::AllegroHand;
 use crate::allegro_link::{AllegroLink, AllegroReceived};
 use crate::control_loop::{ErrorFrameCounts, StopReason};
+use crate::policy_runner::{Observer, PolicyRunner};
 use crate::protocol::allegro::{
     AllegroConfig, AllegroFrame, CONTROL_PERIOD_MS, Command, Finger, Info, JOINTS_PER_FINGER, NUM_JOINTS,
     PositionCycle, Report, Request, SHUTDOWN_COMMANDS, STARTUP_COMMANDS, Status, TorqueScale,
@@ -56,11 +58,16 @@ pub struct JointState {
     pub dq_radps: [f32; NUM_JOINTS],
 }
 
-/// What sets the PD targets: a policy, or a fixed pose.
+/// What sets the PD targets: a policy ([`PolicyTargets`]), or a fixed pose.
 pub trait TargetSource {
     type Error: std::error::Error + Send + Sync + 'static;
-    /// The joint targets wanted now (rad, CAN joint order).
-    fn targets(&mut self, state: &JointState) -> Result<[f32; NUM_JOINTS], Self::Error>;
+    /// The joint targets wanted now (rad, CAN joint order), given the joint state and the
+    /// targets in force (`current_rad`, the safety filter's last safe ones).
+    fn targets(
+        &mut self,
+        state: &JointState,
+        current_rad: &[f32; NUM_JOINTS],
+    ) -> Result<[f32; NUM_JOINTS], Self::Error>;
 }
 
 /// Fixed targets (`--hold`: the start grasp, squeezed).
@@ -69,8 +76,54 @@ pub struct HoldTargets(pub [f32; NUM_JOINTS]);
 
 impl TargetSource for HoldTargets {
     type Error = Infallible;
-    fn targets(&mut self, _: &JointState) -> Result<[f32; NUM_JOINTS], Infallible> {
+    fn targets(&mut self, _: &JointState, _: &[f32; NUM_JOINTS]) -> Result<[f32; NUM_JOINTS], Infallible> {
         Ok(self.0)
+    }
+}
+
+/// A policy setting the PD targets at its own rate, as the simulator's env applies an action:
+/// each update observes the joint angles and the targets in force (the Allegro has no
+/// fingertip sensing, so the observation is the proprioceptive one, [`Observer`]) and moves
+/// every target by the policy's action clipped to `max_action_rad` (the env's
+/// `max_action_rad`). The loop's safety filter then holds the step and the ranges as for any
+/// target source.
+#[derive(Debug)]
+pub struct PolicyTargets<P> {
+    policy: P,
+    observer: Observer,
+    max_action_rad: f32,
+    action: [f32; NUM_JOINTS],
+    /// Updates the policy ran.
+    pub updates: u64,
+}
+
+impl<P: PolicyRunner> PolicyTargets<P> {
+    pub fn new(policy: P, set: ObservationSet, max_action_rad: f32) -> Self {
+        Self { policy, observer: Observer::new(set), max_action_rad, action: [0.0; NUM_JOINTS], updates: 0 }
+    }
+
+    /// The policy.
+    pub fn policy(&self) -> &P {
+        &self.policy
+    }
+}
+
+impl<P: PolicyRunner> TargetSource for PolicyTargets<P> {
+    type Error = P::Error;
+    fn targets(
+        &mut self,
+        state: &JointState,
+        current_rad: &[f32; NUM_JOINTS],
+    ) -> Result<[f32; NUM_JOINTS], P::Error> {
+        let obs = self.observer.observe(&state.q_rad, current_rad, &[]);
+        self.policy.act(&obs, &mut self.action)?;
+        self.updates += 1;
+        let max = self.max_action_rad;
+        // A non-finite action stays non-finite: the filter holds the targets and counts it.
+        Ok(std::array::from_fn(|k| {
+            let a = self.action[k];
+            if a.is_finite() { current_rad[k] + a.clamp(-max, max) } else { f32::NAN }
+        }))
     }
 }
 
@@ -571,9 +624,10 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
     let period_s = PERIOD.as_secs_f32();
     let target_period = Duration::from_secs_f64(1.0 / config.target_rate_hz);
     let end = config.duration.and_then(|d| started.at.checked_add(d));
-    let mut filter = SafetyFilter::new(config.max_delta_rad, config.limits, started.q_rad);
+    let mut filter = SafetyFilter::new(config.max_delta_rad, config.limits.to_vec(), &started.q_rad);
     let mut state = JointState { q_rad: started.q_rad, dq_radps: [0.0; NUM_JOINTS] };
-    let mut targets = filter.last_safe_rad();
+    let mut targets = started.q_rad;
+    targets.copy_from_slice(filter.last_safe_rad());
     let mut cycle = PositionCycle::new();
     let mut last_set_at = started.at;
     // The previous complete set as read, and sets read since the last trusted one.
@@ -618,10 +672,10 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
         }
         if now >= next_update {
             io.report.target_updates += 1;
-            let failed = match source.targets(&state) {
+            let failed = match source.targets(&state, &targets) {
                 Ok(proposal) => {
                     let holds = filter.counts.non_finite_holds;
-                    targets = filter.apply_target(&proposal);
+                    targets.copy_from_slice(filter.apply_target(&proposal));
                     filter.counts.non_finite_holds > holds
                 }
                 Err(_) => {

@@ -1,6 +1,8 @@
 //! The bridge's control loop: at a fixed rate with absolute deadlines, read the hand's state,
-//! build the observation exactly as the simulator does (`vge_sim::observation`), run the
-//! policy, pass its action through the safety filter and send joint commands.
+//! build the observation exactly as the simulator does (`vge_sim::observation`, the set the
+//! policy was trained with), run the policy, pass its action through the safety filter and
+//! send joint commands. Every size (nodes, joints, observation) is the hand's
+//! ([`ProtocolHand`]).
 //!
 //! Deadlines are `start + k * period`. Each wait sleeps until `spin` before the deadline and
 //! then spins: the OS timer alone overshoots by 50-100 us, too coarse for a 1 kHz loop. A loop
@@ -32,23 +34,19 @@ use std::time::{Duration, Instant};
 
 use thiserror::Error;
 use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
-use vge_sim::kinematics::{FINGER_NAMES, JointLimit};
-use vge_sim::observation::{OBS_DIM, build_observation};
+use vge_sim::observation::ObservationSet;
 
 use crate::hand_state::{Applied, HandState, HeartbeatProblem, Plausibility};
 use crate::heartbeat::HeartbeatClock;
+use crate::policy_runner::Observer;
+pub use crate::policy_runner::PolicyRunner;
 use crate::protocol::{
-    FingerId, HEARTBEAT_PERIOD_MS, HOST_NODE, Heartbeat, JointCommand, Message, NodeState,
+    HEARTBEAT_PERIOD_MS, HOST_NODE, Heartbeat, JOINTS_PER_NODE, JointCommand, Message, NodeLayout, NodeState,
 };
+use crate::protocol_hand::ProtocolHand;
 use crate::safety::{SafetyCounts, SafetyFilter};
 use crate::stats::Percentiles;
 use crate::transport::{ErrorClass, Received, Transport, TransportError};
-
-/// What turns an observation into a change of the joint targets.
-pub trait PolicyRunner {
-    type Error: std::error::Error + Send + Sync + 'static;
-    fn act(&mut self, obs: &[f32; OBS_DIM]) -> Result<[f32; 15], Self::Error>;
-}
 
 #[derive(Debug, Clone)]
 pub struct LoopConfig {
@@ -66,7 +64,10 @@ pub struct LoopConfig {
     pub halt_hold_periods: u32,
     /// Largest joint-target change per step (rad), enforced whatever the policy says.
     pub max_delta_rad: f32,
-    pub limits: [JointLimit; 15],
+    /// The hand: its nodes, names and the joint limits targets are clamped to.
+    pub hand: ProtocolHand,
+    /// The observation the policy is fed (the set it was trained with).
+    pub observation: ObservationSet,
     /// Spin this long before each deadline instead of sleeping.
     pub spin: Duration,
     /// A node heartbeat older than this is a lost node.
@@ -84,8 +85,9 @@ pub struct LoopConfig {
 pub const DEFAULT_MAX_SEQ_LAG: u8 = 3;
 
 impl LoopConfig {
-    /// The defaults the `vge-bridge` command line uses, at `rate_hz` with `limits`.
-    pub fn new(rate_hz: f64, limits: [JointLimit; 15]) -> Self {
+    /// The defaults the `vge-bridge` command line uses, at `rate_hz` on `hand`, with the full
+    /// observation.
+    pub fn new(rate_hz: f64, hand: ProtocolHand) -> Self {
         Self {
             rate_hz,
             duration: None,
@@ -94,7 +96,8 @@ impl LoopConfig {
             startup_timeout: Duration::from_secs(5),
             halt_hold_periods: 3,
             max_delta_rad: DEFAULT_MAX_ACTION_RAD,
-            limits,
+            hand,
+            observation: ObservationSet::Full,
             spin: Duration::from_micros(200),
             // Five heartbeat periods: one late beat on a loaded host is not a lost node.
             heartbeat_timeout: Duration::from_millis(5 * u64::from(HEARTBEAT_PERIOD_MS)),
@@ -236,8 +239,8 @@ pub struct LinkCounts {
     /// Protocol messages decoded and sent.
     pub messages_in: u64,
     pub messages_out: u64,
-    /// Frames with a protocol id but a wrong length or payload, extended or remote frames:
-    /// counted, ignored. (Ids outside the protocol are dropped by the socket's filter.)
+    /// Frames with a protocol id but a wrong length or payload, extended or remote frames,
+    /// frames from a node id the hand does not have: counted, ignored. (Ids outside the protocol are dropped by the socket's filter.)
     pub bad_frames: u64,
     /// Node frames whose seq lagged the last command by more than `max_seq_lag`: dropped.
     pub stale_frames: u64,
@@ -276,7 +279,7 @@ pub struct LoopReport {
     pub policy_errors: u64,
     pub safety: SafetyCounts,
     /// Last targets sent while enabled.
-    pub final_targets_rad: [f32; 15],
+    pub final_targets_rad: Vec<f32>,
 }
 
 /// The slowest loop [`run`] accepts: one step in 1000 s. Its period and watchdog (up to
@@ -291,6 +294,8 @@ pub enum LoopError {
     StartupTimeout { timeout: Duration, missing: String },
     #[error("rate must be a finite number of Hz, at least {MIN_RATE_HZ}, got {0}")]
     BadRate(f64),
+    #[error("inconsistent hand: {0}")]
+    BadHand(String),
 }
 
 /// A problem that halts the loop once it has lasted more than `limit` periods in a row.
@@ -309,6 +314,7 @@ impl Persisting {
 
 struct Io<'t, T: Transport> {
     transport: &'t mut T,
+    nodes: NodeLayout,
     state: HandState,
     check: Plausibility,
     counts: LinkCounts,
@@ -330,6 +336,8 @@ impl<T: Transport> Io<'_, T> {
                         match self.state.apply(&m, now, &self.check, self.seq) {
                             Applied::Stale => self.counts.stale_frames += 1,
                             Applied::Implausible => self.counts.implausible_frames += 1,
+                            // A node id the hand does not have: not its frame.
+                            Applied::OtherNode => self.counts.bad_frames += 1,
                             Applied::Kept | Applied::Ignored => {}
                         }
                     }
@@ -366,13 +374,19 @@ impl<T: Transport> Io<'_, T> {
     }
 
     /// One command set with a new seq; whether every frame went out.
-    fn send_targets(&mut self, targets: &[f32; 15], enable: bool) -> Result<bool, TransportError> {
+    fn send_targets(&mut self, targets: &[f32], enable: bool) -> Result<bool, TransportError> {
         let seq = self.seq.map_or(1, |s| s.wrapping_add(1));
         self.seq = Some(seq);
         let mut all_sent = true;
-        for finger in FingerId::all() {
-            let i = usize::from(finger.index()) * 3;
-            let q = [targets[i], targets[i + 1], targets[i + 2]];
+        for finger in self.nodes.fingers() {
+            let i = finger.slot() * JOINTS_PER_NODE;
+            // The filter's targets are the hand's joints, three a node; a short slice (never
+            // the filter's) sends nothing rather than another joint's target.
+            let Some(q) = targets.get(i..i + JOINTS_PER_NODE).and_then(|t| <[f32; 3]>::try_from(t).ok())
+            else {
+                all_sent = false;
+                continue;
+            };
             all_sent &=
                 self.send(&Message::JointCommand(JointCommand { finger, q_target_rad: q, enable, seq }))?;
         }
@@ -408,7 +422,7 @@ fn start_up<T: Transport>(
     io: &mut Io<'_, T>,
     config: &LoopConfig,
     stop: &AtomicBool,
-) -> Result<[f32; 15], LoopError> {
+) -> Result<Vec<f32>, LoopError> {
     let period = Duration::from_secs_f64(1.0 / config.rate_hz);
     let started = Instant::now();
     let mut rounds_with_positions = 0;
@@ -437,14 +451,14 @@ fn start_up<T: Transport>(
                     Some(_),
                     Some(HeartbeatProblem::Missing { finger } | HeartbeatProblem::Stuck { finger, .. }),
                 ) => {
-                    format!("heartbeat from node {finger} ({})", FINGER_NAMES[finger])
+                    format!("heartbeat from {}", config.hand.node_label(finger))
                 }
                 (Some(_), None) => "joint targets".to_owned(),
             };
             return Err(LoopError::StartupTimeout { timeout: config.startup_timeout, missing });
         }
         io.heartbeat(Instant::now(), NodeState::Ready)?;
-        io.send_targets(&[0.0; 15], false)?;
+        io.send_targets(&vec![0.0; config.hand.num_joints()], false)?;
         std::thread::sleep(period.min(Duration::from_millis(10)));
     }
 }
@@ -456,23 +470,24 @@ fn distrust<T: Transport>(io: &Io<'_, T>, config: &LoopConfig, now: Instant) -> 
         return Some((StopReason::BusOff, "the CAN controller reported bus-off".to_owned()));
     }
     if let Some((f, sign)) = io.state.restart() {
-        let detail = format!("node {f} ({}) restarted: {sign}", FINGER_NAMES[f]);
+        let detail = format!("{} restarted: {sign}", config.hand.node_label(f));
         return Some((StopReason::NodeRestarted, detail));
     }
     if let Some(f) = io.state.fault.iter().position(|&f| f) {
-        return Some((StopReason::NodeFault, format!("node {f} ({}) reported a fault", FINGER_NAMES[f])));
+        return Some((StopReason::NodeFault, format!("{} reported a fault", config.hand.node_label(f))));
     }
     match io.state.heartbeat_problem(now, config.heartbeat_timeout, HEARTBEAT_MAX_REPEATS) {
         Some(HeartbeatProblem::Missing { finger }) => {
             let detail = format!(
-                "no heartbeat from node {finger} ({}) for {:?}",
-                FINGER_NAMES[finger], config.heartbeat_timeout
+                "no heartbeat from {} for {:?}",
+                config.hand.node_label(finger),
+                config.heartbeat_timeout
             );
             return Some((StopReason::HeartbeatLost, detail));
         }
         Some(HeartbeatProblem::Stuck { finger, counter }) => {
             let detail =
-                format!("heartbeat counter of node {finger} ({}) stuck at {counter}", FINGER_NAMES[finger]);
+                format!("heartbeat counter of {} stuck at {counter}", config.hand.node_label(finger));
             return Some((StopReason::HeartbeatLost, detail));
         }
         None => {}
@@ -495,22 +510,34 @@ pub fn run<T: Transport, P: PolicyRunner>(
     if !(config.rate_hz.is_finite() && config.rate_hz >= MIN_RATE_HZ) {
         return Err(LoopError::BadRate(config.rate_hz));
     }
+    let hand = &config.hand;
+    if hand.limits.len() != hand.num_joints() || hand.finger_names.len() != hand.num_fingers() {
+        return Err(LoopError::BadHand(format!(
+            "{} joint limits and {} finger names for {} nodes of {JOINTS_PER_NODE} joints",
+            hand.limits.len(),
+            hand.finger_names.len(),
+            hand.num_fingers()
+        )));
+    }
     let period = Duration::from_secs_f64(1.0 / config.rate_hz);
     let check = Plausibility {
-        limits: config.limits,
+        limits: hand.limits.clone(),
         margin_rad: config.plausibility_margin_rad,
         max_seq_lag: config.max_seq_lag,
     };
     let mut io = Io {
         transport,
-        state: HandState::default(),
+        nodes: hand.nodes,
+        state: HandState::new(hand.nodes),
         check,
         counts: LinkCounts::default(),
         seq: None,
         heartbeats: HeartbeatClock::new(Instant::now()),
     };
     let q_start = start_up(&mut io, config, stop)?;
-    let mut safety = SafetyFilter::new(config.max_delta_rad, config.limits, q_start);
+    let mut safety = SafetyFilter::new(config.max_delta_rad, hand.limits.clone(), &q_start);
+    let mut observer = Observer::new(config.observation);
+    let mut action = vec![0.0; hand.num_joints()];
     let limit = config.watchdog_periods.max(1);
 
     let (mut wake_jitter, mut loop_times) = (Vec::new(), Vec::new());
@@ -557,14 +584,14 @@ pub fn run<T: Transport, P: PolicyRunner>(
         if suspect.record(hold, limit) {
             let f = suspects.iter().position(|&s| s).unwrap_or(0);
             let detail =
-                format!("node {f} ({}) sent stale or implausible state for {limit} periods", FINGER_NAMES[f]);
+                format!("{} sent stale or implausible state for {limit} periods", hand.node_label(f));
             break (StopReason::ImplausibleState, detail);
         }
         if let Some((reason, detail)) = distrust(&io, config, woke) {
             // Joint state goes stale when its frames are refused: name the cause.
             if reason == StopReason::Watchdog && suspect.run > 0 {
                 let f = suspects.iter().position(|&s| s).unwrap_or(0);
-                let why = format!("node {f} ({}) sent stale or implausible state; {detail}", FINGER_NAMES[f]);
+                let why = format!("{} sent stale or implausible state; {detail}", hand.node_label(f));
                 break (StopReason::ImplausibleState, why);
             }
             break (reason, detail);
@@ -577,30 +604,32 @@ pub fn run<T: Transport, P: PolicyRunner>(
         }
         last_positions = positions;
 
-        let targets = if hold {
+        if hold {
             holds += 1;
-            safety.last_safe_rad()
         } else {
-            let q = io.state.q_rad().unwrap_or(q_start);
-            let obs = build_observation(&q, &safety.last_safe_rad(), &io.state.contacts());
-            let action = policy.act(&obs);
-            let failed = !action.as_ref().is_ok_and(|a| a.iter().all(|v| v.is_finite()));
+            let q = io.state.q_rad().unwrap_or_else(|| q_start.clone());
+            let obs = observer.observe(&q, safety.last_safe_rad(), &io.state.contacts());
+            let acted = policy.act(&obs, &mut action);
+            let failed = acted.is_err() || !action.iter().all(|v| v.is_finite());
             if failed {
                 policy_errors += 1;
                 holds += 1;
             }
             if failing_policy.record(failed, limit) {
-                let detail = match action {
+                let detail = match acted {
                     Err(e) => format!("the policy failed for {limit} periods: {e}"),
-                    Ok(_) => format!("the policy's action was not finite for {limit} periods"),
+                    Ok(()) => format!("the policy's action was not finite for {limit} periods"),
                 };
                 break (StopReason::PolicyFailure, detail);
             }
-            // A failed action goes to the filter as NaN: it holds the last safe targets.
-            safety.apply_delta(&action.unwrap_or([f32::NAN; 15]))
-        };
+            if failed {
+                // A failed action goes to the filter as NaN: it holds the last safe targets.
+                action.fill(f32::NAN);
+            }
+            safety.apply_delta(&action);
+        }
         io.heartbeat(woke, NodeState::Enabled)?;
-        let sent = io.send_targets(&targets, true)?;
+        let sent = io.send_targets(safety.last_safe_rad(), true)?;
         if unsent.record(!sent, limit) {
             break (
                 StopReason::TxFailure,
@@ -617,7 +646,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
         period_index += 1;
     };
     let elapsed = start.elapsed();
-    let final_targets_rad = safety.last_safe_rad();
+    let final_targets_rad = safety.last_safe_rad().to_vec();
 
     // Halt: hold the last safe targets (motors on, so the grasp does not drop), then disable.
     // Best effort: a bus that refuses frames now leaves the nodes to their command timeout.

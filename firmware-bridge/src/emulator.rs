@@ -11,33 +11,40 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 
 use crate::node_supervisor::{NodeSupervisor, RestartPlan};
-use crate::protocol::{JointCommand, JointPosition, Message, NUM_FINGERS, ProtocolError};
+use crate::protocol::{JointCommand, JointPosition, Message, NodeLayout, ProtocolError};
 use crate::transport::{Received, Transport, TransportError};
 
-/// Joint positions of all fingers, moving towards their commanded targets.
+/// Joint positions of all fingers of a hand, moving towards their commanded targets.
 #[derive(Debug, Clone)]
 pub struct JointControllerEmulator {
-    q_rad: [[f32; 3]; NUM_FINGERS as usize],
+    nodes: NodeLayout,
+    q_rad: Vec<[f32; 3]>,
     /// Fraction of the remaining error removed per command (0 = frozen, 1 = instant).
     response: f32,
 }
 
 impl JointControllerEmulator {
-    /// `response` is clamped to [0, 1].
-    pub fn new(response: f32) -> Self {
-        Self { q_rad: [[0.0; 3]; NUM_FINGERS as usize], response: response.clamp(0.0, 1.0) }
+    /// The nodes of `nodes`, every joint at 0; `response` is clamped to [0, 1].
+    pub fn new(nodes: NodeLayout, response: f32) -> Self {
+        Self { nodes, q_rad: vec![[0.0; 3]; nodes.num_fingers()], response: response.clamp(0.0, 1.0) }
+    }
+
+    /// The nodes emulated.
+    pub fn nodes(&self) -> NodeLayout {
+        self.nodes
     }
 
     /// Applies one command (moving only if it is enabled and `apply` is set: a faulted node
-    /// holds) and returns the finger's state after it, with the given status byte.
-    pub fn apply(&mut self, cmd: &JointCommand, apply: bool, status: u8) -> JointPosition {
-        let q = &mut self.q_rad[usize::from(cmd.finger.index())];
+    /// holds) and returns the finger's state after it, with the given status byte; `None` for
+    /// a node the hand does not have (nobody answers).
+    pub fn apply(&mut self, cmd: &JointCommand, apply: bool, status: u8) -> Option<JointPosition> {
+        let q = self.q_rad.get_mut(cmd.finger.slot())?;
         if cmd.enable && apply {
             for (q_i, target) in q.iter_mut().zip(cmd.q_target_rad) {
                 *q_i += self.response * (target - *q_i);
             }
         }
-        JointPosition { finger: cmd.finger, q_rad: *q, status, seq: cmd.seq }
+        Some(JointPosition { finger: cmd.finger, q_rad: *q, status, seq: cmd.seq })
     }
 }
 
@@ -83,7 +90,7 @@ pub fn serve<T: Transport>(
     stop: &AtomicBool,
 ) -> Result<EmulatorStats, EmulatorError> {
     let mut stats = EmulatorStats::default();
-    let mut nodes = NodeSupervisor::new(limits.command_timeout, Instant::now());
+    let mut nodes = NodeSupervisor::new(emulator.nodes(), limits.command_timeout, Instant::now());
     if let Some(plan) = limits.restart {
         nodes.plan_restart(plan);
     }
@@ -109,8 +116,11 @@ pub fn serve<T: Transport>(
             continue;
         };
         let applied = nodes.on_command(&cmd, last_frame);
-        let state = Message::JointPosition(emulator.apply(&cmd, applied, nodes.status(cmd.finger)));
-        transport.send(&state.encode()?)?;
+        let Some(state) = emulator.apply(&cmd, applied, nodes.status(cmd.finger)) else {
+            stats.ignored += 1;
+            continue;
+        };
+        transport.send(&Message::JointPosition(state).encode()?)?;
         stats.commands += 1;
     }
     stats.command_timeouts = nodes.command_timeouts;
@@ -126,18 +136,20 @@ mod tests {
 
     #[test]
     fn enabled_commands_move_towards_target_and_disabled_ones_hold() {
-        let mut emu = JointControllerEmulator::new(0.5);
+        let mut emu = JointControllerEmulator::new(NodeLayout::VGE15, 0.5);
         let finger = FingerId::new(2).expect("valid");
         let cmd = JointCommand { finger, q_target_rad: [0.4, -0.2, 1.0], enable: true, seq: 9 };
-        let s1 = emu.apply(&cmd, true, STATUS_ENABLED);
+        let s1 = emu.apply(&cmd, true, STATUS_ENABLED).expect("node 2");
         assert_eq!(s1.q_rad, [0.2, -0.1, 0.5]);
         assert_eq!((s1.status, s1.seq), (STATUS_ENABLED, 9));
-        let s2 = emu.apply(&cmd, true, STATUS_ENABLED);
+        let s2 = emu.apply(&cmd, true, STATUS_ENABLED).expect("node 2");
         assert_eq!(s2.q_rad, [0.3, -0.15, 0.75]);
-        let hold = emu.apply(&JointCommand { enable: false, seq: 10, ..cmd }, true, 0);
+        let hold = emu.apply(&JointCommand { enable: false, seq: 10, ..cmd }, true, 0).expect("node 2");
         assert_eq!(hold.q_rad, s2.q_rad);
         assert_eq!(hold.status, 0);
-        let faulted = emu.apply(&cmd, false, 0);
+        let faulted = emu.apply(&cmd, false, 0).expect("node 2");
         assert_eq!(faulted.q_rad, s2.q_rad, "a faulted node holds");
+        let other = JointCommand { finger: FingerId::new(5).expect("node id"), ..cmd };
+        assert_eq!(emu.apply(&other, true, 0), None, "vge15 has no node 5");
     }
 }

@@ -10,20 +10,22 @@
 //! A node that restarts is noticed from its heartbeats ([`RestartSign`]): its boot-up
 //! heartbeat (state booting), its counter starting again, or its enable state forgotten. The
 //! loop clears what start-up saw ([`HandState::clear_restarts`]) and halts on any later one.
+//!
+//! The tables are sized by the hand ([`HandState::new`]: one slot per finger node, three joints
+//! each); a frame from a node the hand does not have is refused ([`Applied::OtherNode`]).
 
 use std::time::{Duration, Instant};
 
-use vge_sim::kinematics::JointLimit;
+use vge_hand::JointLimit;
 use vge_sim::observation::FingertipReading;
 
-use crate::protocol::{Message, NUM_FINGERS, NodeState, STATUS_FAULT};
-
-const FINGERS: usize = NUM_FINGERS as usize;
+use crate::protocol::{HOST_NODE, JOINTS_PER_NODE, Message, NodeLayout, NodeState, STATUS_FAULT};
 
 /// What a reading must satisfy to be believed.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Plausibility {
-    pub limits: [JointLimit; 15],
+    /// Every joint's range, in the hand's joint order.
+    pub limits: Vec<JointLimit>,
     /// How far outside its range a measured joint may read (encoder noise, compliance).
     pub margin_rad: f32,
     /// Largest accepted lag of a frame's seq behind the last command sent.
@@ -79,31 +81,58 @@ pub enum Applied {
     Implausible,
     /// Not hand state (commands, the host's heartbeat).
     Ignored,
+    /// From a node id the hand does not have (another, larger hand's, or a stray node).
+    OtherNode,
 }
 
-/// Per-finger readings; `None` until the first frame of that kind arrived.
-#[derive(Debug, Clone, Default)]
+/// Per-finger readings, one slot per node of the hand; `None` until the first frame of that
+/// kind arrived.
+#[derive(Debug, Clone)]
 pub struct HandState {
-    q_rad: [Option<[f32; 3]>; FINGERS],
-    q_at: [Option<Instant>; FINGERS],
+    q_rad: Vec<Option<[f32; 3]>>,
+    q_at: Vec<Option<Instant>>,
     /// Sequence number each node last applied.
-    pub applied_seq: [Option<u8>; FINGERS],
-    pub dq_radps: [Option<[f32; 3]>; FINGERS],
-    pub tau_nm: [Option<[f32; 3]>; FINGERS],
-    q_target_rad: [Option<[f32; 3]>; FINGERS],
-    tip_position_m: [Option<([f32; 3], f32)>; FINGERS],
-    tip_normal: [Option<([f32; 3], bool)>; FINGERS],
+    pub applied_seq: Vec<Option<u8>>,
+    pub dq_radps: Vec<Option<[f32; 3]>>,
+    pub tau_nm: Vec<Option<[f32; 3]>>,
+    q_target_rad: Vec<Option<[f32; 3]>>,
+    tip_position_m: Vec<Option<([f32; 3], f32)>>,
+    tip_normal: Vec<Option<([f32; 3], bool)>>,
     /// A node reported a fault (fault frame, the fault bit in its position status, or
     /// heartbeat state fault).
-    pub fault: [bool; FINGERS],
-    pub heartbeat: [Option<HeartbeatSeen>; FINGERS],
+    pub fault: Vec<bool>,
+    pub heartbeat: Vec<Option<HeartbeatSeen>>,
     /// The first sign of a restart of each node since the last `clear_restarts`.
-    pub restarted: [Option<RestartSign>; FINGERS],
+    pub restarted: Vec<Option<RestartSign>>,
     /// Fingers that sent a stale or implausible frame since the last `take_suspects`.
-    suspect: [bool; FINGERS],
+    suspect: Vec<bool>,
 }
 
 impl HandState {
+    /// No readings yet from the nodes of `nodes`.
+    pub fn new(nodes: NodeLayout) -> Self {
+        let n = nodes.num_fingers();
+        Self {
+            q_rad: vec![None; n],
+            q_at: vec![None; n],
+            applied_seq: vec![None; n],
+            dq_radps: vec![None; n],
+            tau_nm: vec![None; n],
+            q_target_rad: vec![None; n],
+            tip_position_m: vec![None; n],
+            tip_normal: vec![None; n],
+            fault: vec![false; n],
+            heartbeat: vec![None; n],
+            restarted: vec![None; n],
+            suspect: vec![false; n],
+        }
+    }
+
+    /// Finger nodes of the hand.
+    pub fn num_fingers(&self) -> usize {
+        self.q_rad.len()
+    }
+
     /// Takes in one decoded message received at `now`, after checking it against `check`
     /// and `last_seq_sent` (the seq of the host's last command; `None` before the first).
     pub fn apply(
@@ -113,6 +142,13 @@ impl HandState {
         check: &Plausibility,
         last_seq_sent: Option<u8>,
     ) -> Applied {
+        let node = match message {
+            Message::Heartbeat(h) => (h.node != HOST_NODE).then_some(usize::from(h.node)),
+            m => message_finger(m),
+        };
+        if node.is_some_and(|f| f >= self.num_fingers()) {
+            return Applied::OtherNode;
+        }
         if let (Some(finger), Some(seq), Some(sent)) =
             (message_finger(message), message_seq(message), last_seq_sent)
         {
@@ -126,8 +162,10 @@ impl HandState {
             Message::JointPosition(p) => {
                 let f = usize::from(p.finger.index());
                 let outside = p.q_rad.iter().enumerate().any(|(j, &q)| {
-                    let l = check.limits[3 * f + j];
-                    !(l.lower_rad - check.margin_rad..=l.upper_rad + check.margin_rad).contains(&q)
+                    // A hand without this joint's range reads nothing here as plausible.
+                    check.limits.get(JOINTS_PER_NODE * f + j).is_none_or(|l| {
+                        !(l.lower_rad - check.margin_rad..=l.upper_rad + check.margin_rad).contains(&q)
+                    })
                 });
                 if outside {
                     self.suspect[f] = true;
@@ -150,7 +188,7 @@ impl HandState {
                 self.q_target_rad[usize::from(t.finger.index())] = Some(t.q_target_rad)
             }
             Message::Fault(f) => self.fault[usize::from(f.finger.index())] = true,
-            Message::Heartbeat(h) if h.node < NUM_FINGERS => {
+            Message::Heartbeat(h) if usize::from(h.node) < self.num_fingers() => {
                 let f = usize::from(h.node);
                 let repeats = match self.heartbeat[f] {
                     Some(last) if last.counter == h.counter => last.repeats + 1,
@@ -179,8 +217,9 @@ impl HandState {
     }
 
     /// Which fingers sent a stale or implausible frame since the last call; clears the flags.
-    pub fn take_suspects(&mut self) -> [bool; FINGERS] {
-        std::mem::take(&mut self.suspect)
+    pub fn take_suspects(&mut self) -> Vec<bool> {
+        let n = self.suspect.len();
+        std::mem::replace(&mut self.suspect, vec![false; n])
     }
 
     /// The first node that showed a sign of a restart since the last [`Self::clear_restarts`],
@@ -191,7 +230,7 @@ impl HandState {
 
     /// Forgets the restarts seen so far (start-up takes the nodes as they are once they answer).
     pub fn clear_restarts(&mut self) {
-        self.restarted = [None; FINGERS];
+        self.restarted.iter_mut().for_each(|r| *r = None);
     }
 
     /// The first node whose heartbeat is missing for longer than `timeout` (or never came),
@@ -215,26 +254,18 @@ impl HandState {
     }
 
     /// Time of each finger's latest joint position.
-    pub fn position_times(&self) -> [Option<Instant>; FINGERS] {
-        self.q_at
+    pub fn position_times(&self) -> Vec<Option<Instant>> {
+        self.q_at.clone()
     }
 
-    /// All 15 joint positions, once every finger has reported.
-    pub fn q_rad(&self) -> Option<[f32; 15]> {
-        let mut q = [0.0; 15];
-        for (f, chunk) in q.chunks_exact_mut(3).enumerate() {
-            chunk.copy_from_slice(&self.q_rad[f]?);
-        }
-        Some(q)
+    /// Every joint's position, in the hand's joint order, once every finger has reported.
+    pub fn q_rad(&self) -> Option<Vec<f32>> {
+        joined(&self.q_rad)
     }
 
-    /// All 15 targets the nodes reported holding, once every finger has reported them.
-    pub fn q_target_rad(&self) -> Option<[f32; 15]> {
-        let mut q = [0.0; 15];
-        for (f, chunk) in q.chunks_exact_mut(3).enumerate() {
-            chunk.copy_from_slice(&self.q_target_rad[f]?);
-        }
-        Some(q)
+    /// Every joint's target the nodes reported holding, once every finger has reported them.
+    pub fn q_target_rad(&self) -> Option<Vec<f32>> {
+        joined(&self.q_target_rad)
     }
 
     /// Age of the oldest finger's joint position; `None` if some finger never reported.
@@ -247,18 +278,31 @@ impl HandState {
 
     /// Fingertip contacts for the observation: `Some` only where the latest normal frame
     /// says the tip is in contact and a contact frame has arrived.
-    pub fn contacts(&self) -> [Option<FingertipReading>; FINGERS] {
-        std::array::from_fn(|f| match (self.tip_position_m[f], self.tip_normal[f]) {
-            (Some((position_m, force_n)), Some((normal, true))) => {
-                Some(FingertipReading { position_m, normal, force_n })
-            }
-            _ => None,
-        })
+    pub fn contacts(&self) -> Vec<Option<FingertipReading>> {
+        self.tip_position_m
+            .iter()
+            .zip(&self.tip_normal)
+            .map(|(p, n)| match (p, n) {
+                (Some((position_m, force_n)), Some((normal, true))) => {
+                    Some(FingertipReading { position_m: *position_m, normal: *normal, force_n: *force_n })
+                }
+                _ => None,
+            })
+            .collect()
     }
 
     pub fn any_fault(&self) -> bool {
         self.fault.iter().any(|&f| f)
     }
+}
+
+/// Each node's three joints, node after node; `None` while a node is missing.
+fn joined(per_node: &[Option<[f32; 3]>]) -> Option<Vec<f32>> {
+    let mut q = Vec::with_capacity(JOINTS_PER_NODE * per_node.len());
+    for node in per_node {
+        q.extend_from_slice(&(*node)?);
+    }
+    Some(q)
 }
 
 /// Why a node's heartbeat is not trusted.
@@ -303,7 +347,7 @@ mod tests {
 
     fn check() -> Plausibility {
         Plausibility {
-            limits: [JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15],
+            limits: vec![JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15],
             margin_rad: 0.1,
             max_seq_lag: 2,
         }
@@ -311,7 +355,7 @@ mod tests {
 
     #[test]
     fn positions_complete_only_when_every_finger_reported_and_ages_track_the_oldest() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let t0 = Instant::now();
         for f in 0..4 {
             let finger = FingerId::new(f).expect("finger");
@@ -339,7 +383,7 @@ mod tests {
 
     #[test]
     fn a_contact_counts_only_while_the_tip_reports_it() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let now = Instant::now();
         let finger = FingerId::new(2).expect("finger");
         s.apply(
@@ -367,7 +411,7 @@ mod tests {
 
     #[test]
     fn stale_seqs_and_impossible_joint_positions_are_refused_counted_and_flag_the_finger() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let now = Instant::now();
         let finger = FingerId::new(3).expect("finger");
         let position = |q: f32, seq: u8| {
@@ -385,13 +429,23 @@ mod tests {
         assert_eq!(s.q_rad[3], Some([0.0, 0.55, 0.0]), "only the plausible reading was kept");
         assert_eq!(s.take_suspects(), [false, false, false, true, false]);
         assert_eq!(s.take_suspects(), [false; 5], "taking clears");
+        // Node 5 is on the bus's id range but not on vge15.
+        let other = Message::JointPosition(JointPosition {
+            finger: FingerId::new(5).expect("a node id"),
+            q_rad: [0.0; 3],
+            status: 1,
+            seq: 12,
+        });
+        assert_eq!(s.apply(&other, now, &check(), Some(12)), Applied::OtherNode);
+        assert_eq!(s.apply(&heartbeat_frame(6, 1, 0), now, &check(), None), Applied::OtherNode);
+        assert_eq!(s.take_suspects(), [false; 5]);
         // Wrap-around: seq 255 is one behind 0.
         assert_eq!(s.apply(&position(0.0, 255), now, &check(), Some(0)), Applied::Kept);
     }
 
     #[test]
     fn heartbeats_missing_late_or_stuck_are_problems() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let t0 = Instant::now();
         let timeout = Duration::from_millis(300);
         assert_eq!(s.heartbeat_problem(t0, timeout, 2), Some(HeartbeatProblem::Missing { finger: 0 }));
@@ -429,7 +483,7 @@ mod tests {
 
     #[test]
     fn a_heartbeat_counter_that_starts_again_is_a_restart_and_lost_beats_are_not() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let t0 = Instant::now();
         // Ready (1), then enabled (2): counters 250, 251, 253 (one lost), wrapping to 2 (three lost).
         for (state, counter) in [(1, 250), (2, 251), (2, 253), (2, 254), (2, 255), (2, 2)] {
@@ -452,7 +506,7 @@ mod tests {
 
     #[test]
     fn a_boot_up_heartbeat_or_a_forgotten_enable_is_a_restart() {
-        let mut s = HandState::default();
+        let mut s = HandState::new(NodeLayout::VGE15);
         let t0 = Instant::now();
         // The boot-up message of node 1 (state 0 booting, counter 0), then ready.
         s.apply(&heartbeat_frame(1, 0, 0), t0, &check(), None);

@@ -2,9 +2,12 @@
 //! against a hand's joint controllers over SocketCAN.
 //!
 //! Features (`std` and `sim` by default):
-//! - `std`: the bridge for real hands over SocketCAN. It needs vge-sim's hand description
-//!   only (joint limits, observation layout), without the physics: no rapier3d. A real
-//!   hand's joint limits come from a hand file ([`hand_file`], `--hand FILE`).
+//! - `std`: the bridge for real hands over SocketCAN. It needs the hand's description only
+//!   (`vge_hand::Hand`, read by vge-sim's `hands`: joints, fingers, limits, gains; vge-sim's
+//!   observation layout and policy checks), without the physics: no rapier3d. Every size
+//!   (nodes, joints, observation) comes from the loaded hand ([`protocol_hand`] for vge's own
+//!   protocol, [`allegro_hand`] for the Allegro's). A real hand's joint limits may come from a
+//!   hand file ([`hand_file`], `--hand FILE`).
 //! - `sim`: the simulated hand as well ([`sim_hand`]: `run --backend sim`, `emulate --model
 //!   sim`), with vge-sim's rapier3d physics, and `run --record F.jsonl`, the simulated
 //!   episode recorded (`SimHand::record_to`, vge-sim's `recording`).
@@ -41,6 +44,8 @@ pub mod node_supervisor;
 #[cfg(feature = "std")]
 pub mod policy_runner;
 #[cfg(feature = "std")]
+pub mod protocol_hand;
+#[cfg(feature = "std")]
 pub mod realtime;
 #[cfg(feature = "std")]
 pub mod report;
@@ -48,6 +53,8 @@ pub mod report;
 pub mod safety;
 #[cfg(feature = "sim")]
 pub mod sim_hand;
+#[cfg(feature = "sim")]
+pub mod sim_policy;
 #[cfg(feature = "std")]
 pub mod socketcan_io;
 #[cfg(feature = "std")]

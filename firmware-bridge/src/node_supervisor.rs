@@ -17,11 +17,9 @@ use std::time::{Duration, Instant};
 
 use crate::heartbeat::HeartbeatClock;
 use crate::protocol::{
-    Fault, FaultCode, FingerId, HEARTBEAT_PERIOD_MS, Heartbeat, JointCommand, Message, NUM_FINGERS,
-    NodeState, ProtocolError, RawFrame, STATUS_ENABLED, STATUS_FAULT,
+    Fault, FaultCode, FingerId, HEARTBEAT_PERIOD_MS, Heartbeat, JointCommand, Message, NodeLayout, NodeState,
+    ProtocolError, RawFrame, STATUS_ENABLED, STATUS_FAULT,
 };
-
-const FINGERS: usize = NUM_FINGERS as usize;
 
 /// A node restart to emulate: `node` reboots right after it applied its
 /// `after_enabled_commands`-th enabled command.
@@ -31,20 +29,21 @@ pub struct RestartPlan {
     pub after_enabled_commands: u64,
 }
 
-/// The protocol duties of the five finger nodes.
+/// The protocol duties of a hand's finger nodes (vge15: five).
 #[derive(Debug, Clone)]
 pub struct NodeSupervisor {
+    nodes: NodeLayout,
     command_timeout: Duration,
-    enabled: [bool; FINGERS],
-    fault: [Option<FaultCode>; FINGERS],
-    last_command: [Option<Instant>; FINGERS],
-    last_seq: [u8; FINGERS],
+    enabled: Vec<bool>,
+    fault: Vec<Option<FaultCode>>,
+    last_command: Vec<Option<Instant>>,
+    last_seq: Vec<u8>,
     /// The heartbeat schedule; each node counts its own beats.
     heartbeats: HeartbeatClock,
-    counters: [u8; FINGERS],
+    counters: Vec<u8>,
     /// Nodes whose boot-up heartbeat is due at the next poll.
-    booting: [bool; FINGERS],
-    enabled_commands: [u64; FINGERS],
+    booting: Vec<bool>,
+    enabled_commands: Vec<u64>,
     restart_plan: Option<RestartPlan>,
     /// Command-timeout faults raised so far (one per finger and occurrence).
     pub command_timeouts: u64,
@@ -54,19 +53,21 @@ pub struct NodeSupervisor {
 }
 
 impl NodeSupervisor {
-    /// Nodes that boot at `now`: disabled, their boot-up heartbeats due at once, the regular
-    /// ones a period later.
-    pub fn new(command_timeout: Duration, now: Instant) -> Self {
+    /// The nodes of `nodes`, booting at `now`: disabled, their boot-up heartbeats due at once,
+    /// the regular ones a period later.
+    pub fn new(nodes: NodeLayout, command_timeout: Duration, now: Instant) -> Self {
+        let n = nodes.num_fingers();
         Self {
+            nodes,
             command_timeout,
-            enabled: [false; FINGERS],
-            fault: [None; FINGERS],
-            last_command: [None; FINGERS],
-            last_seq: [0; FINGERS],
+            enabled: vec![false; n],
+            fault: vec![None; n],
+            last_command: vec![None; n],
+            last_seq: vec![0; n],
             heartbeats: HeartbeatClock::new(now + Duration::from_millis(u64::from(HEARTBEAT_PERIOD_MS))),
-            counters: [0; FINGERS],
-            booting: [true; FINGERS],
-            enabled_commands: [0; FINGERS],
+            counters: vec![0; n],
+            booting: vec![true; n],
+            enabled_commands: vec![0; n],
             restart_plan: None,
             command_timeouts: 0,
             heartbeats_sent: 0,
@@ -82,7 +83,10 @@ impl NodeSupervisor {
     /// Reboots `finger`'s node: it forgets its enable state, fault and commands, and sends its
     /// boot-up heartbeat at the next poll, counting from 0 again.
     pub fn restart_node(&mut self, finger: FingerId) {
-        let f = usize::from(finger.index());
+        if !self.nodes.has(finger) {
+            return;
+        }
+        let f = finger.slot();
         self.enabled[f] = false;
         self.fault[f] = None;
         self.last_command[f] = None;
@@ -92,10 +96,13 @@ impl NodeSupervisor {
     }
 
     /// Takes in a command for its finger at `now`; returns whether the node applies its
-    /// targets (`false` while a fault is latched: the finger holds). A disabled command
-    /// disables the finger and clears a latched fault.
+    /// targets (`false` while a fault is latched: the finger holds, and for a node the hand
+    /// does not have). A disabled command disables the finger and clears a latched fault.
     pub fn on_command(&mut self, cmd: &JointCommand, now: Instant) -> bool {
-        let f = usize::from(cmd.finger.index());
+        if !self.nodes.has(cmd.finger) {
+            return false;
+        }
+        let f = cmd.finger.slot();
         self.last_command[f] = Some(now);
         self.last_seq[f] = cmd.seq;
         if !cmd.enable {
@@ -121,10 +128,15 @@ impl NodeSupervisor {
 
     /// The status byte of the finger's position frames.
     pub fn status(&self, finger: FingerId) -> u8 {
-        let f = usize::from(finger.index());
-        let enabled = if self.enabled[f] { STATUS_ENABLED } else { 0 };
-        let fault = if self.fault[f].is_some() { STATUS_FAULT } else { 0 };
+        let f = finger.slot();
+        let enabled = if self.enabled.get(f).copied().unwrap_or(false) { STATUS_ENABLED } else { 0 };
+        let fault = if self.fault.get(f).is_some_and(Option::is_some) { STATUS_FAULT } else { 0 };
         enabled | fault
+    }
+
+    /// The nodes supervised.
+    pub fn nodes(&self) -> NodeLayout {
+        self.nodes
     }
 
     /// Whether any finger has a fault latched.
@@ -136,8 +148,8 @@ impl NodeSupervisor {
     /// (it is then disabled and holds), and every node's heartbeat once per period.
     pub fn poll(&mut self, now: Instant) -> Result<Vec<RawFrame>, ProtocolError> {
         let mut frames = Vec::new();
-        for finger in FingerId::all() {
-            let f = usize::from(finger.index());
+        for finger in self.nodes.fingers() {
+            let f = finger.slot();
             let silent_for = self.last_command[f].map(|t| now.saturating_duration_since(t));
             if self.enabled[f]
                 && self.fault[f].is_none()
@@ -158,8 +170,8 @@ impl NodeSupervisor {
             }
         }
         let regular = self.heartbeats.tick(now).is_some();
-        for finger in FingerId::all() {
-            let f = usize::from(finger.index());
+        for finger in self.nodes.fingers() {
+            let f = finger.slot();
             let state = match (self.booting[f], self.fault[f], self.enabled[f]) {
                 (true, _, _) => NodeState::Booting,
                 (false, Some(_), _) => NodeState::Fault,
@@ -203,7 +215,7 @@ mod tests {
     #[test]
     fn heartbeats_every_period_with_a_counter_and_the_enable_state() {
         let t0 = Instant::now();
-        let mut s = NodeSupervisor::new(Duration::from_millis(500), t0);
+        let mut s = NodeSupervisor::new(NodeLayout::VGE15, Duration::from_millis(500), t0);
         let first = decode(&s.poll(t0).expect("frames"));
         assert_eq!(first.len(), 5);
         assert!(
@@ -232,7 +244,7 @@ mod tests {
     #[test]
     fn a_planned_restart_reboots_one_node_after_its_nth_enabled_command() {
         let t0 = Instant::now();
-        let mut s = NodeSupervisor::new(Duration::from_millis(500), t0);
+        let mut s = NodeSupervisor::new(NodeLayout::VGE15, Duration::from_millis(500), t0);
         let node = FingerId::new(2).expect("finger");
         s.plan_restart(RestartPlan { node, after_enabled_commands: 3 });
         s.poll(t0).expect("boot-up messages");
@@ -274,7 +286,7 @@ mod tests {
     #[test]
     fn an_enabled_finger_without_commands_latches_command_timeout_and_holds_until_disabled() {
         let t0 = Instant::now();
-        let mut s = NodeSupervisor::new(Duration::from_millis(200), t0);
+        let mut s = NodeSupervisor::new(NodeLayout::VGE15, Duration::from_millis(200), t0);
         s.poll(t0).expect("first heartbeats");
         let finger = FingerId::new(1).expect("finger");
         s.on_command(&cmd(1, true, 7), t0);
@@ -303,5 +315,17 @@ mod tests {
         assert!(s.on_command(&cmd(1, false, 9), t0 + Duration::from_millis(950)));
         assert!(s.on_command(&cmd(1, true, 10), t0 + Duration::from_millis(960)));
         assert_eq!(s.status(finger), STATUS_ENABLED);
+    }
+
+    #[test]
+    fn a_hand_of_other_size_beats_for_its_own_nodes_and_ignores_the_rest() {
+        let t0 = Instant::now();
+        let nodes = NodeLayout::new(2).expect("two nodes");
+        let mut s = NodeSupervisor::new(nodes, Duration::from_millis(500), t0);
+        let beats = decode(&s.poll(t0).expect("frames"));
+        assert_eq!(beats.len(), 2);
+        assert!(!s.on_command(&cmd(2, true, 1), t0), "node 2 is not this hand's");
+        assert_eq!(s.status(FingerId::new(2).expect("node id")), 0);
+        assert!(s.on_command(&cmd(1, true, 1), t0));
     }
 }

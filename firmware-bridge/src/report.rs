@@ -17,6 +17,8 @@ pub struct SimHandSummary {
     pub total_reward: f32,
     /// The env reported termination (drop, or too few fingertip contacts).
     pub terminated: bool,
+    /// The object fell (the env's drop: `drop_height_m` below where the grasp left it).
+    pub dropped: bool,
     pub mean_tip_contacts: f32,
     /// Fingertips that broke and remade contact with the object ([`vge_sim::gait`]).
     pub contact_switches: u32,
@@ -87,6 +89,7 @@ pub fn json_line(
         m.insert("total_reward".to_owned(), round(f64::from(s.total_reward), 4));
         m.insert("mean_tip_contacts".to_owned(), round(f64::from(s.mean_tip_contacts), 3));
         m.insert("terminated".to_owned(), json!(s.terminated));
+        m.insert("dropped".to_owned(), json!(s.dropped));
         m.insert("contact_switches".to_owned(), json!(s.contact_switches));
     }
     Value::Object(m).to_string()

@@ -1,7 +1,9 @@
-//! The hand's five nodes emulated by the simulator, speaking the CAN protocol: what
-//! `vge-bridge emulate` puts on a bus and what `vge-bridge run --backend sim` drives.
+//! The hand's finger nodes emulated by the simulator, speaking the CAN protocol: what
+//! `vge-bridge emulate` puts on a bus and what `vge-bridge run --backend sim` drives. The env's
+//! hand sets how many nodes there are (vge15: five); a hand the protocol cannot carry is
+//! refused ([`ProtocolHand::of`]).
 //!
-//! Lockstep: when enabled joint commands with one sequence number have arrived for all five
+//! Lockstep: when enabled joint commands with one sequence number have arrived for all the
 //! fingers, the simulator advances one control period towards those targets and every node
 //! reports its state. Disabled commands (the bridge's start-up query) are answered without
 //! advancing time. The sensor frames carry what the env observes (noise included), so the
@@ -12,16 +14,16 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use std::ops::Range;
+
 use thiserror::Error;
-use vge_sim::observation::{OBS_CONTACT_FORCE, OBS_CONTACT_NORMAL, OBS_CONTACT_POSITION, OBS_DIM, OBS_Q};
-use vge_sim::{Env, EnvConfig, NUM_JOINTS, SimError};
+use vge_sim::{Env, EnvConfig, SimError};
 
 use crate::node_supervisor::NodeSupervisor;
 use crate::protocol::*;
+use crate::protocol_hand::{ProtocolHand, ProtocolHandError};
 use crate::report::SimHandSummary;
 use crate::transport::{Received, Transport, TransportError};
-
-const FINGERS: usize = NUM_FINGERS as usize;
 
 #[derive(Debug, Error)]
 pub enum SimHandError {
@@ -33,6 +35,10 @@ pub enum SimHandError {
     Transport(#[from] TransportError),
     #[error("recording: {0}")]
     Recording(#[from] vge_sim::RecordingError),
+    #[error(transparent)]
+    Hand(#[from] ProtocolHandError),
+    #[error("the env's observation has no slice {0}")]
+    Layout(&'static str),
 }
 
 /// Frames the emulated nodes saw.
@@ -91,14 +97,26 @@ pub fn serve<T: Transport>(
     Ok(stats)
 }
 
+/// Where the readings the nodes report sit in the env's (full) observation.
+#[derive(Debug, Clone)]
+struct Slices {
+    q: Range<usize>,
+    contact_position: Range<usize>,
+    contact_normal: Range<usize>,
+    contact_force: Range<usize>,
+}
+
 #[derive(Debug)]
 pub struct SimHand {
     env: Env,
-    obs: [f32; OBS_DIM],
-    pending: [Option<JointCommand>; FINGERS],
+    hand: ProtocolHand,
+    slices: Slices,
+    obs: Vec<f32>,
+    pending: Vec<Option<JointCommand>>,
     /// The run's accounting, as every episode loop of vge keeps it ([`vge_sim::episode`]).
     tracker: vge_sim::EpisodeTracker,
     terminated: bool,
+    dropped: bool,
     /// The nodes' protocol duties; `serve` polls it for heartbeats and timeouts.
     pub nodes: NodeSupervisor,
     /// Where each step is recorded (`run --record`), if anywhere.
@@ -109,18 +127,36 @@ impl SimHand {
     /// Builds the env and resets it with `seed` (the grasp is found by closing the fingers).
     /// An enabled finger that gets no command for `command_timeout` faults and holds.
     pub fn new(config: EnvConfig, seed: u64, command_timeout: Duration) -> Result<Self, SimHandError> {
+        let hand = ProtocolHand::of(&config.hand)?;
+        let layout = config.observation_layout();
+        let slice = |name: &'static str| layout.range(name).ok_or(SimHandError::Layout(name));
+        let slices = Slices {
+            q: slice("q_rad")?,
+            contact_position: slice("contact_position_m")?,
+            contact_normal: slice("contact_normal")?,
+            contact_force: slice("contact_force_n")?,
+        };
         let mut env = Env::new(config)?;
         let (obs, _) = env.reset(seed)?;
         let tracker = env.episode_tracker()?;
+        let nodes = NodeSupervisor::new(hand.nodes, command_timeout, Instant::now());
         Ok(Self {
             env,
+            pending: vec![None; hand.num_fingers()],
+            hand,
+            slices,
             obs,
-            pending: [None; FINGERS],
             tracker,
             terminated: false,
-            nodes: NodeSupervisor::new(command_timeout, Instant::now()),
+            dropped: false,
+            nodes,
             recorder: None,
         })
+    }
+
+    /// The hand the nodes belong to.
+    pub fn hand(&self) -> &ProtocolHand {
+        &self.hand
     }
 
     /// Records every step from now on into `path` ([`vge_sim::recording`]); the actions
@@ -146,6 +182,7 @@ impl SimHand {
             rotation_rad: o.rotation_rad as f32,
             total_reward: o.episode_return as f32,
             terminated: o.terminated,
+            dropped: self.dropped,
             mean_tip_contacts: o.mean_contacts as f32,
             contact_switches: o.contact_switches,
         }
@@ -158,63 +195,77 @@ impl SimHand {
             // A faulted finger holds: its command does not count towards the next step.
             return Ok(Vec::new());
         }
+        // The supervisor takes no command for a node the hand does not have.
         if !cmd.enable {
             // A query: this finger's node answers for itself, state then held targets.
             let finger = cmd.finger;
             let mut frames = self.state_frames(&[finger], cmd.seq)?;
-            let q_target = self.env.privileged().map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
-            let f = 3 * usize::from(finger.index());
-            let q_target_rad = [q_target[f], q_target[f + 1], q_target[f + 2]];
+            let f = JOINTS_PER_NODE * finger.slot();
+            let q_target = self.q_target_rad();
+            let q_target_rad = std::array::from_fn(|j| q_target.get(f + j).copied().unwrap_or(0.0));
             frames.push(Message::JointTarget(JointTarget { finger, q_target_rad, seq: cmd.seq }).encode()?);
             return Ok(frames);
         }
-        self.pending[usize::from(cmd.finger.index())] = Some(cmd);
+        let Some(slot) = self.pending.get_mut(cmd.finger.slot()) else { return Ok(Vec::new()) };
+        *slot = Some(cmd);
         let complete = self.pending.iter().all(|p| p.is_some_and(|p| p.seq == cmd.seq));
         if !complete {
             return Ok(Vec::new());
         }
-        let current = self.env.privileged().map(|s| s.q_target_rad).unwrap_or([0.0; 15]);
-        let mut action = [0.0f32; 15];
+        let current = self.q_target_rad();
+        let mut action = vec![0.0f32; self.hand.num_joints()];
         for p in self.pending.iter().flatten() {
-            let base = usize::from(p.finger.index()) * 3;
-            for j in 0..3 {
-                action[base + j] = p.q_target_rad[j] - current[base + j];
+            let base = p.finger.slot() * JOINTS_PER_NODE;
+            for j in 0..JOINTS_PER_NODE {
+                action[base + j] = p.q_target_rad[j] - current.get(base + j).copied().unwrap_or(0.0);
             }
         }
-        self.pending = [None; FINGERS];
+        self.pending.iter_mut().for_each(|p| *p = None);
         let result = self.env.step(&action)?;
-        self.obs = result.obs;
-        self.tracker.record(result.reward, result.info.object_rotation_z_rad, result.info.tip_contacts);
+        self.tracker.record(result.reward, result.info.object_rotation_z_rad, &result.info.tip_contacts);
         self.terminated |= result.terminated;
+        self.dropped |= result.info.dropped;
         if let Some(recorder) = &mut self.recorder {
             recorder.record_step(&self.env, &action, &result)?;
         }
-        let all: Vec<FingerId> = FingerId::all().collect();
+        self.obs = result.obs;
+        let all: Vec<FingerId> = self.hand.nodes.fingers().collect();
         self.state_frames(&all, cmd.seq)
+    }
+
+    /// The joint targets the env holds (zeros before its first reset).
+    fn q_target_rad(&self) -> Vec<f32> {
+        self.env.privileged().map_or_else(|| vec![0.0; self.hand.num_joints()], |s| s.q_target_rad.clone())
     }
 
     /// The state frames of `fingers`' nodes, from the latest observation.
     fn state_frames(&self, fingers: &[FingerId], seq: u8) -> Result<Vec<RawFrame>, SimHandError> {
         let state = self.env.privileged();
-        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or_else(|| vec![0.0; NUM_JOINTS]);
-        let q_target = state.map(|s| s.q_target_rad).unwrap_or([0.0; NUM_JOINTS]);
-        let hand = &self.env.config().hand;
-        let kp = self.env.config().physics.motor_stiffness_nm_per_rad;
-        let caps = hand.torque_caps_nm();
-        let mut frames = Vec::with_capacity(FINGERS * 5);
-        for &finger in fingers {
-            let f = usize::from(finger.index());
-            let q: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_Q.start + 3 * f + j]);
-            // Effort: the motor law's stiffness term, capped as the motors are (an estimate:
+        let n_joints = self.hand.num_joints();
+        let dq = self.env.world().map(|w| w.joint_velocities()).unwrap_or_else(|| vec![0.0; n_joints]);
+        let q_target = self.q_target_rad();
+        let servos = &self.env.config().servos;
+        let s = &self.slices;
+        // Readings by index into the observation: 0 where it has none (never, for the env's
+        // own full layout).
+        let at = |i: usize| self.obs.get(i).copied().unwrap_or(0.0);
+        let mut frames = Vec::with_capacity(fingers.len() * 5);
+        for &finger in fingers.iter().filter(|f| self.hand.nodes.has(**f)) {
+            let f = finger.slot();
+            let joint = |j: usize| JOINTS_PER_NODE * f + j;
+            let q: [f32; 3] = std::array::from_fn(|j| at(s.q.start + joint(j)));
+            // Effort: the servo law's stiffness term, capped as the motors are (an estimate:
             // the simulator does not expose the applied motor torque).
             let tau: [f32; 3] = std::array::from_fn(|j| {
-                let k = 3 * f + j;
-                (kp * (q_target[k] - self.obs[OBS_Q.start + k])).clamp(-caps[k], caps[k])
+                let k = joint(j);
+                let servo = servos.get(k);
+                let (kp, cap) = servo.map_or((0.0, 0.0), |s| (s.kp_nm_per_rad, s.torque_cap_nm));
+                (kp * (q_target.get(k).copied().unwrap_or(0.0) - at(s.q.start + k))).clamp(-cap, cap)
             });
-            let p: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_CONTACT_POSITION.start + 3 * f + j]);
-            let n: [f32; 3] = std::array::from_fn(|j| self.obs[OBS_CONTACT_NORMAL.start + 3 * f + j]);
-            let force_n = self.obs[OBS_CONTACT_FORCE.start + f];
-            let in_contact = state.is_some_and(|s| s.contacts[f].is_some());
+            let p: [f32; 3] = std::array::from_fn(|j| at(s.contact_position.start + 3 * f + j));
+            let n: [f32; 3] = std::array::from_fn(|j| at(s.contact_normal.start + 3 * f + j));
+            let force_n = at(s.contact_force.start + f);
+            let in_contact = state.is_some_and(|s| s.contacts.get(f).is_some_and(Option::is_some));
             let messages = [
                 Message::JointPosition(JointPosition {
                     finger,
@@ -224,7 +275,9 @@ impl SimHand {
                 }),
                 Message::JointVelocity(JointVelocity {
                     finger,
-                    dq_radps: std::array::from_fn(|j| dq[3 * f + j].clamp(-32.0, 32.0)),
+                    dq_radps: std::array::from_fn(|j| {
+                        dq.get(joint(j)).copied().unwrap_or(0.0).clamp(-32.0, 32.0)
+                    }),
                     seq,
                 }),
                 Message::JointEffort(JointEffort { finger, tau_nm: tau, seq }),

@@ -37,7 +37,7 @@ fn run_refuses_a_bad_hand_file_naming_the_file_and_the_joint() {
     let short = HandFile::new("short", &format!("joint_limits_rad = [{}]", rows[..14].join(", ")));
     for (file, what) in [
         (&inverted, "joint 4 (index.flex_prox): lower limit 1.6 rad is not below upper limit -0.3 rad"),
-        (&short, "joint_limits_rad lists 14 joints; the hand has 15"),
+        (&short, "joint_limits_rad lists 14 joints; the hand vge15 has 15: thumb.roll, thumb.flex_prox"),
     ] {
         let hand = file.0.to_str().expect("utf-8 path");
         let out = bridge(&["run", "--policy", "/nonexistent.vgep", "--backend", "can", "--hand", hand]);
@@ -58,12 +58,15 @@ fn run_help_documents_the_hand_file_and_the_default_limits() {
     assert!(help.contains("thumb    [-0.500, +0.500] [-0.300, +1.600] [-0.300, +1.600]"), "{help}");
 }
 
-/// The Allegro runs no policy yet, and none of vge15's options that do not apply to it: each
-/// refusal says why and what to use instead, before any bus is touched.
+/// The Allegro runs none of vge15's options that do not apply to it: each refusal says why and
+/// what to use instead, before any bus is touched.
 #[test]
 fn run_and_emulate_for_the_allegro_refuse_what_does_not_apply_saying_why() {
     for (args, why) in [
-        (&["run", "--hand", "allegro", "--policy", "/nonexistent.vgep"][..], "use --hold"),
+        (
+            &["run", "--hand", "allegro", "--backend", "can", "--policy", "/nonexistent.vgep"][..],
+            "reading policy file /nonexistent.vgep",
+        ),
         (&["run", "--hand", "allegro", "--hold", "--fd"], "the Allegro speaks classic CAN"),
         (&["run", "--hand", "allegro", "--hold", "--record", "x.jsonl"], "the Allegro's is not recorded"),
         (&["run", "--hand", "allegro", "--hold", "--squeeze-rad", "5"], "--squeeze-rad must be"),

@@ -9,25 +9,38 @@ use vge_bridge::control_loop::{LoopConfig, PolicyRunner, StopReason, run};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
 use vge_bridge::hand_file;
 use vge_bridge::node_supervisor::RestartPlan;
-use vge_bridge::protocol::{FingerId, Heartbeat, JointPosition, Message, NodeState, RawFrame};
+use vge_bridge::protocol::{FingerId, Heartbeat, JointPosition, Message, NodeLayout, NodeState, RawFrame};
+use vge_bridge::protocol_hand::ProtocolHand;
 use vge_bridge::transport::{BusCounts, ErrorClass, InProcessTransport, Received, Transport, TransportError};
-use vge_sim::kinematics::JointLimit;
-use vge_sim::observation::{OBS_DIM, OBS_Q_TARGET};
+use vge_hand::JointLimit;
+use vge_sim::observation::{ObservationLayout, ObservationSet};
+
+/// vge15's full observation: 65 floats, the targets at 15..30.
+const OBS_DIM: usize = 65;
+const OBS_Q_TARGET_START: usize = 15;
 
 /// Asks every joint to move by a fixed amount each step, and remembers what it saw.
 struct ConstantDelta {
     delta_rad: f32,
     calls: u64,
-    last_obs: [f32; OBS_DIM],
+    last_obs: Vec<f32>,
 }
 
 impl PolicyRunner for ConstantDelta {
     type Error = Infallible;
-    fn act(&mut self, obs: &[f32; OBS_DIM]) -> Result<[f32; 15], Infallible> {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) -> Result<(), Infallible> {
         self.calls += 1;
-        self.last_obs = *obs;
-        Ok([self.delta_rad; 15])
+        self.last_obs = obs.to_vec();
+        action.fill(self.delta_rad);
+        Ok(())
     }
+}
+
+/// vge15 with every joint's range [-0.5, 0.5].
+fn test_hand() -> ProtocolHand {
+    let mut hand = ProtocolHand::vge15().expect("vge15");
+    hand.limits = vec![JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15];
+    hand
 }
 
 fn config(rate_hz: f64, duration_s: f64) -> LoopConfig {
@@ -35,16 +48,24 @@ fn config(rate_hz: f64, duration_s: f64) -> LoopConfig {
         duration: Some(Duration::from_secs_f64(duration_s)),
         startup_timeout: Duration::from_secs(2),
         max_delta_rad: 0.01,
-        ..LoopConfig::new(rate_hz, [JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 15])
+        ..LoopConfig::new(rate_hz, test_hand())
     }
 }
 
 fn spawn_emulator<T: Transport + 'static>(
+    end: T,
+    max_commands: u64,
+) -> thread::JoinHandle<vge_bridge::emulator::EmulatorStats> {
+    spawn_emulator_of(end, NodeLayout::VGE15, max_commands)
+}
+
+fn spawn_emulator_of<T: Transport + 'static>(
     mut end: T,
+    nodes: NodeLayout,
     max_commands: u64,
 ) -> thread::JoinHandle<vge_bridge::emulator::EmulatorStats> {
     thread::spawn(move || {
-        let mut emulator = JointControllerEmulator::new(1.0);
+        let mut emulator = JointControllerEmulator::new(nodes, 1.0);
         let limits = ServeLimits {
             max_commands,
             idle_timeout: Duration::from_millis(300),
@@ -102,7 +123,7 @@ fn decode(frame: &RawFrame) -> Message {
 }
 
 fn hold_policy() -> ConstantDelta {
-    ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: [0.0; OBS_DIM] }
+    ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: Vec::new() }
 }
 
 #[test]
@@ -110,7 +131,7 @@ fn loop_drives_the_emulated_hand_and_clamps_large_actions() {
     let (mut bridge, nodes) = InProcessTransport::pair();
     let emulator = spawn_emulator(nodes, u64::MAX);
     // Asks for 0.05 rad per step; the safety filter allows 0.01.
-    let mut policy = ConstantDelta { delta_rad: 0.05, calls: 0, last_obs: [0.0; OBS_DIM] };
+    let mut policy = ConstantDelta { delta_rad: 0.05, calls: 0, last_obs: Vec::new() };
     let report =
         run(&mut bridge, &mut policy, &config(200.0, 0.25), &AtomicBool::new(false)).expect("loop runs");
     drop(bridge);
@@ -125,7 +146,8 @@ fn loop_drives_the_emulated_hand_and_clamps_large_actions() {
     assert!((report.final_targets_rad[0] - expected).abs() < 1e-4, "{:?}", report.final_targets_rad);
     assert_eq!(report.safety.delta_clamps, report.steps * 15);
     // The observation carried the targets the bridge had sent.
-    assert!(policy.last_obs[OBS_Q_TARGET.start] > 0.0);
+    assert_eq!(policy.last_obs.len(), OBS_DIM);
+    assert!(policy.last_obs[OBS_Q_TARGET_START] > 0.0);
     // Every command frame arrived and was answered; nothing was malformed or refused; the
     // bridge and the nodes sent heartbeats (10 Hz over 0.25 s plus start-up and halt).
     assert_eq!(served.commands, report.link.messages_out - report.link.heartbeats_out);
@@ -138,8 +160,9 @@ struct NanPolicy;
 
 impl PolicyRunner for NanPolicy {
     type Error = Infallible;
-    fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; 15], Infallible> {
-        Ok([f32::NAN; 15])
+    fn act(&mut self, _: &[f32], action: &mut [f32]) -> Result<(), Infallible> {
+        action.fill(f32::NAN);
+        Ok(())
     }
 }
 
@@ -164,7 +187,7 @@ fn a_silent_hand_trips_the_watchdog_and_bad_frames_are_counted() {
     nodes.send_received(Received::Malformed { id: 0x181, len: 3 }).expect("send");
     // The emulated nodes answer 100 commands, then fall silent.
     let emulator = spawn_emulator(nodes, 100);
-    let mut policy = ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: [0.0; OBS_DIM] };
+    let mut policy = ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: Vec::new() };
     let report = run(&mut bridge, &mut policy, &config(200.0, 5.0), &AtomicBool::new(false)).expect("runs");
     drop(bridge);
     emulator.join().expect("emulator thread");
@@ -181,7 +204,7 @@ fn no_hand_at_all_is_a_startup_error() {
     let (mut bridge, _nodes) = InProcessTransport::pair();
     let mut cfg = config(100.0, 1.0);
     cfg.startup_timeout = Duration::from_millis(100);
-    let mut policy = ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: [0.0; OBS_DIM] };
+    let mut policy = ConstantDelta { delta_rad: 0.0, calls: 0, last_obs: Vec::new() };
     let err = run(&mut bridge, &mut policy, &cfg, &AtomicBool::new(false)).expect_err("nobody answers");
     assert!(err.to_string().contains("no joint state"), "{err}");
 }
@@ -193,12 +216,11 @@ struct RollRamp;
 #[cfg(feature = "sim")]
 impl PolicyRunner for RollRamp {
     type Error = Infallible;
-    fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; 15], Infallible> {
-        let mut delta = [0.0; 15];
-        for f in 0..5 {
-            delta[3 * f] = 0.01;
+    fn act(&mut self, _: &[f32], action: &mut [f32]) -> Result<(), Infallible> {
+        for (k, a) in action.iter_mut().enumerate() {
+            *a = if k % 3 == 0 { 0.01 } else { 0.0 };
         }
-        Ok(delta)
+        Ok(())
     }
 }
 
@@ -211,7 +233,7 @@ fn loop_turns_the_simulated_cube_through_the_protocol() {
 
     let env_config = EnvConfig::default();
     let rate_hz = f64::from(env_config.control_hz);
-    let limits = env_config.hand.joint_limits();
+    let hand = ProtocolHand::of(&env_config.hand).expect("vge15");
     let (mut bridge, mut nodes) = InProcessTransport::pair();
     let stop = std::sync::Arc::new(AtomicBool::new(false));
     let stop_nodes = stop.clone();
@@ -221,7 +243,7 @@ fn loop_turns_the_simulated_cube_through_the_protocol() {
         (hand.summary(), stats)
     });
     // 30 steps of 0.01 rad of roll: the in-grasp ramp the sim's own test uses.
-    let cfg = LoopConfig { limits, max_delta_rad: 0.05, ..config(rate_hz, 30.0 / rate_hz) };
+    let cfg = LoopConfig { hand, max_delta_rad: 0.05, ..config(rate_hz, 30.0 / rate_hz) };
     let report = run(&mut bridge, &mut RollRamp, &cfg, &AtomicBool::new(false)).expect("loop runs");
     stop.store(true, Ordering::Relaxed);
     let (summary, stats) = sim.join().expect("sim thread");
@@ -261,7 +283,7 @@ fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
 fn a_hand_files_joint_limits_are_the_ones_positions_are_checked_against() {
     // After start-up, finger 1 reports its proximal flexion at 0.4 rad: inside the default
     // hand's range, outside a real hand whose index finger flexes to 0.2 rad (+0.1 margin).
-    let report_with = |limits| {
+    let report_with = |limits: Vec<JointLimit>| {
         let (bridge, nodes) = InProcessTransport::pair();
         let nodes = tampered(nodes, |t, frame| match decode(&frame) {
             Message::JointPosition(p) if p.finger.index() == 1 && t > Duration::from_millis(200) => {
@@ -270,10 +292,10 @@ fn a_hand_files_joint_limits_are_the_ones_positions_are_checked_against() {
             }
             _ => vec![Received::Frame(frame)],
         });
-        let cfg = LoopConfig { limits, ..config(100.0, 1.0) };
+        let cfg = LoopConfig { hand: ProtocolHand { limits, ..test_hand() }, ..config(100.0, 1.0) };
         run_against_emulator(bridge, nodes, &mut hold_policy(), &cfg)
     };
-    let default = report_with(hand_file::default_joint_limits());
+    let default = report_with(ProtocolHand::vge15().expect("vge15").limits);
     assert_eq!(default.stop_reason, StopReason::DurationReached, "{default:?}");
     assert_eq!(default.link.implausible_frames, 0);
 
@@ -286,7 +308,7 @@ fn a_hand_files_joint_limits_are_the_ones_positions_are_checked_against() {
     let text = format!("joint_limits_rad = [{}]\n", (0..15).map(row).collect::<Vec<_>>().join(", "));
     let path = std::env::temp_dir().join(format!("vge-bridge-hand-{}.toml", std::process::id()));
     std::fs::write(&path, text).expect("writes the hand file");
-    let limits = hand_file::load_joint_limits(&path).expect("a valid hand file");
+    let limits = hand_file::load_joint_limits(&path, &test_hand()).expect("a valid hand file");
     let _ = std::fs::remove_file(&path);
     assert_eq!(limits[4], JointLimit { lower_rad: -0.3, upper_rad: 0.2 });
     let real = report_with(limits);
@@ -351,8 +373,13 @@ fn a_node_that_restarts_mid_run_halts_the_loop_with_node_restarted() {
                 command_timeout: Duration::from_secs(1),
                 restart: Some(RestartPlan { node, after_enabled_commands: 10 }),
             };
-            serve(&mut end, &mut JointControllerEmulator::new(1.0), limits, &AtomicBool::new(false))
-                .expect("emulator runs")
+            serve(
+                &mut end,
+                &mut JointControllerEmulator::new(NodeLayout::VGE15, 1.0),
+                limits,
+                &AtomicBool::new(false),
+            )
+            .expect("emulator runs")
         });
         let cfg = config(20.0, 5.0);
         let report = run(&mut bridge, &mut hold_policy(), &cfg, &AtomicBool::new(false)).expect("loop runs");
@@ -490,12 +517,13 @@ struct Stall {
 
 impl PolicyRunner for Stall {
     type Error = Infallible;
-    fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; 15], Infallible> {
+    fn act(&mut self, _: &[f32], action: &mut [f32]) -> Result<(), Infallible> {
         self.calls += 1;
         if self.calls == 10 {
             thread::sleep(Duration::from_millis(35));
         }
-        Ok([0.0; 15])
+        action.fill(0.0);
+        Ok(())
     }
 }
 
@@ -509,4 +537,39 @@ fn a_late_loop_skips_the_periods_it_missed_instead_of_bursting() {
     assert!(report.steps <= 48, "{report:?}");
     assert!(report.achieved_rate_hz < 97.0, "the rate must show the gap: {}", report.achieved_rate_hz);
     let _ = FingerId::new(0);
+}
+
+/// A hand of two three-joint fingers on vge's protocol: the loop, the nodes and the
+/// observation take their sizes from it, and a proprioceptive policy gets its history.
+#[test]
+fn a_hand_of_another_size_runs_with_its_own_sizes_and_observation() {
+    let (mut bridge, nodes) = InProcessTransport::pair();
+    let two = NodeLayout::new(2).expect("two nodes");
+    let emulator = spawn_emulator_of(nodes, two, u64::MAX);
+    let hand = ProtocolHand {
+        name: "two".to_owned(),
+        nodes: two,
+        finger_names: vec!["left".to_owned(), "right".to_owned()],
+        joint_names: (0..6).map(|k| format!("j{k}")).collect(),
+        limits: vec![JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 6],
+    };
+    let set = ObservationSet::Proprio { history: 2 };
+    let cfg = LoopConfig { hand, observation: set, ..config(200.0, 0.1) };
+    let mut policy = ConstantDelta { delta_rad: 0.01, ..hold_policy() };
+    let report = run(&mut bridge, &mut policy, &cfg, &AtomicBool::new(false)).expect("loop runs");
+    drop(bridge);
+    let served = emulator.join().expect("emulator thread");
+    assert_eq!(report.stop_reason, StopReason::DurationReached, "{report:?}");
+    assert_eq!(report.final_targets_rad.len(), 6);
+    assert_eq!(policy.last_obs.len(), ObservationLayout::new(set, 6, 2).dim());
+    // Now, then the targets of the last two steps: 0.01 rad a step.
+    let targets = &policy.last_obs[6..12];
+    let past_targets = &policy.last_obs[24..30];
+    assert!(
+        targets.iter().zip(past_targets).all(|(now, then)| (now - then - 0.01).abs() < 1e-4),
+        "{:?}",
+        policy.last_obs
+    );
+    assert_eq!(served.commands, report.link.messages_out - report.link.heartbeats_out);
+    assert_eq!(report.link.bad_frames, 0);
 }

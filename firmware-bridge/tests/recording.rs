@@ -37,10 +37,10 @@ fn bridge_run_records_the_simulated_episode_and_refuses_to_over_can() {
     assert_eq!(doc["steps"], serde_json::json!(steps), "one frame per sim step");
     for path in [
         "/world/object",
-        "/world/hand/thumb/distal",
+        "/world/hand/thumb/link2",
         "/world/contacts/fingertip_points",
         "/world/contacts/fingertip_normal_force_1cm_per_N",
-        "/action/little/flex_dist_rad",
+        "/action/little/joint14_rad",
         "/reward_rad_per_s",
     ] {
         assert_eq!(doc["entities"][path]["steps"], serde_json::json!(steps), "{path}");

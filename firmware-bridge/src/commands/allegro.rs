@@ -2,6 +2,7 @@
 //! protocol (docs/allegro-bridge.md).
 
 use std::io::Write as _;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 #[cfg(feature = "sim")]
 use std::sync::Arc;
@@ -16,19 +17,30 @@ use serde_json::{Value, json};
 use vge_bridge::allegro_emulator::{AllegroHandEmulator, AllegroPlant};
 use vge_bridge::allegro_hand::AllegroHand;
 use vge_bridge::allegro_link::{AllegroRole, AllegroSocketCan};
-use vge_bridge::allegro_loop::{self, AllegroLoopConfig, AllegroReport, HoldTargets, PERIOD};
+use vge_bridge::allegro_loop::{
+    self, AllegroLoopConfig, AllegroReport, HoldTargets, PERIOD, PolicyTargets, TargetSource,
+};
 #[cfg(feature = "sim")]
 use vge_bridge::allegro_sim::{SimAllegro, SimAllegroConfig};
 #[cfg(feature = "sim")]
 use vge_bridge::transport::BusCounts;
 
-use super::{Backend, LoopArgs, positive_seconds, stop_on_signal};
+use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
+use vge_sim::action::DEFAULT_MAX_ACTION_RAD;
+
+use super::run::read_policy;
+use super::{Backend, LoopArgs, ObjectArg, positive_seconds, stop_on_signal};
 
 /// What `run --hand allegro` was asked.
 pub struct RunSettings {
     pub backend: Backend,
     pub iface: String,
+    /// The policy that sets the targets; `None`: --hold.
+    pub policy: Option<PathBuf>,
     pub squeeze_rad: f32,
+    /// The object and seed of the simulated Allegro's env (--backend sim --policy).
+    pub object: ObjectArg,
+    pub seed: u64,
     pub loop_args: LoopArgs,
 }
 
@@ -51,7 +63,10 @@ fn loop_config(hand: &AllegroHand, args: &LoopArgs) -> anyhow::Result<AllegroLoo
 
 /// `vge-bridge run --hand allegro`.
 pub fn run(settings: RunSettings) -> anyhow::Result<ExitCode> {
-    let RunSettings { backend, iface, squeeze_rad, loop_args } = settings;
+    let RunSettings { backend, iface, policy, squeeze_rad, object, seed, loop_args } = settings;
+    if let Some(path) = policy {
+        return run_policy(backend, &iface, &path, &object, seed, &loop_args);
+    }
     anyhow::ensure!(
         squeeze_rad.is_finite() && squeeze_rad.abs() <= 1.0,
         "--squeeze-rad must be a number of rad within [-1, 1], got {squeeze_rad}"
@@ -62,12 +77,7 @@ pub fn run(settings: RunSettings) -> anyhow::Result<ExitCode> {
     let stop = stop_on_signal()?;
     loop_args.realtime.apply();
     let (report, extra) = match backend {
-        Backend::Can => {
-            let mut link = AllegroSocketCan::open(&iface, AllegroRole::Host(config.protocol))
-                .with_context(|| format!("opening CAN interface {iface}"))?;
-            let report = allegro_loop::run(&mut link, &mut targets, &config, &stop)?;
-            (report, vec![("backend", json!("can")), ("iface", json!(iface))])
-        }
+        Backend::Can => can_loop(&iface, &mut targets, &config, &stop)?,
         Backend::Sim => {
             let (report, sim) = run_against_sim(&mut targets, &config, &stop)?;
             (report, vec![("backend", json!("sim")), ("emulator", sim)])
@@ -75,10 +85,136 @@ pub fn run(settings: RunSettings) -> anyhow::Result<ExitCode> {
     };
     let mut extra = extra;
     extra.push(("mode", json!("hold")));
-    if loop_args.json {
-        out!("{}", report.json_line(&extra));
+    finish(&report, &extra, loop_args.json)
+}
+
+/// The PD loop on `iface` with `targets`: its report and what names the run.
+fn can_loop<S: TargetSource>(
+    iface: &str,
+    targets: &mut S,
+    config: &AllegroLoopConfig,
+    stop: &AtomicBool,
+) -> anyhow::Result<(AllegroReport, Vec<(&'static str, Value)>)> {
+    let mut link = AllegroSocketCan::open(iface, AllegroRole::Host(config.protocol))
+        .with_context(|| format!("opening CAN interface {iface}"))?;
+    let report = allegro_loop::run(&mut link, targets, config, stop)?;
+    Ok((report, vec![("backend", json!("can")), ("iface", json!(iface))]))
+}
+
+/// `run --hand allegro --policy P`: over CAN the PD loop with the policy's targets; with the
+/// simulator, the Allegro's env.
+fn run_policy(
+    backend: Backend,
+    iface: &str,
+    path: &Path,
+    object: &ObjectArg,
+    seed: u64,
+    loop_args: &LoopArgs,
+) -> anyhow::Result<ExitCode> {
+    if backend == Backend::Sim && !cfg!(feature = "sim") {
+        return Err(super::no_sim("--backend sim (the default)"));
+    }
+    let description = vge_sim::hands::load("allegro").context("the Allegro's description")?;
+    let bytes = read_policy(path)?;
+    // The simulated hand senses its fingertips; the Allegro on CAN has no fingertip sensors.
+    let tip_sensing = backend == Backend::Sim;
+    let loading = || format!("loading {}", path.display());
+    let (feed, mut storage) = storage_for(&bytes, &description, tip_sensing).with_context(loading)?;
+    let runner = RuntimePolicy::load(&bytes, &mut storage).with_context(loading)?;
+    let policy_hz = f64::from(runner.control_hz());
+    let rate_hz = loop_args.rate.unwrap_or(policy_hz);
+    if (rate_hz - policy_hz).abs() > 1e-3 {
+        note!("vge-bridge: note: the policy was trained at {policy_hz} Hz, running it at {rate_hz} Hz");
+    }
+    let about = [
+        ("mode", json!("policy")),
+        ("policy", json!(path.display().to_string())),
+        ("observation", json!(feed.set.name())),
+    ];
+    match backend {
+        Backend::Can => {
+            let hand = AllegroHand::shipped()?;
+            let mut config = loop_config(&hand, loop_args)?;
+            config.target_rate_hz = rate_hz;
+            // The action is clipped as the env clips it when training; --max-delta-rad is the
+            // safety filter's bound on top.
+            let mut targets = PolicyTargets::new(runner, feed.set, DEFAULT_MAX_ACTION_RAD);
+            let stop = stop_on_signal()?;
+            loop_args.realtime.apply();
+            let (report, mut extra) = can_loop(iface, &mut targets, &config, &stop)?;
+            extra.extend(about);
+            extra.push(("policy_updates", json!(targets.updates)));
+            finish(&report, &extra, loop_args.json)
+        }
+        Backend::Sim => {
+            run_policy_sim(runner, feed.set, description, object, seed, rate_hz, loop_args, &about)
+        }
+    }
+}
+
+/// The policy against the simulated Allegro's env, in process.
+#[cfg(feature = "sim")]
+#[allow(clippy::too_many_arguments)]
+fn run_policy_sim(
+    mut runner: RuntimePolicy<'_>,
+    set: vge_sim::ObservationSet,
+    description: Arc<vge_hand::Hand>,
+    object: &ObjectArg,
+    seed: u64,
+    rate_hz: f64,
+    loop_args: &LoopArgs,
+    about: &[(&str, Value)],
+) -> anyhow::Result<ExitCode> {
+    use vge_bridge::sim_policy::{self, SimPolicyConfig};
+    let mut env = vge_sim::EnvConfig::for_hand(description).context("the simulated Allegro")?;
+    env.object.shape = *object;
+    let mut env = vge_sim::Env::new(env).context("the simulated Allegro")?;
+    let config = SimPolicyConfig {
+        rate_hz,
+        duration: positive_seconds("duration", loop_args.duration, true)?,
+        max_steps: loop_args.steps,
+        max_delta_rad: loop_args.max_delta_rad,
+        watchdog_periods: loop_args.watchdog_periods.unwrap_or(5),
+        observation: set,
+        seed,
+    };
+    anyhow::ensure!(
+        config.max_delta_rad.is_finite() && config.max_delta_rad > 0.0,
+        "--max-delta-rad must be positive"
+    );
+    let stop = stop_on_signal()?;
+    loop_args.realtime.apply();
+    let (report, summary) = sim_policy::run(&mut env, &mut runner, &config, &stop)?;
+    let mut extra =
+        vec![("hand", json!("allegro")), ("backend", json!("sim")), ("object", json!(object.to_string()))];
+    extra.extend(about.iter().cloned());
+    super::run::print_report(loop_args.json, &extra, rate_hz, &report, Some(&summary))?;
+    Ok(super::run::exit_status(&report))
+}
+
+/// Stand-in without the simulator: refuses.
+#[cfg(not(feature = "sim"))]
+#[allow(clippy::too_many_arguments)]
+fn run_policy_sim(
+    _: RuntimePolicy<'_>,
+    _: vge_sim::ObservationSet,
+    _: std::sync::Arc<vge_hand::Hand>,
+    _: &ObjectArg,
+    _: u64,
+    _: f64,
+    _: &LoopArgs,
+    _: &[(&str, Value)],
+) -> anyhow::Result<ExitCode> {
+    Err(super::no_sim("--backend sim (the default)"))
+}
+
+/// Prints the report (one JSON line with --json) and returns the exit status, naming a safety
+/// halt on stderr.
+fn finish(report: &AllegroReport, extra: &[(&str, Value)], json: bool) -> anyhow::Result<ExitCode> {
+    if json {
+        out!("{}", report.json_line(extra));
     } else {
-        print_report(&report, &extra)?;
+        print_report(report, extra)?;
     }
     let reason = report.stop_reason;
     if reason.is_safety_halt() {
@@ -146,9 +282,13 @@ fn print_report(r: &AllegroReport, extra: &[(&str, Value)]) -> anyhow::Result<()
         r.safety.limit_clamps,
         r.shutdown_frames
     );
+    out!("targets: {} updates, {} failed", r.target_updates, r.target_errors);
     for (k, v) in extra {
-        if *k == "emulator" {
-            out!("sim:     {v}");
+        match *k {
+            "emulator" => out!("sim:     {v}"),
+            "policy" => out!("policy:  {}", v.as_str().unwrap_or_default()),
+            "observation" => out!("observed: {}", v.as_str().unwrap_or_default()),
+            _ => {}
         }
     }
     Ok(())

@@ -7,26 +7,25 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread;
 use std::time::Duration;
 
+use anyhow::Context;
 use clap::Args;
 use serde_json::json;
 use vge_bridge::control_loop::{self, PolicyRunner};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
-use vge_bridge::hand_file;
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
+use vge_bridge::protocol_hand::{self, ProtocolHand};
 use vge_bridge::transport::InProcessTransport;
-use vge_sim::NUM_JOINTS;
-use vge_sim::observation::OBS_DIM;
 
 use super::run::{loop_config, print_report, read_policy};
 use super::{LoopArgs, RealtimeArgs, stop_on_signal};
 
-/// Loop timing on this host: the control loop against emulated nodes over the in-process
-/// transport (no CAN, no simulator), so only the loop's own timing shows.
+/// Loop timing on this host: the control loop against vge15's emulated nodes over the
+/// in-process transport (no CAN, no simulator), so only the loop's own timing shows.
 ///
 /// A measurement: it exits 0 however the loop stopped (the report names why).
 #[derive(Debug, Args)]
 pub struct BenchArgs {
-    /// Policy file to run each period (default: hold, i.e. zero change).
+    /// Policy file to run each period, a vge15 policy (default: hold, i.e. zero change).
     #[arg(long)]
     policy: Option<PathBuf>,
     /// Control rate in Hz.
@@ -47,8 +46,9 @@ struct Hold;
 
 impl PolicyRunner for Hold {
     type Error = std::convert::Infallible;
-    fn act(&mut self, _: &[f32; OBS_DIM]) -> Result<[f32; NUM_JOINTS], Self::Error> {
-        Ok([0.0; NUM_JOINTS])
+    fn act(&mut self, _: &[f32], action: &mut [f32]) -> Result<(), Self::Error> {
+        action.fill(0.0);
+        Ok(())
     }
 }
 
@@ -67,6 +67,9 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         realtime,
     };
     anyhow::ensure!(duration > 0.0, "--duration must be positive");
+    let description = protocol_hand::load("vge15").context("vge15's description")?;
+    let hand = ProtocolHand::of(&description)?;
+    let nodes = hand.nodes;
     let stop = stop_on_signal()?;
     let (bridge_end, nodes_end) = InProcessTransport::pair();
     let nodes_stop = Arc::new(AtomicBool::new(false));
@@ -79,20 +82,22 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
             command_timeout: Duration::from_secs(1),
             restart: None,
         };
-        serve(&mut end, &mut JointControllerEmulator::new(0.5), limits, &nodes_flag)
+        serve(&mut end, &mut JointControllerEmulator::new(nodes, 0.5), limits, &nodes_flag)
     });
     let mut bridge_end = bridge_end;
     realtime.apply();
     let (report, cfg, name) = match &policy {
         Some(path) => {
             let bytes = read_policy(path)?;
-            let mut storage = storage_for(&bytes)?;
-            let mut runner = RuntimePolicy::load(&bytes, &mut storage)?;
-            let cfg = loop_config(&loop_args, rate as f32, hand_file::default_joint_limits())?;
+            let loading = || format!("loading {}", path.display());
+            let (feed, mut storage) = storage_for(&bytes, &description, true).with_context(loading)?;
+            let mut runner = RuntimePolicy::load(&bytes, &mut storage).with_context(loading)?;
+            let mut cfg = loop_config(&loop_args, rate as f32, hand)?;
+            cfg.observation = feed.set;
             (control_loop::run(&mut bridge_end, &mut runner, &cfg, &stop)?, cfg, path.display().to_string())
         }
         None => {
-            let cfg = loop_config(&loop_args, rate as f32, hand_file::default_joint_limits())?;
+            let cfg = loop_config(&loop_args, rate as f32, hand)?;
             (control_loop::run(&mut bridge_end, &mut Hold, &cfg, &stop)?, cfg, "hold".to_owned())
         }
     };
@@ -102,7 +107,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
     print_report(
         json,
         &[("bench", json!("loop")), ("transport", json!("in-process")), ("policy", json!(name))],
-        &cfg,
+        cfg.rate_hz,
         &report,
         None,
     )?;

@@ -11,7 +11,8 @@ use clap::{Args, ValueEnum};
 use serde_json::{Value, json};
 use vge_bridge::emulator::{JointControllerEmulator, ServeLimits, serve};
 use vge_bridge::node_supervisor::RestartPlan;
-use vge_bridge::protocol::FingerId;
+use vge_bridge::protocol::{FingerId, MAX_FINGERS};
+use vge_bridge::protocol_hand::ProtocolHand;
 #[cfg(feature = "sim")]
 use vge_bridge::sim_hand::{self, SimHand};
 #[cfg(feature = "sim")]
@@ -39,8 +40,8 @@ pub enum NodeModel {
 
 /// Emulate a hand on a CAN interface, in real time, speaking its protocol.
 ///
-/// vge's hand (--hand vge15, the default): its five finger nodes (joint controllers and
-/// fingertip sensors). With --model sim (default) the nodes are the simulated hand holding
+/// vge's hand (--hand vge15, the default): its finger nodes (joint controllers and fingertip
+/// sensors), as many as its description has fingers (five). With --model sim (default) the nodes are the simulated hand holding
 /// --object: every full set of enabled joint commands advances the simulation one control
 /// period. The nodes send heartbeats at 10 Hz and report their enable state; an enabled
 /// finger that gets no command for --command-timeout-s holds and reports fault
@@ -84,9 +85,9 @@ pub struct EmulateArgs {
     /// command_timeout, cleared by a disabled command (vge15).
     #[arg(long, default_value_t = 0.5)]
     command_timeout_s: f64,
-    /// Reboot this node (0 thumb .. 4 little) once it has applied --restart-after-commands
-    /// enabled commands (vge15).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..5))]
+    /// Reboot this node (vge15: 0 thumb .. 4 little) once it has applied
+    /// --restart-after-commands enabled commands (vge15).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..i64::from(MAX_FINGERS)))]
     restart_node: Option<u8>,
     /// The enabled commands the --restart-node node applies before it reboots.
     #[arg(long, default_value_t = 20, requires = "restart_node")]
@@ -123,11 +124,18 @@ pub fn run(args: EmulateArgs) -> anyhow::Result<ExitCode> {
         );
         return super::allegro::emulate(&iface, idle, json);
     }
+    let hand = ProtocolHand::vge15()?;
     let restart = match restart_node {
         Some(node) => {
             anyhow::ensure!(restart_after_commands > 0, "--restart-after-commands must be at least 1");
-            let node = FingerId::new(node).with_context(|| format!("--restart-node {node}"))?;
-            Some(RestartPlan { node, after_enabled_commands: restart_after_commands })
+            let finger = FingerId::new(node).with_context(|| format!("--restart-node {node}"))?;
+            anyhow::ensure!(
+                hand.nodes.has(finger),
+                "--restart-node {node}: the hand {} has nodes 0 to {}",
+                hand.name,
+                hand.num_fingers() - 1
+            );
+            Some(RestartPlan { node: finger, after_enabled_commands: restart_after_commands })
         }
         None => None,
     };
@@ -143,7 +151,8 @@ pub fn run(args: EmulateArgs) -> anyhow::Result<ExitCode> {
     let summary = match model {
         NodeModel::Lag => {
             let mut transport = SocketCanTransport::open(&iface, Role::Nodes).with_context(opening)?;
-            let stats = serve(&mut transport, &mut JointControllerEmulator::new(0.2), limits, &stop)?;
+            let stats =
+                serve(&mut transport, &mut JointControllerEmulator::new(hand.nodes, 0.2), limits, &stop)?;
             let bus = transport.bus_counts();
             json!({
                 "model": "lag",
@@ -217,6 +226,7 @@ fn emulate_sim(
         "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
         "contact_switches": s.contact_switches,
         "terminated": s.terminated,
+        "dropped": s.dropped,
     }))
 }
 

@@ -29,12 +29,13 @@ pub type ObjectArg = String;
 /// The simulated hand's episode, for `run --backend sim` and `emulate --model sim`.
 #[derive(Debug, Args)]
 pub struct SimHandArgs {
-    /// Object in the simulated vge15 hand (`run --backend sim`, `emulate --model sim`): cube,
-    /// sphere, cylinder, dodecahedron, icosahedron or hexagonal-prism. The Allegro holds its
-    /// own 65 mm cube.
+    /// Object in the simulated hand (`run --backend sim`, `emulate --model sim`): cube,
+    /// sphere, cylinder, dodecahedron, icosahedron or hexagonal-prism, of the size the hand's
+    /// description names (vge15: 10 cm; the Allegro: 65 mm). `emulate --hand allegro` and
+    /// `run --hand allegro --hold` hold their 65 mm cube.
     #[arg(long, default_value = "cube")]
     pub object: ObjectArg,
-    /// Seed of the simulated vge15 hand's episode.
+    /// Seed of the simulated hand's episode.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }
@@ -42,20 +43,27 @@ pub struct SimHandArgs {
 /// Which hand `run` drives.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum HandArg {
-    /// vge's own hand and protocol, with the joint limits of its description.
-    Vge15,
-    /// vge's own hand and protocol, with the joint limits of a hand file.
+    /// A hand on vge's own protocol, with the joint limits of its description: a shipped
+    /// hand's name (`vge15`) or an MJCF file's path.
+    Own(String),
+    /// vge15 on vge's own protocol, with the joint limits of a hand file.
     Vge15File(PathBuf),
     /// The Allegro Hand v4 over its own protocol.
     Allegro,
 }
 
-/// `--hand`: a hand's name, or a path to a hand file (a vge15-protocol hand's limits).
+/// `--hand`: a shipped hand's name, an MJCF hand description (`.xml`), or a hand file's path
+/// (TOML: vge15's joint limits replaced).
 pub fn parse_hand(s: &str) -> Result<HandArg, String> {
     Ok(match s {
-        "vge15" => HandArg::Vge15,
         "allegro" => HandArg::Allegro,
-        "" => return Err("a hand's name (vge15, allegro) or a hand file's path".to_owned()),
+        "" => {
+            return Err(
+                "a hand's name (vge15, allegro), an MJCF file (.xml) or a hand file's path".to_owned()
+            );
+        }
+        name if vge_sim::hands::shipped_names().contains(&name) => HandArg::Own(name.to_owned()),
+        path if path.ends_with(".xml") => HandArg::Own(path.to_owned()),
         path => HandArg::Vge15File(PathBuf::from(path)),
     })
 }

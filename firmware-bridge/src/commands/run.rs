@@ -13,12 +13,15 @@ use clap::Args;
 use serde_json::{Value, json};
 use vge_bridge::allegro_hand::DEFAULT_SQUEEZE_RAD;
 use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner, StopReason};
-use vge_bridge::hand_file::{self, JointLimits};
+use vge_bridge::hand_file;
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
+use vge_bridge::protocol::fd::{FD_JOINTS, FD_NODES};
+use vge_bridge::protocol_hand::{self, ProtocolHand};
 use vge_bridge::report::{SimHandSummary, json_line};
 #[cfg(feature = "sim")]
 use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::{FdSocketCanTransport, Role, SocketCanTransport};
+use vge_hand::Hand;
 use vge_runtime::AlignedBytes;
 #[cfg(feature = "sim")]
 use vge_sim::{EnvConfig, ObjectShape};
@@ -29,11 +32,13 @@ use super::{Backend, HandArg, LoopArgs, SimHandArgs, no_sim, parse_hand, positiv
 
 /// Run a policy file at a fixed rate, or hold the Allegro Hand's grasp.
 ///
-/// vge's hand (--hand vge15, the default, or a hand file): each period, read the hand's state,
-/// build the observation exactly as the simulator does, run the policy on vge-runtime, clamp
-/// the change and the joint limits, send the targets. Stops after --duration, on Ctrl-C
-/// (hold, then disable), when the hand falls silent (watchdog) or when a node reports a fault
-/// or restarts. Prints rate, jitter, deadline misses and frame counts, and the object's
+/// vge's hand (--hand vge15, the default, a hand file, or a hand description whose fingers
+/// are three joints each): the policy file is checked against the hand before its weights are
+/// loaded (its joints, its observation slices); each period, read the hand's state, build the
+/// observation exactly as the simulator does (the set the policy was trained with), run the
+/// policy on vge-runtime, clamp the change and the joint limits, send the targets. Stops after
+/// --duration, on Ctrl-C (hold, then disable), when the hand falls silent (watchdog) or when a
+/// node reports a fault or restarts. Prints rate, jitter, deadline misses and frame counts, and the object's
 /// rotation with the sim backend.
 ///
 /// The Allegro Hand v4 (--hand allegro; docs/allegro-bridge.md): start-up as its drivers do
@@ -45,8 +50,14 @@ use super::{Backend, HandArg, LoopArgs, SimHandArgs, no_sim, parse_hand, positiv
 /// clip are clipped before they leave the host. On stop, fault or timeout: zero torques, servos
 /// off, reports off. Halts when no complete position set came for --watchdog-periods periods
 /// (3 ms each), on implausible positions (outside the ranges, or jumps), on a hand fault.
-/// Prints the loop's rate, its jitter and late sets. With --backend sim the emulated Allegro
-/// (`emulate --hand allegro`'s) runs in process.
+/// Prints the loop's rate, its jitter and late sets. With --policy the targets are the policy's
+/// instead of --hold's: it runs at its own rate (the file's, 20 Hz) on the joint angles and
+/// targets now and at its past steps (the Allegro has no fingertip sensors: only a policy of
+/// the `proprio` observation set runs on it), each action a change of the targets clipped as
+/// the simulator clips it, then held to --max-delta-rad and the ranges like --hold's. With
+/// --backend sim: --hold runs the emulated Allegro (`emulate --hand allegro`'s) in process;
+/// --policy runs the simulated Allegro's env (as it was trained) in process and prints how the
+/// object turned, the contact switches and whether it dropped.
 ///
 /// Exit status: 0 after --duration, --steps or Ctrl-C; after a safety halt one per stop
 /// reason: 10 watchdog (Allegro: position timeout), 11 node_fault, 12 heartbeat_lost, 13
@@ -55,15 +66,18 @@ use super::{Backend, HandArg, LoopArgs, SimHandArgs, no_sim, parse_hand, positiv
 /// transport error); 2 for a bad command line.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// Policy file written by `vge train`, `vge export` or `vge import` (vge15 only for now:
-    /// policy files do not yet record their hand). Required unless --hold.
+    /// Policy file written by `vge train`, `vge export` or `vge import`, for the hand driven:
+    /// refused, before its weights are loaded, when its actions are not the hand's joints or
+    /// it observes what the hand cannot give. Required unless --hold.
     #[arg(long, required_unless_present = "hold")]
     policy: Option<PathBuf>,
     /// The hand: `vge15` (vge's own, default), `allegro` (the Allegro Hand v4 over its own CAN
-    /// protocol), or a hand file (TOML: `joint_limits_rad`, 15 [lower, upper] pairs in rad,
-    /// finger-major; docs/can-protocol.md, Joint limits) with the joint limits of a hand on
-    /// vge's protocol, instead of vge15's below. The safety filter clamps targets to them and
-    /// the plausibility check holds positions against them; the simulated hand keeps its own.
+    /// protocol), a hand description (MJCF `.xml`, its TOML beside it) whose fingers are three
+    /// joints each, on vge's protocol, or a hand file (TOML: `joint_limits_rad`, one [lower,
+    /// upper] pair in rad per joint, 15 for vge15, finger-major; docs/can-protocol.md, Joint
+    /// limits) with the joint limits of vge15 on vge's protocol, instead of those below. The
+    /// safety filter clamps targets to them and the plausibility check holds positions
+    /// against them; the simulated hand keeps its own.
     #[arg(long, value_name = "HAND|FILE", default_value = "vge15", value_parser = parse_hand)]
     hand: HandArg,
     /// The hand to drive: the simulated one in process, or one on CAN (`--iface`). `sim` needs
@@ -73,8 +87,8 @@ pub struct RunArgs {
     /// CAN interface (backend can).
     #[arg(long, default_value = "vcan0")]
     iface: String,
-    /// Use the CAN FD option (backend can, vge15): one frame per node per step and one
-    /// command frame for the hand; the interface needs an FD MTU (72).
+    /// Use the CAN FD option (backend can, a hand of five nodes such as vge15): one frame per
+    /// node per step and one command frame for the hand; the interface needs an FD MTU (72).
     #[arg(long)]
     fd: bool,
     #[command(flatten)]
@@ -119,15 +133,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             record.is_none(),
             "--record records the simulated vge15 episode; the Allegro's is not recorded yet"
         );
-        if let Some(p) = &policy {
-            anyhow::bail!(
-                "--policy {}: policy files do not record their hand or observation yet, and vge trains \
-                 vge15 policies only, so the Allegro cannot run one; use --hold (the loop takes a \
-                 policy's PD targets once Allegro policies exist)",
-                p.display()
-            );
-        }
-        let run = super::allegro::RunSettings { backend, iface, squeeze_rad, loop_args };
+        let run =
+            super::allegro::RunSettings { backend, iface, policy, squeeze_rad, object, seed, loop_args };
         return super::allegro::run(run);
     }
     let Some(policy) = policy else {
@@ -147,17 +154,22 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             vge_sim::recording::check_path(path)?;
         }
     }
-    let limits = match &hand {
-        HandArg::Vge15File(path) => {
-            hand_file::load_joint_limits(path).with_context(|| format!("hand file {}", path.display()))?
-        }
-        HandArg::Vge15 | HandArg::Allegro => hand_file::default_joint_limits(),
-    };
+    let (description, hand) = own_protocol_hand(&hand)?;
+    anyhow::ensure!(
+        !fd || hand.num_fingers() == FD_NODES,
+        "--fd: the CAN FD hand command carries {FD_NODES} finger nodes ({FD_JOINTS} joint targets); the \
+         hand {} has {}: run it on the classic frames (without --fd)",
+        hand.name,
+        hand.num_fingers()
+    );
     let bytes = read_policy(&policy)?;
-    let mut storage = storage_for(&bytes).with_context(|| format!("loading {}", policy.display()))?;
+    // vge's protocol carries the fingertip sensors' frames, and the simulated hand fills them.
+    let (feed, mut storage) =
+        storage_for(&bytes, &description, true).with_context(|| format!("loading {}", policy.display()))?;
     let mut runner =
         RuntimePolicy::load(&bytes, &mut storage).with_context(|| format!("loading {}", policy.display()))?;
-    let cfg = loop_config(&loop_args, runner.control_hz(), limits)?;
+    let mut cfg = loop_config(&loop_args, runner.control_hz(), hand)?;
+    cfg.observation = feed.set;
     let stop = stop_on_signal()?;
     loop_args.realtime.apply();
     match backend {
@@ -171,32 +183,66 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 control_loop::run(&mut transport, &mut runner, &cfg, &stop)?
             };
             let backend = if fd { "can-fd" } else { "can" };
-            print_report(loop_args.json, &[("backend", json!(backend))], &cfg, &report, None)?;
+            let extra = [("hand", json!(cfg.hand.name)), ("backend", json!(backend))];
+            print_report(loop_args.json, &extra, cfg.rate_hz, &report, None)?;
             Ok(exit_status(&report))
         }
         Backend::Sim => {
             let (report, summary) =
-                run_against_sim(&mut runner, &cfg, &object, seed, record.as_deref(), &stop)?;
-            let extra = [("backend", json!("sim")), ("object", json!(object.to_string()))];
-            print_report(loop_args.json, &extra, &cfg, &report, Some(&summary))?;
+                run_against_sim(&mut runner, &cfg, description, &object, seed, record.as_deref(), &stop)?;
+            let extra = [
+                ("hand", json!(cfg.hand.name)),
+                ("backend", json!("sim")),
+                ("object", json!(object.to_string())),
+            ];
+            print_report(loop_args.json, &extra, cfg.rate_hz, &report, Some(&summary))?;
             Ok(exit_status(&report))
         }
     }
 }
 
+/// The hand `--hand` names on vge's own protocol: its description (what the policy is checked
+/// against and the simulated hand is built from) and its nodes and limits (a hand file's
+/// limits in place of vge15's).
+pub fn own_protocol_hand(arg: &HandArg) -> anyhow::Result<(Arc<Hand>, ProtocolHand)> {
+    let spec = match arg {
+        HandArg::Own(spec) => spec.as_str(),
+        HandArg::Vge15File(_) | HandArg::Allegro => "vge15",
+    };
+    let description = protocol_hand::load(spec).with_context(|| format!("--hand {spec}"))?;
+    let mut hand = ProtocolHand::of(&description)?;
+    if let HandArg::Vge15File(path) = arg {
+        hand.limits = hand_file::load_joint_limits(path, &hand)
+            .with_context(|| format!("hand file {}", path.display()))?;
+    }
+    Ok((description, hand))
+}
+
 /// The joint limits every target is clamped to (and positions are checked against).
 pub fn joint_limits_help() -> String {
-    let limits = hand_file::default_joint_limits();
+    let hand = match ProtocolHand::vge15() {
+        Ok(hand) => hand,
+        Err(e) => return format!("Joint limits: vge15's description could not be read: {e}\n"),
+    };
     let mut text = String::from(
         "Joint limits (rad) of vge15, the default hand (--hand FILE replaces them): the safety filter clamps\n\
          every target to them, and a measured position more than 0.1 rad outside them is implausible\n\
-         (dropped and counted; the loop holds, and halts if it persists). The Allegro's are those of\n\
-         hands/allegro.xml (`vge hand inspect allegro`).\n  \
-         finger   roll              proximal flexion  distal flexion\n",
+         (dropped and counted; the loop holds, and halts if it persists). Another hand's are those of\n\
+         its description (the Allegro's hands/allegro.xml: `vge hand inspect allegro`).\n  \
+         finger   ",
     );
-    for (f, name) in vge_sim::kinematics::FINGER_NAMES.iter().enumerate() {
+    // The joints of a finger by their names after the finger's (vge15: roll, flex_prox, flex_dist).
+    let per_node = hand.num_joints() / hand.num_fingers().max(1);
+    for k in 0..per_node {
+        let name = hand.joint_name(k);
+        let short = name.rsplit('.').next().unwrap_or(&name);
+        text.push_str(&format!("{short:<18}"));
+    }
+    text = text.trim_end().to_owned();
+    text.push('\n');
+    for (f, name) in hand.finger_names.iter().enumerate() {
         text.push_str(&format!("  {name:<8}"));
-        for l in &limits[3 * f..3 * f + 3] {
+        for l in hand.limits.iter().skip(per_node * f).take(per_node) {
             text.push_str(&format!(" [{:+.3}, {:+.3}]", l.lower_rad, l.upper_rad));
         }
         text.push('\n');
@@ -204,7 +250,7 @@ pub fn joint_limits_help() -> String {
     text
 }
 
-pub fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyhow::Result<LoopConfig> {
+pub fn loop_config(args: &LoopArgs, policy_hz: f32, hand: ProtocolHand) -> anyhow::Result<LoopConfig> {
     let rate_hz = args.rate.unwrap_or(f64::from(policy_hz));
     anyhow::ensure!(
         rate_hz.is_finite() && rate_hz >= control_loop::MIN_RATE_HZ,
@@ -227,7 +273,7 @@ pub fn loop_config(args: &LoopArgs, policy_hz: f32, limits: JointLimits) -> anyh
         max_delta_rad: args.max_delta_rad,
         heartbeat_timeout,
         max_seq_lag: args.max_seq_lag,
-        ..LoopConfig::new(rate_hz, limits)
+        ..LoopConfig::new(rate_hz, hand)
     })
 }
 
@@ -260,17 +306,17 @@ pub fn read_policy(path: &Path) -> anyhow::Result<AlignedBytes> {
 pub fn print_report(
     json: bool,
     extra: &[(&str, Value)],
-    cfg: &LoopConfig,
+    rate_hz: f64,
     r: &LoopReport,
     sim: Option<&SimHandSummary>,
 ) -> anyhow::Result<()> {
     if json {
-        out!("{}", json_line(extra, cfg.rate_hz, r, sim));
+        out!("{}", json_line(extra, rate_hz, r, sim));
         return Ok(());
     }
     let detail = if r.stop_detail.is_empty() { String::new() } else { format!(": {}", r.stop_detail) };
     out!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.steps);
-    out!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, cfg.rate_hz);
+    out!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, rate_hz);
     out!(
         "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {} ({} periods skipped)",
         r.wake_jitter.p50_us,
@@ -320,7 +366,11 @@ pub fn print_report(
             s.total_reward,
             s.mean_tip_contacts,
             s.contact_switches,
-            if s.terminated { "; the episode terminated (drop or lost contacts)" } else { "" }
+            match (s.dropped, s.terminated) {
+                (true, _) => "; the object dropped",
+                (false, true) => "; the episode terminated (lost contacts)",
+                (false, false) => "",
+            }
         );
     }
     Ok(())
@@ -328,7 +378,7 @@ pub fn print_report(
 
 /// `run`'s exit status: 0 for a normal end, the stop reason's own status for a safety halt
 /// (named on stderr too, whatever --json says).
-fn exit_status(report: &LoopReport) -> ExitCode {
+pub fn exit_status(report: &LoopReport) -> ExitCode {
     let reason: StopReason = report.stop_reason;
     if reason.is_safety_halt() {
         note!(
@@ -346,6 +396,7 @@ fn exit_status(report: &LoopReport) -> ExitCode {
 fn run_against_sim<P: PolicyRunner>(
     _: &mut P,
     _: &LoopConfig,
+    _: Arc<Hand>,
     _: &ObjectArg,
     _: u64,
     _: Option<&Path>,
@@ -359,6 +410,7 @@ fn run_against_sim<P: PolicyRunner>(
 fn run_against_sim<P: PolicyRunner>(
     runner: &mut P,
     cfg: &LoopConfig,
+    hand: Arc<Hand>,
     object: &ObjectShape,
     seed: u64,
     record: Option<&Path>,
@@ -367,7 +419,8 @@ fn run_against_sim<P: PolicyRunner>(
     use std::sync::atomic::Ordering;
     use std::thread;
     use vge_bridge::transport::InProcessTransport;
-    let mut env = EnvConfig::default();
+    let name = hand.name().to_owned();
+    let mut env = EnvConfig::for_hand(hand).with_context(|| format!("the simulated hand {name}"))?;
     env.object.shape = *object;
     let (mut bridge_end, mut nodes_end) = InProcessTransport::pair();
     let nodes_stop = Arc::new(AtomicBool::new(false));
