@@ -11,7 +11,9 @@ use std::time::Duration;
 use vge_bridge::allegro_emulator::{AllegroHandEmulator, AllegroPlant, EmulatedHand, InertiaPlant, serve};
 use vge_bridge::allegro_hand::{AllegroHand, DEFAULT_SQUEEZE_RAD};
 use vge_bridge::allegro_link::{AllegroInProcess, AllegroLink, AllegroReceived};
-use vge_bridge::allegro_loop::{self, AllegroLoopConfig, AllegroReport, HoldTargets};
+use vge_bridge::allegro_loop::{
+    self, AllegroLoopConfig, AllegroReport, HoldTargets, PolicyTargets, TargetSource,
+};
 use vge_bridge::control_loop::StopReason;
 use vge_bridge::protocol::allegro::{AllegroConfig, AllegroFrame, Command, NUM_JOINTS};
 use vge_bridge::transport::TransportError;
@@ -57,6 +59,15 @@ fn run_against<P: AllegroPlant + Send + 'static>(
     targets: [f32; NUM_JOINTS],
     tweak: impl FnOnce(&mut AllegroLoopConfig),
 ) -> Run<P> {
+    run_with(plant, &mut HoldTargets(targets), tweak)
+}
+
+/// The loop with the targets of `source` against an emulated hand of `plant`.
+fn run_with<P: AllegroPlant + Send + 'static, S: TargetSource>(
+    plant: P,
+    source: &mut S,
+    tweak: impl FnOnce(&mut AllegroLoopConfig),
+) -> Run<P> {
     let hand = AllegroHand::shipped().expect("allegro");
     let mut config = AllegroLoopConfig::new(&hand);
     // Generous: a loaded test machine must not trip the watchdog in tests about other things.
@@ -72,7 +83,7 @@ fn run_against<P: AllegroPlant + Send + 'static>(
     });
     let sent = Arc::new(std::sync::Mutex::new(Vec::new()));
     let mut tap = Tap { inner: bridge_end, sent: sent.clone() };
-    let report = allegro_loop::run(&mut tap, &mut HoldTargets(targets), &config, &AtomicBool::new(false));
+    let report = allegro_loop::run(&mut tap, source, &config, &AtomicBool::new(false));
     // Let the emulator take in the shut-down frames before it stops.
     thread::sleep(Duration::from_millis(50));
     done.store(true, Ordering::Relaxed);
@@ -321,4 +332,52 @@ fn the_simulated_allegro_holds_its_cube_under_the_pd_loop() {
     eprintln!("emulator: {stats:?}\nhold: {hold:?} released {released}");
     let hold = hold.expect("the stand was taken away");
     assert!(hold.fell_m < 0.01 && hold.tips_touching >= 3, "{hold:?}");
+}
+
+/// Asks every joint to move by `delta_rad` at each update, and remembers what it observed.
+struct Push {
+    delta_rad: f32,
+    observations: Vec<Vec<f32>>,
+}
+
+impl vge_bridge::policy_runner::PolicyRunner for Push {
+    type Error = std::convert::Infallible;
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) -> Result<(), Self::Error> {
+        self.observations.push(obs.to_vec());
+        action.fill(self.delta_rad);
+        Ok(())
+    }
+}
+
+#[test]
+fn a_policy_sets_the_targets_at_its_rate_clipped_as_the_env_clips_and_observes_its_history() {
+    use vge_sim::observation::{ObservationLayout, ObservationSet};
+    let hand = AllegroHand::shipped().expect("allegro");
+    let set = ObservationSet::Proprio { history: 2 };
+    // Asks for 1 rad a step: the env's clip makes it 0.05, the filter's 0.02 on top.
+    let mut targets = PolicyTargets::new(Push { delta_rad: 1.0, observations: Vec::new() }, set, 0.05);
+    let run = run_with(InertiaPlant::at(hand.start_grasp_rad), &mut targets, |c| {
+        c.max_cycles = Some(200);
+        c.target_rate_hz = 50.0;
+        c.max_delta_rad = 0.02;
+    });
+    let report = run.report.expect("the loop ran");
+    assert_eq!(report.stop_reason, StopReason::StepsReached, "{}", report.stop_detail);
+    // 200 sets of 3 ms at 50 Hz: about 30 updates (the loop's pace is the hand's).
+    assert!((25..=40).contains(&report.target_updates), "{} updates", report.target_updates);
+    assert_eq!(report.target_errors, 0);
+    assert_eq!(targets.updates, report.target_updates);
+    assert_eq!(report.safety.delta_clamps, 16 * report.target_updates, "every joint held to 0.02 a step");
+    let dim = ObservationLayout::new(set, NUM_JOINTS, 4).dim();
+    let observations = &targets.policy().observations;
+    assert!(observations.iter().all(|o| o.len() == dim), "{dim} floats each");
+    // The targets observed rise 0.02 rad an update (until a range stops them), and the past
+    // is the previous update's.
+    let (second, third) = (&observations[1], &observations[2]);
+    let (now, past) = (16..32, 64..80);
+    for k in 0..NUM_JOINTS {
+        let step = third[now.start + k] - second[now.start + k];
+        assert!(step <= 0.02 + 1e-6, "joint {k} moved {step} in one update");
+        assert_eq!(third[past.start + k], second[now.start + k], "joint {k}: the past is the last update");
+    }
 }
