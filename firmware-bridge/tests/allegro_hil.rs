@@ -14,6 +14,8 @@
 
 #[path = "support/allegro_dbc.rs"]
 mod allegro_dbc;
+#[path = "support/policy_files.rs"]
+mod policy_files;
 
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -137,8 +139,15 @@ fn spawn_emulator(iface: &str) -> Child {
 /// `vge-bridge run --hand allegro --backend can --iface IFACE --hold --json ARGS` in the
 /// background.
 fn spawn_bridge(iface: &str, args: &[&str]) -> Child {
+    let mut hold = vec!["--hold"];
+    hold.extend(args);
+    spawn_run(iface, &hold)
+}
+
+/// `vge-bridge run --hand allegro --backend can --iface IFACE --json ARGS` in the background.
+fn spawn_run(iface: &str, args: &[&str]) -> Child {
     Command::new(env!("CARGO_BIN_EXE_vge-bridge"))
-        .args(["run", "--hand", "allegro", "--backend", "can", "--iface", iface, "--hold", "--json"])
+        .args(["run", "--hand", "allegro", "--backend", "can", "--iface", iface, "--json"])
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -444,4 +453,74 @@ fn allegro_torque_beyond_the_clip_never_leaves_the_host() {
     eprintln!(
         "allegro hil: {frames} torque frames, {at_clip} joint torques at their clip, none beyond; PD asked up to {asked} N m"
     );
+}
+
+#[test]
+#[ignore = "needs vcan0: run scripts/hil.sh"]
+fn allegro_policy_sets_the_pd_targets_over_vcan_at_its_own_rate() {
+    use vge_sim::observation::ObservationSet;
+    let iface = iface();
+    let dir = std::env::temp_dir().join(format!("vge-allegro-hil-policy-{}", std::process::id()));
+    let allegro = vge_sim::hands::load("allegro").expect("allegro");
+    let set = ObservationSet::Proprio { history: 2 };
+    let policy = policy_files::write_policy(&dir, &allegro, set, 7);
+    let emulator = spawn_emulator(&iface);
+    let capture = Capture::start(&iface);
+    // 2000 sets are 6 s of the hand's time; the policy runs at its file's 20 Hz meanwhile.
+    let mut args =
+        vec!["--policy", policy.to_str().expect("utf-8 path"), "--steps", "2000", "--duration", "600"];
+    args.extend(TOLERANT);
+    let (code, out, err) = finish(spawn_run(&iface, &args));
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(code, Some(0), "bridge: {out}\n{err}");
+    let (emu_code, emu_out, emu_err) = finish(emulator);
+    let seen = capture.stop();
+    assert_eq!(emu_code, Some(0), "emulator: {emu_err}");
+    let report = json(&out);
+    assert_eq!(report["stop_reason"], "steps", "{out}");
+    assert_eq!(
+        (report["mode"].as_str(), report["observation"].as_str()),
+        (Some("policy"), Some("proprio:2")),
+        "{out}"
+    );
+    assert_eq!(report["cycles"], 2000);
+    print_timing("policy-driven run", &report);
+    // The policy ran at its rate, on every update, without an error or a non-finite target.
+    let updates = report["target_updates"].as_u64().expect("target_updates");
+    assert_eq!(report["policy_updates"].as_u64(), Some(updates), "{out}");
+    assert_eq!(
+        (report["target_errors"].as_u64(), report["non_finite_holds"].as_u64()),
+        (Some(0), Some(0)),
+        "{out}"
+    );
+    let achieved = report["achieved_rate_hz"].as_f64().expect("rate");
+    // 2000 sets at the achieved rate, 20 updates a second of wall time.
+    let expected = 2000.0 / achieved * 20.0;
+    assert!(
+        (updates as f64 - expected).abs() <= 0.25 * expected + 3.0,
+        "{updates} updates, about {expected:.0} expected"
+    );
+    eprintln!(
+        "allegro hil: policy {} updates at 20 Hz over {} torque sets; {} delta clamps, {} limit clamps, {} \
+         torques clipped; {} position frames, {} frames out",
+        updates,
+        report["cycles"],
+        report["delta_clamps"],
+        report["limit_clamps"],
+        report["torque_clips"],
+        report["position_frames"],
+        report["frames_out"]
+    );
+    // On the bus: torques a set per position set, then the shut-down; the hand never saw a
+    // torque beyond a clip, and it ends limp and quiet.
+    let run = from_bridge_start(&seen);
+    let host: Vec<&AllegroFrame> = run.iter().map(|(_, f)| f).filter(|f| is_host_frame(f)).collect();
+    let last: Vec<_> = host[host.len() - 6..].iter().map(|f| shape(f)).collect();
+    assert_eq!(last, SHUTDOWN, "the bridge's last six frames");
+    let torques = host.iter().filter(|f| (0x180..=0x18C).contains(&f.id())).count();
+    assert_eq!(torques, 4 * 2000 + 4);
+    let emu = json(&emu_out);
+    eprintln!("allegro hil: emulator {emu_out}");
+    assert_eq!(emu["torques_beyond_clip"], 0, "{emu_out}");
+    assert_eq!(emu["servo_on_at_end"], false, "{emu_out}");
 }
