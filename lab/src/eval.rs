@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use thiserror::Error;
 use vge_runtime::Policy;
-use vge_sim::{Env, EnvConfig, EpisodeTracker, ObjectShape, SimError, StepResult};
+use vge_sim::{Env, EnvConfig, EpisodeTracker, ObjectShape, Observer, SimError, StepResult};
 
 /// Episodes of the success test.
 pub const SUCCESS_TEST_EPISODES: usize = 20;
@@ -168,9 +168,18 @@ pub fn run_episode_observed(
     // `act` chooses the action and `on_step` sees its outcome: both closures read this.
     let joints = env_config.hand.num_joints();
     let last_action = RefCell::new(vec![0.0f32; joints]);
+    // What the policy observes, made from the env's full observation; the first call of the
+    // episode starts its history.
+    let observer = RefCell::new((Observer::new(env_config.observation, joints), true));
     let act = |_: &Env, obs: &[f32]| {
         let mut action = vec![0.0f32; joints];
-        policy(obs, &mut action).map_err(EvalError::Policy)?;
+        let seen = {
+            let (observer, first) = &mut *observer.borrow_mut();
+            let seen = if *first { observer.start(obs) } else { observer.step(obs) };
+            *first = false;
+            seen
+        };
+        policy(&seen, &mut action).map_err(EvalError::Policy)?;
         last_action.borrow_mut().clone_from(&action);
         Ok::<_, EvalError>(action)
     };
@@ -422,8 +431,7 @@ fn with_runtime_policy<T>(
     f: impl FnOnce(&EnvConfig, &PolicyFn<'_>) -> Result<T, EvalError>,
 ) -> Result<T, EvalError> {
     let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
-    vge_sim::check_policy_interface(&info, &env.hand, &env.observation_layout())
-        .map_err(EvalError::Policy)?;
+    vge_sim::check_policy_interface(&info, &env.hand, &env.policy_layout()).map_err(EvalError::Policy)?;
     let env = at_control_rate(env, info.control_hz);
     // Aligned, so that a version-2 file's arrays are used in place (as on the robot).
     let aligned = vge_runtime::AlignedBytes::new(bytes);
@@ -465,4 +473,36 @@ pub fn read_policy_file(path: &Path) -> Result<Vec<u8>, EvalError> {
         }
         other => EvalError::Policy(other.to_string()),
     })
+}
+
+/// The task a policy file was trained for, as an env: its hand (`hand`, a shipped hand's
+/// name or an MJCF path, replaces the recorded one: a hand that is not shipped is found
+/// only so), the hand's orientation, the observation set its layout declares, on `object`.
+/// A file without a task record is vge's own hand with the full observation. The policy is
+/// checked against the env before anything runs.
+pub fn policy_task_env(
+    bytes: &[u8],
+    hand: Option<&str>,
+    object: ObjectShape,
+) -> Result<EnvConfig, EvalError> {
+    let info = vge_runtime::policy::inspect(bytes).map_err(|e| EvalError::Policy(e.to_string()))?;
+    let recorded = info.task.as_ref().map_or(vge_runtime::policy::UNRECORDED_HAND, |t| t.hand);
+    let spec = hand.unwrap_or(recorded);
+    let hand = vge_sim::hands::load(spec).map_err(|e| {
+        EvalError::Policy(format!("the policy's hand {spec}: {e} (name its file with --hand PATH)"))
+    })?;
+    let mut env = EnvConfig::for_hand(hand)?;
+    env.object.shape = object;
+    if let Some(task) = &info.task
+        && !task.orientation.is_empty()
+    {
+        env.physics.hand_orientation = task.orientation.parse().map_err(EvalError::Policy)?;
+    }
+    let slices: Vec<(&str, usize, usize)> =
+        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)).collect();
+    env.observation =
+        vge_sim::ObservationSet::of_layout(&slices, env.hand.num_joints(), env.hand.num_fingers())
+            .map_err(EvalError::Policy)?;
+    vge_sim::check_policy_interface(&info, &env.hand, &env.policy_layout()).map_err(EvalError::Policy)?;
+    Ok(env)
 }

@@ -195,7 +195,7 @@ fn check_policy(path: &Path, bytes: &[u8], env: &EnvConfig) -> Result<(), ScoreE
     let bad = |message: String| ScoreError::Policy { path: path.to_owned(), message };
     let info =
         vge_runtime::policy::inspect(bytes).map_err(|e| bad(format!("not a valid policy file: {e}")))?;
-    vge_sim::check_policy_interface(&info, &env.hand, &env.observation_layout()).map_err(bad)
+    vge_sim::check_policy_interface(&info, &env.hand, &env.policy_layout()).map_err(bad)
 }
 
 /// The fields of `best-eval.json` and `final-eval.json` the score reads.

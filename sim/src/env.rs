@@ -167,6 +167,10 @@ pub struct EnvConfig {
     pub perturbation: PerturbationConfig,
     /// Per-episode randomisation of the object's physics and of the action's timing.
     pub randomization: DomainRandomization,
+    /// What a policy acting in this env observes ([`crate::Observer`] makes it from the env's
+    /// own full observation): the full set, or joints and targets with their history for a
+    /// hand without fingertip sensing.
+    pub observation: ObservationSet,
 }
 
 /// Domain randomisation for policies that must survive a real hand: the object's mass and
@@ -236,6 +240,7 @@ impl EnvConfig {
             randomization: DomainRandomization::default(),
             noise: NoiseConfig::default(),
             perturbation: PerturbationConfig::default(),
+            observation: ObservationSet::Full,
         })
     }
 }
@@ -267,10 +272,16 @@ impl EnvConfig {
         }
     }
 
-    /// The observation's layout: the full set, sized by the hand.
+    /// The layout of the env's own observation: the full set, sized by the hand.
     #[must_use]
     pub fn observation_layout(&self) -> ObservationLayout {
         ObservationLayout::new(ObservationSet::Full, self.hand.num_joints(), self.hand.num_fingers())
+    }
+
+    /// The layout of what a policy in this env observes ([`Self::observation`]).
+    #[must_use]
+    pub fn policy_layout(&self) -> ObservationLayout {
+        ObservationLayout::new(self.observation, self.hand.num_joints(), self.hand.num_fingers())
     }
 
     /// Physics steps per control step (rounded: `(1/30)/(1/240)` in f32 is not 8).

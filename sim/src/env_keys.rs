@@ -277,6 +277,7 @@ impl EnvSection {
         }
         env.physics.hand_orientation = self.hand_orientation;
         env.physics.finger_collisions = self.finger_collisions;
+        env.observation = self.observation_set()?;
         Ok(env)
     }
 }

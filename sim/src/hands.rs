@@ -49,6 +49,15 @@ pub fn load(spec: &str) -> Result<Arc<Hand>, SimError> {
     if let Some(hand) = shipped(spec) {
         return hand;
     }
+    // A shipped hand also by the model name its file gives (`<mujoco model>`, what a policy
+    // file records): `allegro_right` is `allegro`.
+    for (name, _, _) in SHIPPED {
+        if let Some(Ok(hand)) = shipped(name)
+            && hand.name() == spec
+        {
+            return Ok(hand);
+        }
+    }
     if spec.contains(std::path::MAIN_SEPARATOR) || spec.contains('/') || spec.ends_with(".xml") {
         return Hand::load(Path::new(spec)).map(Arc::new).map_err(|e| SimError::Hand(e.to_string()));
     }
@@ -56,4 +65,18 @@ pub fn load(spec: &str) -> Result<Arc<Hand>, SimError> {
         "hand `{spec}`: not a shipped hand ({}) nor a path to an MJCF file (a path has a `/` or ends in .xml)",
         shipped_names().join(", ")
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_shipped_hand_loads_by_its_name_or_its_model_name_and_an_unknown_name_is_refused() {
+        let allegro = load("allegro").expect("allegro");
+        assert_eq!(allegro.name(), "allegro_right");
+        assert!(Arc::ptr_eq(&load("allegro_right").expect("by model name"), &allegro));
+        let err = load("shadow").expect_err("not shipped");
+        assert!(err.to_string().contains("vge15, allegro"), "{err}");
+    }
 }

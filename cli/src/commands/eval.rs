@@ -83,7 +83,7 @@ pub struct EvalArgs {
     plot: Option<PathBuf>,
     /// Also record the first episode (seed --seed) into this file (JSON Lines): each finger
     /// link's pose and the object's, the fingertip and link contact points with their normal
-    /// forces, the 15 actions and the reward, one line per control step. See it in the Rerun
+    /// forces, the actions (one per joint) and the reward, one line per control step. See it in the Rerun
     /// viewer with the Python package: `python -m vge.recording F.jsonl --spawn` (or `-o F.rrd`;
     /// `pip install ./python rerun-sdk`).
     #[arg(long, value_name = "F.jsonl")]
@@ -92,6 +92,11 @@ pub struct EvalArgs {
     /// summary.
     #[arg(long)]
     json: bool,
+    /// The hand to run the policy on, in place of the one its file records (a shipped
+    /// hand's name or an MJCF file: a policy of a hand vge does not ship is run so). The
+    /// hand's orientation and the observation the policy takes come from the file.
+    #[arg(long, value_name = "NAME|FILE.xml")]
+    hand: Option<String>,
 }
 
 /// The objects of `vge eval --objects`.
@@ -118,6 +123,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         json,
         run,
         write,
+        hand,
     } = args;
     if let Some(dir) = run {
         return rescore_run(&dir, write, json);
@@ -138,10 +144,16 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     ] {
         anyhow::ensure!(v.is_finite() && v >= 0.0, "--{name} must be >= 0, got {v}");
     }
+    // The policy's own task: its hand, orientation and observation, refused before any
+    // episode if the policy cannot run on it.
+    let task =
+        vge_lab::eval::policy_task_env(&vge_lab::eval::read_policy_file(&policy)?, hand.as_deref(), object)
+            .with_context(|| format!("the task of {}", policy.display()))?;
     // The success test's env for an object, with the robustness test's disturbances set the
     // one way it sets them.
     let env_for = |object: ObjectShape| {
-        let env = EnvConfig { object: vge_sim::ObjectConfig::of(object), ..EnvConfig::default() };
+        let env =
+            EnvConfig { object: vge_sim::ObjectConfig { shape: object, ..task.object }, ..task.clone() };
         let mut env = vge_lab::eval::success_test_env(&env, episode_s, grasp_noise_rad);
         use vge_lab::robustness::Axis;
         for (axis, level) in [

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Args;
-use vge_sim::EnvConfig;
 
 use super::eval::EpisodeArgs;
 
@@ -68,8 +67,9 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
     anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
     let bytes = vge_lab::eval::read_policy_file(&policy)?;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let mut base = EnvConfig::default();
-    base.object.shape = object;
+    // The policy's own task: its hand, orientation and observation.
+    let base = vge_lab::eval::policy_task_env(&bytes, None, object)
+        .with_context(|| format!("the task of {}", policy.display()))?;
     let axes = if axes.is_empty() { robustness::Axis::ALL.to_vec() } else { axes };
     for (i, axis) in axes.iter().enumerate() {
         anyhow::ensure!(!axes[..i].contains(axis), "--axes names {} twice", axis.name());
