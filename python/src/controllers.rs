@@ -76,8 +76,9 @@ impl ControllerCore {
         Ok(Self { kind, env: env.into(), controller: Mutex::new(controller), state: Mutex::new(state) })
     }
 
-    /// The controller's action (15 joint-target changes, float32) for `env`'s current state,
-    /// or `None` when it has none this step (e.g. too few contacts; `last_error` says why).
+    /// The controller's action (one joint-target change per joint of the env's hand, float32)
+    /// for `env`'s current state, or `None` when it has none this step (e.g. too few
+    /// contacts; `last_error` says why).
     fn act<'py>(
         &self,
         py: Python<'py>,

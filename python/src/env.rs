@@ -1,25 +1,64 @@
-//! One environment: `vge_sim::Env` behind the calls `vge.HandEnv` makes.
+//! One environment: `vge_sim::Env` behind the calls `vge.HandEnv` makes, on the hand its
+//! `[env]` keys name, observed as their `observation` key says.
 
-use numpy::{PyArray1, PyReadonlyArray1, PyUntypedArrayMethods};
+use std::sync::Arc;
+
+use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vge_sim::{Env, NUM_FINGERS, NUM_JOINTS, PrivilegedState};
+use vge_hand::Hand;
+use vge_sim::{Env, ObservationLayout, ObservationSet, Observer, PrivilegedState};
 
+use crate::hand::HandCore;
 use crate::{errors, keys};
 
 /// Per-fingertip normal force (N), 0 where a fingertip does not touch.
-pub fn tip_forces_n(state: &PrivilegedState) -> [f32; NUM_FINGERS] {
-    state.contacts.map(|c| c.map_or(0.0, |c| c.normal_force_n))
+pub fn tip_forces_n(state: &PrivilegedState) -> Vec<f32> {
+    state.contacts.iter().map(|c| c.as_ref().map_or(0.0, |c| c.normal_force_n)).collect()
 }
 
 /// Gymnasium's step tuple: `(obs, reward, terminated, truncated, info)`.
 type StepTuple<'py> = (Bound<'py, PyArray1<f32>>, f64, bool, bool, Bound<'py, PyDict>);
+
+/// What a policy observes of an env: its observation set, that set's layout on the env's
+/// hand, and the env's full layout (what the critic and the controllers see).
+#[derive(Debug, Clone)]
+pub struct Observation {
+    pub set: ObservationSet,
+    pub layout: ObservationLayout,
+    pub full_layout: ObservationLayout,
+}
+
+impl Observation {
+    /// The observation the `[env]` keys name, on the hand of `config`.
+    pub fn of(keys: &vge_config_file::EnvKeys, config: &vge_sim::EnvConfig, origin: &str) -> PyResult<Self> {
+        let set = keys.0.observation_set().map_err(|e| errors::value(format!("{origin}: {e}")))?;
+        let hand = &config.hand;
+        Ok(Self {
+            set,
+            layout: ObservationLayout::new(set, hand.num_joints(), hand.num_fingers()),
+            full_layout: config.observation_layout(),
+        })
+    }
+
+    pub fn is_full(&self) -> bool {
+        self.set == ObservationSet::Full
+    }
+}
+
+/// A layout as Python's `[(name, start, end), ...]`.
+pub fn layout_list(layout: &ObservationLayout) -> Vec<(&'static str, usize, usize)> {
+    layout.slices().iter().map(|(n, r)| (*n, r.start, r.end)).collect()
+}
 
 /// The `[env]` keys given, the env built from them, and the current episode.
 #[pyclass(module = "vge._vge")]
 #[derive(Debug)]
 pub struct EnvCore {
     pub env: Env,
+    pub observation: Observation,
+    /// Makes the policy's observation from the env's full one.
+    observer: Observer,
     /// Seed of the episode the last reset began (`None` before the first).
     pub episode_seed: Option<u64>,
     /// Resets so far: a controller compares it with the episode it last acted in.
@@ -32,6 +71,10 @@ impl EnvCore {
     pub fn state(&self) -> PyResult<&PrivilegedState> {
         self.env.privileged().ok_or_else(|| errors::sim(vge_sim::SimError::NotReset))
     }
+
+    pub fn hand(&self) -> &Arc<Hand> {
+        &self.env.config().hand
+    }
 }
 
 #[pymethods]
@@ -43,8 +86,17 @@ impl EnvCore {
     fn new(keys: Option<&Bound<'_, PyDict>>, index: usize, config_path: Option<&str>) -> PyResult<Self> {
         let (keys, origin) = keys::read(config_path, keys)?;
         let config = keys.env_config(index, &origin).map_err(errors::keys)?;
+        let observation = Observation::of(&keys, &config, &origin)?;
+        let observer = Observer::new(observation.set, config.hand.num_joints());
         let env = Env::new(config).map_err(errors::sim)?;
-        Ok(Self { env, episode_seed: None, episodes: 0, training_only_keys: keys.training_only_keys() })
+        Ok(Self {
+            env,
+            observation,
+            observer,
+            episode_seed: None,
+            episodes: 0,
+            training_only_keys: keys.training_only_keys(),
+        })
     }
 
     /// Rebuilds the world from `seed`: `(obs, info)`.
@@ -54,7 +106,8 @@ impl EnvCore {
         seed: u64,
     ) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyDict>)> {
         let env = &mut self.env;
-        let (obs, reset_info) = py.detach(|| env.reset(seed)).map_err(errors::sim)?;
+        let (full, reset_info) = py.detach(|| env.reset(seed)).map_err(errors::sim)?;
+        let obs = self.observer.start(&full);
         self.episode_seed = Some(seed);
         self.episodes += 1;
         let info = PyDict::new(py);
@@ -62,19 +115,19 @@ impl EnvCore {
         info.set_item("episode_seed", seed)?;
         state_info(py, &info, self)?;
         info.set_item("object_height_m", reset_info.object_height_m)?;
-        Ok((PyArray1::from_slice(py, &obs), info))
+        if !self.observation.is_full() {
+            info.set_item("full_obs", PyArray1::from_vec(py, full))?;
+        }
+        Ok((PyArray1::from_vec(py, obs), info))
     }
 
-    /// One control step with a float32 action of 15 entries: `(obs, reward, terminated,
-    /// truncated, info)`.
+    /// One control step with a float32 action of one entry per joint: `(obs, reward,
+    /// terminated, truncated, info)`.
     fn step<'py>(&mut self, py: Python<'py>, action: PyReadonlyArray1<'py, f32>) -> PyResult<StepTuple<'py>> {
-        let got = action.len();
         let action = action.as_slice().map_err(|e| errors::value(format!("action: {e}")))?;
-        let action: [f32; NUM_JOINTS] = action
-            .try_into()
-            .map_err(|_| errors::sim(vge_sim::SimError::ActionLength { got, expected: NUM_JOINTS }))?;
         let env = &mut self.env;
-        let r = py.detach(|| env.step(&action)).map_err(errors::sim)?;
+        let r = py.detach(|| env.step(action)).map_err(errors::sim)?;
+        let obs = self.observer.step(&r.obs);
         let info = PyDict::new(py);
         info.set_item("object_rotation_z_rad", r.info.object_rotation_z_rad)?;
         info.set_item("object_angvel_z_rad_per_s", r.info.object_angvel_z_rad_per_s)?;
@@ -82,7 +135,10 @@ impl EnvCore {
         info.set_item("dropped", r.info.dropped)?;
         info.set_item("step", r.info.step)?;
         state_info(py, &info, self)?;
-        Ok((PyArray1::from_slice(py, &r.obs), f64::from(r.reward), r.terminated, r.truncated, info))
+        if !self.observation.is_full() {
+            info.set_item("full_obs", PyArray1::from_vec(py, r.obs))?;
+        }
+        Ok((PyArray1::from_vec(py, obs), f64::from(r.reward), r.terminated, r.truncated, info))
     }
 
     /// The noise-free state: object pose and velocity, joint angles and targets, contacts.
@@ -101,6 +157,43 @@ impl EnvCore {
         d.set_item("q_target_rad", PyArray1::from_slice(py, &s.q_target_rad))?;
         state_info(py, &d, self)?;
         Ok(d)
+    }
+
+    /// The hand the env simulates.
+    #[getter(hand)]
+    fn hand_core(&self) -> HandCore {
+        HandCore::from_arc(self.hand().clone())
+    }
+
+    /// Entries of the observation the env returns (its observation set's, on its hand).
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.observation.layout.dim()
+    }
+
+    /// Entries of an action: one per joint.
+    #[getter]
+    fn act_dim(&self) -> usize {
+        self.hand().num_joints()
+    }
+
+    /// The observation's named slices: `[(name, start, end), ...]`.
+    #[getter]
+    fn obs_layout(&self) -> Vec<(&'static str, usize, usize)> {
+        layout_list(&self.observation.layout)
+    }
+
+    /// The full observation's named slices (what `info["full_obs"]` holds when the env
+    /// observes less).
+    #[getter]
+    fn full_obs_layout(&self) -> Vec<(&'static str, usize, usize)> {
+        layout_list(&self.observation.full_layout)
+    }
+
+    /// The observation set's name: `full`, `proprio` or `proprio:K`.
+    #[getter]
+    fn observation(&self) -> String {
+        self.observation.set.name()
     }
 
     #[getter]
@@ -143,10 +236,9 @@ impl EnvCore {
 /// Contacts and forces of the current state into `info`.
 fn state_info(py: Python<'_>, info: &Bound<'_, PyDict>, core: &EnvCore) -> PyResult<()> {
     let s = core.state()?;
-    let touching = s.contacts.map(|c| c.is_some());
-    info.set_item("tip_contacts", PyArray1::from_slice(py, &touching))?;
+    info.set_item("tip_contacts", PyArray1::from_vec(py, s.tip_contacts()))?;
     info.set_item("num_tip_contacts", s.num_tip_contacts())?;
-    info.set_item("contact_forces_n", PyArray1::from_slice(py, &tip_forces_n(s)))?;
+    info.set_item("contact_forces_n", PyArray1::from_vec(py, tip_forces_n(s)))?;
     let f = core.env.external_force_n();
     info.set_item("external_force_n", PyArray1::from_slice(py, &[f.x, f.y, f.z]))?;
     Ok(())

@@ -2,6 +2,8 @@
 //! limits, masses, and the kinematics in float64 (as MuJoCo computes them, so that the two
 //! can be compared entry by entry).
 
+use std::sync::Arc;
+
 use numpy::{PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
 use vge_hand::Hand;
@@ -12,10 +14,15 @@ use crate::errors;
 #[pyclass(module = "vge._vge", frozen)]
 #[derive(Debug)]
 pub struct HandCore {
-    hand: Hand,
+    hand: Arc<Hand>,
 }
 
 impl HandCore {
+    /// The hand an env simulates, shared with it.
+    pub fn from_arc(hand: Arc<Hand>) -> Self {
+        Self { hand }
+    }
+
     fn joints<'a>(&self, q: &'a PyReadonlyArray1<'_, f64>) -> PyResult<&'a [f64]> {
         q.as_slice().map_err(|e| errors::value(format!("joint angles: {e}")))
     }
@@ -26,7 +33,20 @@ impl HandCore {
     /// Reads the MJCF file at `path` and the TOML beside it (same stem), if there is one.
     #[staticmethod]
     fn load(path: &str) -> PyResult<Self> {
-        Ok(Self { hand: Hand::load(path).map_err(errors::hand)? })
+        Ok(Self { hand: Arc::new(Hand::load(path).map_err(errors::hand)?) })
+    }
+
+    /// A hand that ships with vge (`vge15`, `allegro`), or the MJCF file at `spec` when it is
+    /// a path (it has a `/` or ends in .xml): the reader of the `[env]` key `hand`.
+    #[staticmethod]
+    fn named(spec: &str) -> PyResult<Self> {
+        Ok(Self { hand: vge_sim::hands::load(spec).map_err(errors::sim)? })
+    }
+
+    /// The names of the hands that ship with vge.
+    #[staticmethod]
+    fn shipped_names() -> Vec<&'static str> {
+        vge_sim::hands::shipped_names()
     }
 
     #[getter]

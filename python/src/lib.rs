@@ -1,11 +1,13 @@
 //! `vge._vge`: the Rust half of the Python package `vge` (the Python half, in `vge/`, makes
 //! these into a Gymnasium `Env` and `VectorEnv`).
 //!
-//! - [`env::EnvCore`]: one `vge_sim::Env` built from `[env]` keys;
+//! - [`env::EnvCore`]: one `vge_sim::Env` built from `[env]` keys (the hand among them), its
+//!   observation the full one or the proprioceptive one the keys name;
 //! - [`vec_env::VecEnvCore`]: N of them stepped on rayon's threads into preallocated numpy
 //!   arrays, with Gymnasium's next-step autoreset;
 //! - [`controllers::ControllerCore`]: IGM, CS or FG acting on an `EnvCore`'s state;
-//! - [`policy::PolicyCore`]: a policy file on the no_std runtime;
+//! - [`policy::PolicyCore`]: a policy file on the no_std runtime, checked against the hand and
+//!   observation of the env it drives;
 //! - [`hand::HandCore`]: a hand read from its MJCF description, with its kinematics.
 //!
 //! Nothing here panics on Python input: every value is checked and refused with an
@@ -30,15 +32,10 @@ fn _vge(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<hand::HandCore>()?;
     m.add("PolicyError", m.py().get_type::<errors::PolicyError>())?;
     m.add("HandError", m.py().get_type::<errors::HandError>())?;
-    m.add("OBS_DIM", vge_sim::OBS_DIM)?;
-    m.add("NUM_JOINTS", vge_sim::NUM_JOINTS)?;
-    m.add("NUM_FINGERS", vge_sim::NUM_FINGERS)?;
     m.add("ENV_KEYS", vge_sim::EnvSection::keys().to_vec())?;
     let objects: Vec<&str> = vge_sim::ObjectShape::ALL.iter().map(|o| o.name()).collect();
     m.add("OBJECTS", objects)?;
-    let layout: Vec<(&str, usize, usize)> =
-        vge_sim::observation::OBS_LAYOUT.iter().map(|(n, r)| (*n, r.start, r.end)).collect();
-    m.add("OBS_LAYOUT", layout)?;
+    m.add("HANDS", vge_sim::hands::shipped_names())?;
     m.add("VERSION", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -4,20 +4,23 @@
 //! stepped.
 //!
 //! Not `vge_sim::VecEnv`: that steps every env every call and returns fresh vectors; here a
-//! call may reset some envs and step the others, and the results land in place.
+//! call may reset some envs and step the others, and the results land in place. Every env
+//! has the one hand the `[env]` keys name, so the arrays' widths are that hand's.
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
-use vge_sim::{Env, NUM_FINGERS, NUM_JOINTS, OBS_DIM, SimError};
+use vge_sim::{Env, Observer, SimError};
 
-use crate::env::tip_forces_n;
+use crate::env::{Observation, layout_list, tip_forces_n};
 use crate::{errors, keys};
 
 /// One env's row of every output array.
 struct Row<'a> {
     obs: &'a mut [f32],
+    /// The full observation, when the envs observe less (else empty).
+    full_obs: &'a mut [f32],
     reward: &'a mut f64,
     terminated: &'a mut bool,
     truncated: &'a mut bool,
@@ -33,28 +36,40 @@ struct Row<'a> {
 
 /// What one env does on a call.
 #[derive(Debug, Clone, Copy)]
-enum Op {
+enum Op<'a> {
     Reset(u64),
-    Step([f32; NUM_JOINTS]),
+    Step(&'a [f32]),
 }
 
-fn run(env: &mut Env, op: Op, row: Row<'_>) -> Result<bool, SimError> {
-    let (rotation, dropped, step, ended) = match op {
+/// One env and what makes its policy's observation.
+#[derive(Debug)]
+struct Slot {
+    env: Env,
+    observer: Observer,
+}
+
+fn run(slot: &mut Slot, op: Op<'_>, row: Row<'_>) -> Result<bool, SimError> {
+    let env = &mut slot.env;
+    let (full, rotation, dropped, step, ended) = match op {
         Op::Reset(seed) => {
-            let (obs, _) = env.reset(seed)?;
-            row.obs.copy_from_slice(&obs);
+            let (full, _) = env.reset(seed)?;
+            row.obs.copy_from_slice(&slot.observer.start(&full));
             *row.reward = 0.0;
             (*row.terminated, *row.truncated, *row.autoreset) = (false, false, true);
-            (0.0, false, 0, false)
+            (full, 0.0, false, 0, false)
         }
         Op::Step(action) => {
-            let r = env.step(&action)?;
-            row.obs.copy_from_slice(&r.obs);
+            let r = env.step(action)?;
+            row.obs.copy_from_slice(&slot.observer.step(&r.obs));
             *row.reward = f64::from(r.reward);
             (*row.terminated, *row.truncated, *row.autoreset) = (r.terminated, r.truncated, false);
-            (r.info.object_rotation_z_rad, r.info.dropped, r.info.step as i64, r.terminated || r.truncated)
+            let ended = r.terminated || r.truncated;
+            (r.obs, r.info.object_rotation_z_rad, r.info.dropped, r.info.step as i64, ended)
         }
     };
+    if !row.full_obs.is_empty() {
+        row.full_obs.copy_from_slice(&full);
+    }
     let state = env.privileged().ok_or(SimError::NotReset)?;
     for (t, c) in row.tip_contacts.iter_mut().zip(&state.contacts) {
         *t = c.is_some();
@@ -69,10 +84,13 @@ fn run(env: &mut Env, op: Op, row: Row<'_>) -> Result<bool, SimError> {
     Ok(ended)
 }
 
-/// The output arrays, allocated once (shapes: `n`, `n x 65`, `n x 5`, `n x 3`).
+/// The output arrays, allocated once (shapes: `n`, `n x obs_dim`, `n x fingers`, `n x 3`;
+/// `full_obs` is `n x full obs_dim` when the envs observe less than the full observation,
+/// else `n x 0`).
 #[derive(Debug)]
 struct Buffers {
     obs: Py<PyArray2<f32>>,
+    full_obs: Py<PyArray2<f32>>,
     rewards: Py<PyArray1<f64>>,
     terminations: Py<PyArray1<bool>>,
     truncations: Py<PyArray1<bool>>,
@@ -86,15 +104,34 @@ struct Buffers {
     step: Py<PyArray1<i64>>,
 }
 
-/// One env's row of the output arrays (bytes).
-const ROW_BYTES: u64 = (4 * OBS_DIM + 8 + 3 + NUM_FINGERS + 4 * NUM_FINGERS + 4 * 3 + 4 + 4 + 1 + 8) as u64;
+/// The widths of a row: observation, full observation (0 when it is the observation),
+/// fingertips.
+#[derive(Debug, Clone, Copy)]
+struct Widths {
+    obs: usize,
+    full_obs: usize,
+    fingers: usize,
+}
+
+impl Widths {
+    fn of(observation: &Observation, fingers: usize) -> Self {
+        let full_obs = if observation.is_full() { 0 } else { observation.full_layout.dim() };
+        Self { obs: observation.layout.dim(), full_obs, fingers }
+    }
+
+    /// One env's row of the output arrays (bytes).
+    fn row_bytes(self) -> u64 {
+        (4 * self.obs + 4 * self.full_obs + 8 + 3 + self.fingers + 4 * self.fingers + 4 * 3 + 4 + 4 + 1 + 8)
+            as u64
+    }
+}
 
 /// Refuses `num_envs` envs that no machine holds, or this one does not, before any is made,
 /// with the memory they would take: as `vge train` refuses its `num_envs`, by the bounds of
 /// `vge_config_file::memory`, instead of allocating until the process is killed.
-fn check_fits_memory(num_envs: usize) -> PyResult<()> {
+fn check_fits_memory(num_envs: usize, widths: Widths) -> PyResult<()> {
     use vge_config_file::memory::{SIM_ENV_BYTES, bytes_text, refusal};
-    let per_env = SIM_ENV_BYTES + ROW_BYTES;
+    let per_env = SIM_ENV_BYTES + widths.row_bytes();
     let total = (num_envs as u64).saturating_mul(per_env);
     let parts = format!(" ({} per env)", bytes_text(per_env));
     match refusal(&format!("VecHandEnv({num_envs})"), total, &parts) {
@@ -107,7 +144,9 @@ fn check_fits_memory(num_envs: usize) -> PyResult<()> {
 #[pyclass(module = "vge._vge")]
 #[derive(Debug)]
 pub struct VecEnvCore {
-    envs: Vec<Env>,
+    slots: Vec<Slot>,
+    observation: Observation,
+    widths: Widths,
     /// Envs whose episode ended on the last call: the next call resets them.
     pending_reset: Vec<bool>,
     buffers: Buffers,
@@ -123,15 +162,22 @@ fn borrow_error(e: impl std::fmt::Display) -> PyErr {
 impl VecEnvCore {
     /// Runs `ops[i]` on env `i`, side by side, writing each env's row of the outputs; the
     /// GIL is released meanwhile.
-    fn run_all(&mut self, py: Python<'_>, ops: &[Op]) -> PyResult<()> {
+    fn run_all(&mut self, py: Python<'_>, ops: &[Op<'_>]) -> PyResult<()> {
         let b = &self.buffers;
+        let w = self.widths;
         macro_rules! rw {
             ($a:expr) => {
                 $a.bind(py).try_readwrite().map_err(borrow_error)?
             };
         }
-        let (mut obs, mut rew, mut term, mut trunc, mut auto) =
-            (rw!(b.obs), rw!(b.rewards), rw!(b.terminations), rw!(b.truncations), rw!(b.autoreset));
+        let (mut obs, mut full_obs, mut rew, mut term, mut trunc, mut auto) = (
+            rw!(b.obs),
+            rw!(b.full_obs),
+            rw!(b.rewards),
+            rw!(b.terminations),
+            rw!(b.truncations),
+            rw!(b.autoreset),
+        );
         let (mut tips, mut forces, mut ext) =
             (rw!(b.tip_contacts), rw!(b.contact_forces_n), rw!(b.external_force_n));
         let (mut rot, mut height, mut dropped, mut step) =
@@ -141,17 +187,24 @@ impl VecEnvCore {
                 $a.as_slice_mut().map_err(borrow_error)?
             };
         }
-        let n = self.envs.len();
+        let n = self.slots.len();
+        let full_obs = slice!(full_obs);
+        // An empty array has no rows to cut: every env gets an empty one.
+        let mut full_obs: Box<dyn Iterator<Item = &mut [f32]>> = if w.full_obs == 0 {
+            Box::new(std::iter::repeat_with(<&mut [f32]>::default))
+        } else {
+            Box::new(full_obs.chunks_exact_mut(w.full_obs))
+        };
         let (mut obs, mut rew, mut term, mut trunc, mut auto) = (
-            slice!(obs).chunks_exact_mut(OBS_DIM),
+            slice!(obs).chunks_exact_mut(w.obs.max(1)),
             slice!(rew).iter_mut(),
             slice!(term).iter_mut(),
             slice!(trunc).iter_mut(),
             slice!(auto).iter_mut(),
         );
         let (mut tips, mut forces, mut ext) = (
-            slice!(tips).chunks_exact_mut(NUM_FINGERS),
-            slice!(forces).chunks_exact_mut(NUM_FINGERS),
+            slice!(tips).chunks_exact_mut(w.fingers.max(1)),
+            slice!(forces).chunks_exact_mut(w.fingers.max(1)),
             slice!(ext).chunks_exact_mut(3),
         );
         let (mut rot, mut height, mut dropped, mut step) = (
@@ -164,6 +217,7 @@ impl VecEnvCore {
             .map(|_| {
                 Some(Row {
                     obs: obs.next()?,
+                    full_obs: full_obs.next()?,
                     reward: rew.next()?,
                     terminated: term.next()?,
                     truncated: trunc.next()?,
@@ -179,13 +233,14 @@ impl VecEnvCore {
             })
             .collect::<Option<Vec<Row<'_>>>>()
             .ok_or_else(|| borrow_error("an output array is shorter than the batch"))?;
-        let envs = &mut self.envs;
+        let slots = &mut self.slots;
         let ended: Vec<bool> = py
             .detach(|| {
-                envs.par_iter_mut()
+                slots
+                    .par_iter_mut()
                     .zip(ops.par_iter())
                     .zip(rows.into_par_iter())
-                    .map(|((env, op), row)| run(env, *op, row))
+                    .map(|((slot, op), row)| run(slot, *op, row))
                     .collect::<Result<Vec<bool>, SimError>>()
             })
             .map_err(errors::sim)?;
@@ -194,12 +249,22 @@ impl VecEnvCore {
     }
 
     fn seeds(&self, seeds: &PyReadonlyArray1<'_, u64>) -> PyResult<Vec<u64>> {
-        let n = self.envs.len();
+        let n = self.slots.len();
         let s = seeds.as_slice().map_err(|e| errors::value(format!("seeds: {e}")))?;
         if s.len() != n {
             return Err(errors::sim(SimError::BatchLength { got: s.len(), expected: n }));
         }
         Ok(s.to_vec())
+    }
+
+    /// The hand every env simulates and the layout of what they observe (what a policy
+    /// that drives them must take).
+    pub fn interface(&self) -> PyResult<(std::sync::Arc<vge_hand::Hand>, vge_sim::ObservationLayout)> {
+        Ok((self.first()?.config().hand.clone(), self.observation.layout.clone()))
+    }
+
+    fn first(&self) -> PyResult<&Env> {
+        self.slots.first().map(|s| &s.env).ok_or_else(|| errors::value("the vector env has no envs"))
     }
 }
 
@@ -218,24 +283,30 @@ impl VecEnvCore {
         if num_envs == 0 {
             return Err(errors::value("num_envs must be at least 1"));
         }
-        check_fits_memory(num_envs)?;
         let (keys, origin) = keys::read(config_path, keys)?;
-        let envs = (0..num_envs)
+        let first = keys.env_config(0, &origin).map_err(errors::keys)?;
+        let observation = Observation::of(&keys, &first, &origin)?;
+        let widths = Widths::of(&observation, first.hand.num_fingers());
+        check_fits_memory(num_envs, widths)?;
+        let joints = first.hand.num_joints();
+        let slots = (0..num_envs)
             .map(|i| {
                 keys.env_config(i, &origin)
                     .map_err(errors::keys)
                     .and_then(|c| Env::new(c).map_err(errors::sim))
+                    .map(|env| Slot { env, observer: Observer::new(observation.set, joints) })
             })
             .collect::<PyResult<Vec<_>>>()?;
         let n = num_envs;
         let buffers = Buffers {
-            obs: PyArray2::zeros(py, [n, OBS_DIM], false).unbind(),
+            obs: PyArray2::zeros(py, [n, widths.obs], false).unbind(),
+            full_obs: PyArray2::zeros(py, [n, widths.full_obs], false).unbind(),
             rewards: PyArray1::zeros(py, n, false).unbind(),
             terminations: PyArray1::zeros(py, n, false).unbind(),
             truncations: PyArray1::zeros(py, n, false).unbind(),
             autoreset: PyArray1::zeros(py, n, false).unbind(),
-            tip_contacts: PyArray2::zeros(py, [n, NUM_FINGERS], false).unbind(),
-            contact_forces_n: PyArray2::zeros(py, [n, NUM_FINGERS], false).unbind(),
+            tip_contacts: PyArray2::zeros(py, [n, widths.fingers], false).unbind(),
+            contact_forces_n: PyArray2::zeros(py, [n, widths.fingers], false).unbind(),
             external_force_n: PyArray2::zeros(py, [n, 3], false).unbind(),
             rotation_z_rad: PyArray1::zeros(py, n, false).unbind(),
             height_m: PyArray1::zeros(py, n, false).unbind(),
@@ -243,7 +314,9 @@ impl VecEnvCore {
             step: PyArray1::zeros(py, n, false).unbind(),
         };
         Ok(Self {
-            envs,
+            slots,
+            observation,
+            widths,
             pending_reset: vec![false; n],
             buffers,
             training_only_keys: keys.training_only_keys(),
@@ -252,11 +325,11 @@ impl VecEnvCore {
 
     /// Resets env `i` with `seeds[i]`, every env side by side.
     fn reset(&mut self, py: Python<'_>, seeds: PyReadonlyArray1<'_, u64>) -> PyResult<()> {
-        let ops: Vec<Op> = self.seeds(&seeds)?.into_iter().map(Op::Reset).collect();
+        let ops: Vec<Op<'_>> = self.seeds(&seeds)?.into_iter().map(Op::Reset).collect();
         self.run_all(py, &ops)
     }
 
-    /// Steps every env with its row of `actions` (float32, `n x 15`), except those whose
+    /// Steps every env with its row of `actions` (float32, `n x joints`), except those whose
     /// episode ended on the last call, which are reset with their entry of `seeds`. Every
     /// action is checked before any env moves.
     fn step(
@@ -265,21 +338,21 @@ impl VecEnvCore {
         actions: PyReadonlyArray2<'_, f32>,
         seeds: PyReadonlyArray1<'_, u64>,
     ) -> PyResult<()> {
-        let n = self.envs.len();
+        let n = self.slots.len();
+        let joints = self.first()?.config().hand.num_joints();
         let shape = actions.shape().to_vec();
-        if shape != [n, NUM_JOINTS] {
-            return Err(errors::value(format!("actions have shape {shape:?}, expected [{n}, {NUM_JOINTS}]")));
+        if shape != [n, joints] {
+            return Err(errors::value(format!("actions have shape {shape:?}, expected [{n}, {joints}]")));
         }
         let seeds = self.seeds(&seeds)?;
         let a = actions.as_slice().map_err(|e| errors::value(format!("actions: {e}")))?;
         let mut ops = Vec::with_capacity(n);
-        for (i, row) in a.chunks_exact(NUM_JOINTS).enumerate() {
+        for (i, (row, slot)) in a.chunks_exact(joints.max(1)).zip(&self.slots).enumerate() {
             ops.push(if self.pending_reset[i] {
                 Op::Reset(seeds[i])
             } else {
-                let action =
-                    Env::check_action(row).map_err(|e| errors::value(format!("actions row {i}: {e}")))?;
-                Op::Step(action)
+                slot.env.check_action(row).map_err(|e| errors::value(format!("actions row {i}: {e}")))?;
+                Op::Step(row)
             });
         }
         self.run_all(py, &ops)
@@ -291,10 +364,14 @@ impl VecEnvCore {
     }
 
     /// The output arrays (the same objects on every call; each call overwrites them).
+    /// `full_obs` is there when the envs observe less than the full observation.
     fn buffers<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let b = &self.buffers;
         let d = PyDict::new(py);
         d.set_item("obs", b.obs.bind(py))?;
+        if !self.observation.is_full() {
+            d.set_item("full_obs", b.full_obs.bind(py))?;
+        }
         d.set_item("rewards", b.rewards.bind(py))?;
         d.set_item("terminations", b.terminations.bind(py))?;
         d.set_item("truncations", b.truncations.bind(py))?;
@@ -311,23 +388,56 @@ impl VecEnvCore {
 
     #[getter]
     fn num_envs(&self) -> usize {
-        self.envs.len()
+        self.slots.len()
+    }
+
+    /// The hand every env simulates.
+    #[getter]
+    fn hand(&self) -> PyResult<crate::hand::HandCore> {
+        Ok(crate::hand::HandCore::from_arc(self.first()?.config().hand.clone()))
+    }
+
+    /// Entries of each env's observation.
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.widths.obs
+    }
+
+    /// Entries of each env's action: one per joint.
+    #[getter]
+    fn act_dim(&self) -> PyResult<usize> {
+        Ok(self.first()?.config().hand.num_joints())
+    }
+
+    #[getter]
+    fn obs_layout(&self) -> Vec<(&'static str, usize, usize)> {
+        layout_list(&self.observation.layout)
+    }
+
+    #[getter]
+    fn full_obs_layout(&self) -> Vec<(&'static str, usize, usize)> {
+        layout_list(&self.observation.full_layout)
+    }
+
+    #[getter]
+    fn observation(&self) -> String {
+        self.observation.set.name()
     }
 
     /// Largest action entry of each env (rad).
     #[getter]
     fn max_action_rad(&self) -> Vec<f32> {
-        self.envs.iter().map(|e| e.config().max_action_rad).collect()
+        self.slots.iter().map(|s| s.env.config().max_action_rad).collect()
     }
 
     #[getter]
     fn control_hz(&self) -> Vec<f32> {
-        self.envs.iter().map(|e| e.config().control_hz).collect()
+        self.slots.iter().map(|s| s.env.config().control_hz).collect()
     }
 
     #[getter]
     fn objects(&self) -> Vec<&'static str> {
-        self.envs.iter().map(|e| e.config().object.shape.name()).collect()
+        self.slots.iter().map(|s| s.env.config().object.shape.name()).collect()
     }
 
     #[getter]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import gymnasium as gym
 
 from . import _vge, controllers
-from ._vge import NUM_FINGERS, NUM_JOINTS, OBJECTS, OBS_DIM, OBS_LAYOUT, HandError, PolicyError
+from ._vge import HANDS, OBJECTS, HandError, PolicyError
 from .env import HandEnv
 from .hand import Hand
 from .policy import Policy
@@ -21,6 +21,27 @@ __version__ = _vge.VERSION
 
 #: The `[env]` keys of a vge config that `HandEnv` and `VecHandEnv` accept by name.
 ENV_KEYS = tuple(_vge.ENV_KEYS)
+
+#: The hands that ship with vge, by the name the `[env]` key `hand` takes ("vge15", the
+#: default, and "allegro"); the key also takes the path of an MJCF file.
+HANDS = tuple(HANDS)
+
+# The sizes of one hand are an env's now (`env.obs_dim`, `env.act_dim`, `env.obs_layout`,
+# `env.joint_names`, `env.finger_names`); these module constants were vge15's.
+_REMOVED = {
+    "OBS_DIM": "env.obs_dim",
+    "NUM_JOINTS": "env.act_dim (or env.hand.num_joints)",
+    "NUM_FINGERS": "env.hand.num_fingers",
+    "OBS_LAYOUT": "env.obs_layout",
+}
+
+
+def __getattr__(name: str):
+    if name in _REMOVED:
+        raise AttributeError(
+            f"vge.{name} was the size of one hand (vge15); each env has its own: use {_REMOVED[name]}"
+        )
+    raise AttributeError(f"module 'vge' has no attribute {name!r}")
 
 
 def env_id(object: str) -> str:
@@ -42,9 +63,6 @@ __all__ = [
     "controllers",
     "env_id",
     "ENV_KEYS",
+    "HANDS",
     "OBJECTS",
-    "OBS_DIM",
-    "OBS_LAYOUT",
-    "NUM_JOINTS",
-    "NUM_FINGERS",
 ]

@@ -7,9 +7,10 @@ A controller reads the env's noise-free state (object pose, contacts), as in tra
     env = vge.HandEnv()
     fg = vge.controllers.FG(env)
     obs, info = env.reset(seed=0)
-    action = fg.act(env)           # float32 (15,), or None when it has no action this step
+    action = fg.act(env)           # float32 (env.act_dim,), or None when it has no action this step
 
-A controller is built for one env (its hand and control period) and keeps episode state
+A controller works on any hand (`vge.HandEnv(hand="allegro")` too): it is built for one env
+(its hand and control period) and keeps episode state
 (CS's switching trajectory). When the env has begun a new episode since its last action, it
 resets itself with a generator seeded from the episode's seed, as `vge controller` does, so a
 loop stepping `fg.act(env)` (zeros when None) reproduces that command's episodes exactly.

@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _vge
 from ._checks import float32_array
+from .hand import Hand
 
 
 def env_keys(object: str | None, keys: dict[str, Any]) -> dict[str, Any]:
@@ -37,21 +38,32 @@ def episode_seed(rng: np.random.Generator) -> int:
 
 
 class HandEnv(gym.Env):
-    """The 15-joint hand turning an object about the vertical, as vge trains it.
+    """A hand turning an object about the vertical, as vge trains it. The hand is the `[env]`
+    key `hand`: `"vge15"` (vge's own 15-joint, 5-finger hand, the default), `"allegro"`
+    (16 joints, 4 fingers), or the path of an MJCF file; its sizes are the env's
+    (`obs_dim`, `act_dim`, `joint_names`, `finger_names`, `hand`).
 
-    - Observation: 65 float32 (`vge.OBS_LAYOUT`): joint angles, joint targets, per fingertip
-      contact point, normal and normal force (zeros out of contact).
-    - Action: 15 float32 joint-target changes (rad), each within +-`max_action_rad`.
+    - Observation: `obs_dim` float32 in the layout `obs_layout`. With `observation="full"`
+      (the default): joint angles, joint targets, per fingertip contact point, normal and
+      normal force (zeros out of contact): 65 for vge15, 60 for the Allegro. With
+      `observation="proprio:K"`: joint angles and targets now and at the last K control
+      steps (what a hand without fingertip sensing measures), `2 * joints * (1 + K)`; then
+      `info["full_obs"]` carries the full observation (what a critic may see, in
+      `full_obs_layout`).
+    - Action: `act_dim` float32 joint-target changes (rad), one per joint in `joint_names`'
+      order, each within +-`max_action_rad`.
     - Reward: the object's rotation rate about z (rad/s), clipped to +-`max_reward_rad_per_s`,
       while enough fingertips touch it; a backward turn is charged whatever the contacts
       (`charge_reverse_rotation`, on by default), and `drop_penalty` (0 by default) on a drop.
     - terminated: the object dropped; truncated: the episode's time limit.
     - info: `tip_contacts`, `num_tip_contacts`, `contact_forces_n` (per fingertip, N),
       `external_force_n` (the push on the object, N), `object_rotation_z_rad` (this
-      step's), `object_angvel_z_rad_per_s`, `object_height_m`, `dropped`, `step`.
+      step's), `object_angvel_z_rad_per_s`, `object_height_m`, `dropped`, `step`, and
+      `full_obs` when the env observes less than the full observation.
 
     `object` is one of `vge.OBJECTS`; any key of a vge config's `[env]` section is accepted by
-    name (`HandEnv(episode_length=600, noise_q_std_rad=0.01)`), or use `from_config`.
+    name (`HandEnv(episode_length=600, noise_q_std_rad=0.01)`,
+    `HandEnv(hand="allegro", observation="proprio:3")`), or use `from_config`.
 
     `reset(seed=s)` starts the episode the Rust `vge_sim::Env` starts from seed `s`; a reset
     without a seed draws the episode's seed from the env's generator (`np_random`).
@@ -62,9 +74,10 @@ class HandEnv(gym.Env):
     def __init__(self, object: str | None = None, *, _config_path: str | None = None, _index: int = 0, **env: Any):
         self._core = _vge.EnvCore(env_keys(object, env), _index, _config_path)
         warn_training_only(self._core.training_only_keys)
+        self._hand = Hand(self._core.hand)
         bound = np.float32(self._core.max_action_rad)
-        self.action_space = gym.spaces.Box(-bound, bound, shape=(_vge.NUM_JOINTS,), dtype=np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(_vge.OBS_DIM,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-bound, bound, shape=(self.act_dim,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
 
     @classmethod
     def from_config(cls, path: str, index: int = 0, **overrides: Any) -> "HandEnv":
@@ -75,6 +88,46 @@ class HandEnv(gym.Env):
     @property
     def object(self) -> str:
         return self._core.object
+
+    @property
+    def hand(self) -> Hand:
+        """The hand the env simulates (its names, limits and kinematics)."""
+        return self._hand
+
+    @property
+    def obs_dim(self) -> int:
+        """Entries of an observation (the observation set's, on this hand)."""
+        return self._core.obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """Entries of an action: one per joint."""
+        return self._core.act_dim
+
+    @property
+    def obs_layout(self) -> list[tuple[str, int, int]]:
+        """The observation's named slices, `(name, start, end)` in order."""
+        return self._core.obs_layout
+
+    @property
+    def full_obs_layout(self) -> list[tuple[str, int, int]]:
+        """The full observation's slices (`info["full_obs"]` when the env observes less)."""
+        return self._core.full_obs_layout
+
+    @property
+    def observation(self) -> str:
+        """The observation set: `full`, `proprio` or `proprio:K`."""
+        return self._core.observation
+
+    @property
+    def joint_names(self) -> list[str]:
+        """The joints, in the order of an action's entries."""
+        return self._hand.joint_names
+
+    @property
+    def finger_names(self) -> list[str]:
+        """The fingers, in the order of the per-fingertip info entries."""
+        return self._hand.finger_names
 
     @property
     def control_hz(self) -> float:
@@ -101,7 +154,7 @@ class HandEnv(gym.Env):
         return self._core.reset(int(seed))
 
     def step(self, action):
-        return self._core.step(float32_array(action, (_vge.NUM_JOINTS,), "action"))
+        return self._core.step(float32_array(action, (self.act_dim,), "action"))
 
     def privileged_state(self) -> dict[str, Any]:
         """The noise-free state (object pose and velocities, joint angles and targets,

@@ -43,6 +43,13 @@ class Hand:
         """Reads the MJCF file at `path` and the TOML beside it (same stem), if any."""
         return cls(_vge.HandCore.load(fspath(path)))
 
+    @classmethod
+    def named(cls, spec: str | PathLike) -> "Hand":
+        """A hand by the name the `[env]` key `hand` takes: one that ships with vge
+        (`vge.HANDS`: "vge15", "allegro"), or the path of an MJCF file (it has a `/` or ends
+        in .xml)."""
+        return cls(_vge.HandCore.named(fspath(spec)))
+
     @property
     def name(self) -> str:
         """`<mujoco model>`, else the file's stem."""

@@ -12,6 +12,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from . import _vge
 from ._checks import float32_array
 from .env import env_keys, episode_seed, warn_training_only
+from .hand import Hand
 
 # Per-env info arrays (each with its "_key" mask, all True: every env reports every key).
 _INFO_KEYS = (
@@ -39,7 +40,10 @@ class VecHandEnv(VectorEnv):
     Gymnasium's `SyncVectorEnv` over `HandEnv`s to the bit (tested), only faster.
 
     `object` applies to every env; without it env `i` gets `objects[i % len(objects)]`, as in
-    training. `copy=False` returns the internal arrays themselves (overwritten by the next
+    training. Every env has the one hand the keys name (`hand`), and the widths of the arrays
+    are its: observations `(num_envs, obs_dim)`, actions `(num_envs, act_dim)`, per-fingertip
+    infos `(num_envs, fingers)`; with `observation="proprio:K"`, `infos["full_obs"]` holds
+    each env's full observation. `copy=False` returns the internal arrays themselves (overwritten by the next
     call) instead of copies.
     """
 
@@ -61,12 +65,15 @@ class VecHandEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.copy = copy
         self._buffers = self._core.buffers()
+        # The full observation too, when the envs observe less (what a critic may see).
+        self._info_keys = _INFO_KEYS + (("full_obs",) if "full_obs" in self._buffers else ())
         bounds = np.asarray(self._core.max_action_rad, dtype=np.float32)
         if not np.all(bounds == bounds[0]):
             raise ValueError(f"the envs have different action bounds {bounds}")
         bound = bounds[0]
-        self.single_action_space = gym.spaces.Box(-bound, bound, shape=(_vge.NUM_JOINTS,), dtype=np.float32)
-        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(_vge.OBS_DIM,), dtype=np.float32)
+        self._hand = Hand(self._core.hand)
+        self.single_action_space = gym.spaces.Box(-bound, bound, shape=(self.act_dim,), dtype=np.float32)
+        self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, shape=(self.obs_dim,), dtype=np.float32)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
         self._env_rngs: list[np.random.Generator | None] = [None] * self.num_envs
@@ -82,6 +89,41 @@ class VecHandEnv(VectorEnv):
     def objects(self) -> list[str]:
         return self._core.objects
 
+    @property
+    def hand(self) -> Hand:
+        """The hand every env simulates."""
+        return self._hand
+
+    @property
+    def obs_dim(self) -> int:
+        """Entries of one env's observation."""
+        return self._core.obs_dim
+
+    @property
+    def act_dim(self) -> int:
+        """Entries of one env's action: one per joint."""
+        return self._core.act_dim
+
+    @property
+    def obs_layout(self) -> list[tuple[str, int, int]]:
+        return self._core.obs_layout
+
+    @property
+    def full_obs_layout(self) -> list[tuple[str, int, int]]:
+        return self._core.full_obs_layout
+
+    @property
+    def observation(self) -> str:
+        return self._core.observation
+
+    @property
+    def joint_names(self) -> list[str]:
+        return self._hand.joint_names
+
+    @property
+    def finger_names(self) -> list[str]:
+        return self._hand.finger_names
+
     def _draw_seed(self, i: int) -> int:
         if self._env_rngs[i] is None:
             self._env_rngs[i], _ = seeding.np_random()
@@ -91,7 +133,7 @@ class VecHandEnv(VectorEnv):
         b = self._buffers
         infos: dict[str, Any] = {}
         mask = np.ones(self.num_envs, dtype=np.bool_)
-        for key in _INFO_KEYS:
+        for key in self._info_keys:
             infos[key] = b[key].copy() if self.copy else b[key]
             infos["_" + key] = mask
         obs = b["obs"].copy() if self.copy else b["obs"]
@@ -120,7 +162,7 @@ class VecHandEnv(VectorEnv):
         return self._results()
 
     def step(self, actions):
-        actions = float32_array(actions, (self.num_envs, _vge.NUM_JOINTS), "actions")
+        actions = float32_array(actions, (self.num_envs, self.act_dim), "actions")
         pending = self._core.pending_resets()
         seeds = self._zero_seeds
         if any(pending):
