@@ -6,14 +6,21 @@
 //! self-referential cell ([`self_cell`]). A version-1 file's arrays must be decoded into
 //! separate storage the policy borrows mutably at load, which such a cell cannot lend, so a
 //! version-1 file is loaded (and checked) again on every call: it is the legacy format.
+//!
+//! Given the env it will drive, a policy is checked against that env's hand and observation
+//! layout as `vge eval` checks it ([`vge_sim::check_policy_interface`]).
 
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vge_runtime::policy::{inspect, max_file_len};
+use vge_hand::Hand;
+use vge_runtime::policy::{UNRECORDED_HAND, UNRECORDED_OBSERVATION_SET, inspect, max_file_len};
 use vge_runtime::{AlignedBytes, Policy, PolicyError};
+use vge_sim::ObservationLayout;
 
+use crate::env::EnvCore;
 use crate::errors;
+use crate::vec_env::VecEnvCore;
 
 /// `vge eval`'s runtime capacity (`vge_lab::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
 const MAX_LAYERS: usize = 8;
@@ -64,6 +71,19 @@ fn policy_error(path: &str, e: PolicyError) -> PyErr {
     errors::PolicyError::new_err(format!("{path}: {e}"))
 }
 
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+impl PolicyCore {
+    /// [`vge_sim::check_policy_interface`] of the file against `hand` observed as `layout`.
+    fn check(&self, hand: &Hand, layout: &ObservationLayout) -> Result<(), String> {
+        self.loaded
+            .with(|p| vge_sim::check_policy_interface(p.info(), hand, layout))
+            .map_err(|e| e.to_string())?
+    }
+}
+
 #[pymethods]
 impl PolicyCore {
     /// Reads and checks the policy file at `path` (every check of the runtime: framing,
@@ -97,6 +117,27 @@ impl PolicyCore {
             loaded
         };
         Ok(Self { path: path.to_owned(), loaded, obs_dim, act_dim })
+    }
+
+    /// Checks that the policy drives `env` (a `HandEnv`'s or a `VecHandEnv`'s core) as it
+    /// is observed: the hand it was trained for (name and description), its observation
+    /// layout, its action names ([`vge_sim::check_policy_interface`]); a `vge.PolicyError`
+    /// names what differs.
+    fn check_env(&self, env: &Bound<'_, PyAny>) -> PyResult<()> {
+        let checked = if let Ok(env) = env.cast::<EnvCore>() {
+            let env = env.try_borrow()?;
+            self.check(env.hand(), &env.observation.layout)
+        } else if let Ok(env) = env.cast::<VecEnvCore>() {
+            let env = env.try_borrow()?;
+            let (hand, layout) = env.interface()?;
+            self.check(&hand, &layout)
+        } else {
+            let type_name = env.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".to_owned());
+            return Err(pyo3::exceptions::PyTypeError::new_err(format!(
+                "expected a vge env core (EnvCore or VecEnvCore), got {type_name}"
+            )));
+        };
+        checked.map_err(|e| errors::PolicyError::new_err(format!("{}: {e}", self.path)))
     }
 
     /// The action (float32, `act_dim`) for one float32 observation (`obs_dim`).
@@ -173,10 +214,39 @@ impl PolicyCore {
                 d.set_item("max_width", info.max_width)?;
                 d.set_item("num_params", info.num_params)?;
                 d.set_item("weight_type", format!("{:?}", info.weight_type).to_lowercase())?;
+                match &info.task {
+                    None => d.set_item("task", py.None())?,
+                    Some(task) => {
+                        let t = PyDict::new(py);
+                        t.set_item("hand", task.hand)?;
+                        t.set_item("hand_sha256", hex(task.hand_sha256))?;
+                        t.set_item("observation_set", task.observation_set)?;
+                        t.set_item("object", task.object)?;
+                        t.set_item("orientation", task.orientation)?;
+                        d.set_item("task", t)?;
+                    }
+                }
                 Ok(())
             })
             .map_err(|e| policy_error(&self.path, e))??;
         Ok(d)
+    }
+
+    /// The hand the policy drives: its task record's, else vge's own (a file from before
+    /// task records).
+    #[getter]
+    fn hand(&self) -> PyResult<String> {
+        self.loaded
+            .with(|p| p.info().task.map_or(UNRECORDED_HAND, |t| t.hand).to_owned())
+            .map_err(|e| policy_error(&self.path, e))
+    }
+
+    /// The observation set the policy observes: its task record's, else `full`.
+    #[getter]
+    fn observation_set(&self) -> PyResult<String> {
+        self.loaded
+            .with(|p| p.info().task.map_or(UNRECORDED_OBSERVATION_SET, |t| t.observation_set).to_owned())
+            .map_err(|e| policy_error(&self.path, e))
     }
 
     #[getter]
