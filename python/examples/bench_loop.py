@@ -4,8 +4,8 @@
 scripts/bench-python-vs-mujoco.sh, beside scripts/bench_mujoco.py's loop over MuJoCo on the
 same hand.
 
-The workload is bench_mujoco.py's: from the settled grasp, each control step changes the 15
-joint targets by the same deterministic pseudo-random table (0.2 x max_action_rad, the file
+The workload is bench_mujoco.py's: from the settled grasp, each control step changes the
+hand's joint targets (vge15's 15) by the same deterministic pseudo-random table (0.2 x max_action_rad, the file
 `vge-python-reference bench-actions FILE STEPS` or `vge bench sim --write-actions` writes), and an
 episode ends on a drop or after 400 steps. vge's reset simulates the grasp closing (MuJoCo's
 restores a settled state): vge pays for its resets here, as in `vge bench sim`.
@@ -21,12 +21,12 @@ import numpy as np
 
 import vge
 
-def load_actions(path, steps):
-    """The first `steps` rows (15 float32 targets each) of the bench's action table."""
+def load_actions(path, steps, joints):
+    """The first `steps` rows (`joints` float32 targets each) of the bench's action table."""
     raw = np.fromfile(path, dtype="<f4")
-    if raw.size % 15 or raw.size // 15 < steps:
-        raise SystemExit(f"{path}: {raw.size} floats; needs at least {steps} rows of 15")
-    return raw.reshape(-1, 15)[:steps]
+    if raw.size % joints or raw.size // joints < steps:
+        raise SystemExit(f"{path}: {raw.size} floats; needs at least {steps} rows of {joints}")
+    return raw.reshape(-1, joints)[:steps]
 
 
 def main():
@@ -38,10 +38,10 @@ def main():
     args = p.parse_args()
     if args.steps < 1 or args.num_envs < 1:
         p.error("--steps and --num-envs must be >= 1")
-    # Loaded before timing, as bench_mujoco.py does.
-    table = load_actions(args.actions, args.steps)
-
     env = vge.HandEnv("cube")
+    # Loaded before timing, as bench_mujoco.py does.
+    table = load_actions(args.actions, args.steps, env.act_dim)
+
     env.reset(seed=0)
     for k in range(20):  # warm-up
         env.step(table[k])

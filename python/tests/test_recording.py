@@ -65,7 +65,7 @@ def test_files_that_are_not_recordings_are_refused_naming_why(tmp_path, text, me
 
 def test_a_malformed_step_is_reported_not_raised(tmp_path):
     path = tmp_path / "cut.jsonl"
-    header = {"format": "vge episode", "version": 1, "control_dt_s": 0.05, "force_arrow_m_per_n": 0.01,
+    header = {"format": "vge episode", "version": recording.VERSION, "control_dt_s": 0.05, "force_arrow_m_per_n": 0.01,
               "fingers": [], "object": {"shape": "cube", "width_m": 0.1}}
     path.write_text(json.dumps(header) + "\n" + json.dumps({"step": 1}) + "\n")
     cli = subprocess.run([sys.executable, "-m", "vge.recording", path, "-o", tmp_path / "x.rrd"],
