@@ -491,6 +491,8 @@ pub fn policy_task_env(
     let hand = vge_sim::hands::load(spec).map_err(|e| {
         EvalError::Policy(format!("the policy's hand {spec}: {e} (name its file with --hand PATH)"))
     })?;
+    // The hand first: its name says more than a layout that does not fit it.
+    vge_sim::policy_interface::check_task(&info, &hand).map_err(EvalError::Policy)?;
     let mut env = EnvConfig::for_hand(hand)?;
     env.object.shape = object;
     if let Some(task) = &info.task

@@ -36,7 +36,7 @@ pub fn check_policy_interface(
 /// The policy's recorded hand against `hand`: a file from before hands were recorded is
 /// vge's own hand ([`vge_runtime::policy::UNRECORDED_HAND`]); one of another hand, or of
 /// another version of this hand's description, is refused.
-fn check_task(info: &PolicyInfo<'_>, hand: &Hand) -> Result<(), String> {
+pub fn check_task(info: &PolicyInfo<'_>, hand: &Hand) -> Result<(), String> {
     let (name, sha) = match &info.task {
         Some(task) => (task.hand, Some(task.hand_sha256)),
         None => (vge_runtime::policy::UNRECORDED_HAND, None),
