@@ -1,18 +1,19 @@
 #!/usr/bin/env python3
 """MuJoCo's throughput on vge's task, to compare with `vge bench sim`.
 
-Loads the MJCF that `vge bench sim --write-mjcf` writes (the same hand, object, motors, and
-the settled grasp as keyframe `grasp`) and steps it the way `vge bench sim` steps one world:
-at the control rate, each control step adds a small deterministic pseudo-random change to
-the 15 motor targets (the table `vge bench sim --write-actions` writes: vge_sim::bench's own
-actions, clipped to the joint limits),
-runs the physics steps of one control period, and reads the fingertip contacts (position,
-normal, normal force per fingertip-object pair, as vge's observation does). An episode ends
-when the object falls 3 cm below its start height or after `--episode-steps`; then the
-settled grasp is restored (cheaper than vge's reset, which simulates the grasp closing: that
-favours MuJoCo). The settled grasp: the keyframe stepped for `--settle-s` untimed, so that
-MuJoCo's softer contacts find their own equilibrium (the cube stays within 1 mm of the
-keyframe on all five fingertips).
+Loads the MJCF that `vge bench sim --write-mjcf` writes (vge_sim::mjcf: the same hand, object,
+motors, and the settled grasp as keyframe `grasp`, for any hand) and steps it the way
+`vge bench sim` steps one world: at the control rate, each control step adds a small
+deterministic pseudo-random change to the motor targets (the table `vge bench sim
+--write-actions` writes: vge_sim::bench's own actions, one column per actuator, clipped to the
+joint limits), runs the physics steps of one control period, and reads the fingertip contacts
+(position, normal, normal force per fingertip-object pair, as vge's observation does; the
+fingertips are the geoms named `fingertip.*`). An episode ends when the object falls 3 cm
+below its start height (along gravity) or after `--episode-steps`; then the settled grasp is
+restored (cheaper than vge's reset, which simulates the grasp closing: that favours MuJoCo).
+The settled grasp: the keyframe stepped for `--settle-s` untimed, so that MuJoCo's softer
+contacts find their own equilibrium (vge15's cube stays within 1 mm of the keyframe on all
+five fingertips).
 
 Prints one JSON line: control_steps_per_s, sim_seconds_per_s, and whether the grasp held
 (resets, mean fingertip contacts, the object's turn about z over the run).
@@ -26,12 +27,13 @@ import time
 import mujoco
 import numpy as np
 
-def load_actions(path, steps):
-    """The first `steps` rows of the action table `vge bench sim --write-actions` wrote."""
+def load_actions(path, steps, joints):
+    """The first `steps` rows of the action table `vge bench sim --write-actions` wrote, one
+    column per joint."""
     raw = np.fromfile(path, dtype="<f4")
-    if raw.size % 15:
-        raise SystemExit(f"{path}: {raw.size} floats is not a whole number of 15-joint rows")
-    table = raw.reshape(-1, 15).astype(np.float64)
+    if raw.size % joints:
+        raise SystemExit(f"{path}: {raw.size} floats is not a whole number of {joints}-joint rows")
+    table = raw.reshape(-1, joints).astype(np.float64)
     if len(table) < steps:
         raise SystemExit(f"{path}: {len(table)} control steps of actions, --steps asks for {steps}")
     return table[:steps]
@@ -49,30 +51,34 @@ def main():
     args = p.parse_args()
     if args.steps < 1 or args.episode_steps < 1 or not args.control_hz > 0 or args.settle_s < 0:
         p.error("--steps and --episode-steps must be >= 1, --control-hz > 0, --settle-s >= 0")
-    # Read first, so that a bad table fails before MuJoCo settles the grasp, and before
-    # timing, so that Python's speed does not count against MuJoCo.
-    table = load_actions(args.actions, args.steps)
-
     model = mujoco.MjModel.from_xml_path(args.mjcf)
     data = mujoco.MjData(model)
+    # Read before MuJoCo settles the grasp, so that a bad table fails first, and before
+    # timing, so that Python's speed does not count against MuJoCo.
+    table = load_actions(args.actions, args.steps, model.nu)
     key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "grasp")
     if key < 0:
         raise SystemExit(f"{args.mjcf}: no keyframe `grasp` (write it with vge bench sim --write-mjcf)")
     physics_per_control = round(1.0 / (args.control_hz * model.opt.timestep))
     if physics_per_control < 1:
         raise SystemExit("control rate above the physics rate")
-    tips = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"f{i}_tip") for i in range(5)]
+    tips = [g for g in range(model.ngeom) if model.geom(g).name.startswith("fingertip.")]
+    if not tips:
+        raise SystemExit(f"{args.mjcf}: no fingertip geoms (named fingertip.*)")
     obj_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "object")
     obj_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "object")
+    # Heights are measured against gravity (the hand may be held palm down or on its side).
+    up = -np.asarray(model.opt.gravity, dtype=np.float64)
+    up = up / np.linalg.norm(up) if np.linalg.norm(up) > 0 else np.array([0.0, 0.0, 1.0])
     lo, hi = model.actuator_ctrlrange[:, 0].copy(), model.actuator_ctrlrange[:, 1].copy()
     force = np.zeros(6)
 
     def read_contacts():
         """vge's readout: per fingertip the summed normal force and the force-weighted contact
         position and normal; returns how many fingertips touch the object."""
-        n = np.zeros(5)
-        pos = np.zeros((5, 3))
-        nrm = np.zeros((5, 3))
+        n = np.zeros(len(tips))
+        pos = np.zeros((len(tips), 3))
+        nrm = np.zeros((len(tips), 3))
         for c in range(data.ncon):
             con = data.contact[c]
             pair = {con.geom1, con.geom2}
@@ -98,10 +104,13 @@ def main():
     mujoco.mj_copyData(settled, model, data)
     settled_contacts = read_contacts()
 
+    def height():
+        return float(data.xpos[obj_body] @ up)
+
     def reset():
         mujoco.mj_copyData(data, model, settled)
         mujoco.mj_forward(model, data)
-        return float(data.xpos[obj_body][2])
+        return height()
 
     def yaw():
         q = data.xquat[obj_body]
@@ -118,7 +127,7 @@ def main():
             turned += (y - last_yaw + math.pi) % (2 * math.pi) - math.pi
             last_yaw = y
             t += 1
-            if data.xpos[obj_body][2] < z0 - 0.03 or t >= args.episode_steps:
+            if height() < z0 - 0.03 or t >= args.episode_steps:
                 resets += 1
                 reset()
                 last_yaw, t = yaw(), 0
@@ -131,14 +140,17 @@ def main():
     print(json.dumps({
         "bench": "mujoco",
         "mujoco_version": mujoco.__version__,
+        "model": model.names.split(b"\0", 1)[0].decode(),
         "control_steps_per_s_single": args.steps / wall,
         "sim_seconds_per_s": args.steps / wall / args.control_hz,
         "physics_steps_per_control": physics_per_control,
         "timestep_s": model.opt.timestep,
         "resets_single": resets,
         "mean_tip_contacts": mean_contacts,
+        "joints": model.nu,
+        "fingertips": len(tips),
         "settled_tip_contacts": settled_contacts,
-        "settled_height_m": float(settled.xpos[obj_body][2]),
+        "settled_height_m": float(settled.xpos[obj_body] @ up),
         "object_turn_rad": turned,
         "steps": args.steps,
     }))
