@@ -1,6 +1,6 @@
 //! Acceptance tests on the real rapier world: holding, turning, force balance.
 
-use vge_sim::{Env, EnvConfig, NUM_FINGERS, NUM_JOINTS, ObjectConfig, ObjectShape, StepResult};
+use vge_sim::{Env, EnvConfig, ObjectConfig, ObjectShape, StepResult};
 
 fn env_for(shape: ObjectShape) -> Env {
     let config =
@@ -10,6 +10,22 @@ fn env_for(shape: ObjectShape) -> Env {
 
 fn steps_for(env: &Env, seconds: f32) -> usize {
     (seconds / env.config().control_dt_s()).round() as usize
+}
+
+/// The zero action of the env's hand.
+fn zeros(env: &Env) -> Vec<f32> {
+    vec![0.0; env.config().hand.num_joints()]
+}
+
+/// Every finger's flexion joints (all but its first, the roll) opened by 1 rad per step.
+fn opening(env: &Env) -> Vec<f32> {
+    let mut open = zeros(env);
+    for finger in env.config().hand.fingers() {
+        for j in finger.joints.clone().skip(1) {
+            open[j] = -1.0;
+        }
+    }
+    open
 }
 
 /// Each object is held for 10 s with zero action: height drift < 2 mm, yaw drift
@@ -27,10 +43,11 @@ fn zero_action_holds_every_object_for_ten_seconds() {
         );
         let start = env.privileged().expect("state").object;
         let n = steps_for(&env, 10.0);
-        let mut min_contacts = NUM_FINGERS;
+        let mut min_contacts = env.config().hand.num_fingers();
         let mut last: Option<StepResult> = None;
+        let zero = zeros(&env);
         for _ in 0..n {
-            let r = env.step(&[0.0; NUM_JOINTS]).expect("step");
+            let r = env.step(&zero).expect("step");
             min_contacts = min_contacts.min(r.info.num_tip_contacts);
             assert!(!r.terminated, "{}: terminated at step {} ({:?})", shape.name(), r.info.step, r.info);
             last = Some(r);
@@ -61,15 +78,17 @@ fn roll_ramp_turns_the_cube_in_grasp() {
     let yaw0 = env.privileged().expect("state").object.yaw_rad();
     let n = steps_for(&env, 2.0);
     let per_step = 0.3 / n as f32;
-    let mut action = [0.0; NUM_JOINTS];
-    for f in 0..NUM_FINGERS {
-        action[vge_sim::kinematics::joint_index(f, 0)] = per_step;
+    let mut action = zeros(&env);
+    for finger in env.config().hand.fingers() {
+        action[finger.joints.start] = per_step;
     }
-    let mut min_contacts = NUM_FINGERS;
+    let mut min_contacts = env.config().hand.num_fingers();
     let mut integrated_reward_rad = 0.0;
     for _ in 0..n + steps_for(&env, 0.5) {
         let r = env.step(&action).expect("step");
-        action = if r.info.step >= n { [0.0; NUM_JOINTS] } else { action };
+        if r.info.step >= n {
+            action = zeros(&env);
+        }
         min_contacts = min_contacts.min(r.info.num_tip_contacts);
         integrated_reward_rad += r.reward * env.config().control_dt_s();
         assert!(!r.terminated, "terminated: {:?}", r.info);
@@ -91,8 +110,9 @@ fn contact_forces_balance_the_weight_at_rest() {
     for shape in [ObjectShape::Cube, ObjectShape::Sphere, ObjectShape::Icosahedron] {
         let mut env = env_for(shape);
         env.reset(11).expect("reset");
+        let zero = zeros(&env);
         for _ in 0..steps_for(&env, 0.5) {
-            env.step(&[0.0; NUM_JOINTS]).expect("step");
+            env.step(&zero).expect("step");
         }
         let world = env.world().expect("world");
         let weight = world.object_mass_kg() * world.physics().gravity_m_per_s2;
@@ -134,11 +154,7 @@ fn contact_forces_balance_the_weight_at_rest() {
 fn dropping_the_object_terminates() {
     let mut env = env_for(ObjectShape::Cube);
     env.reset(5).expect("reset");
-    let mut open = [0.0; NUM_JOINTS];
-    for f in 0..NUM_FINGERS {
-        open[vge_sim::kinematics::joint_index(f, 1)] = -1.0;
-        open[vge_sim::kinematics::joint_index(f, 2)] = -1.0;
-    }
+    let open = opening(&env);
     let mut ended = None;
     for _ in 0..steps_for(&env, 2.0) {
         let r = env.step(&open).expect("step");
@@ -166,11 +182,7 @@ fn a_drop_costs_the_drop_penalty_on_its_step_only() {
         let mut env = env_for(ObjectShape::Cube);
         env.set_drop_penalty(penalty).expect("a valid penalty");
         env.reset(5).expect("reset");
-        let mut open = [0.0; NUM_JOINTS];
-        for f in 0..NUM_FINGERS {
-            open[vge_sim::kinematics::joint_index(f, 1)] = -1.0;
-            open[vge_sim::kinematics::joint_index(f, 2)] = -1.0;
-        }
+        let open = opening(&env);
         let mut rewards = Vec::new();
         for _ in 0..steps_for(&env, 2.0) {
             let r = env.step(&open).expect("step");
@@ -200,23 +212,28 @@ fn a_drop_costs_the_drop_penalty_on_its_step_only() {
 #[test]
 fn bad_actions_are_errors_and_the_world_stays_finite() {
     let mut env = env_for(ObjectShape::Cube);
-    assert!(matches!(env.step(&[0.0; NUM_JOINTS]), Err(vge_sim::SimError::NotReset)));
+    let n = env.config().hand.num_joints();
+    assert!(matches!(env.step(&zeros(&env)), Err(vge_sim::SimError::NotReset)));
     env.reset(1).expect("reset");
     let before = env.privileged().expect("state").clone();
-    let mut nan = [0.0; NUM_JOINTS];
+    let mut nan = zeros(&env);
     nan[4] = f32::NAN;
-    let mut inf = [0.0; NUM_JOINTS];
+    let mut inf = zeros(&env);
     inf[0] = f32::NEG_INFINITY;
     assert!(matches!(env.step(&nan), Err(vge_sim::SimError::NonFiniteAction { index: 4, .. })));
     assert!(matches!(env.step(&inf), Err(vge_sim::SimError::NonFiniteAction { index: 0, .. })));
-    assert!(matches!(env.step(&[0.0; 14]), Err(vge_sim::SimError::ActionLength { got: 14, expected: 15 })));
-    assert!(matches!(env.step(&[0.0; 16]), Err(vge_sim::SimError::ActionLength { got: 16, .. })));
+    let short = vec![0.0; n - 1];
+    assert!(
+        matches!(env.step(&short), Err(vge_sim::SimError::ActionLength { got, expected }) if got == n - 1 && expected == n)
+    );
+    let long = vec![0.0; n + 1];
+    assert!(matches!(env.step(&long), Err(vge_sim::SimError::ActionLength { got, .. }) if got == n + 1));
     let world = env.world().expect("world");
     assert!(world.is_finite());
     assert_eq!(world.joint_targets(), &before.q_target_rad);
     assert_eq!(world.object_state(), before.object);
     // Huge finite actions are clipped, not errors.
-    let r = env.step(&[1e30; NUM_JOINTS]).expect("clipped");
+    let r = env.step(&vec![1e30; n]).expect("clipped");
     assert!(r.obs.iter().all(|v| v.is_finite()));
     let max = env.config().max_action_rad;
     let targets = env.config().observation_layout().range("q_target_rad").expect("targets");
