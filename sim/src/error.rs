@@ -4,8 +4,6 @@
 
 use thiserror::Error;
 
-use crate::kinematics::KinematicsError;
-
 /// Why a simulator call was rejected.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SimError {
@@ -45,7 +43,7 @@ pub enum SimError {
     /// A hand's description was refused (the reader's message names the file, element and line).
     #[error("{0}")]
     Hand(String),
-    /// A kinematics query failed.
-    #[error(transparent)]
-    Kinematics(#[from] KinematicsError),
+    /// A kinematics query of the hand failed (the hand's message).
+    #[error("{0}")]
+    Kinematics(String),
 }

@@ -8,11 +8,13 @@
 //!
 //! # Features
 //! - `physics` (default): the rapier3d world and everything built on it ([`world`],
-//!   [`objects`], [`env`], [`env_keys`], [`vec_env`], [`bench`]). Without it the crate is the hand
-//!   description alone, with no rapier3d or rayon: [`kinematics`] (geometry, joint limits),
-//!   the observation layout and its builder ([`observation`]), the action's default step
-//!   ([`action`]), contact switches ([`gait`]) and [`rotation_about_z_rad`]; what the bridge needs
-//!   to drive a real hand (`vge-bridge` without its `sim` feature).
+//!   [`objects`], [`env`], [`env_keys`], [`vec_env`], [`bench`], and [`mjcf`], the same task
+//!   written for MuJoCo). Without it the crate is the hand description alone, with no rapier3d
+//!   or rayon: the shipped hands ([`hands`]: geometry, joint limits and kinematics are
+//!   `vge_hand::Hand`'s), the observation layout and its builder ([`observation`]), the
+//!   action's default step ([`action`]), contact switches ([`gait`]) and
+//!   [`rotation_about_z_rad`]; what the bridge needs to drive a real hand (`vge-bridge` without
+//!   its `sim` feature).
 //!
 //! With `physics`, [`recording`] writes episodes as JSON Lines files (`vge eval --record`,
 //! `vge-bridge run --record`) that the Python package shows in the Rerun viewer.
@@ -29,7 +31,6 @@ pub mod episode;
 pub mod error;
 pub mod gait;
 pub mod hands;
-pub mod kinematics;
 #[cfg(feature = "physics")]
 pub mod mjcf;
 #[cfg(feature = "physics")]
@@ -53,10 +54,6 @@ pub use env::{
 pub use env_keys::EnvSection;
 pub use episode::{EpisodeOutcome, EpisodeTracker};
 pub use error::SimError;
-pub use kinematics::{
-    Contact, FingerModel, HandModel, JOINTS_PER_FINGER, JointLimit, KinematicsError, NOMINAL_CUBE_SIDE_M,
-    NUM_FINGERS, NUM_JOINTS, grasp_map,
-};
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};
 pub use observation::{
@@ -67,5 +64,7 @@ pub use policy_interface::check_policy_interface;
 pub use recording::{EpisodeRecorder, RecordingError};
 #[cfg(feature = "physics")]
 pub use vec_env::VecEnv;
+/// A joint's range of motion, as the hand's description and the servos give it.
+pub use vge_hand::JointLimit;
 #[cfg(feature = "physics")]
 pub use world::{ContactReading, HandOrientation, HandWorld, JointServo, ObjectState, PhysicsConfig};

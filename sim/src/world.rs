@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use vge_hand::{GeomMass, GeomShape, Hand};
 
-use crate::kinematics::JointLimit;
+use crate::JointLimit;
 use crate::objects::ObjectConfig;
 
 /// Physics parameters of the world (SI units).
