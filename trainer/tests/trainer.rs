@@ -449,7 +449,10 @@ fn every_shipped_config_loads_and_validates() {
     }
     // The Table I grid's base (configs/cube-base.toml) is a whole config of its own.
     assert!(names.contains(&"cube-base".to_owned()));
-    assert_eq!(names.len(), 33, "{names:?}");
+    // The Allegro's, on its own hand with a proprioceptive actor.
+    assert!(names.contains(&"allegro-cube-fg-vge".to_owned()));
+    assert!(names.contains(&"allegro-cube-fg-rl".to_owned()));
+    assert_eq!(names.len(), 35, "{names:?}");
 }
 
 #[test]
