@@ -158,11 +158,13 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
     }
 }
 
-/// `vge bench sim --write-mjcf`.
+/// `vge bench sim --write-mjcf`: the benchmarked env's hand, object and first settled grasp
+/// (seed 0) as MJCF (`vge_sim::mjcf`, for any hand).
 fn write_mjcf(path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<()> {
-    let xml = vge_sim::mjcf::settled_grasp_mjcf(&EnvConfig::default(), 0, mujoco_timestep_s)?;
+    let env = EnvConfig::default();
+    let xml = vge_sim::mjcf::settled_grasp_mjcf(&env, 0, mujoco_timestep_s)?;
     std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
-    eprintln!("wrote {} (MuJoCo, time step {mujoco_timestep_s} s)", path.display());
+    eprintln!("wrote {} ({} for MuJoCo, time step {mujoco_timestep_s} s)", path.display(), env.hand.name());
     Ok(())
 }
 
