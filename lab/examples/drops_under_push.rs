@@ -15,16 +15,15 @@ use vge_lab::eval::{
 };
 use vge_lab::robustness::Axis;
 use vge_runtime::{AlignedBytes, Policy};
-use vge_sim::{EnvConfig, NUM_FINGERS};
+use vge_sim::EnvConfig;
 
 /// How far the object may sink below its starting height before a drop counts as begun (m).
 const ONSET_M: f32 = 0.005;
-const FINGERS: [&str; NUM_FINGERS] = ["thumb", "index", "middle", "ring", "little"];
 
 /// One control step: which fingertips touch, the object's height, the force on it.
 #[derive(Clone)]
 struct Step {
-    tips: [bool; NUM_FINGERS],
+    tips: Vec<bool>,
     height_m: f32,
     force_n: [f32; 3],
 }
@@ -49,7 +48,8 @@ fn main() -> anyhow::Result<()> {
     // The robustness test's own force axis, so both apply the same force process.
     Axis::Perturbation.apply(&mut env, force_std_n);
 
-    let act = |obs: &[f32; vge_sim::OBS_DIM], a: &mut [f32; vge_sim::NUM_JOINTS]| {
+    let fingers: Vec<String> = env.hand.fingers().iter().map(|f| f.name.clone()).collect();
+    let act = |obs: &[f32], a: &mut [f32]| {
         policy.forward(obs, a).map_err(|e| e.to_string())
     };
     let mut all: Vec<Step> = Vec::new();
@@ -59,7 +59,7 @@ fn main() -> anyhow::Result<()> {
         let mut steps: Vec<Step> = Vec::new();
         let outcome = run_episode_observed(&env, seed + e, &act, |env, _, r, _| {
             steps.push(Step {
-                tips: r.info.tip_contacts,
+                tips: r.info.tip_contacts.clone(),
                 height_m: r.info.object_height_m,
                 force_n: env.external_force_n().into(),
             });
@@ -89,12 +89,12 @@ fn main() -> anyhow::Result<()> {
     let mean = |f: &dyn Fn(&Step) -> f32, v: &[Step]| {
         v.iter().map(|s| f64::from(f(s))).sum::<f64>() / v.len().max(1) as f64
     };
-    for (k, name) in FINGERS.iter().enumerate() {
+    for (k, name) in fingers.iter().enumerate() {
         row(&format!("{name} off (%)"), &|v| share(&|s| !s.tips[k], v));
     }
     let tips = |s: &Step| s.tips.iter().filter(|t| **t).count();
     row("fingertips on, mean", &|v| mean(&|s| tips(s) as f32, v));
-    for n in 2..=5 {
+    for n in 2..=fingers.len() {
         row(&format!("{n} fingertips on (%)"), &|v| share(&|s| tips(s) == n, v));
     }
     let norm = |s: &Step| s.force_n.iter().map(|f| f * f).sum::<f32>().sqrt();

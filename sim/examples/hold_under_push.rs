@@ -9,7 +9,10 @@
 //! targets still.
 //!
 //!   cargo run --release -p vge-sim --example hold_under_push [EPISODES] [SQUEEZE_RAD...]
-use vge_sim::{Env, EnvConfig, NUM_JOINTS, PerturbationConfig};
+use vge_sim::{Env, EnvConfig, PerturbationConfig};
+
+/// vge15's joints (the default env's hand), three per finger.
+const NUM_JOINTS: usize = 15;
 
 /// Steps of each phase (lift, then squeeze); the targets are frozen afterwards.
 const PHASE_STEPS: usize = 8;

@@ -1,9 +1,11 @@
 //! Same seed and actions, same bits; vectorized equals serial.
 
 use vge_sim::{
-    Env, EnvConfig, NUM_JOINTS, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig, StepResult,
-    VecEnv,
+    Env, EnvConfig, NoiseConfig, ObjectConfig, ObjectShape, PerturbationConfig, StepResult, VecEnv,
 };
+
+/// vge15's joints (the default env's hand).
+const NUM_JOINTS: usize = 15;
 
 fn noisy_config(shape: ObjectShape) -> EnvConfig {
     let mut c = EnvConfig {

@@ -1,7 +1,10 @@
 //! Domain randomisation on the real rapier world: the object's mass drawn per episode from
 //! its range (seeded), the action latency, and disturbances changed between episodes.
 
-use vge_sim::{DomainRandomization, Env, EnvConfig, NUM_JOINTS, NoiseConfig, PerturbationConfig};
+use vge_sim::{DomainRandomization, Env, EnvConfig, NoiseConfig, PerturbationConfig};
+
+/// vge15's joints (the default env's hand).
+const NUM_JOINTS: usize = 15;
 
 fn env_with(randomization: DomainRandomization) -> Env {
     Env::new(EnvConfig { randomization, ..EnvConfig::default() }).expect("valid config")

@@ -5,11 +5,16 @@
 //! two fingertips apart), and bad values are refused naming the field.
 
 use nalgebra::{Isometry3, Vector3};
-use vge_sim::kinematics::joint_index;
-use vge_sim::{
-    Env, EnvConfig, HandModel, HandOrientation, HandWorld, NUM_FINGERS, NUM_JOINTS, ObjectConfig,
-    PhysicsConfig,
-};
+use vge_sim::{Env, EnvConfig, HandOrientation, HandWorld, ObjectConfig, PhysicsConfig};
+
+/// vge15's sizes (the default env's hand): five fingers of three joints.
+const NUM_FINGERS: usize = 5;
+const NUM_JOINTS: usize = 15;
+
+/// Joint `joint` of finger `finger` in vge15's finger-major joint vector.
+const fn joint_index(finger: usize, joint: usize) -> usize {
+    3 * finger + joint
+}
 
 /// A long episode so that nothing truncates the few steps a test takes.
 fn config_with(edit: impl FnOnce(&mut EnvConfig)) -> EnvConfig {
@@ -202,7 +207,8 @@ fn closest_tips_m(finger_collisions: bool, flex: f32, roll: f32) -> f32 {
 
 #[test]
 fn finger_collisions_keep_two_fingertips_apart() {
-    let diameter = 2.0 * HandModel::default().fingers[0].tip_radius_m;
+    // vge15's fingertip spheres: 12 mm radius (hands/vge15.xml).
+    let diameter = 2.0 * 0.012;
     // Closed to 0.8 rad and rolled towards each other in pairs, the tips of fingers 0 and 1
     // (2 and 3) would meet.
     let off = closest_tips_m(false, 0.8, 0.4);

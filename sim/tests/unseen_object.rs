@@ -2,7 +2,11 @@
 //! world: it builds as the 12-vertex hull it should be, and the hand's frozen initial grasp
 //! holds it, so that a policy tested on it meets an object it could hold.
 
-use vge_sim::{Env, EnvConfig, NUM_FINGERS, NUM_JOINTS, ObjectConfig, ObjectShape};
+use vge_sim::{Env, EnvConfig, ObjectConfig, ObjectShape};
+
+/// vge15's sizes (the default env's hand): five fingers of three joints.
+const NUM_FINGERS: usize = 5;
+const NUM_JOINTS: usize = 15;
 
 #[test]
 fn the_hexagonal_prism_builds_as_a_twelve_vertex_hull() {
