@@ -9,8 +9,7 @@
 # with the same actions (one column per joint) and contact readout. The two alternate ROUNDS
 # times (default 3) pinned to one core; the medians and their ratio are printed, and every
 # round's JSON line is kept in target/bench-vs-mujoco.jsonl. HAND: a shipped hand's name or an
-# MJCF path (default vge15, the hand `vge bench sim` runs without --hand; another needs a
-# `vge` whose `bench sim` takes --hand). Compare only figures from one run: the CPU model varies
+# MJCF path (default vge15, the hand `vge bench sim` runs without --hand). Compare only figures from one run: the CPU model varies
 # between machines. Exits 2, saying so, when more than one fingertip on average is off the
 # object in MuJoCo (fewer than 4 of vge15's 5: then the workloads differ).
 set -euo pipefail

@@ -53,6 +53,10 @@ pub enum Bench {
         /// Threads for the vectorized run (0: all cores).
         #[arg(long, default_value_t = 0)]
         threads: usize,
+        /// The hand: a shipped hand (vge15, allegro) or an MJCF file, on the cube its file
+        /// is sized for.
+        #[arg(long, default_value = "vge15")]
+        hand: String,
         /// Write the benchmarked task as a MuJoCo model instead (MJCF: the same hand, object
         /// and motors, the first world's settled grasp as keyframe `grasp`) and exit; what
         /// scripts/bench-vs-mujoco.sh times MuJoCo on.
@@ -63,7 +67,7 @@ pub enum Bench {
         #[arg(long, default_value_t = 1.0 / 240.0, requires = "write_mjcf")]
         mujoco_timestep_s: f32,
         /// With --write-mjcf: also write the first world's actions for --steps control steps
-        /// (rows of 15 little-endian f32), the table scripts/bench_mujoco.py replays.
+        /// (rows of one little-endian f32 per joint), the table scripts/bench_mujoco.py replays.
         #[arg(long, value_name = "FILE", requires = "write_mjcf")]
         write_actions: Option<PathBuf>,
     },
@@ -129,15 +133,16 @@ pub enum Bench {
 /// `vge bench`.
 pub fn run(bench: Bench) -> anyhow::Result<()> {
     match bench {
-        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, write_actions, steps, .. } => {
-            write_mjcf(&path, mujoco_timestep_s)?;
+        Bench::Sim { write_mjcf: Some(path), mujoco_timestep_s, write_actions, steps, hand, .. } => {
+            let env = bench_env(&hand)?;
+            write_mjcf(&env, &path, mujoco_timestep_s)?;
             match write_actions {
-                Some(actions) => write_bench_actions(&actions, steps),
+                Some(actions) => write_bench_actions(&env, &actions, steps),
                 None => Ok(()),
             }
         }
-        Bench::Sim { json, steps, worlds, threads, write_mjcf: None, .. } => {
-            bench_sim(json, steps, worlds, threads)
+        Bench::Sim { json, steps, worlds, threads, hand, write_mjcf: None, .. } => {
+            bench_sim(bench_env(&hand)?, json, steps, worlds, threads)
         }
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes),
         Bench::Cores { json, window_s } => bench_cores(json, window_s),
@@ -160,18 +165,22 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
 
 /// `vge bench sim --write-mjcf`: the benchmarked env's hand, object and first settled grasp
 /// (seed 0) as MJCF (`vge_sim::mjcf`, for any hand).
-fn write_mjcf(path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<()> {
-    let env = EnvConfig::default();
-    let xml = vge_sim::mjcf::settled_grasp_mjcf(&env, 0, mujoco_timestep_s)?;
+/// The benchmarked task: `hand` on the cube its file is sized for.
+fn bench_env(hand: &str) -> anyhow::Result<EnvConfig> {
+    let loaded = vge_sim::hands::load(hand).with_context(|| format!("--hand {hand}"))?;
+    Ok(EnvConfig::for_hand(loaded)?)
+}
+
+fn write_mjcf(env: &EnvConfig, path: &std::path::Path, mujoco_timestep_s: f32) -> anyhow::Result<()> {
+    let xml = vge_sim::mjcf::settled_grasp_mjcf(env, 0, mujoco_timestep_s)?;
     std::fs::write(path, xml).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {} ({} for MuJoCo, time step {mujoco_timestep_s} s)", path.display(), env.hand.name());
     Ok(())
 }
 
 /// `vge bench sim --write-actions`.
-fn write_bench_actions(path: &std::path::Path, steps: usize) -> anyhow::Result<()> {
+fn write_bench_actions(env: &EnvConfig, path: &std::path::Path, steps: usize) -> anyhow::Result<()> {
     anyhow::ensure!(steps > 0, "--steps must be at least 1");
-    let env = EnvConfig::default();
     let bytes = vge_sim::bench::first_world_actions_f32_le(steps, env.hand.num_joints(), env.max_action_rad);
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {} ({steps} control steps of the bench's actions)", path.display());
@@ -179,14 +188,9 @@ fn write_bench_actions(path: &std::path::Path, steps: usize) -> anyhow::Result<(
 }
 
 /// `vge bench sim`.
-fn bench_sim(json: bool, steps: usize, worlds: usize, threads: usize) -> anyhow::Result<()> {
+fn bench_sim(env: EnvConfig, json: bool, steps: usize, worlds: usize, threads: usize) -> anyhow::Result<()> {
     anyhow::ensure!(steps > 0 && worlds > 0, "--steps and --worlds must be at least 1");
-    let settings = vge_sim::bench::BenchSettings {
-        env: EnvConfig::default(),
-        steps_per_world: steps,
-        num_worlds: worlds,
-        threads,
-    };
+    let settings = vge_sim::bench::BenchSettings { env, steps_per_world: steps, num_worlds: worlds, threads };
     if !json {
         eprintln!("stepping 1 world then {worlds} worlds, {steps} control steps each...");
     }
