@@ -49,9 +49,7 @@ fn main() -> anyhow::Result<()> {
     Axis::Perturbation.apply(&mut env, force_std_n);
 
     let fingers: Vec<String> = env.hand.fingers().iter().map(|f| f.name.clone()).collect();
-    let act = |obs: &[f32], a: &mut [f32]| {
-        policy.forward(obs, a).map_err(|e| e.to_string())
-    };
+    let act = |obs: &[f32], a: &mut [f32]| policy.forward(obs, a).map_err(|e| e.to_string());
     let mut all: Vec<Step> = Vec::new();
     let mut onsets: Vec<Step> = Vec::new();
     let mut drops = 0;
