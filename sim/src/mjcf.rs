@@ -506,8 +506,8 @@ mod tests {
         assert!(xml.contains(
             r#"<inertial pos="-0.0093 0 -0.0475" mass="0.4154" diaginertia="0.0007544 0.00037 0.0004996"/>"#
         ));
-        // kp 3, the joint's damping 0.1 carried by the motor (none on the joint), cap 0.7 N m.
-        assert!(xml.contains(r#"kp="3" kv="0.1""#) && xml.contains(r#"forcerange="-0.7 0.7""#));
+        // kp 3, the joint's damping 0.001 carried by the motor (none on the joint), cap 0.7 N m.
+        assert!(xml.contains(r#"kp="3" kv="0.001""#) && xml.contains(r#"forcerange="-0.7 0.7""#));
         assert!(!xml.contains("damping="));
         let (qpos, ctrl) = (key_attr(&xml, "qpos"), key_attr(&xml, "ctrl"));
         assert_eq!((qpos.len(), ctrl.len()), (16 + 7, 16));
