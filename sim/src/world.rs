@@ -135,18 +135,23 @@ pub enum HandOrientation {
     /// towards the middle and ring fingers (at +-36 deg about +x), perpendicular to the
     /// rotation axis. The middle and ring fingertips carry the object's weight from below.
     SideOn,
+    /// Palm up: gravity along the hand's +z, from the object towards the palm (the hand
+    /// turned 180 deg about x, the fingers' direction: the Allegro's palm-up mount in
+    /// hands/allegro.toml). The fingertips' friction carries the object, as palm down.
+    PalmUp,
 }
 
 impl HandOrientation {
     /// All orientations, in a fixed order.
-    pub const ALL: [Self; 2] = [Self::PalmDown, Self::SideOn];
+    pub const ALL: [Self; 3] = [Self::PalmDown, Self::SideOn, Self::PalmUp];
 
-    /// The name configs use (`"palm_down"`, `"side_on"`).
+    /// The name configs use (`"palm_down"`, `"side_on"`, `"palm_up"`).
     #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             Self::PalmDown => "palm_down",
             Self::SideOn => "side_on",
+            Self::PalmUp => "palm_up",
         }
     }
 
@@ -156,6 +161,7 @@ impl HandOrientation {
         match self {
             Self::PalmDown => Vector3::new(0.0, 0.0, -1.0),
             Self::SideOn => Vector3::new(1.0, 0.0, 0.0),
+            Self::PalmUp => Vector3::new(0.0, 0.0, 1.0),
         }
     }
 
