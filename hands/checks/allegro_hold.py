@@ -2,22 +2,28 @@
 the grasp holds a 65 mm cube under gravity.
 
     .deps/py/bin/python hands/checks/allegro_hold.py [--mass 0.1] [--friction 0.8]
-        [--squeeze 0.05 | --press-mm 3] [--thumb-squeeze S] [--noslip N] [--seconds 2]
-        [--palm-up]
+        [--squeeze 0.05 | --press-mm 3 | --press-n-per-kg 5] [--thumb-squeeze S] [--noslip N]
+        [--seconds 2] [--palm-up]
 
 The scene is the hand file plus a cube on a free joint at the origin (the object vge adds).
 The motor targets are the keyframe's joints pressed past contact, either as vge's own grasp
 does (GraspConfig's squeeze_rad: the flexion joints, j1-j3 of every finger and thj2-thj3 of
 the thumb, `--squeeze` rad further) or, with `--press-mm`, each finger's targets moved so that
-its tip would go that far into its face (through the tip's Jacobian). The cube is held still
+its tip would go that far into its face (through the tip's Jacobian), or, with
+`--press-n-per-kg`, as vge's start grasp does for a hand with a keyframe (sim/src/grasp.rs:
+each tip pressing that many N per kg of the cube into its face, the thumb against the
+fingers' resultant, the links' and the cube's weight carried). The cube is held still
 for 0.05 s while the grip builds, then released. MuJoCo options as vge's sim-vs-MuJoCo
 comparison: implicitfast, elliptic cones, impratio 10.
 
-Measured (0.1 kg, friction 0.8, dt 2 ms, 2 s): --press-mm 3 holds it, 1.6 mm lower and
-1.5 mm towards the thumb; --squeeze 0.05 holds it 2.4 mm lower and 5 mm towards the thumb
-(the thumb's flexion presses mostly upwards); --squeeze 0 drops it. The slow sinking that
-remains (about 0.4 mm/s) does not change with friction 0.8 or 1.5 and stops with --noslip 3:
-it is the creep of MuJoCo's soft friction constraints, not slip.
+Measured (0.1 kg, friction 0.8, dt 2 ms, 2 s): --press-n-per-kg 5 holds it 1.1 mm lower,
+0.1 mm off centre sideways, turned 0.9 deg (palm up: 0.8 mm, 0.3 deg); --press-mm 3 holds it
+2.4 mm lower and 1.5 mm towards the thumb; --squeeze 0.05 holds it 3.2 mm lower and 5.6 mm
+towards the thumb (the thumb's flexion presses mostly upwards); --squeeze 0 drops it. The
+slow sinking that remains (about 0.5 mm/s) does not change with friction 0.8 or 1.5 and
+stops with --noslip 3 (--press-n-per-kg 5: 0.01 mm in 10 s): it is the creep of MuJoCo's
+soft friction constraints, not slip. The joints' damping (0.001 in the file, 0.1 before)
+makes no difference here (--press-n-per-kg 5, 10 s: 5.26 and 5.25 mm lower).
 """
 
 import argparse
@@ -64,6 +70,41 @@ def hand_checks(m, d, key_q, half):
     print(f"  nearest other hand geom: {name} {1e3 * dist:.1f} mm; hand self-contacts: {dc.ncon}")
 
 
+def vge_press(m, d, key_q, force_n):
+    """vge's start grasp (sim/src/grasp.rs): each tip pressing `force_n` into its face, the
+    thumb against the fingers' resultant, the least change to those forces that carries the
+    cube's weight and turns it about no axis; the targets are the pose plus (J^T f + the
+    links' gravity torques) / kp."""
+    mujoco.mj_forward(m, d)
+    cube = m.body("cube").id
+    centre = d.xpos[cube].copy()
+    points, forces, jacs = [], [], []
+    for t in TIPS:
+        c = d.xpos[m.body(t).id] - centre
+        axis = int(np.argmax(np.abs(c)))
+        inward = np.zeros(3)
+        inward[axis] = -np.sign(c[axis])
+        p = c + inward * m.geom(t).size[0]
+        points.append(p)
+        forces.append(inward * force_n)
+        jac = np.zeros((3, m.nv))
+        mujoco.mj_jac(m, d, jac, None, p + centre, m.body(t).id)
+        jacs.append(jac[:, :16])
+    forces[3] = -sum(forces[:3])
+    grasp_map = np.zeros((6, 12))
+    for k, p in enumerate(points):
+        grasp_map[:3, 3 * k : 3 * k + 3] = np.eye(3)
+        grasp_map[3:, 3 * k : 3 * k + 3] = [[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]]
+    weight = m.opt.gravity * m.body_mass[cube]
+    wanted = np.concatenate([-weight, np.zeros(3)])
+    f = np.concatenate(forces)
+    f += np.linalg.pinv(grasp_map, rcond=1e-6) @ (wanted - grasp_map @ f)
+    torque = d.qfrc_bias[:16].copy()  # at rest: the links' gravity torques
+    for k, jac in enumerate(jacs):
+        torque += jac.T @ f[3 * k : 3 * k + 3]
+    return key_q + torque / m.actuator_gainprm[:16, 0]
+
+
 def hold(args, key_q, half):
     spec = mujoco.MjSpec.from_file(str(HAND))
     for k in list(spec.keys):
@@ -96,10 +137,12 @@ def hold(args, key_q, half):
     d.qpos[:16] = key_q
     d.qpos[16:23] = [0, 0, 0, 1, 0, 0, 0]
     ctrl = key_q.copy()
-    if args.press_mm is None:
+    if args.press_mm is None and args.press_n_per_kg is None:
         ctrl[FLEXION] += args.squeeze
         if args.thumb_squeeze is not None:
             ctrl[[14, 15]] += args.thumb_squeeze - args.squeeze
+    elif args.press_n_per_kg is not None:
+        ctrl = vge_press(m, d, key_q, args.press_n_per_kg * args.mass)
     else:
         # Each finger's targets moved so that its tip goes `press_mm` into its face (least
         # squares through the tip's Jacobian): a press along the face normal for every finger.
@@ -155,6 +198,10 @@ def main():
     ap.add_argument("--squeeze", type=float, default=0.05)
     ap.add_argument("--thumb-squeeze", type=float, default=None, help="the thumb's, if not --squeeze")
     ap.add_argument("--press-mm", type=float, default=None, help="press each tip this far into its face instead")
+    ap.add_argument(
+        "--press-n-per-kg", type=float, default=None,
+        help="vge's start grasp instead: each tip pressing this many N per kg of the cube (GraspConfig's 5)",
+    )
     ap.add_argument("--noslip", type=int, default=0, help="MuJoCo noslip iterations (0: off)")
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--timestep", type=float, default=0.002)
@@ -166,7 +213,13 @@ def main():
     hand_checks(m, d, key_q, args.width / 2)
     print(
         f"hold: {args.width * 1e3:.0f} mm cube, {args.mass} kg, friction {args.friction}, "
-        + (f"press {args.press_mm} mm" if args.press_mm is not None else f"squeeze {args.squeeze} rad")
+        + (
+            f"press {args.press_mm} mm"
+            if args.press_mm is not None
+            else f"press {args.press_n_per_kg} N/kg"
+            if args.press_n_per_kg is not None
+            else f"squeeze {args.squeeze} rad"
+        )
         + f", dt {args.timestep} s, {'palm up' if args.palm_up else 'palm down'}"
     )
     hold(args, key_q, args.width / 2)

@@ -41,16 +41,24 @@ use crate::observation::{FingertipReading, ObservationLayout, ObservationSet, bu
 use crate::world::{ContactReading, HandWorld, JointServo, ObjectState, PhysicsConfig};
 
 /// How the initial grasp is made. A hand whose file names a start grasp (a keyframe) starts
-/// there; otherwise each finger closes (every joint after its first together) until it
-/// touches the object, found geometrically by bisection on the closing angle. The targets
-/// of every joint after each finger's first are then set `squeeze_rad` further, the object
-/// is held in place for `hold_s` while the grip builds, then released and left to settle
-/// for `settle_s`.
+/// there, each grasping finger closed onto the object along the surface normal and its
+/// targets set to press with `squeeze_force_n_per_kg`; otherwise each finger closes (every
+/// joint after its first together) until it touches the object, found geometrically by
+/// bisection on the closing angle, and the targets of every joint after each finger's first
+/// are set `squeeze_rad` further. The object is then held in place for `hold_s` while the
+/// grip builds, released and left to settle for `settle_s`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GraspConfig {
-    /// Extra flexion of the targets past first contact (rad); the motor torque caps then
-    /// set the grip force (notes: ~0.05 rad).
+    /// Extra flexion of the targets past first contact (rad), for a hand without a start
+    /// grasp; the motor torque caps then set the grip force (notes: ~0.05 rad).
     pub squeeze_rad: f32,
+    /// A hand that starts from its file's grasp (a keyframe) presses each fingertip into the
+    /// object with this normal force per kg of the object's mass (N/kg), instead of
+    /// `squeeze_rad`: targets set from the fingertip Jacobians, the finger named `thumb`
+    /// pressing against the others' resultant. Per kg, so that a drawn mass is gripped as
+    /// firmly for its weight: on the Allegro 5 N/kg holds 0.01-0.25 kg still for 30 s, 2 N/kg
+    /// drops them (sim/tests/allegro.rs).
+    pub squeeze_force_n_per_kg: f32,
     /// Time the object is held fixed while the fingers press (s).
     pub hold_s: f32,
     /// Time the released object settles in the grasp before the episode starts (s).
@@ -59,7 +67,8 @@ pub struct GraspConfig {
     /// `thumb` stays open (its joints at 0, clamped to their ranges).
     pub randomize_fingers: bool,
     /// Uniform noise (rad, +-) on each finger's first joint (its roll or spread) and, opening
-    /// only, on its closing joints.
+    /// only, on its closing joints. From a start grasp the finger is then closed back onto
+    /// the object, so the noise moves where its tip touches.
     pub pose_noise_rad: f32,
 }
 
@@ -67,6 +76,7 @@ impl Default for GraspConfig {
     fn default() -> Self {
         Self {
             squeeze_rad: 0.05,
+            squeeze_force_n_per_kg: 5.0,
             hold_s: 0.05,
             settle_s: 0.25,
             randomize_fingers: false,
@@ -332,6 +342,7 @@ impl EnvConfig {
             ("drop penalty", self.drop_penalty),
             ("max reward (rad/s)", self.max_reward_rad_per_s),
             ("squeeze (rad)", self.grasp.squeeze_rad),
+            ("squeeze force (N/kg)", self.grasp.squeeze_force_n_per_kg),
             ("hold time (s)", self.grasp.hold_s),
             ("settle time (s)", self.grasp.settle_s),
             ("grasp pose noise (rad)", self.grasp.pose_noise_rad),
@@ -615,14 +626,28 @@ impl Env {
                 None => grasping[f] = false,
             }
         }
-        world.set_joint_positions(&q)?;
-        let mut target = q;
-        for (_, finger) in fingers.iter().enumerate().filter(|(f, _)| grasping[*f]) {
-            for j in finger.joints.clone().skip(1) {
-                target[j] += grasp.squeeze_rad;
+        if keyframe.is_some() {
+            let pressed = crate::grasp::press_start_grasp(
+                &hand,
+                &cfg.servos,
+                &object,
+                &cfg.physics.gravity_m_per_s2_vector(),
+                &q,
+                &grasping,
+                grasp.squeeze_force_n_per_kg * object.mass_kg,
+            )?;
+            world.set_joint_positions(&pressed.q_rad)?;
+            world.set_joint_targets(&pressed.target_rad);
+        } else {
+            world.set_joint_positions(&q)?;
+            let mut target = q;
+            for (_, finger) in fingers.iter().enumerate().filter(|(f, _)| grasping[*f]) {
+                for j in finger.joints.clone().skip(1) {
+                    target[j] += grasp.squeeze_rad;
+                }
             }
+            world.set_joint_targets(&target);
         }
-        world.set_joint_targets(&target);
         let hz = cfg.physics.physics_hz;
         for _ in 0..round_steps(grasp.hold_s, hz) {
             world.step();

@@ -30,6 +30,8 @@ pub mod env_keys;
 pub mod episode;
 pub mod error;
 pub mod gait;
+#[cfg(feature = "physics")]
+mod grasp;
 pub mod hands;
 #[cfg(feature = "physics")]
 pub mod mjcf;

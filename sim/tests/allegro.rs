@@ -144,3 +144,147 @@ fn the_allegro_env_starts_from_its_file_grasp_with_observations_and_actions_of_i
     // Its action has 16 entries, not vge15's 15.
     assert!(env.step(&[0.0; 15]).is_err());
 }
+
+/// One zero-action episode from `Env::reset`: what the start grasp must survive.
+#[derive(Debug, Clone, Copy)]
+struct Hold {
+    /// Control step of the drop, if any.
+    dropped_at: Option<usize>,
+    /// Largest |rotation about z| since the reset (rad): the sum of the steps' turns.
+    max_turn_rad: f32,
+    /// Fewest fingertips touching at any step.
+    min_contacts: usize,
+    /// The object's largest distance from where the reset left it (m).
+    max_shift_m: f32,
+    /// Where the reset left the object's centre (m; the cube starts at the origin).
+    reset_at_m: nalgebra::Vector3<f32>,
+}
+
+fn hold_from_reset(config: &vge_sim::EnvConfig, seed: u64, steps: usize) -> Hold {
+    let mut env = vge_sim::Env::new(config.clone()).expect("env");
+    let (_, info) = env.reset(seed).expect("reset");
+    let start = env.privileged().expect("state").object.pose.translation.vector;
+    let mut hold = Hold {
+        dropped_at: None,
+        max_turn_rad: 0.0,
+        min_contacts: info.num_tip_contacts,
+        max_shift_m: 0.0,
+        reset_at_m: start,
+    };
+    let mut turn_rad = 0.0f32;
+    let zero = vec![0.0; config.hand.num_joints()];
+    for _ in 0..steps {
+        let r = env.step(&zero).expect("step");
+        turn_rad += r.info.object_rotation_z_rad;
+        hold.max_turn_rad = hold.max_turn_rad.max(turn_rad.abs());
+        hold.min_contacts = hold.min_contacts.min(r.info.num_tip_contacts);
+        let at = env.privileged().expect("state").object.pose.translation.vector;
+        hold.max_shift_m = hold.max_shift_m.max((at - start).norm());
+        if r.info.dropped {
+            hold.dropped_at = Some(r.info.step);
+            break;
+        }
+    }
+    hold
+}
+
+fn allegro_env_config() -> vge_sim::EnvConfig {
+    let hand = vge_sim::hands::load("allegro").expect("allegro");
+    let mut config = vge_sim::EnvConfig::for_hand(hand).expect("config");
+    config.episode_length_steps = 600;
+    config
+}
+
+/// Every seed of `seeds` held `steps` control steps with zero action: no drop, at least 3
+/// fingertips on the object at every step, turned less than `max_turn_rad` about z.
+fn assert_holds(config: &vge_sim::EnvConfig, seeds: std::ops::Range<u64>, steps: usize, max_turn_rad: f32) {
+    for seed in seeds {
+        let h = hold_from_reset(config, seed, steps);
+        println!("seed {seed}: {h:?}");
+        assert_eq!(h.dropped_at, None, "seed {seed}: {h:?}");
+        assert!(h.min_contacts >= 3, "seed {seed}: {h:?}");
+        assert!(h.max_turn_rad < max_turn_rad, "seed {seed}: {h:?}");
+    }
+}
+
+// Measured (hold_figures, seeds 0..10, 600 steps), pose noise 0 / 0.02 rad: no drop, all 4
+// tips on the cube throughout, |turn about z| at most 0.000 / 0.008 rad, the cube within
+// 1.1 / 1.3 mm of where the reset left it (0.2 mm from the origin). Before (the flexion joints
+// squeezed 0.05 rad, joint damping 0.1) every episode dropped, after 12-29 s.
+
+#[test]
+fn the_allegro_holds_its_start_grasp_still_for_30_s_with_zero_action() {
+    assert_holds(&allegro_env_config(), 0..10, 600, 0.1);
+}
+
+#[test]
+fn the_allegro_holds_its_start_grasp_for_30_s_under_the_protocols_pose_noise() {
+    let mut config = allegro_env_config();
+    config.grasp.pose_noise_rad = 0.02;
+    assert_holds(&config, 0..10, 600, 0.1);
+}
+
+/// The press is per kg of the object: HORA's heaviest object (0.25 kg) is held as the
+/// nominal cube is (measured, seeds 0..10 with the pose noise: at most 0.015 rad, 1.1 mm).
+/// At 2 N/kg instead of 5 every episode drops it.
+#[test]
+fn the_allegro_holds_a_heavier_cube_as_firmly_for_its_weight() {
+    let mut config = allegro_env_config();
+    config.object.mass_kg = 0.25;
+    config.grasp.pose_noise_rad = 0.02;
+    assert_holds(&config, 0..3, 600, 0.1);
+}
+
+/// Palm up (gravity along the hand's +z) the same keyframe and press hold the cube (measured
+/// over 30 s, seeds 0..10 with the pose noise: at most 0.062 rad, 1.6 mm, all 4 tips on).
+#[test]
+fn the_allegro_holds_the_cube_palm_up_for_5_s() {
+    let mut config = allegro_env_config();
+    config.physics.hand_orientation = vge_sim::HandOrientation::PalmUp;
+    config.grasp.pose_noise_rad = 0.02;
+    assert_holds(&config, 0..3, 100, 0.1);
+}
+
+/// Per-seed figures for the report, e.g. `VGE_HOLD_NOISE=0.02 cargo test --release -p
+/// vge-sim --test allegro hold_figures -- --ignored --nocapture` (also `VGE_HOLD_SEEDS`,
+/// `VGE_HOLD_STEPS`, `VGE_HOLD_MASS_KG`, `VGE_HOLD_SQUEEZE_N_PER_KG`, `VGE_HOLD_PALM_UP`).
+#[test]
+#[ignore = "a measurement, not a check"]
+fn hold_figures() {
+    let var = |name: &str| std::env::var(name).ok().and_then(|s| s.parse::<f32>().ok());
+    let mut config = allegro_env_config();
+    config.grasp.pose_noise_rad = var("VGE_HOLD_NOISE").unwrap_or(0.0);
+    let seeds = var("VGE_HOLD_SEEDS").unwrap_or(10.0) as u64;
+    let steps = var("VGE_HOLD_STEPS").unwrap_or(600.0) as usize;
+    config.episode_length_steps = steps.max(1);
+    if let Some(m) = var("VGE_HOLD_MASS_KG") {
+        config.object.mass_kg = m;
+    }
+    if let Some(f) = var("VGE_HOLD_SQUEEZE_N_PER_KG") {
+        config.grasp.squeeze_force_n_per_kg = f;
+    }
+    if std::env::var("VGE_HOLD_PALM_UP").is_ok() {
+        config.physics.hand_orientation = vge_sim::HandOrientation::PalmUp;
+    }
+    let (mut drops, mut turn, mut shift, mut contacts) = (0, 0.0f32, 0.0f32, usize::MAX);
+    for seed in 0..seeds {
+        let h = hold_from_reset(&config, seed, steps);
+        println!(
+            "seed {seed}: drop {:?}, max |turn| {:.3} rad, min contacts {}, max shift {:.1} mm, reset at {:.1?} mm",
+            h.dropped_at,
+            h.max_turn_rad,
+            h.min_contacts,
+            1e3 * h.max_shift_m,
+            (1e3 * h.reset_at_m).as_slice()
+        );
+        drops += usize::from(h.dropped_at.is_some());
+        turn = turn.max(h.max_turn_rad);
+        shift = shift.max(h.max_shift_m);
+        contacts = contacts.min(h.min_contacts);
+    }
+    println!(
+        "noise {}: {drops} drops in {seeds}, max |turn| {turn:.3} rad, min contacts {contacts}, max shift {:.1} mm",
+        config.grasp.pose_noise_rad,
+        1e3 * shift
+    );
+}
