@@ -60,7 +60,6 @@ impl ObsColumns {
     }
 
     /// The critic's part of `rows` (`[batch, row_dim]`).
-    #[must_use]
     pub fn critic_of(&self, rows: &Tensor) -> Tensor {
         if self.row_dim() == self.critic_dim {
             rows.shallow_clone()
@@ -70,7 +69,6 @@ impl ObsColumns {
     }
 
     /// The actor's part of `rows` (`[batch, row_dim]`).
-    #[must_use]
     pub fn actor_of(&self, rows: &Tensor) -> Tensor {
         if self.is_whole() {
             return rows.shallow_clone();
