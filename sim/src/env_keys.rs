@@ -136,8 +136,9 @@ pub struct EnvSection {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub motor_stiffness_nm_per_rad: Option<f32>,
     /// Task variant: the hand's orientation to gravity, `"palm_down"` (default: gravity along
-    /// the rotation axis) or `"side_on"` (gravity along the hand's +x, from the thumb towards
-    /// the middle and ring fingers; see `vge_sim::HandOrientation`).
+    /// the rotation axis), `"palm_up"` (gravity along the hand's +z: the object rests on the
+    /// fingers) or `"side_on"` (gravity along the hand's +x, from vge15's thumb towards its
+    /// middle and ring fingers; see `vge_sim::HandOrientation`).
     #[serde(skip_serializing_if = "is_palm_down")]
     pub hand_orientation: HandOrientation,
     /// Task variant: whether the fingers collide with each other (default false: the hand
