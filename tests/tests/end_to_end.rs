@@ -59,7 +59,8 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
 
     // 2. The policy file is what vge-runtime loads.
     let bytes = vge_runtime::AlignedBytes::new(&std::fs::read(&policy_path).expect("policy file"));
-    let mut storage = storage_for(&bytes).expect("valid policy file for the hand");
+    let vge15 = vge_sim::hands::vge15().expect("vge15");
+    let (_, mut storage) = storage_for(&bytes, &vge15, true).expect("valid policy file for the hand");
     let mut runner = RuntimePolicy::load(&bytes, &mut storage).expect("loads");
     assert_eq!(runner.control_hz(), config.env.control_hz);
 
@@ -90,7 +91,8 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
     let stop_nodes = std::sync::Arc::new(AtomicBool::new(false));
     let flag = stop_nodes.clone();
     let env = EnvConfig::default();
-    let limits = env.hand.joint_limits();
+    let protocol_hand =
+        vge_bridge::protocol_hand::ProtocolHand::of(&env.hand).expect("vge15 on vge's protocol");
     let rate_hz = f64::from(env.control_hz);
     let hand = SimHand::new(env, 9, Duration::from_secs(1)).expect("simulated hand");
     let sim = thread::spawn(move || {
@@ -101,7 +103,7 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
         duration: Some(Duration::from_secs(2)),
         halt_hold_periods: 2,
         max_delta_rad: config.env.max_action_rad,
-        ..LoopConfig::new(rate_hz, limits)
+        ..LoopConfig::new(rate_hz, protocol_hand)
     };
     let report = control_loop::run(&mut bridge, &mut runner, &loop_config, &AtomicBool::new(false))
         .expect("bridge loop runs");

@@ -25,6 +25,9 @@ use vge_bridge::socketcan_io::{standard_id_and_data, to_can_frame};
 use vge_bridge::transport::{Role, SocketCanTransport};
 use vge_tests::hil_iface;
 
+/// vge15's nodes, one a finger: the hand these tests put on the bus.
+const NUM_FINGERS: u8 = 5;
+
 const READ_TIMEOUT: Duration = Duration::from_secs(2);
 
 fn open(iface: &str) -> CanSocket {
@@ -65,7 +68,7 @@ fn joint_controller_emulator_answers_commands_over_vcan() {
     let expected = u64::from(rounds) * u64::from(NUM_FINGERS);
     let server_iface = iface.clone();
     let server = thread::spawn(move || {
-        let mut emulator = JointControllerEmulator::new(0.5);
+        let mut emulator = JointControllerEmulator::new(NodeLayout::VGE15, 0.5);
         let mut transport = SocketCanTransport::open(&server_iface, Role::Nodes)?;
         let limits = ServeLimits {
             max_commands: expected,
@@ -189,7 +192,7 @@ fn frames_captured_on_vcan_decode_with_the_dbc() {
     capture.set_read_timeout(READ_TIMEOUT).expect("read timeout");
 
     let mut messages = Vec::new();
-    for finger in FingerId::all() {
+    for finger in NodeLayout::VGE15.fingers() {
         let k = f32::from(finger.index());
         messages.extend([
             Message::JointCommand(JointCommand {
@@ -792,7 +795,7 @@ fn fd_frames_captured_on_vcan_decode_with_the_dbc() {
     }
     let mut messages =
         vec![FdMessage::HandCommand(HandCommand { q_target_rad: q_target, enable: true, seq: 77 })];
-    for finger in FingerId::all() {
+    for finger in NodeLayout::VGE15.fingers() {
         let k = f32::from(finger.index());
         messages.push(FdMessage::NodeState(FingerState {
             finger,
