@@ -14,8 +14,6 @@
 
 #[path = "support/allegro_dbc.rs"]
 mod allegro_dbc;
-#[path = "support/policy_files.rs"]
-mod policy_files;
 
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -458,12 +456,12 @@ fn allegro_torque_beyond_the_clip_never_leaves_the_host() {
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn allegro_policy_sets_the_pd_targets_over_vcan_at_its_own_rate() {
-    use vge_sim::observation::ObservationSet;
     let iface = iface();
-    let dir = std::env::temp_dir().join(format!("vge-allegro-hil-policy-{}", std::process::id()));
-    let allegro = vge_sim::hands::load("allegro").expect("allegro");
-    let set = ObservationSet::Proprio { history: 2 };
-    let policy = policy_files::write_policy(&dir, &allegro, set, 7);
+    // A stored untrained proprio:2 Allegro policy (`vge export --init --hand allegro
+    // --observation proprio:2 --hidden 64,64 --seed 7`): the guest runs no libtorch, and a
+    // test binary that wrote one with vge-export would link it under the workspace's features.
+    let policy = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fixtures/policies/allegro-proprio2-init.vgep");
     let emulator = spawn_emulator(&iface);
     let capture = Capture::start(&iface);
     // 2000 sets are 6 s of the hand's time; the policy runs at its file's 20 Hz meanwhile.
@@ -471,7 +469,6 @@ fn allegro_policy_sets_the_pd_targets_over_vcan_at_its_own_rate() {
         vec!["--policy", policy.to_str().expect("utf-8 path"), "--steps", "2000", "--duration", "600"];
     args.extend(TOLERANT);
     let (code, out, err) = finish(spawn_run(&iface, &args));
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(code, Some(0), "bridge: {out}\n{err}");
     let (emu_code, emu_out, emu_err) = finish(emulator);
     let seen = capture.stop();
