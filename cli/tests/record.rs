@@ -60,9 +60,13 @@ fn eval_record_writes_the_first_episode_step_by_step() {
         "/reward_rad_per_s".to_owned(),
         "/object_rotation_about_z_rad".to_owned(),
     ];
-    for finger in ["thumb", "index", "middle", "ring", "little"] {
-        expected.extend(["roll", "proximal", "distal"].map(|l| format!("/world/hand/{finger}/{l}")));
-        expected.extend(["roll", "flex_prox", "flex_dist"].map(|j| format!("/action/{finger}/{j}_rad")));
+    // The converter names links and actions by the hand file's fingers and joint indices.
+    let hand = vge_sim::hands::vge15().expect("vge15");
+    for finger in hand.fingers() {
+        for j in finger.joints.clone() {
+            expected.push(format!("/world/hand/{}/link{j}", finger.name));
+            expected.push(format!("/action/{}/joint{j}_rad", finger.name));
+        }
     }
     for path in &expected {
         let e = entities.get(path).unwrap_or_else(|| panic!("{path} missing: {:?}", entities.keys()));

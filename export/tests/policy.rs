@@ -227,8 +227,9 @@ fn a_malformed_task_is_rejected_when_encoding() {
 }
 
 /// Every policy file stored in the repository (the shipped policy, the results' and the
-/// fixtures') is version 1 or 2 and still loads unchanged, as vge's own hand with the full
-/// observation set; re-encoded it becomes version 3 without a task record, same model.
+/// fixtures') still loads unchanged: those of version 1 or 2 as vge's own hand with the full
+/// observation set (no task record), those of version 3 with theirs; re-encoded, an old file
+/// becomes version 3 without a task record, same model.
 #[test]
 fn stored_policy_files_still_load_as_the_unrecorded_hand() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
@@ -248,7 +249,11 @@ fn stored_policy_files_still_load_as_the_unrecorded_hand() {
     for path in &files {
         let bytes = std::fs::read(path).unwrap();
         let info = vge_runtime::policy::inspect(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(info.format_version <= 2 && info.task.is_none(), "{}", path.display());
+        match info.format_version {
+            1 | 2 => assert!(info.task.is_none(), "{}", path.display()),
+            3 => assert!(info.task.is_some(), "{}: version 3 without a task record", path.display()),
+            v => panic!("{}: unknown format version {v}", path.display()),
+        }
     }
     let shipped = std::fs::read(root.join("policies/cube.vgep")).unwrap();
     let text = inspect::report(&shipped).unwrap().to_string();
