@@ -43,12 +43,43 @@ pub(crate) fn affine(
     y: &mut [f32],
 ) -> Result<(), RuntimeError> {
     layer.check_io(index, x, y)?;
+    #[cfg(all(feature = "simd", target_arch = "x86_64"))]
+    if let Some(level) = crate::simd::level() {
+        let w = match layer.weights {
+            Weights::F32(w) => Some(crate::simd::SimdWeights::F32(w)),
+            Weights::F16(w) => Some(crate::simd::SimdWeights::F16(w)),
+            Weights::I8 { .. } => None,
+        };
+        if let Some(w) = w
+            && crate::simd::dense(level, w, layer.bias, x, y)
+        {
+            return Ok(());
+        }
+    }
     match layer.weights {
         Weights::F32(w) => dense_f32(w, layer.bias, x, y),
         Weights::F16(w) => dense_f::<ROWS, u16>(w, layer.bias, x, y, weights::f16_to_f32),
         Weights::I8 { q, row_scale } => dense_i8(q, row_scale, layer.bias, index, x, q_buf, y)?,
     }
     Ok(())
+}
+
+/// Which floating-point kernel this build runs on this CPU: `"fma-avx512"` or `"fma-avx2"`
+/// (the `simd` feature's fused kernel), `"portable-avx512"` (the portable kernel compiled for
+/// AVX-512F, `std` on x86-64), or `"portable"`.
+#[must_use]
+pub fn float_kernel() -> &'static str {
+    #[cfg(all(feature = "simd", target_arch = "x86_64"))]
+    match crate::simd::level() {
+        Some(crate::simd::Level::Avx512) => return "fma-avx512",
+        Some(crate::simd::Level::Avx2) => return "fma-avx2",
+        None => {}
+    }
+    #[cfg(all(feature = "std", target_arch = "x86_64"))]
+    if dispatch::has_avx512() {
+        return "portable-avx512";
+    }
+    "portable"
 }
 
 /// The `f32` kernel: with the `std` feature on x86-64, the AVX-512 build of the same code
@@ -343,3 +374,119 @@ mod dsp {
 
 #[cfg(all(feature = "armv7em-dsp", target_arch = "arm"))]
 use dsp::rows_i8;
+
+#[cfg(all(test, feature = "simd", target_arch = "x86_64"))]
+#[allow(clippy::indexing_slicing)]
+mod simd_tests {
+    use super::{ROWS, dense_f};
+    use crate::simd::{self, Level, SimdWeights};
+    use crate::weights::f16_to_f32;
+
+    /// xorshift64*: reproducible values without a dependency.
+    struct Draw(u64);
+
+    impl Draw {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+
+        /// Uniform in [-1, 1).
+        fn unit(&mut self) -> f32 {
+            (self.next() >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+        }
+
+        /// A finite half: any sign and mantissa, exponents 2^-10 .. 2^1.
+        fn half(&mut self) -> u16 {
+            let r = self.next();
+            let sign = ((r >> 63) as u16) << 15;
+            let exponent = (5 + (r >> 32) % 12) as u16;
+            sign | (exponent << 10) | (r as u16 & 0x3ff)
+        }
+    }
+
+    /// In and out sizes around the kernels' blocks: under, at and over one 8- or 16-lane chunk
+    /// and four-row block, and the policy's 65-256-256-15.
+    const SHAPES: [(usize, usize); 10] =
+        [(16, 1), (17, 3), (8, 4), (23, 5), (65, 256), (256, 256), (256, 15), (31, 7), (64, 9), (1, 2)];
+
+    fn levels() -> Vec<Level> {
+        match simd::level() {
+            Some(Level::Avx512) => vec![Level::Avx512, Level::Avx2],
+            Some(Level::Avx2) => vec![Level::Avx2],
+            None => vec![],
+        }
+    }
+
+    extern crate std;
+    use std::vec;
+    use std::vec::Vec;
+
+    /// Each output of the fused kernel within `simd::tolerance` of the portable kernel's, for
+    /// both weight types at every level this CPU has; and the two are not the same function
+    /// (some output differs in its last bits, or the test would not see a wrong order).
+    fn check(weights_f16: bool) {
+        let mut draw = Draw(0x9E37_79B9_7F4A_7C15);
+        let mut differing = 0usize;
+        for level in levels() {
+            for (n_in, n_out) in SHAPES {
+                let x: Vec<f32> = (0..n_in).map(|_| 4.0 * draw.unit()).collect();
+                let b: Vec<f32> = (0..n_out).map(|_| draw.unit()).collect();
+                let w16: Vec<u16> = (0..n_in * n_out).map(|_| draw.half()).collect();
+                let w32: Vec<f32> = if weights_f16 {
+                    w16.iter().map(|h| f16_to_f32(*h)).collect()
+                } else {
+                    (0..n_in * n_out).map(|_| draw.unit()).collect()
+                };
+                let mut portable = vec![0.0f32; n_out];
+                let mut fused = vec![f32::NAN; n_out];
+                let w = if weights_f16 {
+                    dense_f::<ROWS, u16>(&w16, &b, &x, &mut portable, f16_to_f32);
+                    SimdWeights::F16(&w16)
+                } else {
+                    dense_f::<ROWS, f32>(&w32, &b, &x, &mut portable, |v| v);
+                    SimdWeights::F32(&w32)
+                };
+                assert!(simd::dense(level, w, &b, &x, &mut fused), "{level:?} is available");
+                for r in 0..n_out {
+                    let row = &w32[r * n_in..(r + 1) * n_in];
+                    let abs: f32 = row.iter().zip(&x).map(|(w, x)| (w * x).abs()).sum();
+                    let bound = simd::tolerance(n_in, b[r], abs);
+                    let diff = (fused[r] - portable[r]).abs();
+                    assert!(
+                        diff <= bound,
+                        "{level:?} {n_in}x{n_out} row {r}: fused {} portable {} differ by {diff} > {bound}",
+                        fused[r],
+                        portable[r]
+                    );
+                    differing += usize::from(fused[r] != portable[r]);
+                }
+            }
+        }
+        if !levels().is_empty() {
+            assert!(differing > 0, "the fused kernel matched the portable one bit for bit everywhere");
+        }
+    }
+
+    #[test]
+    fn the_fused_f32_kernel_is_within_its_tolerance_of_the_portable_one() {
+        check(false);
+    }
+
+    #[test]
+    fn the_fused_f16_kernel_is_within_its_tolerance_of_the_portable_one() {
+        check(true);
+    }
+
+    #[test]
+    fn a_level_this_cpu_lacks_is_refused_and_leaves_the_output() {
+        let mut y = [7.0f32; 2];
+        let ran = simd::dense(Level::Avx512, SimdWeights::F32(&[1.0; 32]), &[0.0; 2], &[1.0; 16], &mut y);
+        assert_eq!(ran, simd::level() == Some(Level::Avx512));
+        if !ran {
+            assert_eq!(y, [7.0; 2]);
+        }
+    }
+}

@@ -38,11 +38,16 @@ mod kernel;
 mod layer;
 mod mlp;
 pub mod policy;
+#[cfg(all(feature = "simd", target_arch = "x86_64"))]
+mod simd;
+#[cfg(all(feature = "simd", target_arch = "x86_64"))]
+pub use simd::tolerance as simd_tolerance;
 mod weights;
 
 #[cfg(feature = "std")]
 pub use aligned::AlignedBytes;
 pub use error::{PolicyError, RuntimeError};
+pub use kernel::float_kernel;
 pub use layer::{Activation, Layer};
 pub use mlp::{Mlp, PolicyMlp};
 pub use policy::{HandPolicy, ObsLayout, ObsSlice, Policy, PolicyInfo, Provenance, storage_len};
