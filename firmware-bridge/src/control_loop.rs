@@ -4,10 +4,9 @@
 //! send joint commands. Every size (nodes, joints, observation) is the hand's
 //! ([`ProtocolHand`]).
 //!
-//! Deadlines are `start + k * period`. Each wait sleeps until `spin` before the deadline and
-//! then spins: the OS timer alone overshoots by 50-100 us, too coarse for a 1 kHz loop. A loop
-//! that wakes a whole period late skips the periods already gone (each a deadline miss)
-//! instead of running them back to back, so the achieved rate and the misses tell the truth.
+//! Deadlines, the end of a run and the policy's guard are [`crate::pacing`]'s, shared with
+//! the simulator's in-process loop ([`crate::sim_policy`]). Each wait sleeps until `spin`
+//! before the deadline and then spins.
 //!
 //! What the loop does not trust, and what it does then (docs/can-protocol.md, Semantics):
 //! - no fresh joint state for `watchdog_periods`: halt (watchdog);
@@ -38,6 +37,8 @@ use vge_sim::observation::ObservationSet;
 
 use crate::hand_state::{Applied, HandState, HeartbeatProblem, Plausibility};
 use crate::heartbeat::HeartbeatClock;
+pub use crate::pacing::MIN_RATE_HZ;
+use crate::pacing::{GuardedPolicy, PaceFigures, Pacer, Persisting, RunLimits};
 use crate::policy_runner::Observer;
 pub use crate::policy_runner::PolicyRunner;
 use crate::protocol::{
@@ -282,9 +283,36 @@ pub struct LoopReport {
     pub final_targets_rad: Vec<f32>,
 }
 
-/// The slowest loop [`run`] accepts: one step in 1000 s. Its period and watchdog (up to
-/// `u32::MAX` periods) then fit a [`Duration`], which panics on larger values.
-pub const MIN_RATE_HZ: f64 = 1e-3;
+impl LoopReport {
+    /// The report of a run that ended for `stop_reason`: its pace, what crossed the link, the
+    /// steps that held and failed, and the safety filter's counts and last targets.
+    #[must_use]
+    pub fn new(
+        stop_reason: StopReason,
+        stop_detail: String,
+        pace: PaceFigures,
+        link: LinkCounts,
+        holds: u64,
+        policy_errors: u64,
+        safety: &SafetyFilter,
+    ) -> Self {
+        Self {
+            stop_reason,
+            stop_detail,
+            steps: pace.steps,
+            achieved_rate_hz: pace.achieved_rate_hz,
+            wake_jitter: pace.wake_jitter,
+            loop_time: pace.loop_time,
+            deadline_misses: pace.deadline_misses,
+            skipped_periods: pace.skipped_periods,
+            link,
+            holds,
+            policy_errors,
+            safety: safety.counts,
+            final_targets_rad: safety.last_safe_rad().to_vec(),
+        }
+    }
+}
 
 #[derive(Debug, Error)]
 pub enum LoopError {
@@ -296,20 +324,6 @@ pub enum LoopError {
     BadRate(f64),
     #[error("inconsistent hand: {0}")]
     BadHand(String),
-}
-
-/// A problem that halts the loop once it has lasted more than `limit` periods in a row.
-#[derive(Debug, Default)]
-struct Persisting {
-    run: u32,
-}
-
-impl Persisting {
-    /// Records one period with (`true`) or without the problem; whether it now halts.
-    fn record(&mut self, present: bool, limit: u32) -> bool {
-        self.run = if present { self.run + 1 } else { 0 };
-        self.run > limit
-    }
 }
 
 struct Io<'t, T: Transport> {
@@ -401,16 +415,6 @@ impl<T: Transport> Io<'_, T> {
             self.counts.heartbeats_out += 1;
         }
         Ok(())
-    }
-}
-
-fn wait_until(deadline: Instant, spin: Duration) {
-    let now = Instant::now();
-    if deadline > now + spin {
-        std::thread::sleep(deadline - now - spin);
-    }
-    while Instant::now() < deadline {
-        std::hint::spin_loop();
     }
 }
 
@@ -507,7 +511,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
     config: &LoopConfig,
     stop: &AtomicBool,
 ) -> Result<LoopReport, LoopError> {
-    if !(config.rate_hz.is_finite() && config.rate_hz >= MIN_RATE_HZ) {
+    if !crate::pacing::valid_rate(config.rate_hz) {
         return Err(LoopError::BadRate(config.rate_hz));
     }
     let hand = &config.hand;
@@ -519,7 +523,6 @@ pub fn run<T: Transport, P: PolicyRunner>(
             hand.num_fingers()
         )));
     }
-    let period = Duration::from_secs_f64(1.0 / config.rate_hz);
     let check = Plausibility {
         limits: hand.limits.clone(),
         margin_rad: config.plausibility_margin_rad,
@@ -540,34 +543,18 @@ pub fn run<T: Transport, P: PolicyRunner>(
     let mut action = vec![0.0; hand.num_joints()];
     let limit = config.watchdog_periods.max(1);
 
-    let (mut wake_jitter, mut loop_times) = (Vec::new(), Vec::new());
-    let (mut deadline_misses, mut skipped_periods, mut holds, mut policy_errors) = (0, 0, 0, 0);
-    let (mut suspect, mut failing_policy) = (Persisting::default(), Persisting::default());
-    let (mut overload, mut unsent) = (Persisting::default(), Persisting::default());
+    let mut holds = 0;
+    let mut guard = GuardedPolicy::new(limit);
+    let (mut suspect, mut overload, mut unsent) =
+        (Persisting::default(), Persisting::default(), Persisting::default());
     let mut last_positions = io.state.position_times();
-    let start = Instant::now();
-    let (mut period_index, mut steps): (u64, u64) = (0, 0);
+    let limits = RunLimits { stop, duration: config.duration, max_steps: config.max_steps };
+    let mut pacer = Pacer::start(config.rate_hz, config.spin);
     let (stop_reason, stop_detail) = loop {
-        let mut deadline = start + period.mul_f64(period_index as f64);
-        wait_until(deadline, config.spin);
-        let woke = Instant::now();
-        let behind = (woke.saturating_duration_since(deadline).as_secs_f64() / period.as_secs_f64()) as u64;
-        if behind > 0 {
-            period_index += behind;
-            skipped_periods += behind;
-            deadline_misses += behind;
-            deadline = start + period.mul_f64(period_index as f64);
-        }
-        wake_jitter.push(woke.saturating_duration_since(deadline));
-
-        if stop.load(Ordering::Relaxed) {
-            break (StopReason::StopRequested, String::new());
-        }
-        if config.duration.is_some_and(|d| woke.saturating_duration_since(start) >= d) {
-            break (StopReason::DurationReached, String::new());
-        }
-        if config.max_steps.is_some_and(|n| steps >= n) {
-            break (StopReason::StepsReached, String::new());
+        let tick = pacer.wait();
+        let woke = tick.woke;
+        if let Some(end) = pacer.ends(&tick, &limits) {
+            break (end, String::new());
         }
         let flooded = io.drain(config.rx_budget)?;
         if flooded {
@@ -598,7 +585,7 @@ pub fn run<T: Transport, P: PolicyRunner>(
         }
         // From the second step on: the first drains what start-up's queries left queued.
         let positions = io.state.position_times();
-        if steps > 0 {
+        if pacer.steps > 0 {
             io.counts.lost_frames +=
                 positions.iter().zip(&last_positions).filter(|(now, before)| now == before).count() as u64;
         }
@@ -609,22 +596,13 @@ pub fn run<T: Transport, P: PolicyRunner>(
         } else {
             let q = io.state.q_rad().unwrap_or_else(|| q_start.clone());
             let obs = observer.observe(&q, safety.last_safe_rad(), &io.state.contacts());
-            let acted = policy.act(&obs, &mut action);
-            let failed = acted.is_err() || !action.iter().all(|v| v.is_finite());
-            if failed {
-                policy_errors += 1;
-                holds += 1;
-            }
-            if failing_policy.record(failed, limit) {
-                let detail = match acted {
-                    Err(e) => format!("the policy failed for {limit} periods: {e}"),
-                    Ok(()) => format!("the policy's action was not finite for {limit} periods"),
-                };
-                break (StopReason::PolicyFailure, detail);
-            }
-            if failed {
-                // A failed action goes to the filter as NaN: it holds the last safe targets.
-                action.fill(f32::NAN);
+            // A failed action goes to the filter as NaN: it holds the last safe targets.
+            match guard.act(policy, &obs, &mut action, "periods") {
+                Ok(failed) => holds += u64::from(failed),
+                Err(detail) => {
+                    holds += 1;
+                    break (StopReason::PolicyFailure, detail);
+                }
             }
             safety.apply_delta(&action);
         }
@@ -636,16 +614,10 @@ pub fn run<T: Transport, P: PolicyRunner>(
                 format!("commands could not be sent for {limit} periods (transmit queue full)"),
             );
         }
-        steps += 1;
-
-        let done = Instant::now();
-        loop_times.push(done - woke);
-        if done > deadline + period {
-            deadline_misses += 1;
-        }
-        period_index += 1;
+        pacer.step_done(&tick);
     };
-    let elapsed = start.elapsed();
+    let pace = pacer.figures();
+    let period = pacer.period();
     let final_targets_rad = safety.last_safe_rad().to_vec();
 
     // Halt: hold the last safe targets (motors on, so the grasp does not drop), then disable.
@@ -663,34 +635,12 @@ pub fn run<T: Transport, P: PolicyRunner>(
     let bus = io.transport.bus_counts();
     io.counts.frames_in = bus.frames_in;
     io.counts.frames_out = bus.frames_out;
-    Ok(LoopReport {
-        stop_reason,
-        stop_detail,
-        steps,
-        achieved_rate_hz: if elapsed.is_zero() { 0.0 } else { steps as f64 / elapsed.as_secs_f64() },
-        wake_jitter: Percentiles::of(&mut wake_jitter),
-        loop_time: Percentiles::of(&mut loop_times),
-        deadline_misses,
-        skipped_periods,
-        link: io.counts,
-        holds,
-        policy_errors,
-        safety: safety.counts,
-        final_targets_rad,
-    })
+    Ok(LoopReport::new(stop_reason, stop_detail, pace, io.counts, holds, guard.errors, &safety))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_problem_halts_only_once_it_outlasts_the_limit() {
-        let mut p = Persisting::default();
-        assert!(!p.record(true, 2) && !p.record(true, 2));
-        assert!(!p.record(false, 2), "a good period resets the count");
-        assert!(!p.record(true, 2) && !p.record(true, 2) && p.record(true, 2));
-    }
 
     #[test]
     fn every_safety_halt_exits_with_a_status_of_its_own_and_a_normal_end_with_0() {

@@ -42,6 +42,8 @@ pub mod heartbeat;
 #[cfg(feature = "std")]
 pub mod node_supervisor;
 #[cfg(feature = "std")]
+pub mod pacing;
+#[cfg(feature = "std")]
 pub mod policy_runner;
 #[cfg(feature = "std")]
 pub mod protocol_hand;

@@ -2,10 +2,12 @@
 //! will drive before its weights are loaded, and fed the observation it was trained on.
 //!
 //! Every path that runs a policy file (`run` over CAN or against the simulator, vge15 or the
-//! Allegro, and `bench`) reads it through [`check_policy`]: the file must be for this hand
-//! ([`check_task_record`]), its observation set must be one the hand can give over this link
-//! (a hand without fingertip sensing runs `proprio` policies only), and its sizes, observation
-//! slices and action names must be the hand's ([`vge_sim::check_policy_interface`]).
+//! Allegro, and `bench`) reads it through [`check_policy`], with the checks `vge eval` makes:
+//! the file must be for this hand and this description of it
+//! (`vge_sim::policy_interface::check_task`), its observation set (read from its slices,
+//! `vge_sim::ObservationSet::of_layout`) must be one the hand can give over this link (a hand
+//! without fingertip sensing runs `proprio` policies only), and its sizes, observation slices
+//! and action names must be the hand's ([`vge_sim::check_policy_interface`]).
 
 use thiserror::Error;
 use vge_hand::Hand;
@@ -33,57 +35,6 @@ pub enum LoadError {
     OtherHand(String),
 }
 
-/// The slices of an observation that need fingertip sensing (`vge_sim::observation`'s full set).
-const CONTACT_SLICES: [&str; 3] = ["contact_position_m", "contact_normal", "contact_force_n"];
-
-/// Whether the policy file is for `hand`: the one place the bridge compares the hand a policy
-/// was trained for with the hand it drives. The file's task record names the hand and the
-/// hash of its description (a file without one is for vge's own hand,
-/// [`vge_runtime::policy::UNRECORDED_HAND`]); both must be this hand's, and the policy's
-/// actions must be the hand's joints in its order.
-pub fn check_task_record(info: &PolicyInfo<'_>, hand: &Hand) -> Result<(), String> {
-    let refuse = |why: String| format!("not a policy for the hand {}: {why}", hand.name());
-    let (name, sha256) = match &info.task {
-        Some(task) => (task.hand, Some(task.hand_sha256)),
-        None => (vge_runtime::policy::UNRECORDED_HAND, None),
-    };
-    if name != hand.name() {
-        let unrecorded = if info.task.is_none() { " (a file without a task record is its)" } else { "" };
-        return Err(refuse(format!("it was trained for the hand {name}{unrecorded}")));
-    }
-    if let Some(sha256) = sha256
-        && *sha256 != hand.description_sha256()
-    {
-        let hex = |b: &[u8; 32]| b.iter().map(|x| format!("{x:02x}")).collect::<String>();
-        return Err(refuse(format!(
-            "it was trained on another description of it (sha256 {}, this one's {}): its joints, gains \
-             or geometry may differ",
-            hex(sha256),
-            hex(&hand.description_sha256())
-        )));
-    }
-    vge_sim::action::check_action_names(hand, info.action_names.iter()).map_err(refuse)
-}
-
-/// The observation set a policy file observes: its task record's, else read from its slices:
-/// `full` where it has a fingertip contact slice, else `proprio` with as many past steps as
-/// its `q_rad_past` slice holds (0 without one). A record or layout that is neither is left
-/// for [`vge_sim::check_policy_interface`] to refuse, naming the difference.
-#[must_use]
-pub fn observation_set_of(info: &PolicyInfo<'_>, num_joints: usize) -> ObservationSet {
-    if let Some(set) = info.task.as_ref().and_then(|t| ObservationSet::parse(t.observation_set).ok()) {
-        return set;
-    }
-    if info.obs_layout.iter().any(|s| CONTACT_SLICES.contains(&s.name)) {
-        return ObservationSet::Full;
-    }
-    let history = info
-        .obs_layout
-        .get("q_rad_past")
-        .map_or(0, |s| s.end.saturating_sub(s.start).div_ceil(num_joints.max(1)));
-    ObservationSet::Proprio { history }
-}
-
 /// What a checked policy is fed: its observation set and that set's layout on the hand.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PolicyFeed {
@@ -95,8 +46,11 @@ pub struct PolicyFeed {
 /// sensing or without (`tip_sensing`), before any weight is loaded: the observation the bridge
 /// will feed it, or why it cannot drive this hand.
 pub fn check_policy(info: &PolicyInfo<'_>, hand: &Hand, tip_sensing: bool) -> Result<PolicyFeed, String> {
-    check_task_record(info, hand)?;
-    let set = observation_set_of(info, hand.num_joints());
+    // The hand first: its name says more than a layout that does not fit it.
+    vge_sim::policy_interface::check_task(info, hand)?;
+    let slices: Vec<(&str, usize, usize)> =
+        info.obs_layout.iter().map(|s| (s.name, s.start, s.end)).collect();
+    let set = ObservationSet::of_layout(&slices, hand.num_joints(), hand.num_fingers())?;
     let layout = ObservationLayout::new(set, hand.num_joints(), hand.num_fingers());
     if layout.needs_tip_sensing() && !tip_sensing {
         return Err(format!(

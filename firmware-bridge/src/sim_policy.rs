@@ -8,20 +8,21 @@
 //! (noise included), runs the policy, passes its action through the same [`SafetyFilter`]
 //! (largest step, joint ranges, a non-finite action holds), and steps the env with the change
 //! of the safe targets. A policy that fails `watchdog_periods` steps in a row halts it
-//! (policy_failure). The object's fate is the env's own accounting ([`vge_sim::EpisodeTracker`]).
+//! (policy_failure). The pace, the end of a run and the policy's guard are the control
+//! loop's ([`crate::pacing`]). The object's fate is the env's own accounting ([`vge_sim::EpisodeTracker`]).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
 use thiserror::Error;
 use vge_sim::observation::ObservationSet;
 use vge_sim::{Env, SimError};
 
 use crate::control_loop::{LinkCounts, LoopReport, MIN_RATE_HZ, StopReason};
+use crate::pacing::{GuardedPolicy, Pacer, RunLimits};
 use crate::policy_runner::{Observer, PolicyRunner};
 use crate::report::SimHandSummary;
 use crate::safety::SafetyFilter;
-use crate::stats::Percentiles;
 
 #[derive(Debug, Error)]
 pub enum SimPolicyError {
@@ -60,7 +61,7 @@ pub fn run<P: PolicyRunner>(
     config: &SimPolicyConfig,
     stop: &AtomicBool,
 ) -> Result<(LoopReport, SimHandSummary), SimPolicyError> {
-    if !(config.rate_hz.is_finite() && config.rate_hz >= MIN_RATE_HZ) {
+    if !crate::pacing::valid_rate(config.rate_hz) {
         return Err(SimPolicyError::BadRate(config.rate_hz));
     }
     let layout = env.config().observation_layout();
@@ -76,36 +77,15 @@ pub fn run<P: PolicyRunner>(
     let mut tracker = env.episode_tracker()?;
     let mut observer = Observer::new(config.observation);
     let mut action = vec![0.0; num_joints];
-    let limit = config.watchdog_periods.max(1);
-    let period = Duration::from_secs_f64(1.0 / config.rate_hz);
-    let (mut wake_jitter, mut loop_times) = (Vec::new(), Vec::new());
-    let (mut steps, mut period_index, mut holds, mut policy_errors) = (0u64, 0u64, 0u64, 0u64);
-    let (mut deadline_misses, mut skipped_periods, mut failing) = (0u64, 0u64, 0u32);
+    let mut guard = GuardedPolicy::new(config.watchdog_periods);
+    let mut holds = 0u64;
     let (mut terminated, mut dropped) = (false, false);
-    let start = Instant::now();
+    let limits = RunLimits { stop, duration: config.duration, max_steps: config.max_steps };
+    let mut pacer = Pacer::start(config.rate_hz, Duration::ZERO);
     let (stop_reason, stop_detail) = loop {
-        let mut deadline = start + period.mul_f64(period_index as f64);
-        let now = Instant::now();
-        if deadline > now {
-            std::thread::sleep(deadline - now);
-        }
-        let woke = Instant::now();
-        let behind = (woke.saturating_duration_since(deadline).as_secs_f64() / period.as_secs_f64()) as u64;
-        if behind > 0 {
-            period_index += behind;
-            skipped_periods += behind;
-            deadline_misses += behind;
-            deadline = start + period.mul_f64(period_index as f64);
-        }
-        wake_jitter.push(woke.saturating_duration_since(deadline));
-        if stop.load(Ordering::Relaxed) {
-            break (StopReason::StopRequested, String::new());
-        }
-        if config.duration.is_some_and(|d| woke.saturating_duration_since(start) >= d) {
-            break (StopReason::DurationReached, String::new());
-        }
-        if config.max_steps.is_some_and(|n| steps >= n) {
-            break (StopReason::StepsReached, String::new());
+        let tick = pacer.wait();
+        if let Some(end) = pacer.ends(&tick, &limits) {
+            break (end, String::new());
         }
         // The env's observation is the full one, noise included; the proprioceptive one is
         // built from its joint angles and targets as the env's readings.
@@ -115,20 +95,13 @@ pub fn run<P: PolicyRunner>(
             ObservationSet::Full => obs.clone(),
             ObservationSet::Proprio { .. } => observer.observe(&q, &targets, &[]),
         };
-        let acted = policy.act(&observed, &mut action);
-        let failed = acted.is_err() || !action.iter().all(|v| v.is_finite());
-        failing = if failed { failing + 1 } else { 0 };
-        if failed {
-            policy_errors += 1;
-            holds += 1;
-            action.fill(f32::NAN);
-        }
-        if failing > limit {
-            let detail = match acted {
-                Err(e) => format!("the policy failed for {limit} steps: {e}"),
-                Ok(()) => format!("the policy's action was not finite for {limit} steps"),
-            };
-            break (StopReason::PolicyFailure, detail);
+        // A failed action goes to the filter as NaN: it holds the last safe targets.
+        match guard.act(policy, &observed, &mut action, "steps") {
+            Ok(failed) => holds += u64::from(failed),
+            Err(detail) => {
+                holds += 1;
+                break (StopReason::PolicyFailure, detail);
+            }
         }
         // The env moves its targets by the change from the ones it holds to the safe ones.
         let change: Vec<f32> = safety.apply_delta(&action).iter().zip(&targets).map(|(t, b)| t - b).collect();
@@ -137,15 +110,8 @@ pub fn run<P: PolicyRunner>(
         terminated |= result.terminated;
         dropped |= result.info.dropped;
         obs = result.obs;
-        steps += 1;
-        let done = Instant::now();
-        loop_times.push(done - woke);
-        if done > deadline + period {
-            deadline_misses += 1;
-        }
-        period_index += 1;
+        pacer.step_done(&tick);
     };
-    let elapsed = start.elapsed();
     let outcome = tracker.outcome(terminated);
     let summary = SimHandSummary {
         steps: outcome.length as u64,
@@ -156,20 +122,9 @@ pub fn run<P: PolicyRunner>(
         mean_tip_contacts: outcome.mean_contacts as f32,
         contact_switches: outcome.contact_switches,
     };
-    let report = LoopReport {
-        stop_reason,
-        stop_detail,
-        steps,
-        achieved_rate_hz: if elapsed.is_zero() { 0.0 } else { steps as f64 / elapsed.as_secs_f64() },
-        wake_jitter: Percentiles::of(&mut wake_jitter),
-        loop_time: Percentiles::of(&mut loop_times),
-        deadline_misses,
-        skipped_periods,
-        link: LinkCounts::default(),
-        holds,
-        policy_errors,
-        safety: safety.counts,
-        final_targets_rad: safety.last_safe_rad().to_vec(),
-    };
+    // No bus: the link counts are zero.
+    let pace = pacer.figures();
+    let report =
+        LoopReport::new(stop_reason, stop_detail, pace, LinkCounts::default(), holds, guard.errors, &safety);
     Ok((report, summary))
 }

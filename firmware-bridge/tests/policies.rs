@@ -85,6 +85,41 @@ fn a_full_observation_policy_is_refused_on_the_allegros_can_saying_it_has_no_fin
     assert!(stderr(&out).contains("opening CAN interface vcan-absent"), "{}", stderr(&out));
 }
 
+/// The Allegro's untrained `proprio:2` actor as `vge export --init` wrote it (the fixture the
+/// HIL test runs).
+const ALLEGRO_PROPRIO_FIXTURE: &str =
+    concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/policies/allegro-proprio2-init.vgep");
+
+/// What a `proprio` policy file of vge's exporter asks for as input: the joint angles and
+/// targets now and at its past steps, no fingertip contact, so the bridge feeds it over the
+/// Allegro's CAN (no tip sensing); the same hand's `full` file is refused there.
+#[test]
+fn an_allegro_proprio_policy_file_has_no_contact_inputs_and_runs_without_tip_sensing() {
+    let allegro = hand("allegro");
+    let bytes = std::fs::read(ALLEGRO_PROPRIO_FIXTURE).expect("the fixture policy");
+    let info = vge_runtime::policy::inspect(&bytes).expect("a valid policy file");
+    let names: Vec<&str> = info.obs_layout.iter().map(|s| s.name).collect();
+    assert_eq!(names, ["q_rad", "q_target_rad", "q_rad_past", "q_target_rad_past"]);
+    assert!(!names.iter().any(|n| n.starts_with("contact")), "{names:?}");
+    let joints = allegro.num_joints();
+    assert_eq!(info.obs_dim, 2 * joints + 2 * 2 * joints, "joints and targets, now and 2 steps back");
+    assert_eq!(info.task.as_ref().map(|t| t.observation_set), Some("proprio:2"));
+    let feed =
+        vge_bridge::policy_runner::check_policy(&info, &allegro, false).expect("runs without tip sensing");
+    assert_eq!(feed.set, PROPRIO_2);
+    assert!(!feed.layout.needs_tip_sensing());
+    // The full observation of the same hand has the contact slices, and is refused without.
+    let full_bytes = policy_files::policy_bytes(&allegro, ObservationSet::Full, 1);
+    let full = vge_runtime::policy::inspect(&full_bytes).expect("a valid policy file");
+    assert!(full.obs_layout.iter().any(|s| s.name.starts_with("contact")));
+    let err = vge_bridge::policy_runner::check_policy(&full, &allegro, false).expect_err("no tip sensing");
+    assert!(err.contains("has no fingertip sensors"), "{err}");
+    assert!(
+        vge_bridge::policy_runner::check_policy(&full, &allegro, true).is_ok(),
+        "the simulation senses tips"
+    );
+}
+
 #[test]
 fn a_policy_for_one_hand_is_refused_on_the_other_naming_the_hand() {
     let dir = Dir::new("other-hand");
@@ -109,10 +144,7 @@ fn a_policy_for_one_hand_is_refused_on_the_other_naming_the_hand() {
         let out = bridge(&args);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
-        assert!(
-            err.contains(&format!("not a policy for the hand {name}: it was trained for the hand {other}")),
-            "{args:?}: {err}"
-        );
+        assert!(err.contains(&format!("the policy drives the hand {other}, not {name}")), "{args:?}: {err}");
         assert!(!err.contains("opening CAN interface"), "{args:?}: refused before the bus: {err}");
     }
 }
