@@ -41,6 +41,7 @@ use vge_sim::observation::ObservationSet;
 use crate::allegro_hand::AllegroHand;
 use crate::allegro_link::{AllegroLink, AllegroReceived};
 use crate::control_loop::{ErrorFrameCounts, StopReason};
+use crate::pacing::Persisting;
 use crate::policy_runner::{Observer, PolicyRunner};
 use crate::protocol::allegro::{
     AllegroConfig, AllegroFrame, CONTROL_PERIOD_MS, Command, Finger, Info, JOINTS_PER_FINGER, NUM_JOINTS,
@@ -56,6 +57,36 @@ pub struct JointState {
     pub q_rad: [f32; NUM_JOINTS],
     /// Finite differences of successive position sets, smoothed.
     pub dq_radps: [f32; NUM_JOINTS],
+}
+
+impl JointState {
+    /// At rest at `q_rad`.
+    #[must_use]
+    pub fn at_rest(q_rad: [f32; NUM_JOINTS]) -> Self {
+        Self { q_rad, dq_radps: [0.0; NUM_JOINTS] }
+    }
+
+    /// Takes in a trusted position set read `dt_s` after the last trusted one: the velocity
+    /// estimate moves towards the finite difference by `smoothing` (0, 1].
+    pub fn update(&mut self, q_rad: [f32; NUM_JOINTS], dt_s: f32, smoothing: f32) {
+        for ((dq, q_new), q_old) in self.dq_radps.iter_mut().zip(&q_rad).zip(&self.q_rad) {
+            *dq = smoothing * (q_new - q_old) / dt_s + (1.0 - smoothing) * *dq;
+        }
+        self.q_rad = q_rad;
+    }
+}
+
+/// The loop's PD law on every joint: `tau = kp (target - q) - kv dq` (N m, before the clip).
+#[must_use]
+pub fn pd_torques_nm(
+    config: &AllegroLoopConfig,
+    targets_rad: &[f32; NUM_JOINTS],
+    state: &JointState,
+) -> [f32; NUM_JOINTS] {
+    std::array::from_fn(|k| {
+        config.kp_nm_per_rad[k] * (targets_rad[k] - state.q_rad[k])
+            - config.kv_nms_per_rad[k] * state.dq_radps[k]
+    })
 }
 
 /// What sets the PD targets: a policy ([`PolicyTargets`]), or a fixed pose.
@@ -576,17 +607,6 @@ fn status_text(s: Status) -> String {
     format!("status {:#04x} ({})", s.bits, faults.join(", "))
 }
 
-/// A problem that halts once it has lasted more than `limit` times in a row.
-#[derive(Debug, Default)]
-struct Persisting(u32);
-
-impl Persisting {
-    fn record(&mut self, present: bool, limit: u32) -> bool {
-        self.0 = if present { self.0 + 1 } else { 0 };
-        self.0 > limit
-    }
-}
-
 /// Why a complete position set is not trusted, if it is not.
 fn implausible(
     q: &[f32; NUM_JOINTS],
@@ -625,7 +645,7 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
     let target_period = Duration::from_secs_f64(1.0 / config.target_rate_hz);
     let end = config.duration.and_then(|d| started.at.checked_add(d));
     let mut filter = SafetyFilter::new(config.max_delta_rad, config.limits.to_vec(), &started.q_rad);
-    let mut state = JointState { q_rad: started.q_rad, dq_radps: [0.0; NUM_JOINTS] };
+    let mut state = JointState::at_rest(started.q_rad);
     let mut targets = started.q_rad;
     targets.copy_from_slice(filter.last_safe_rad());
     let mut cycle = PositionCycle::new();
@@ -767,17 +787,10 @@ fn pd_loop<L: AllegroLink, S: TargetSource>(
             continue;
         }
         implausible_run.record(false, config.persist_limit);
-        let a = config.velocity_smoothing;
-        let dt_s = period_s * sets_since_trusted as f32;
-        for ((dq_est, q_new), q_old) in state.dq_radps.iter_mut().zip(&q).zip(&state.q_rad) {
-            *dq_est = a * (q_new - q_old) / dt_s + (1.0 - a) * *dq_est;
-        }
-        state.q_rad = q;
+        state.update(q, period_s * sets_since_trusted as f32, config.velocity_smoothing);
         sets_since_trusted = 0;
 
-        let tau: [f32; NUM_JOINTS] = std::array::from_fn(|k| {
-            config.kp_nm_per_rad[k] * (targets[k] - q[k]) - config.kv_nms_per_rad[k] * state.dq_radps[k]
-        });
+        let tau = pd_torques_nm(config, &targets, &state);
         for finger in Finger::ALL {
             for joint in 0..JOINTS_PER_FINGER {
                 let t = tau[finger.joint_index(joint)].abs();

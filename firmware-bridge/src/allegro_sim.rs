@@ -5,10 +5,14 @@
 //! sits on a stand (held fixed) until the hand grips it: once the servos are on and at least
 //! three fingertips have touched the cube for [`SimAllegroConfig::grip_ms`], the stand is
 //! taken away. From then on the summary says how well the cube is held: how far it fell, moved
-//! and turned since, measured when the servos go off (a limp hand drops it) or at the end.
+//! and turned since, measured when the servos go off (a limp hand drops it) or at the end;
+//! and, as the env accounts for an episode, how far it turned about z (summed at the env's
+//! 20 Hz), the fingertips' contact switches (`vge_sim::gait`) and whether it fell by the env's
+//! drop height.
 
 use thiserror::Error;
-use vge_sim::{HandWorld, JointServo, ObjectConfig, ObjectShape, PhysicsConfig};
+use vge_sim::gait::ContactSwitches;
+use vge_sim::{HandWorld, JointServo, ObjectConfig, ObjectShape, ObjectState, PhysicsConfig};
 
 use crate::allegro_emulator::AllegroPlant;
 use crate::protocol::allegro::NUM_JOINTS;
@@ -28,6 +32,11 @@ pub struct SimAllegroConfig {
     pub grip_ms: u64,
     /// The cube (the size the Allegro's start grasp is laid out for).
     pub object: ObjectConfig,
+    /// How often the turn about z and the contacts are sampled (ms): the env's control period,
+    /// so that contact switches count as the env counts them.
+    pub sample_ms: u64,
+    /// A cube sunk this far below where it was released is dropped (m): the env's drop height.
+    pub drop_height_m: f32,
 }
 
 impl Default for SimAllegroConfig {
@@ -36,6 +45,8 @@ impl Default for SimAllegroConfig {
             physics_hz: 1000.0,
             grip_ms: 200,
             object: ObjectConfig { shape: ObjectShape::Cube, width_m: 0.065, mass_kg: 0.1, friction: 0.8 },
+            sample_ms: 50,
+            drop_height_m: 0.03,
         }
     }
 }
@@ -53,6 +64,22 @@ pub struct HoldSummary {
     pub turned_rad: f32,
     /// Fingertips touching it at the moment.
     pub tips_touching: usize,
+    /// Its turn about z, summed over the samples (rad, the reward's sense).
+    pub rotation_z_rad: f32,
+    /// Fingertips that let go and touched again ([`ContactSwitches`], sampled).
+    pub contact_switches: u32,
+    /// Whether it sank by the drop height at some sample.
+    pub dropped: bool,
+}
+
+/// What the samples since the release have gathered.
+#[derive(Debug, Clone)]
+struct Episode {
+    /// The cube at the last sample.
+    last: ObjectState,
+    rotation_z_rad: f32,
+    switches: ContactSwitches,
+    dropped: bool,
 }
 
 /// The simulated Allegro and its cube.
@@ -65,6 +92,7 @@ pub struct SimAllegro {
     sim_ms: u64,
     /// When the stand went (ms) and the cube's position and rotation then.
     released: Option<(u64, [f32; 3], [f32; 4])>,
+    episode: Option<Episode>,
     /// The hold when the servos first went off after the release.
     at_servo_off: Option<HoldSummary>,
     was_on: bool,
@@ -101,6 +129,7 @@ impl SimAllegro {
             grip_ms: 0,
             sim_ms: 0,
             released: None,
+            episode: None,
             at_servo_off: None,
             was_on: false,
             q_rad,
@@ -122,6 +151,24 @@ impl SimAllegro {
         self.world.fingertip_contacts().iter().filter(|c| c.is_some()).count()
     }
 
+    fn touching(&self) -> Vec<bool> {
+        self.world.fingertip_contacts().iter().map(Option::is_some).collect()
+    }
+
+    /// One sample of the episode: the turn since the last, the contacts, the drop.
+    fn sample(&mut self) {
+        let now = self.world.object_state();
+        let touching = self.touching();
+        let fell_m = self.released.map_or(0.0, |(_, p0, _)| p0[2] - now.pose.translation.vector.z);
+        let drop_height_m = self.config.drop_height_m;
+        if let Some(e) = &mut self.episode {
+            e.rotation_z_rad += vge_sim::rotation_about_z_rad(&e.last.pose.rotation, &now.pose.rotation);
+            e.last = now;
+            e.switches.update(&touching);
+            e.dropped |= fell_m >= drop_height_m;
+        }
+    }
+
     fn hold_now(&self) -> Option<HoldSummary> {
         let (at_ms, p0, r0) = self.released?;
         let pose = self.world.object_state().pose;
@@ -130,12 +177,16 @@ impl SimAllegro {
         let q = pose.rotation.quaternion().coords;
         // The angle between two unit quaternions: 2 acos |<a, b>|.
         let dot = (q.x * r0[0] + q.y * r0[1] + q.z * r0[2] + q.w * r0[3]).abs().min(1.0);
+        let episode = self.episode.as_ref();
         Some(HoldSummary {
             held_s: (self.sim_ms - at_ms) as f64 / 1000.0,
             fell_m: p0[2] - p.z,
             moved_m: moved,
             turned_rad: 2.0 * dot.acos(),
             tips_touching: self.tips_touching(),
+            rotation_z_rad: episode.map_or(0.0, |e| e.rotation_z_rad),
+            contact_switches: episode.map_or(0, |e| e.switches.count),
+            dropped: episode.is_some_and(|e| e.dropped),
         })
     }
 
@@ -180,7 +231,15 @@ impl AllegroPlant for SimAllegro {
                     let p = pose.translation.vector;
                     let r = pose.rotation.quaternion().coords;
                     self.released = Some((self.sim_ms, [p.x, p.y, p.z], [r.x, r.y, r.z, r.w]));
+                    self.episode = Some(Episode {
+                        last: self.world.object_state(),
+                        rotation_z_rad: 0.0,
+                        switches: ContactSwitches::new(&self.touching()),
+                        dropped: false,
+                    });
                 }
+            } else if self.config.sample_ms > 0 && self.sim_ms.is_multiple_of(self.config.sample_ms) {
+                self.sample();
             }
         }
         self.q_rad = read_q(&self.world);

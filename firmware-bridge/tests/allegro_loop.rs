@@ -334,6 +334,53 @@ fn the_simulated_allegro_holds_its_cube_under_the_pd_loop() {
     assert!(hold.fell_m < 0.01 && hold.tips_touching >= 3, "{hold:?}");
 }
 
+/// The loop's PD law (its gains, velocity estimate and torques) holding `targets` on the
+/// simulated Allegro for `seconds` of the hand's time, in lockstep at the hand's 3 ms period:
+/// how the cube fared. Lockstep, not the real-time loop, so that what is measured is the law
+/// and its targets, whatever the host's load (the real-time loop holds it in the HIL test).
+#[cfg(feature = "sim")]
+fn hold_in_lockstep(
+    targets: [f32; NUM_JOINTS],
+    kv_nms_per_rad: Option<f32>,
+    seconds: f32,
+) -> vge_bridge::allegro_sim::HoldSummary {
+    use vge_bridge::allegro_loop::{JointState, PERIOD, pd_torques_nm};
+    use vge_bridge::allegro_sim::{SimAllegro, SimAllegroConfig};
+    let hand = AllegroHand::shipped().expect("allegro");
+    let mut config = AllegroLoopConfig::new(&hand);
+    if let Some(kv) = kv_nms_per_rad {
+        config.kv_nms_per_rad = [kv; NUM_JOINTS];
+    }
+    let mut plant = SimAllegro::new(SimAllegroConfig::default()).expect("the simulated Allegro");
+    let mut state = JointState::at_rest(plant.q_rad());
+    let period_ms = PERIOD.as_millis() as u32;
+    for _ in 0..(seconds / PERIOD.as_secs_f32()).round() as usize {
+        let tau = pd_torques_nm(&config, &targets, &state);
+        plant.step(true, &tau, period_ms);
+        state.update(plant.q_rad(), PERIOD.as_secs_f32(), config.velocity_smoothing);
+    }
+    assert!(plant.is_finite(), "the simulated hand blew up");
+    plant.hold().expect("the hand gripped the cube and the stand went")
+}
+
+/// `--hold`'s targets, the start grasp pressed as the simulator presses it at a reset, hold the
+/// cube under the loop's PD law (the simulator's servo gains) where it was released; the
+/// flexion squeeze of a hand without a keyframe pushes it towards the thumb.
+#[cfg(feature = "sim")]
+#[test]
+fn the_hold_presses_the_grasp_as_the_simulator_does_and_keeps_the_cube_where_it_was() {
+    let pressed = AllegroHand::pressed_grasp_rad(vge_sim::HandOrientation::PalmDown).expect("press");
+    let hand = AllegroHand::shipped().expect("allegro");
+    let press = hold_in_lockstep(pressed, None, 3.0);
+    let squeeze = hold_in_lockstep(hand.squeezed_grasp_rad(DEFAULT_SQUEEZE_RAD), None, 3.0);
+    eprintln!("press:   {press:?}\nsqueeze: {squeeze:?}");
+    for (name, h) in [("press", &press), ("squeeze", &squeeze)] {
+        assert!(h.held_s > 2.5 && !h.dropped && h.tips_touching >= 3, "{name}: {h:?}");
+    }
+    assert!(press.moved_m < 0.003 && press.turned_rad < 0.05, "press: {press:?}");
+    assert!(squeeze.moved_m > 2.0 * press.moved_m, "the squeeze pushes the cube: {squeeze:?} vs {press:?}");
+}
+
 /// Asks every joint to move by `delta_rad` at each update, and remembers what it observed.
 struct Push {
     delta_rad: f32,

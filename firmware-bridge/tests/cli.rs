@@ -70,6 +70,8 @@ fn run_and_emulate_for_the_allegro_refuse_what_does_not_apply_saying_why() {
         (&["run", "--hand", "allegro", "--hold", "--fd"], "the Allegro speaks classic CAN"),
         (&["run", "--hand", "allegro", "--hold", "--record", "x.jsonl"], "the Allegro's is not recorded"),
         (&["run", "--hand", "allegro", "--hold", "--squeeze-rad", "5"], "--squeeze-rad must be"),
+        (&["run", "--hand", "allegro", "--hold", "--kv-nms-per-rad=-1"], "--kv-nms-per-rad must be"),
+        (&["run", "--policy", "/nonexistent.vgep", "--kv-nms-per-rad", "0.1"], "sets the Allegro's PD loop"),
         (&["run", "--hold"], "--hold holds the Allegro's grasp (--hand allegro)"),
         (&["emulate", "--hand", "allegro", "--model", "lag"], "the Allegro is torque-driven"),
         (&["emulate", "--hand", "allegro", "--fd"], "the Allegro speaks classic CAN"),

@@ -22,6 +22,7 @@ use vge_bridge::allegro_loop::{
 };
 #[cfg(feature = "sim")]
 use vge_bridge::allegro_sim::{SimAllegro, SimAllegroConfig};
+use vge_bridge::protocol::allegro::NUM_JOINTS;
 #[cfg(feature = "sim")]
 use vge_bridge::transport::BusCounts;
 
@@ -37,7 +38,11 @@ pub struct RunSettings {
     pub iface: String,
     /// The policy that sets the targets; `None`: --hold.
     pub policy: Option<PathBuf>,
-    pub squeeze_rad: f32,
+    /// --hold's flexion squeeze by angle; `None`: the start grasp pressed as the simulator
+    /// presses it.
+    pub squeeze_rad: Option<f32>,
+    /// The PD damping on every joint instead of the simulator's (N m s / rad).
+    pub kv_nms_per_rad: Option<f32>,
     /// The object and seed of the simulated Allegro's env (--backend sim --policy).
     pub object: ObjectArg,
     pub seed: u64,
@@ -47,8 +52,19 @@ pub struct RunSettings {
 /// The default position timeout and persistence, in 3 ms periods.
 const DEFAULT_WATCHDOG_PERIODS: u32 = 10;
 
-fn loop_config(hand: &AllegroHand, args: &LoopArgs) -> anyhow::Result<AllegroLoopConfig> {
+fn loop_config(
+    hand: &AllegroHand,
+    kv_nms_per_rad: Option<f32>,
+    args: &LoopArgs,
+) -> anyhow::Result<AllegroLoopConfig> {
     let mut config = AllegroLoopConfig::new(hand);
+    if let Some(kv) = kv_nms_per_rad {
+        anyhow::ensure!(
+            kv.is_finite() && kv >= 0.0,
+            "--kv-nms-per-rad must be a finite number >= 0, got {kv}"
+        );
+        config.kv_nms_per_rad = [kv; NUM_JOINTS];
+    }
     if let Some(rate) = args.rate {
         config.target_rate_hz = rate;
     }
@@ -63,17 +79,15 @@ fn loop_config(hand: &AllegroHand, args: &LoopArgs) -> anyhow::Result<AllegroLoo
 
 /// `vge-bridge run --hand allegro`.
 pub fn run(settings: RunSettings) -> anyhow::Result<ExitCode> {
-    let RunSettings { backend, iface, policy, squeeze_rad, object, seed, loop_args } = settings;
+    let RunSettings { backend, iface, policy, squeeze_rad, kv_nms_per_rad, object, seed, loop_args } =
+        settings;
     if let Some(path) = policy {
-        return run_policy(backend, &iface, &path, &object, seed, &loop_args);
+        return run_policy(backend, &iface, &path, &object, seed, kv_nms_per_rad, &loop_args);
     }
-    anyhow::ensure!(
-        squeeze_rad.is_finite() && squeeze_rad.abs() <= 1.0,
-        "--squeeze-rad must be a number of rad within [-1, 1], got {squeeze_rad}"
-    );
     let hand = AllegroHand::shipped()?;
-    let config = loop_config(&hand, &loop_args)?;
-    let mut targets = HoldTargets(hand.squeezed_grasp_rad(squeeze_rad));
+    let config = loop_config(&hand, kv_nms_per_rad, &loop_args)?;
+    let (grasp, held) = hold_targets(&hand, squeeze_rad)?;
+    let mut targets = HoldTargets(held);
     let stop = stop_on_signal()?;
     loop_args.realtime.apply();
     let (report, extra) = match backend {
@@ -85,7 +99,35 @@ pub fn run(settings: RunSettings) -> anyhow::Result<ExitCode> {
     };
     let mut extra = extra;
     extra.push(("mode", json!("hold")));
+    extra.push(("grasp", grasp));
     finish(&report, &extra, loop_args.json)
+}
+
+/// --hold's targets and how they were made: the start grasp pressed as the simulator's env
+/// presses it (`"press"`), or squeezed by `squeeze_rad` on the flexion joints when given.
+fn hold_targets(hand: &AllegroHand, squeeze_rad: Option<f32>) -> anyhow::Result<(Value, [f32; NUM_JOINTS])> {
+    if let Some(squeeze_rad) = squeeze_rad {
+        anyhow::ensure!(
+            squeeze_rad.is_finite() && squeeze_rad.abs() <= 1.0,
+            "--squeeze-rad must be a number of rad within [-1, 1], got {squeeze_rad}"
+        );
+        return Ok((json!(format!("squeeze {squeeze_rad} rad")), hand.squeezed_grasp_rad(squeeze_rad)));
+    }
+    pressed_grasp().map(|targets| (json!("press"), targets))
+}
+
+#[cfg(feature = "sim")]
+fn pressed_grasp() -> anyhow::Result<[f32; NUM_JOINTS]> {
+    Ok(AllegroHand::pressed_grasp_rad(vge_sim::HandOrientation::PalmDown)?)
+}
+
+/// Without the simulator there are no statics to press with: refuses, naming the fallback.
+#[cfg(not(feature = "sim"))]
+fn pressed_grasp() -> anyhow::Result<[f32; NUM_JOINTS]> {
+    Err(super::no_sim(
+        "--hold's press (the start grasp pressed as the simulator's reset presses it; --squeeze-rad R \
+         squeezes the flexion joints by angle instead)",
+    ))
 }
 
 /// The PD loop on `iface` with `targets`: its report and what names the run.
@@ -109,11 +151,17 @@ fn run_policy(
     path: &Path,
     object: &ObjectArg,
     seed: u64,
+    kv_nms_per_rad: Option<f32>,
     loop_args: &LoopArgs,
 ) -> anyhow::Result<ExitCode> {
     if backend == Backend::Sim && !cfg!(feature = "sim") {
         return Err(super::no_sim("--backend sim (the default)"));
     }
+    anyhow::ensure!(
+        backend == Backend::Can || kv_nms_per_rad.is_none(),
+        "--kv-nms-per-rad sets the PD loop over CAN (or --hold's emulated hand); a policy with --backend sim \
+         runs in the simulator's env, whose servos are the hand file's"
+    );
     let description = vge_sim::hands::load("allegro").context("the Allegro's description")?;
     let bytes = read_policy(path)?;
     // The simulated hand senses its fingertips; the Allegro on CAN has no fingertip sensors.
@@ -134,7 +182,7 @@ fn run_policy(
     match backend {
         Backend::Can => {
             let hand = AllegroHand::shipped()?;
-            let mut config = loop_config(&hand, loop_args)?;
+            let mut config = loop_config(&hand, kv_nms_per_rad, loop_args)?;
             config.target_rate_hz = rate_hz;
             // The action is clipped as the env clips it when training; --max-delta-rad is the
             // safety filter's bound on top.
@@ -334,6 +382,9 @@ fn hold_json(plant: &SimAllegro) -> Option<Value> {
             "moved_m": round(f64::from(h.moved_m), 5),
             "turned_rad": round(f64::from(h.turned_rad), 4),
             "tips_touching": h.tips_touching,
+            "rotation_rad": round(f64::from(h.rotation_z_rad), 4),
+            "contact_switches": h.contact_switches,
+            "dropped": h.dropped,
         })
     })
 }

@@ -11,7 +11,6 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Args;
 use serde_json::{Value, json};
-use vge_bridge::allegro_hand::DEFAULT_SQUEEZE_RAD;
 use vge_bridge::control_loop::{self, LoopConfig, LoopReport, PolicyRunner, StopReason};
 use vge_bridge::hand_file;
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
@@ -102,13 +101,23 @@ pub struct RunArgs {
     #[arg(long, value_name = "F.jsonl")]
     record: Option<PathBuf>,
     /// Hold the start grasp instead of running a policy (--hand allegro): the targets are the
-    /// hand description's start grasp, every joint but each finger's first pressed
-    /// --squeeze-rad further, so that the fingertips press into the cube.
+    /// hand description's start grasp pressed as the simulator's env presses it at a reset
+    /// (each fingertip into its face with 5 N per kg of the cube, 0.1 kg, the thumb against the
+    /// others' resultant, the weights carried; palm down), the targets the policies start from
+    /// in training. Needs the `sim` feature (the default build) for the statics.
     #[arg(long, conflicts_with = "policy")]
     hold: bool,
-    /// How far --hold presses the grasp past contact (rad).
-    #[arg(long, default_value_t = DEFAULT_SQUEEZE_RAD)]
-    squeeze_rad: f32,
+    /// --hold squeezes instead: every joint but each finger's first this much further than the
+    /// start grasp (rad; 0.05 as vge squeezes a hand without a keyframe). The thumb's flexion
+    /// then presses mostly upwards and pushes the cube towards the thumb.
+    #[arg(long, requires = "hold")]
+    squeeze_rad: Option<f32>,
+    /// The Allegro's PD damping on every joint (N m s / rad) instead of the simulator's (its
+    /// servo's kv plus the joint's damping: 0.001 for hands/allegro.xml, what the policies are
+    /// trained with). A real hand's geared joints may want more: HORA ran the real Allegro
+    /// with D 0.1 (hands/allegro.xml, "Motor gains").
+    #[arg(long, value_name = "NMS_PER_RAD")]
+    kv_nms_per_rad: Option<f32>,
     #[command(flatten)]
     loop_args: LoopArgs,
 }
@@ -125,6 +134,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         record,
         hold: _,
         squeeze_rad,
+        kv_nms_per_rad,
         loop_args,
     } = args;
     if hand == HandArg::Allegro {
@@ -133,10 +143,22 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             record.is_none(),
             "--record records the simulated vge15 episode; the Allegro's is not recorded yet"
         );
-        let run =
-            super::allegro::RunSettings { backend, iface, policy, squeeze_rad, object, seed, loop_args };
+        let run = super::allegro::RunSettings {
+            backend,
+            iface,
+            policy,
+            squeeze_rad,
+            kv_nms_per_rad,
+            object,
+            seed,
+            loop_args,
+        };
         return super::allegro::run(run);
     }
+    anyhow::ensure!(
+        kv_nms_per_rad.is_none(),
+        "--kv-nms-per-rad sets the Allegro's PD loop (--hand allegro); vge's joint controllers run their own"
+    );
     let Some(policy) = policy else {
         anyhow::bail!("--hold holds the Allegro's grasp (--hand allegro); vge15 runs a --policy");
     };
