@@ -1,0 +1,35 @@
+//! `vge facts`: what a results write-up quotes about a finished, scored run.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+/// Print a finished, scored run's facts as the results write-ups report them
+///
+/// Reads RUN_DIR/score.json (held-out scores), final-eval.json (wall time), metrics.csv
+/// (the critic's mean Q against the discounted return collected, from 100k steps on; the BC
+/// term; the controller's share), eval.csv (the periodic tests), train.log (each training
+/// segment: where it started, its wall time, how it ended) and the lanes' logs (when each
+/// lane started and ended the run, named by its path after results/), and prints one table
+/// row and the numbers a bullet quotes.
+///
+/// Example:
+///   vge facts docs/results/variants/sac-alpha0/table1/rl/seed-6
+#[derive(Debug, Args)]
+#[command(verbatim_doc_comment)]
+pub struct FactsArgs {
+    /// Finished, scored run folders.
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// The folder of the lanes' logs (`vge queue run` writes them).
+    #[arg(long, default_value = "runs/lanes")]
+    lanes: PathBuf,
+}
+
+/// `vge facts`.
+pub fn run(args: FactsArgs) -> anyhow::Result<()> {
+    for run in &args.runs {
+        print!("{}", vge_lab::run_facts::facts(run, &args.lanes)?);
+    }
+    Ok(())
+}

@@ -1,0 +1,71 @@
+//! `vge facts`, which the results write-ups quote, on a committed run folder: its row and
+//! segments are what the run's own files say, and its lane lines come from the lanes' logs.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("workspace root").to_owned()
+}
+
+fn facts(args: &[&str], lanes: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vge"))
+        .arg("facts")
+        .arg("--lanes")
+        .arg(lanes)
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("vge runs")
+}
+
+#[test]
+fn a_committed_run_gives_its_row_its_two_segments_and_its_lanes() {
+    let lanes = common::temp_dir("facts-lanes");
+    let rel = "variants/sac-alpha0/table1/rl/seed-6";
+    std::fs::write(
+        lanes.join("lane-a.log"),
+        format!(
+            "2026-11-20T10:00:00Z start {rel} with vge-abc1234\n2026-11-20T11:00:00Z end {rel} (exit 143)\n\
+             2026-11-20T11:00:01Z start other/seed-0 with vge-abc1234\n"
+        ),
+    )
+    .expect("a lane log");
+    std::fs::write(lanes.join("lane-b.log"), format!("2026-11-21T09:00:00Z end {rel} (exit 0)\n"))
+        .expect("log");
+    let out = facts(&[&format!("docs/results/{rel}")], &lanes);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // score.json: selected (the final policy, 1M) and final on 100 held-out episodes.
+    assert!(text.contains("\n  0.00 (1.00) | 1M | 0.00 (1.00) | 2.57 | 4,000\n"), "{text}");
+    // train.log: stopped checkpointed at a session's end, then resumed to the end.
+    assert!(
+        text.contains(
+            "segments (train.log): 2: from 0, 3,130 s, stopped checkpointed at 820,288; \
+             from 820,288, 914 s, done\n"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("periodic tests (step: success, drops): 100k: 0%, 95%;"), "{text}");
+    assert!(
+        text.contains(
+            "lanes: 2026-11-20T10:00:00Z start (lane-a); 2026-11-20T11:00:00Z end (lane-a); \
+             2026-11-21T09:00:00Z end (lane-b)\n"
+        ),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&lanes);
+}
+
+#[test]
+fn a_folder_without_a_score_is_refused_naming_what_is_missing() {
+    let dir = common::temp_dir("facts-unscored");
+    std::fs::write(dir.join("metrics.csv"), "step\n").expect("write");
+    let out = facts(&[dir.to_str().expect("utf-8 path")], &dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("missing score.json, final-eval.json, eval.csv"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
