@@ -2,6 +2,10 @@
 //!
 //! Both figures step the default task (grasp held, small deterministic pseudo-random
 //! actions, automatic reset on termination or truncation, reset time included).
+//!
+//! The single-world figure is also given per second of the thread's own CPU time (Linux),
+//! which other processes on the same core do not inflate: on a loaded machine the wall-clock
+//! figure measures the machine's load as much as the simulator.
 
 use std::time::Instant;
 
@@ -38,12 +42,20 @@ pub struct SimBench {
     pub threads_used: usize,
     /// Control steps per second, one world on one thread.
     pub control_steps_per_s_single: f64,
+    /// Control steps per second of the thread's CPU time, one world (None where the OS does
+    /// not say: [`thread_cpu_s`]).
+    pub control_steps_per_cpu_s_single: Option<f64>,
     /// Control steps per second summed over all worlds, on `threads_used` threads.
     pub control_steps_per_s_vec: f64,
     /// Physics steps per second, one world.
     pub physics_steps_per_s_single: f64,
-    /// Resets during the single-world run.
+    /// Resets during the single-world run (drops and time limits).
     pub resets_single: usize,
+    /// Drops (terminations) during the single-world run: with `resets_single` and
+    /// `mean_tip_contacts_single`, whether the grasp held, to set beside another simulator's.
+    pub drops_single: usize,
+    /// Fingertips touching the object, averaged over the single-world run's control steps.
+    pub mean_tip_contacts_single: f64,
 }
 
 impl SimBench {
@@ -68,11 +80,15 @@ impl SimBench {
             "bench": "sim",
             "control_steps_per_s_single": self.control_steps_per_s_single,
             "control_steps_per_s_vec": self.control_steps_per_s_vec,
+            "control_steps_per_cpu_s_single": self.control_steps_per_cpu_s_single,
+            "sim_seconds_per_cpu_s": self.control_steps_per_cpu_s_single.map(|c| c / f64::from(e.control_hz)),
             "speedup": self.speedup(),
             "sim_seconds_per_s": self.sim_seconds_per_s(),
             "sim_seconds_per_s_vec": self.control_steps_per_s_vec / f64::from(e.control_hz),
             "physics_steps_per_s_single": self.physics_steps_per_s_single,
             "resets_single": self.resets_single,
+            "drops_single": self.drops_single,
+            "mean_tip_contacts": self.mean_tip_contacts_single,
             "num_worlds": self.settings.num_worlds,
             "threads": self.threads_used,
             "steps_per_world": self.settings.steps_per_world,
@@ -84,6 +100,15 @@ impl SimBench {
         })
         .to_string()
     }
+}
+
+/// Time this thread has spent on a CPU (s), from `/proc/thread-self/schedstat` (Linux, in
+/// ns); `None` elsewhere.
+#[must_use]
+pub fn thread_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = stat.split_whitespace().next()?.parse().ok()?;
+    Some(ns as f64 * 1e-9)
 }
 
 /// Deterministic small action for step `k` of world `w` (a SplitMix-style hash).
@@ -110,22 +135,32 @@ pub fn first_world_actions_f32_le(steps: usize, joints: usize, max_action_rad: f
     (0..steps).flat_map(|k| action(0, k, joints, max_action_rad)).flat_map(f32::to_le_bytes).collect()
 }
 
-/// Runs `steps` control steps on `env`, resetting when an episode ends; returns resets.
-fn drive(env: &mut Env, w: usize, steps: usize) -> Result<usize, SimError> {
+/// How the grasp fared over a [`drive`].
+#[derive(Debug, Clone, Copy, Default)]
+struct Held {
+    resets: usize,
+    drops: usize,
+    tip_contacts: usize,
+}
+
+/// Runs `steps` control steps on `env`, resetting when an episode ends.
+fn drive(env: &mut Env, w: usize, steps: usize) -> Result<Held, SimError> {
     let max = env.config().max_action_rad;
     let joints = env.config().hand.num_joints();
-    let mut resets = 0;
+    let mut held = Held::default();
     let mut seed = w as u64 * 1_000_003;
     env.reset(seed)?;
     for k in 0..steps {
         let r = env.step(&action(w, k, joints, max))?;
+        held.tip_contacts += r.info.num_tip_contacts;
         if r.terminated || r.truncated {
             seed += 1;
-            resets += 1;
+            held.resets += 1;
+            held.drops += usize::from(r.terminated);
             env.reset(seed)?;
         }
     }
-    Ok(resets)
+    Ok(held)
 }
 
 /// Measures one world on the calling thread, then `num_worlds` worlds across a rayon pool.
@@ -136,9 +171,11 @@ pub fn run(settings: &BenchSettings) -> Result<SimBench, SimError> {
     }
     let mut env = Env::new(settings.env.clone())?;
     drive(&mut env, 0, 20)?; // warm-up
+    let cpu_before = thread_cpu_s();
     let t = Instant::now();
-    let resets_single = drive(&mut env, 0, settings.steps_per_world)?;
+    let held = drive(&mut env, 0, settings.steps_per_world)?;
     let single_s = t.elapsed().as_secs_f64();
+    let cpu_s = thread_cpu_s().zip(cpu_before).map(|(after, before)| after - before).filter(|s| *s > 0.0);
     let control_steps_per_s_single = settings.steps_per_world as f64 / single_s;
 
     let mut builder = rayon::ThreadPoolBuilder::new();
@@ -162,10 +199,13 @@ pub fn run(settings: &BenchSettings) -> Result<SimBench, SimError> {
         settings: settings.clone(),
         threads_used,
         control_steps_per_s_single,
+        control_steps_per_cpu_s_single: cpu_s.map(|s| settings.steps_per_world as f64 / s),
         control_steps_per_s_vec,
         physics_steps_per_s_single: control_steps_per_s_single
             * settings.env.physics_steps_per_control() as f64,
-        resets_single,
+        resets_single: held.resets,
+        drops_single: held.drops,
+        mean_tip_contacts_single: held.tip_contacts as f64 / settings.steps_per_world as f64,
     })
 }
 
@@ -202,5 +242,15 @@ mod tests {
         assert_eq!(json["sim_seconds_per_s"].as_f64(), Some(r.sim_seconds_per_s()));
         assert_eq!(json["control_hz"].as_f64(), Some(30.0));
         assert!(json["sim_seconds_per_s_vec"].as_f64().unwrap() > 0.0);
+        // The grasp holds through the short walk: no drop, most fingertips on the cube.
+        assert_eq!(r.drops_single, 0);
+        assert!(r.drops_single <= r.resets_single);
+        assert!(r.mean_tip_contacts_single >= 3.0, "{} fingertips", r.mean_tip_contacts_single);
+        assert_eq!(json["mean_tip_contacts"].as_f64(), Some(r.mean_tip_contacts_single));
+        // One thread spends at most the wall-clock time on a CPU.
+        if cfg!(target_os = "linux") {
+            let cpu = r.control_steps_per_cpu_s_single.unwrap();
+            assert!(cpu >= 0.99 * r.control_steps_per_s_single, "{cpu} per CPU s");
+        }
     }
 }
