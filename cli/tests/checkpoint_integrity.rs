@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use vge_lab::config::{Config, load_config};
+use vge_run::config::{Config, load_config};
 use vge_trainer::checkpoint::{self, CheckpointError};
 use vge_trainer::train::{TrainError, train};
 
@@ -85,7 +85,7 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             let path = entry.expect("entry").path();
             if path.is_dir() {
                 stack.push(path);
-            } else if path.file_name().is_some_and(|n| n == vge_lab::run_lock::LOCK_FILE) {
+            } else if path.file_name().is_some_and(|n| n == vge_run::run_dir::lock::LOCK_FILE) {
                 continue;
             } else {
                 let bytes = std::fs::read(&path).expect("read");

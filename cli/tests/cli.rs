@@ -245,8 +245,8 @@ fn sweep_slurm_dry_run_writes_an_array_job_that_resumes_and_checkpoints() {
     let copy_text = std::fs::read_to_string(&copied).expect("copied config");
     assert!(!copy_text.contains("cube-base.toml"), "{copy_text}");
     assert_eq!(
-        vge_lab::config::load_config(&copied, &[]).expect("the copy loads alone"),
-        vge_lab::config::load_config(&config, &[]).expect("config")
+        vge_run::config::load_config(&copied, &[]).expect("the copy loads alone"),
+        vge_run::config::load_config(&config, &[]).expect("config")
     );
     for line in [
         "#SBATCH --array=0,2-3".to_owned(), // seed 1 is done
@@ -611,7 +611,7 @@ fn screen_snapshots_tests_the_passing_snapshots_and_the_final_policy() {
     let err = text(&refused.stderr);
     assert!(!refused.status.success() && err.contains("config.toml"), "{err}");
     assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
-    let config = vge_lab::config::load_config(&common::config("cube-fg-rl.toml"), &[]).expect("config");
+    let config = vge_run::config::load_config(&common::config("cube-fg-rl.toml"), &[]).expect("config");
     std::fs::write(run.join("config.toml"), config.to_toml_string().expect("toml")).expect("config.toml");
     let out = screen(&run);
     assert!(out.status.success(), "{}", text(&out.stderr));
@@ -648,7 +648,7 @@ fn ship_copies_measures_and_records_a_finished_runs_policy_and_refuses_an_unfini
     assert!(export.status.success(), "{}", text(&export.stderr));
     // A run folder stores its config whole (its base merged in).
     let variant =
-        vge_lab::config::load_config(&common::config("variants/heavy-cube.toml"), &[]).expect("config");
+        vge_run::config::load_config(&common::config("variants/heavy-cube.toml"), &[]).expect("config");
     std::fs::write(run.join("config.toml"), variant.to_toml_string().expect("toml")).expect("config");
     let policies = run.join("shipped");
     let ship_with = |policy: &str, force: bool| {

@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use vge_lab::config::{Config, parse_with_overrides};
+use vge_run::config::{Config, parse_with_overrides};
 
 /// What `--set KEY=VALUE` on an empty config file gives (the --set path of every command).
 fn with(set: &str) -> Result<Config, String> {
@@ -169,7 +169,7 @@ fn a_2gb_sparse_policy_file_is_refused_unread_by_inspect_and_eval() {
     let root = common::temp_dir("policy-size");
     let z = sparse_2gb(&root);
     let z = z.to_str().expect("utf-8");
-    let limit = vge_lab::eval::EVAL_MAX_FILE_LEN;
+    let limit = vge_run::eval::EVAL_MAX_FILE_LEN;
     assert_eq!(limit, vge_export::MAX_FILE_LEN, "inspect and eval read the same files");
     for args in [vec!["inspect", z], vec!["eval", "--policy", z, "--episodes", "1"]] {
         let (ok, err, peak) = vge_with_peak_memory(&args);

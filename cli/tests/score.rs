@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use vge_lab::score::{HELD_OUT_SEED, SCORE_FILE, Score};
+use vge_run::score::{HELD_OUT_SEED, SCORE_FILE, Score};
 
 const STEPS: u64 = 400;
 /// `run.score_episodes` of the tiny run: training's own score at its end.

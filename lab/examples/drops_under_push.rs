@@ -9,11 +9,11 @@
 //!
 //! Arguments: POLICY FORCE_STD_N [EPISODES=20] [SEED=2000].
 use anyhow::Context;
-use vge_lab::eval::{
+use vge_lab::robustness::Axis;
+use vge_run::eval::{
     EVAL_MAX_LAYERS, EVAL_MAX_WIDTH, SUCCESS_TEST_EPISODE_S, SUCCESS_TEST_GRASP_NOISE_RAD,
     run_episode_observed, success_test_env,
 };
-use vge_lab::robustness::Axis;
 use vge_runtime::{AlignedBytes, Policy};
 use vge_sim::EnvConfig;
 

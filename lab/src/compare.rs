@@ -1,6 +1,6 @@
 //! `vge compare GROUP=DIR,DIR... --out DIR`: groups of scored runs side by side, reported
 //! the way the field trusts ([`crate::stats`]): per group the IQM and mean of one figure of
-//! the runs' held-out episodes (`score.json`, [`crate::score`]; the success rate unless a
+//! the runs' held-out episodes (`score.json`, [`vge_run::score`]; the success rate unless a
 //! [`Metric`] says otherwise) with 95% stratified bootstrap intervals, the probability of
 //! improvement between groups with its interval, performance profiles with bands, and the
 //! IQM of the periodic success and return against env steps with bands. `vge plot --table1`
@@ -16,15 +16,18 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use thiserror::Error;
 
-use crate::eval::ObjectFigures;
-use crate::plot::{Groups, PlotError, RunCurves, Series, XAxis};
-use crate::score::{PolicyScore, Score};
+use crate::plot::{Groups, PlotError, Series, XAxis};
 use crate::stats::{Aggregates, Bootstrap, Estimate, Scores, StatsError};
+use vge_run::eval::ObjectFigures;
+use vge_run::run_dir::RunCurves;
+use vge_run::score::{PolicyScore, Score};
 
 #[derive(Debug, Error)]
 pub enum CompareError {
     #[error(transparent)]
     Plot(#[from] PlotError),
+    #[error(transparent)]
+    RunFile(#[from] vge_run::run_dir::RunFileError),
     #[error(transparent)]
     Stats(#[from] StatsError),
     #[error("{path}: {source}")]
@@ -231,7 +234,7 @@ pub fn success_rates(runs: &[&RunCurves], judged: Judged) -> Vec<f64> {
 
 /// The objects of a run on several, as its score names them for `judged`'s policy (the
 /// last snapshots are pooled only, so they have none).
-fn judged_objects(score: &Score, judged: Judged) -> Option<&crate::eval::PerObjectFigures> {
+fn judged_objects(score: &Score, judged: Judged) -> Option<&vge_run::eval::PerObjectFigures> {
     match judged {
         Judged::Selected => score.selected.as_ref().and_then(|s| s.per_object.as_ref()),
         Judged::Final => score.final_policy.per_object.as_ref(),
@@ -523,14 +526,14 @@ fn read_groups(specs: &[GroupSpec]) -> Result<Vec<(String, Vec<RunCurves>)>, Com
         if groups.iter().any(|(name, _): &(String, _)| *name == spec.name) {
             return Err(CompareError::Group { group: spec.name.clone(), what: "named twice".to_owned() });
         }
-        let dirs = crate::table1::find_runs(&spec.dirs)?;
+        let dirs = vge_run::run_dir::find_runs(&spec.dirs)?;
         if dirs.is_empty() {
             return Err(CompareError::Group {
                 group: spec.name.clone(),
                 what: "no run folder found".to_owned(),
             });
         }
-        let runs = dirs.iter().map(|d| crate::plot::read_run(d)).collect::<Result<Vec<_>, _>>()?;
+        let runs = dirs.iter().map(|d| vge_run::run_dir::read_run(d)).collect::<Result<Vec<_>, _>>()?;
         unscored.extend(runs.iter().filter(|r| r.score.is_none()).map(|r| r.dir.clone()));
         groups.push((spec.name.clone(), runs));
     }
@@ -604,7 +607,7 @@ pub fn write(
         md.push_str(&format!(
             "\nEach run on each object (per-object.csv): the first periodic test at which the object's \
              success reached {:.0}%, and the held-out figures of the selected and final policies.\n\n",
-            100.0 * crate::eval::LEARNED_SUCCESS_RATE
+            100.0 * vge_run::eval::LEARNED_SUCCESS_RATE
         ));
         md.push_str(&crate::object_rows::to_markdown(&object_rows));
         texts.push(("per-object.csv", crate::object_rows::to_csv(&object_rows)));

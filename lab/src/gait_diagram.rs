@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::eval::{EvalError, GaitTrace};
 use crate::plot::{PlotError, draw_err};
+use vge_run::eval::{EvalError, GaitTrace};
 
 /// The area one chart is drawn on.
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
@@ -176,7 +176,7 @@ pub fn trace_episode(
     seed: u64,
     label: &str,
 ) -> Result<Episode, EvalError> {
-    let trace = crate::eval::trace_policy_bytes(bytes, env, seed)?;
+    let trace = vge_run::eval::trace_policy_bytes(bytes, env, seed)?;
     let o = &trace.outcome;
     let title = format!(
         "{label}: the {}, episode seed {seed}, {:.1} rad in {:.1} s, {} contact switches{}",

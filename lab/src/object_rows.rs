@@ -2,13 +2,14 @@
 //! `per-object.csv` and its table in `compare.md`): when each object first passed a periodic
 //! success test, and the selected and final policies' held-out figures on it.
 //!
-//! The aggregates of [`crate::compare`] say how a group does; these rows say which seed
+//! The group aggregates of `vge compare` say how a group does; these rows say which seed
 //! and which object carry it, which is what a reader checks a multi-object claim against.
 
 use std::path::Path;
 
-use crate::eval::{LEARNED_SUCCESS_RATE, ObjectFigures};
-use crate::plot::{PlotError, RunCurves};
+use crate::plot::PlotError;
+use vge_run::eval::{LEARNED_SUCCESS_RATE, ObjectFigures};
+use vge_run::run_dir::RunCurves;
 use vge_sim::ObjectShape;
 
 /// One run on one object.
@@ -39,9 +40,9 @@ pub fn rows(
     let mut rows = Vec::new();
     for (group, runs) in groups {
         for run in runs {
-            let eval_csv = crate::run_dir::RunDir::new(&run.dir).eval_csv();
+            let eval_csv = vge_run::run_dir::RunDir::new(&run.dir).eval_csv();
             for &object in objects {
-                let figures = |per_object: Option<&crate::eval::PerObjectFigures>| {
+                let figures = |per_object: Option<&vge_run::eval::PerObjectFigures>| {
                     per_object.and_then(|p| p.of(object).copied())
                 };
                 let score = run.score.as_ref();
@@ -68,8 +69,10 @@ pub fn rows(
 /// [`LEARNED_SUCCESS_RATE`]; None when none does, or the run has no such column.
 fn first_pass_step(eval_csv: &Path, object: ObjectShape) -> Result<Option<u64>, PlotError> {
     let column = format!("{}_success", object.name());
-    let Some((steps, success)) = crate::plot::object_success(eval_csv, &column)? else { return Ok(None) };
-    let steps = crate::plot::whole_steps(eval_csv, &steps)?;
+    let Some((steps, success)) = vge_run::run_dir::object_success(eval_csv, &column)? else {
+        return Ok(None);
+    };
+    let steps = vge_run::run_dir::whole_steps(eval_csv, &steps)?;
     Ok(steps.iter().zip(&success).find(|(_, s)| **s >= LEARNED_SUCCESS_RATE).map(|(step, _)| *step))
 }
 

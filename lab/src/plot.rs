@@ -2,8 +2,9 @@
 //! seeds), like the paper's figures, the critic's mean Q beside the discounted Monte-Carlo
 //! returns of the data it learns from, and a markdown table of final success rates, like its
 //! Table I. A run's final success is that of its `final-eval.json` (the success test of
-//! [`crate::eval`]) or else its last periodic evaluation; a run *learned* when it reaches
-//! [`crate::eval::LEARNED_SUCCESS_RATE`].
+//! [`vge_run::eval`]) or else its last periodic evaluation; a run *learned* when it reaches
+//! [`vge_run::eval::LEARNED_SUCCESS_RATE`]. The runs are read by [`vge_run::run_dir::read_run`];
+//! this module only draws.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -13,13 +14,14 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use thiserror::Error;
 
-use crate::config::{AlgorithmName, Config, ConfigError, Method, parse_with_overrides};
-use vge_controllers::ControllerKind;
+use vge_run::run_dir::{RunCurves, RunFileError, Selected, object_success};
 
 #[derive(Debug, Error)]
 pub enum PlotError {
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
+    /// A file the lab reads beside the runs (a controller's figures) that does not say what
+    /// it must.
     #[error("{path}: {message}")]
     Csv { path: PathBuf, message: String },
     #[error("no run directories given")]
@@ -28,316 +30,9 @@ pub enum PlotError {
     Font(String),
     #[error("drawing: {0}")]
     Draw(String),
-    /// A run's `config.toml` that the config parser cannot read (the message names the file).
+    /// A run's file that cannot be read (the message names the file).
     #[error(transparent)]
-    Config(#[from] ConfigError),
-}
-
-/// One run's curves, from its `metrics.csv` and `eval.csv`.
-#[derive(Debug, Clone)]
-pub struct RunCurves {
-    pub dir: PathBuf,
-    /// The experiment, from the run's config (`name`): runs with one name are seeds of it.
-    pub experiment: String,
-    /// The run config's seed.
-    pub seed: u64,
-    /// The run config's method and controller (the cell of Table I it belongs to).
-    pub method: Method,
-    pub controller: Option<ControllerKind>,
-    /// The objects its envs train on (`env.objects`).
-    pub objects: Vec<vge_sim::ObjectShape>,
-    pub step: Vec<f64>,
-    pub mean_return: Vec<f64>,
-    pub rotation_rad: Vec<f64>,
-    pub controller_share: Vec<f64>,
-    /// The critic's mean Q on replayed batches (empty in runs that predate the column).
-    pub mean_q: Vec<f64>,
-    /// Mean discounted Monte-Carlo return of the visited states (empty when not logged).
-    pub mc_return: Vec<f64>,
-    /// The periodic evaluations (`eval.csv`: the success test on the exported policy):
-    /// their env steps, mean returns and success rates (empty without evaluations).
-    pub eval_step: Vec<f64>,
-    pub eval_return: Vec<f64>,
-    pub eval_success: Vec<f64>,
-    /// Success rate of the final evaluation (`final-eval.json`), else of the last periodic
-    /// one, if any.
-    pub final_success: Option<f64>,
-    /// For a run on several objects, its worst object's success in the final evaluation.
-    pub final_worst_object_success: Option<f64>,
-    /// Mean return and contact switches per episode of the final evaluation
-    /// (`final-eval.json`).
-    pub final_return: Option<f64>,
-    pub final_contact_switches: Option<f64>,
-    /// Env steps and wall time of the finished run (from `final-eval.json`).
-    pub env_steps: Option<u64>,
-    pub wall_s: Option<f64>,
-    /// Model selection (`best-eval.json`): the snapshot with the best periodic evaluation and
-    /// its success rate on held-out test grasps; None for runs without snapshots.
-    pub selected: Option<Selected>,
-    /// The run's score on many held-out episodes (`score.json`, [`crate::score`]); None
-    /// until `vge score` (or the end of training) wrote it.
-    pub score: Option<crate::score::Score>,
-}
-
-/// The fields of `best-eval.json` that the plot reads.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(from = "SelectedFields")]
-pub struct Selected {
-    pub selected_step: u64,
-    /// On the test grasps, which the selection never saw.
-    pub success_rate: f64,
-    /// For a run on several objects, its worst object's success on those grasps.
-    pub worst_object_success_rate: Option<f64>,
-}
-
-#[derive(serde::Deserialize)]
-struct SelectedFields {
-    selected_step: u64,
-    success_rate: f64,
-    #[serde(default)]
-    per_object: Option<crate::eval::PerObjectFigures>,
-}
-
-impl From<SelectedFields> for Selected {
-    fn from(f: SelectedFields) -> Self {
-        Self {
-            selected_step: f.selected_step,
-            success_rate: f.success_rate,
-            worst_object_success_rate: f
-                .per_object
-                .as_ref()
-                .and_then(crate::eval::PerObjectFigures::worst_success_rate),
-        }
-    }
-}
-
-/// The success test's verdict: the pooled success and, on several objects, every object's
-/// reach [`crate::eval::LEARNED_SUCCESS_RATE`] (a policy for five objects that drops one
-/// has not learned the task).
-fn learned(success: f64, worst_object: Option<f64>) -> bool {
-    let pass = |s: f64| s >= crate::eval::LEARNED_SUCCESS_RATE;
-    pass(success) && worst_object.is_none_or(pass)
-}
-
-impl Selected {
-    pub fn learned(&self) -> bool {
-        learned(self.success_rate, self.worst_object_success_rate)
-    }
-}
-
-impl RunCurves {
-    /// Whether the run learned by the success test's definition (None: not evaluated).
-    pub fn learned(&self) -> Option<bool> {
-        self.final_success.map(|s| learned(s, self.final_worst_object_success))
-    }
-}
-
-/// The fields of `final-eval.json` that the plot and `vge eval --run` read.
-#[derive(Debug, serde::Deserialize)]
-pub(crate) struct FinalEvalFields {
-    pub(crate) success_rate: f64,
-    /// Absent in files of older vge versions.
-    #[serde(default)]
-    pub(crate) mean_return: Option<f64>,
-    #[serde(default)]
-    pub(crate) mean_rotation_rad: Option<f64>,
-    #[serde(default)]
-    pub(crate) mean_contact_switches: Option<f64>,
-    pub(crate) env_steps: u64,
-    pub(crate) wall_s: f64,
-    #[serde(default)]
-    pub(crate) cpu_s: Option<f64>,
-    #[serde(default)]
-    pub(crate) per_object: Option<crate::eval::PerObjectFigures>,
-}
-
-/// A run's CSV table or JSON record (the larger bound of the two).
-fn read(path: &Path) -> Result<String, PlotError> {
-    crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_TABLE_FILE_LEN)
-        .map_err(|source| PlotError::Io { path: path.to_owned(), source })
-}
-
-/// Columns of a CSV with a header row, by name; a name the header lacks is an error naming
-/// it. An empty field (a metrics window in which no episode ended, or before the first
-/// update) is NaN: nothing was measured there, and curves leave it out
-/// ([`on_common_grid`]).
-pub(crate) fn csv_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, PlotError> {
-    let columns = columns_by_name(path, names)?;
-    names
-        .iter()
-        .zip(columns)
-        .map(|(n, c)| {
-            c.ok_or_else(|| PlotError::Csv { path: path.to_owned(), message: format!("no column `{n}`") })
-        })
-        .collect()
-}
-
-/// [`csv_columns`], or None when the file or one of the columns is missing (a run from
-/// before the column existed, or without periodic evaluations).
-pub(crate) fn csv_columns_if_present(
-    path: &Path,
-    names: &[&str],
-) -> Result<Option<Vec<Vec<f64>>>, PlotError> {
-    if !path.exists() {
-        return Ok(None);
-    }
-    Ok(columns_by_name(path, names)?.into_iter().collect())
-}
-
-/// Each of `names`' column, None where the header lacks it. A last line without its newline
-/// is a row still being written (or cut short by a kill, which a resume drops too) and is
-/// not read; a complete row without a field of a named column is an error naming the row.
-fn columns_by_name(path: &Path, names: &[&str]) -> Result<Vec<Option<Vec<f64>>>, PlotError> {
-    let bad = |message: String| PlotError::Csv { path: path.to_owned(), message };
-    let text = read(path)?;
-    let complete = text.rfind('\n').map_or("", |end| &text[..=end]);
-    let mut reader =
-        csv::ReaderBuilder::new().flexible(true).trim(csv::Trim::All).from_reader(complete.as_bytes());
-    let header = reader.headers().map_err(|e| bad(e.to_string()))?.clone();
-    let index: Vec<Option<usize>> = names.iter().map(|n| header.iter().position(|h| h == *n)).collect();
-    let mut columns: Vec<Option<Vec<f64>>> = index.iter().map(|i| i.map(|_| Vec::new())).collect();
-    for (row, record) in reader.records().enumerate() {
-        let record = record.map_err(|e| bad(e.to_string()))?;
-        if record.iter().all(str::is_empty) {
-            continue;
-        }
-        for (col, i) in index.iter().enumerate() {
-            let (Some(i), Some(values)) = (i, columns[col].as_mut()) else { continue };
-            let field = record.get(*i).ok_or_else(|| {
-                bad(format!(
-                    "row {} has {} fields, the header {}: no `{}`",
-                    row + 2,
-                    record.len(),
-                    header.len(),
-                    names[col]
-                ))
-            })?;
-            let value = if field.is_empty() {
-                f64::NAN
-            } else {
-                field.parse::<f64>().map_err(|_| {
-                    bad(format!("row {}: column `{}` is `{field}`, not a number", row + 2, names[col]))
-                })?
-            };
-            values.push(value);
-        }
-    }
-    Ok(columns)
-}
-
-/// A CSV's step column as whole env steps: a negative, fractional or non-finite step is
-/// refused, naming its row, rather than cast to another step.
-pub(crate) fn whole_steps(path: &Path, steps: &[f64]) -> Result<Vec<u64>, PlotError> {
-    // Below 2^53 every whole f64 is exact, and no run takes that many steps.
-    const EXACT: f64 = 9_007_199_254_740_992.0;
-    steps
-        .iter()
-        .enumerate()
-        .map(|(i, &step)| {
-            if step.is_finite() && (0.0..=EXACT).contains(&step) && step.fract() == 0.0 {
-                Ok(step as u64)
-            } else {
-                Err(PlotError::Csv {
-                    path: path.to_owned(),
-                    message: format!("row {}: step `{step}` is not a whole number of env steps", i + 2),
-                })
-            }
-        })
-        .collect()
-}
-
-/// Reads one run directory.
-pub fn read_run(dir: &Path) -> Result<RunCurves, PlotError> {
-    let config = run_config(dir)?;
-    let experiment = experiment(&config);
-    let metrics = dir.join(crate::run_dir::METRICS);
-    let cols = csv_columns(&metrics, &["step", "return", "rotation", "controller_share"])?;
-    let [step, mean_return, rotation_rad, controller_share]: [Vec<f64>; 4] =
-        cols.try_into().map_err(|_| PlotError::Csv { path: metrics.clone(), message: "columns".into() })?;
-    // Columns later vge versions added: empty for the runs from before them.
-    let optional = |name: &str| {
-        csv_columns_if_present(&metrics, &[name])
-            .map(|c| c.and_then(|c| c.into_iter().next()).unwrap_or_default())
-    };
-    let (mean_q, mc_return) = (optional("mean_q")?, optional("mc_return")?);
-    let final_eval = read_final_eval(dir)?;
-    let eval = dir.join(crate::run_dir::EVAL);
-    let [eval_step, eval_return, eval_success]: [Vec<f64>; 3] = if eval.exists() {
-        csv_columns(&eval, &["step", "return", "success"])?
-            .try_into()
-            .map_err(|_| PlotError::Csv { path: eval.clone(), message: "columns".into() })?
-    } else {
-        Default::default()
-    };
-    let final_success = match &final_eval {
-        Some(f) => Some(f.success_rate),
-        None => eval_success.last().copied(),
-    };
-    let final_worst_object_success = final_eval
-        .as_ref()
-        .and_then(|f| f.per_object.as_ref())
-        .and_then(crate::eval::PerObjectFigures::worst_success_rate);
-    Ok(RunCurves {
-        dir: dir.to_owned(),
-        experiment,
-        seed: config.seed,
-        method: config.method,
-        controller: config.controller,
-        objects: config.env.objects.clone(),
-        step,
-        mean_return,
-        rotation_rad,
-        controller_share,
-        mean_q,
-        mc_return,
-        eval_step,
-        eval_return,
-        eval_success,
-        final_success,
-        final_worst_object_success,
-        final_return: final_eval.as_ref().and_then(|f| f.mean_return),
-        final_contact_switches: final_eval.as_ref().and_then(|f| f.mean_contact_switches),
-        env_steps: final_eval.as_ref().map(|f| f.env_steps),
-        wall_s: final_eval.as_ref().map(|f| f.wall_s),
-        selected: read_json(&dir.join(crate::run_dir::BEST_EVAL))?,
-        score: read_json(&dir.join(crate::score::SCORE_FILE))?,
-    })
-}
-
-/// The run's `config.toml`, read with the config parser (so a file it cannot read is an
-/// error naming the file; keys left out take the config's defaults).
-fn run_config(dir: &Path) -> Result<Config, PlotError> {
-    let path = dir.join(crate::run_dir::CONFIG);
-    Ok(parse_with_overrides(&read(&path)?, &path.display().to_string(), &[])?)
-}
-
-/// The experiment of a run: its config's `name`. A run of a SAC config switched to TD3
-/// (`--set algorithm="td3"`) is another experiment: the learner is appended unless the name
-/// already says it.
-fn experiment(config: &Config) -> String {
-    let algorithm = config.algorithm.name();
-    if config.algorithm != AlgorithmName::Sac && !config.name.contains(algorithm) {
-        format!("{} ({algorithm})", config.name)
-    } else {
-        config.name.clone()
-    }
-}
-
-/// The run's `final-eval.json`, if it finished.
-/// `dir/final-eval.json`; `None` when the run has none (unfinished).
-pub(crate) fn read_final_eval(dir: &Path) -> Result<Option<FinalEvalFields>, PlotError> {
-    read_json(&dir.join(crate::run_dir::FINAL_EVAL))
-}
-
-/// A JSON file of a run, if it exists.
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>, PlotError> {
-    if !path.exists() {
-        return Ok(None);
-    }
-    let text = read(path)?;
-    serde_json::from_str(&text)
-        .map(Some)
-        .map_err(|e| PlotError::Csv { path: path.to_owned(), message: e.to_string() })
+    Run(#[from] RunFileError),
 }
 
 /// One point of a group's curve: step, mean, min and max over its runs.
@@ -824,7 +519,7 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
     // Per row (file) and object, each run's curve of that object's success, carried as its
     // evaluation curve.
     let rows =
-        [(crate::run_dir::EVAL, "periodic evaluations"), (crate::run_dir::METRICS, "training episodes")];
+        [(vge_run::run_dir::EVAL, "periodic evaluations"), (vge_run::run_dir::METRICS, "training episodes")];
     let mut per_panel: Vec<Vec<RunCurves>> = Vec::new();
     for (file, _) in &rows {
         for &object in &objects {
@@ -877,32 +572,9 @@ pub fn plot_per_object(runs: &[RunCurves], out: &Path) -> Result<Option<PathBuf>
     Ok(Some(path))
 }
 
-/// A curve's steps and values.
-type StepsAndValues = (Vec<f64>, Vec<f64>);
-
-/// `(step, success)` of a CSV's `column`; `None` when the file or the column is missing (a
-/// run from before the per-object columns, or without periodic evaluations).
-pub(crate) fn object_success(path: &Path, column: &str) -> Result<Option<StepsAndValues>, PlotError> {
-    let Some(columns) = csv_columns_if_present(path, &["step", column])? else { return Ok(None) };
-    let [step, success]: [Vec<f64>; 2] = columns
-        .try_into()
-        .map_err(|_| PlotError::Csv { path: path.to_owned(), message: "columns".into() })?;
-    Ok(Some((step, success)))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn steps_must_be_whole_env_steps() {
-        let path = Path::new("eval.csv");
-        assert_eq!(whole_steps(path, &[0.0, 250_000.0, 2e6]).expect("whole"), [0, 250_000, 2_000_000]);
-        for (step, row) in [(-5.0, 3), (12.7, 3), (f64::NAN, 3), (f64::INFINITY, 3), (1e30, 3)] {
-            let err = whole_steps(path, &[100.0, step]).expect_err("refused").to_string();
-            assert!(err.contains(&format!("row {row}: step `{step}` is not a whole number")), "{err}");
-        }
-    }
 
     #[test]
     fn an_infinite_q_is_left_out_of_the_panel_and_counted() {
@@ -925,48 +597,27 @@ mod tests {
     }
 
     #[test]
-    fn a_row_being_written_is_not_read_and_a_short_complete_row_is_refused_naming_it() {
-        let dir = std::env::temp_dir().join(format!("vge-plot-csv-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        let csv = dir.join("eval.csv");
-        // The last row has no newline yet: the writer is still at it.
-        std::fs::write(&csv, "step,success,return\n100,0.5,3\n200,,4\n300,0.").expect("write");
-        let columns = csv_columns(&csv, &["step", "success"]).expect("reads the complete rows");
-        assert_eq!(columns[0], vec![100.0, 200.0]);
-        assert!(columns[1][0] == 0.5 && columns[1][1].is_nan(), "an empty field is NaN: {columns:?}");
-        assert_eq!(csv_columns_if_present(&csv, &["step", "mean_q"]).expect("reads"), None);
-        assert_eq!(csv_columns_if_present(&dir.join("absent.csv"), &["step"]).expect("no file"), None);
-        let err = csv_columns(&csv, &["step", "mean_q"]).expect_err("no such column").to_string();
-        assert!(err.contains("no column `mean_q`"), "{err}");
-        std::fs::write(&csv, "step,success,return\n100,0.5,3\n200,0.7\n").expect("write");
-        let err = csv_columns(&csv, &["return"]).expect_err("a short row").to_string();
-        assert!(err.contains("row 3 has 2 fields, the header 3: no `return`"), "{err}");
-        assert_eq!(csv_columns(&csv, &["success"]).expect("the fields it has"), vec![vec![0.5, 0.7]]);
-        std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
     fn a_window_that_measured_nothing_is_left_out_of_the_curves_not_drawn_as_zero() {
         let dir = std::env::temp_dir().join(format!("vge-plot-empty-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
         let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs");
-        let config = crate::config::load_config(&configs.join("cube-fg-rl.toml"), &[]).expect("config");
+        let config = vge_run::config::load_config(&configs.join("cube-fg-rl.toml"), &[]).expect("config");
         std::fs::write(dir.join("config.toml"), config.to_toml_string().expect("toml")).expect("write");
         // No update before the first row ended (mean_q empty), no episode in the third.
         std::fs::write(
-            dir.join(crate::run_dir::METRICS),
+            dir.join(vge_run::run_dir::METRICS),
             "step,return,rotation,controller_share,mean_q\n\
              10000,1.0,0.1,1.0,\n20000,2.0,0.2,0.5,4.0\n30000,,,0.4,6.0\n40000,4.0,0.4,0.3,8.0\n",
         )
         .expect("write");
-        let run = read_run(&dir).expect("read");
+        let run = vge_run::run_dir::read_run(&dir).expect("read");
         assert!(run.mean_q[0].is_nan() && run.mean_return[2].is_nan(), "{run:?}");
         // mean Q starts where it was first measured; the return's gap is interpolated across.
         let q = on_common_grid(&[&run], |r| (&r.step, &r.mean_q));
         assert_eq!(q, vec![(20000.0, vec![4.0]), (30000.0, vec![6.0]), (40000.0, vec![8.0])]);
         let ret = on_common_grid(&[&run], |r| (&r.step, &r.mean_return));
         assert_eq!(ret, vec![(10000.0, vec![1.0]), (20000.0, vec![2.0]), (40000.0, vec![4.0])]);
-        let mut rng = crate::compare::rng_for(0, "mean Q");
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
         let iqm =
             iqm_curve(&[&run, &run], |r| (&r.step, &r.mean_q), &crate::stats::Bootstrap::default(), &mut rng)
                 .expect("no NaN reaches the statistics");
@@ -975,33 +626,6 @@ mod tests {
             [(20000.0, 4.0), (30000.0, 6.0), (40000.0, 8.0)]
         );
         std::fs::remove_dir_all(&dir).ok();
-    }
-
-    #[test]
-    fn a_selection_on_several_objects_learned_only_if_every_object_passed() {
-        let figures = |s: f64| {
-            format!(
-                r#"{{"success_rate": {s}, "drop_rate": 0, "mean_return": 0, "mean_rotation_rad": 0,
-                   "mean_contact_switches": 0, "episodes": 20}}"#
-            )
-        };
-        let selected = |cube: f64, sphere: f64| -> Selected {
-            let json = format!(
-                r#"{{"selected_step": 1500000, "success_rate": {}, "per_object":
-                   {{"cube": {}, "sphere": {}}}}}"#,
-                (cube + sphere) / 2.0,
-                figures(cube),
-                figures(sphere)
-            );
-            serde_json::from_str(&json).expect("best-eval.json")
-        };
-        // Pooled 0.6, but the sphere at 0.2: not learned.
-        assert_eq!(selected(1.0, 0.2).worst_object_success_rate, Some(0.2));
-        assert!(!selected(1.0, 0.2).learned());
-        assert!(selected(1.0, 0.5).learned());
-        let one: Selected =
-            serde_json::from_str(r#"{"selected_step": 5, "success_rate": 0.5}"#).expect("one object");
-        assert!(one.learned() && one.worst_object_success_rate.is_none());
     }
 
     #[test]

@@ -15,8 +15,8 @@ use plotters::prelude::*;
 use serde::Serialize;
 use vge_sim::EnvConfig;
 
-use crate::eval::{EvalError, EvalReport, eval_policy_bytes_per_object, success_test_env};
 use crate::plot::PlotError;
+use vge_run::eval::{EvalError, EvalReport, eval_policy_bytes_per_object, success_test_env};
 
 /// Standard gravity, for the object's weight (N).
 const GRAVITY_MPS2: f32 = 9.81;

@@ -5,7 +5,7 @@
 //! axis), writing `NAME.json` with the goals and whether each holds, `NAME-robustness.png`
 //! and the gait diagram of one episode.
 //!
-//! Both measure on the run's own task ([`crate::run_eval::task_envs`]): its object, hand,
+//! Both measure on the run's own task ([`vge_run::run_eval::task_envs`]): its object, hand,
 //! physics and reward, without its training disturbances, so that a policy trained on a
 //! task variant (a heavier cube, the hand on its side) is judged on that variant. A policy
 //! trained on several objects is measured on each: the success test and the pushes pooled
@@ -17,10 +17,10 @@ use serde::Serialize;
 use thiserror::Error;
 use vge_sim::EnvConfig;
 
-use crate::eval::{self, EvalError, EvalReport, ObjectFigures};
 use crate::plot::PlotError;
 use crate::robustness::{self, Axis, RobustnessOptions, RobustnessReport};
-use crate::run_dir::{self, RunDir};
+use vge_run::eval::{self, EvalError, EvalReport, ObjectFigures};
+use vge_run::run_dir::{self, RunDir};
 
 #[derive(Debug, Error)]
 pub enum ShipError {
@@ -35,9 +35,11 @@ pub enum ShipError {
     #[error(transparent)]
     Plot(#[from] PlotError),
     #[error(transparent)]
+    RunFile(#[from] vge_run::run_dir::RunFileError),
+    #[error(transparent)]
     Export(#[from] vge_export::ExportError),
     #[error(transparent)]
-    RunConfig(#[from] crate::run_eval::RunEvalError),
+    RunConfig(#[from] vge_run::run_eval::RunEvalError),
     #[error(transparent)]
     Gait(#[from] crate::gait_diagram::DrawEpisodeError),
 }
@@ -101,11 +103,11 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
             message: "missing: the run has no periodic tests to screen".into(),
         });
     }
-    let [steps, success]: [Vec<f64>; 2] = crate::plot::csv_columns(&eval_csv, &["step", "success"])?
+    let [steps, success]: [Vec<f64>; 2] = vge_run::run_dir::csv_columns(&eval_csv, &["step", "success"])?
         .try_into()
         .map_err(|_| ShipError::Run { path: eval_csv.display().to_string(), message: "columns".into() })?;
     let mut out = Vec::new();
-    for (step, success) in crate::plot::whole_steps(&eval_csv, &steps)?.into_iter().zip(success) {
+    for (step, success) in vge_run::run_dir::whole_steps(&eval_csv, &steps)?.into_iter().zip(success) {
         let path = dir.snapshot(step);
         if success >= min_success && path.exists() {
             out.push((Some(step), path));
@@ -114,7 +116,7 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
     let final_policy = dir.policy();
     if final_policy.exists() {
         let read = |p: &Path| {
-            crate::read_limits::read_bounded(p, vge_export::MAX_FILE_LEN as u64).map_err(io_err(p))
+            vge_run::read_limits::read_bounded(p, vge_export::MAX_FILE_LEN as u64).map_err(io_err(p))
         };
         let bytes = read(&final_policy)?;
         let mut same = false;
@@ -129,7 +131,7 @@ pub fn screen_candidates(run: &Path, min_success: f64) -> Result<Vec<(Option<u64
 }
 
 /// Screens `candidates` (from [`screen_candidates`]) of the run in `run` on its task
-/// ([`crate::run_eval::task_envs`]) with the success test and the two pushes, each pooled over
+/// ([`vge_run::run_eval::task_envs`]) with the success test and the two pushes, each pooled over
 /// the run's objects; `on_row` sees each row as it is measured.
 pub fn screen(
     run: &Path,
@@ -137,7 +139,7 @@ pub fn screen(
     options: &ScreenOptions,
     mut on_row: impl FnMut(&ScreenRow),
 ) -> Result<Vec<ScreenRow>, ShipError> {
-    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?)?;
+    let bases = vge_run::run_eval::task_envs(&vge_run::run_eval::run_config(run)?)?;
     let success_envs = success_test_envs(&bases);
     let pushes = RobustnessOptions {
         episodes: options.episodes,
@@ -348,7 +350,7 @@ pub fn ship(
     // Measured before anything is written: a policy that cannot be read replaces nothing.
     let bytes = eval::read_policy_file(&source)?;
     let provenance = provenance_line(&bytes)?;
-    let bases = crate::run_eval::task_envs(&crate::run_eval::run_config(run)?)?;
+    let bases = vge_run::run_eval::task_envs(&vge_run::run_eval::run_config(run)?)?;
     let success_envs = success_test_envs(&bases);
     let success_test =
         eval::eval_policy_bytes_per_object(&bytes, &success_envs, options.success_episodes, 0)?;
@@ -367,10 +369,10 @@ pub fn ship(
     if let Some(parent) = files.policy.parent() {
         std::fs::create_dir_all(parent).map_err(io_err(parent))?;
     }
-    crate::atomic_file::write(&files.policy, &bytes).map_err(io_err(&files.policy))?;
-    let config = crate::read_limits::read_bounded(&dir.config(), crate::read_limits::MAX_CONFIG_FILE_LEN)
+    vge_run::run_dir::atomic_file::write(&files.policy, &bytes).map_err(io_err(&files.policy))?;
+    let config = vge_run::read_limits::read_bounded(&dir.config(), vge_run::read_limits::MAX_CONFIG_FILE_LEN)
         .map_err(io_err(&dir.config()))?;
-    crate::atomic_file::write(&files.config, &config).map_err(io_err(&files.config))?;
+    vge_run::run_dir::atomic_file::write(&files.config, &config).map_err(io_err(&files.config))?;
     robustness::plot(&record.robustness, &files.robustness_png)?;
     let objects: Vec<_> = bases.iter().map(|b| b.object.shape).collect();
     let label = files.policy.display().to_string();
@@ -383,7 +385,7 @@ pub fn ship(
     let mut json = serde_json::to_string_pretty(&record)
         .map_err(|e| ShipError::Json { path: files.record.display().to_string(), message: e.to_string() })?;
     json.push('\n');
-    crate::atomic_file::write(&files.record, json.as_bytes()).map_err(io_err(&files.record))?;
+    vge_run::run_dir::atomic_file::write(&files.record, json.as_bytes()).map_err(io_err(&files.record))?;
     Ok((record, gait_pngs))
 }
 

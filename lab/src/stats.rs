@@ -3,7 +3,7 @@
 //! definitions these follow and which `lab/tests/stats_vs_rliable.rs` checks them against):
 //!
 //! - a group's scores are a matrix of runs x tasks ([`Scores`]); here a task is usually one
-//!   (the cube), a score a run's success rate on held-out episodes ([`crate::score`]);
+//!   (the cube), a score a run's success rate on held-out episodes ([`vge_run::score`]);
 //! - the **mean** is the mean over tasks of each task's mean over runs (rliable's
 //!   `aggregate_mean`), the **IQM** the interquartile mean of all runs x tasks flattened:
 //!   `scipy.stats.trim_mean(x, 0.25)`, which drops `floor(n / 4)` values from each end of the

@@ -38,7 +38,7 @@ pub enum SweepError {
     #[error("{0}")]
     Invalid(String),
     #[error(transparent)]
-    Config(#[from] crate::config::ConfigError),
+    Config(#[from] vge_run::config::ConfigError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> SweepError + '_ {
@@ -72,7 +72,7 @@ pub enum SeedState {
 pub fn seed_state(dir: &Path) -> SeedState {
     if check_finished(dir).is_ok() {
         SeedState::Done
-    } else if crate::run_dir::RunDir::new(dir).resume_checkpoint().is_some() {
+    } else if vge_run::run_dir::RunDir::new(dir).resume_checkpoint().is_some() {
         // checkpoint.old alone: killed between the two renames of a checkpoint save.
         SeedState::Interrupted
     } else {
@@ -80,33 +80,9 @@ pub fn seed_state(dir: &Path) -> SeedState {
     }
 }
 
-/// Whether the run in `dir` finished: `policy.vgep` parses and its CRC holds, and
-/// `final-eval.json` (written after it, and last of all) parses. Err: what is missing or
-/// wrong, naming the file.
-pub fn check_finished(dir: &Path) -> Result<(), String> {
-    let policy = dir.join(crate::run_dir::POLICY);
-    vge_export::PolicyFile::read(&policy).map_err(|e| match &e {
-        vge_export::ExportError::Io { source, .. } => format!("{e}: {source}"),
-        _ => format!("{}: {e}", policy.display()),
-    })?;
-    let path = dir.join(crate::run_dir::FINAL_EVAL);
-    match crate::plot::read_final_eval(dir) {
-        Ok(Some(_)) => Ok(()),
-        Ok(None) => Err(format!("{} is missing", path.display())),
-        Err(e) => Err(e.to_string()),
-    }
-}
-
-/// The step of a run directory's last checkpoint (`state.toml` of the folder a resume reads,
-/// [`crate::run_dir::RunDir::resume_checkpoint`]), for messages: the checkpoint is not verified here.
-pub fn checkpoint_step(dir: &Path) -> Option<u64> {
-    let ckpt = crate::run_dir::RunDir::new(dir).resume_checkpoint()?;
-    let path = ckpt.join(crate::run_dir::CHECKPOINT_STATE);
-    let text =
-        crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN).ok()?;
-    let table: toml::Table = toml::from_str(&text).ok()?;
-    u64::try_from(table.get("step")?.as_integer()?).ok()
-}
+/// Whether a run finished and the step of its last checkpoint: the run folder's readers,
+/// here under the names sweeps and queues know them by.
+pub use vge_run::run_dir::{check_finished, checkpoint_step};
 
 /// The exit status of a `vge train` or `vge sweep` that a signal stopped (its checkpoint
 /// saved): 128 + the signal's number, as a shell reports a process that the signal ended
@@ -331,9 +307,10 @@ fn how_it_ended(dir: &Path, status: std::process::ExitStatus, log: &Path) -> Out
 /// stderr holds a progress bar only on a terminal, so the files are what every run has.
 pub fn progress_line(dir: &Path, seed: u64, steps: Option<u64>) -> String {
     let from_config = || {
-        let path = dir.join(crate::run_dir::CONFIG);
-        let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
-            .ok()?;
+        let path = dir.join(vge_run::run_dir::CONFIG);
+        let text =
+            vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_CONFIG_FILE_LEN)
+                .ok()?;
         u64::try_from(text.parse::<toml::Table>().ok()?.get("total_steps")?.as_integer()?).ok()
     };
     let total_steps = steps.or_else(from_config);
@@ -379,7 +356,7 @@ struct MetricsRow {
 /// has no newline yet).
 fn last_row(path: &Path, names: &[&str]) -> Option<Vec<String>> {
     let text =
-        crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_TABLE_FILE_LEN).ok()?;
+        vge_run::read_limits::read_to_string_bounded(path, vge_run::read_limits::MAX_TABLE_FILE_LEN).ok()?;
     let complete = &text[..text.rfind('\n')?];
     let mut lines = complete.lines();
     let header: Vec<&str> = lines.next()?.split(',').collect();
@@ -391,7 +368,7 @@ fn last_row(path: &Path, names: &[&str]) -> Option<Vec<String>> {
 }
 
 fn last_metrics(dir: &Path) -> Option<MetricsRow> {
-    let row = last_row(&dir.join(crate::run_dir::METRICS), &["step", "return", "steps_per_s"])?;
+    let row = last_row(&dir.join(vge_run::run_dir::METRICS), &["step", "return", "steps_per_s"])?;
     Some(MetricsRow {
         step: row[0].parse().ok()?,
         mean_return: row[1].parse().ok()?,
@@ -401,15 +378,15 @@ fn last_metrics(dir: &Path) -> Option<MetricsRow> {
 
 /// The step and success rate of the run's last periodic success test (`eval.csv`).
 fn last_success(dir: &Path) -> Option<(u64, f64)> {
-    let row = last_row(&dir.join(crate::run_dir::EVAL), &["step", "success"])?;
+    let row = last_row(&dir.join(vge_run::run_dir::EVAL), &["step", "success"])?;
     Some((row[0].parse().ok()?, row[1].parse().ok()?))
 }
 
 /// The final policy's success rate and whether the seed learned (`final-eval.json`).
 fn final_success(dir: &Path) -> Option<(f64, bool)> {
-    let path = dir.join(crate::run_dir::FINAL_EVAL);
-    let text =
-        crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN).ok()?;
+    let path = dir.join(vge_run::run_dir::FINAL_EVAL);
+    let text = vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_RECORD_FILE_LEN)
+        .ok()?;
     let doc: serde_json::Value = serde_json::from_str(&text).ok()?;
     Some((doc.get("success_rate")?.as_f64()?, doc.get("learned")?.as_bool()?))
 }
@@ -419,7 +396,7 @@ pub fn summary_line(sweep: &Sweep, seed: u64, outcome: &Outcome) -> String {
     let dir = sweep.seed_dir(seed);
     match outcome {
         Outcome::Skipped => {
-            format!("seed {seed}: done already ({})", dir.join(crate::run_dir::POLICY).display())
+            format!("seed {seed}: done already ({})", dir.join(vge_run::run_dir::POLICY).display())
         }
         Outcome::Done => match last_metrics(&dir) {
             Some(m) => format!(
@@ -431,9 +408,9 @@ pub fn summary_line(sweep: &Sweep, seed: u64, outcome: &Outcome) -> String {
                     100.0 * rate,
                     if learned { "learned" } else { "did not learn" }
                 )),
-                dir.join(crate::run_dir::POLICY).display()
+                dir.join(vge_run::run_dir::POLICY).display()
             ),
-            None => format!("seed {seed}: done; {}", dir.join(crate::run_dir::POLICY).display()),
+            None => format!("seed {seed}: done; {}", dir.join(vge_run::run_dir::POLICY).display()),
         },
         Outcome::Stopped { step, code } => format!(
             "seed {seed}: stopped at step {} (exit {code}), checkpoint saved; the same sweep again resumes it",
@@ -616,21 +593,21 @@ pub fn write_sbatch(vge: &Path, sweep: &Sweep, slurm: &Slurm) -> Result<(PathBuf
     // Every seed done: an array of no tasks is no job, and the last script stays as it was.
     if !seeds.is_empty() {
         let text = sbatch_script(vge, &dir, &name, &seeds, sweep, slurm);
-        crate::atomic_file::write(&path, text.as_bytes()).map_err(io_err(&path))?;
+        vge_run::run_dir::atomic_file::write(&path, text.as_bytes()).map_err(io_err(&path))?;
     }
     Ok((path, seeds))
 }
 
 fn copy_config(from: &Path, to: &Path) -> Result<(), SweepError> {
     // A copy that kept `base = "..."` would look for the base beside the copy.
-    let merged = crate::config::read_config_table(from)?;
+    let merged = vge_run::config::read_config_table(from)?;
     let text = toml::to_string(&merged)
         .map_err(|e| SweepError::Invalid(format!("{}: {e}", from.display())))?
         .into_bytes();
-    match crate::read_limits::read_bounded(to, crate::read_limits::MAX_CONFIG_FILE_LEN) {
+    match vge_run::read_limits::read_bounded(to, vge_run::read_limits::MAX_CONFIG_FILE_LEN) {
         Ok(existing) if existing == text => Ok(()),
         Ok(_) => Err(SweepError::OtherConfig(to.display().to_string())),
-        Err(_) => crate::atomic_file::write(to, &text).map_err(io_err(to)),
+        Err(_) => vge_run::run_dir::atomic_file::write(to, &text).map_err(io_err(to)),
     }
 }
 
@@ -669,7 +646,7 @@ mod tests {
         std::fs::create_dir_all(&dir).expect("dir");
         assert_eq!(progress_line(&dir, 3, Some(1000)), "seed 3: starting (no metrics row yet)");
         let metrics = "step,episodes,return,steps_per_s\n100,1,2.5,80.4\n200,2,3.25,90.6\n300,3,9";
-        std::fs::write(dir.join(crate::run_dir::METRICS), metrics).expect("metrics");
+        std::fs::write(dir.join(vge_run::run_dir::METRICS), metrics).expect("metrics");
         // 800 steps left at 90.6 steps/s.
         assert_eq!(
             progress_line(&dir, 3, Some(1000)),
@@ -677,7 +654,7 @@ mod tests {
         );
         assert_eq!(progress_line(&dir, 3, Some(200)), "seed 3: 200/200 steps, 91 steps/s, return 3.25");
         std::fs::write(
-            dir.join(crate::run_dir::EVAL),
+            dir.join(vge_run::run_dir::EVAL),
             "step,episodes,return,rotation,success\n200,20,5.0,1.0,0.3500\n",
         )
         .expect("eval");
@@ -686,7 +663,7 @@ mod tests {
             "seed 3: 200/1000 steps, 91 steps/s (9 s left), return 3.25, success 35% at 200"
         );
         assert_eq!(final_success(&dir), None);
-        std::fs::write(dir.join(crate::run_dir::FINAL_EVAL), r#"{"learned": true, "success_rate": 0.55}"#)
+        std::fs::write(dir.join(vge_run::run_dir::FINAL_EVAL), r#"{"learned": true, "success_rate": 0.55}"#)
             .expect("json");
         assert_eq!(final_success(&dir), Some((0.55, true)));
         let _ = std::fs::remove_dir_all(&dir);
@@ -705,8 +682,8 @@ mod tests {
         copy_config(&child, &copy).expect("copy");
         let text = std::fs::read_to_string(&copy).expect("copy");
         assert!(!text.contains("base.toml"), "{text}");
-        let original = crate::config::load_config(&child, &[]).expect("original");
-        let copied = crate::config::load_config(&copy, &[]).expect("copy loads alone");
+        let original = vge_run::config::load_config(&child, &[]).expect("original");
+        let copied = vge_run::config::load_config(&copy, &[]).expect("copy loads alone");
         assert_eq!(copied, original);
         assert_eq!((copied.total_steps, copied.num_envs, copied.name.as_str()), (1000, 2, "child"));
         // The same config again is fine; an edited base makes it another sweep's config.

@@ -1,6 +1,6 @@
 //! The paper's Table I and Fig. 3 from run folders (`vge plot --table1 DIR`): for every
 //! (controller, method) the seeds that finished, how many learned (the success test of
-//! [`crate::eval`]), their mean final success rate and return, and learning curves of the
+//! [`vge_run::eval`]), their mean final success rate and return, and learning curves of the
 //! periodic evaluations, one figure per controller with one band per method.
 //!
 //! Runs are found under the given folders (a run folder holds `config.toml` and
@@ -12,9 +12,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use crate::config::Method;
-use crate::plot::{Groups, PlotError, RunCurves, read_run};
+use crate::plot::{Groups, PlotError};
 use vge_controllers::ControllerKind;
+use vge_run::config::Method;
+use vge_run::run_dir::{RunCurves, read_run};
 
 /// Controllers in the table's order (the paper's: FG, then CS; IGM last).
 pub const CONTROLLERS: [ControllerKind; 3] = [ControllerKind::Fg, ControllerKind::Cs, ControllerKind::Igm];
@@ -79,7 +80,7 @@ pub struct Row {
     /// and how many have one (table1.md only): the verdicts if each run shipped the snapshot
     /// its own periodic tests picked, scored on held-out grasps, instead of its final policy.
     pub selection_learned: (usize, usize),
-    /// Finished runs with a score of their selected policy (`score.json`, [`crate::score`]).
+    /// Finished runs with a score of their selected policy (`score.json`, [`vge_run::score`]).
     pub scored: usize,
     /// IQM and mean over those runs of the selected policy's success on the held-out
     /// episodes, with 95% stratified bootstrap intervals ([`crate::stats`]); None where no
@@ -129,7 +130,7 @@ pub fn late_success(eval_success: &[f64]) -> Option<f64> {
 /// verdict of not learned, the seed found a gait and lost it by the end of its budget.
 #[must_use]
 pub fn passed_a_periodic_test(eval_success: &[f64]) -> bool {
-    eval_success.iter().any(|&s| s >= crate::eval::LEARNED_SUCCESS_RATE)
+    eval_success.iter().any(|&s| s >= vge_run::eval::LEARNED_SUCCESS_RATE)
 }
 
 /// How much a seed's last periodic test must beat its best earlier one to count as still
@@ -166,7 +167,7 @@ pub type AloneFigures = (f64, f64, f64);
 /// the roots overlap.
 pub fn find_runs(roots: &[PathBuf]) -> Result<Vec<PathBuf>, PlotError> {
     fn walk(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), PlotError> {
-        if dir.join(crate::run_dir::CONFIG).is_file() && dir.join(crate::run_dir::METRICS).is_file() {
+        if dir.join(vge_run::run_dir::CONFIG).is_file() && dir.join(vge_run::run_dir::METRICS).is_file() {
             found.push(dir.to_owned());
             return Ok(());
         }
@@ -473,7 +474,7 @@ fn markdown_notes(rows: &[Row]) -> String {
         text.push_str(&format!(
             "\nPassed earlier: of the {not_learned} seeds that did not learn, {fell} passed a periodic \
              test (success >= {:.0}%) during the run and fell below it by the final test.\n",
-            100.0 * crate::eval::LEARNED_SUCCESS_RATE
+            100.0 * vge_run::eval::LEARNED_SUCCESS_RATE
         ));
     }
     if rows.iter().any(|r| r.rising > 0) {
@@ -513,8 +514,9 @@ pub fn read_controllers_alone(dir: &Path) -> Result<BTreeMap<ControllerKind, Alo
         if !path.exists() {
             continue;
         }
-        let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_RECORD_FILE_LEN)
-            .map_err(|source| PlotError::Io { path: path.clone(), source })?;
+        let text =
+            vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_RECORD_FILE_LEN)
+                .map_err(|source| PlotError::Io { path: path.clone(), source })?;
         let c: ControllerAlone = serde_json::from_str(text.trim())
             .map_err(|e| PlotError::Csv { path: path.clone(), message: e.to_string() })?;
         alone.insert(kind, (c.success_rate, c.mean_return, c.mean_contact_switches));

@@ -22,7 +22,7 @@ fn tempdir(name: &str) -> PathBuf {
 fn fake_run(dir: &Path, config: &str, final_eval: Option<(f64, f64)>) {
     std::fs::create_dir_all(dir).expect("run dir");
     // As training stores it: the whole config, any base merged in.
-    let merged = vge_lab::config::load_config(&repo().join("configs").join(config), &[]).expect("config");
+    let merged = vge_run::config::load_config(&repo().join("configs").join(config), &[]).expect("config");
     std::fs::write(dir.join("config.toml"), merged.to_toml_string().expect("toml")).expect("config");
     std::fs::write(
         dir.join("metrics.csv"),
@@ -210,7 +210,7 @@ fn write_score(dir: &Path, success: f64) {
         })
     };
     let score = serde_json::json!({
-        "definition": vge_lab::score::DEFINITION, "episodes": 100, "seed": 1u64 << 52,
+        "definition": vge_run::score::DEFINITION, "episodes": 100, "seed": 1u64 << 52,
         "episode_s": 30.0, "grasp_noise_rad": 0.02,
         "selected": policy("policy-best.vgep", success), "final": policy("policy.vgep", success / 2.0),
     });

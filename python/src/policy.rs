@@ -22,7 +22,7 @@ use crate::env::EnvCore;
 use crate::errors;
 use crate::vec_env::VecEnvCore;
 
-/// `vge eval`'s runtime capacity (`vge_lab::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
+/// `vge eval`'s runtime capacity (`vge_run::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
 const MAX_LAYERS: usize = 8;
 const MAX_WIDTH: usize = 1024;
 type EvalPolicy<'a> = Policy<'a, MAX_LAYERS, MAX_WIDTH>;

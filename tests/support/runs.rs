@@ -53,9 +53,9 @@ pub const TINY: &[&str] = &[
 /// `dir/config.toml`: the config defaults with [`TINY`], then `own` overrides, for
 /// `total_steps`, validated. Its path.
 pub fn tiny_config_file(dir: &std::path::Path, own: &[&str], total_steps: u64) -> PathBuf {
-    let mut c = vge_lab::config::Config::default();
+    let mut c = vge_run::config::Config::default();
     for o in TINY.iter().chain(own) {
-        vge_lab::config::apply_override(&mut c, o).expect(o);
+        vge_run::config::apply_override(&mut c, o).expect(o);
     }
     c.total_steps = total_steps;
     c.validate().expect("valid");

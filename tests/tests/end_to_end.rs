@@ -12,7 +12,7 @@ use vge_bridge::control_loop::{self, LoopConfig, StopReason};
 use vge_bridge::policy_runner::{RuntimePolicy, storage_for};
 use vge_bridge::sim_hand::{self, SimHand};
 use vge_bridge::transport::InProcessTransport;
-use vge_lab::config::{Config, apply_override};
+use vge_run::config::{Config, apply_override};
 use vge_sim::EnvConfig;
 use vge_trainer::nets::{GaussianActor, NetSpec};
 

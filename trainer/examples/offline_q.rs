@@ -8,7 +8,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::Device;
-use vge_lab::config::{Config, apply_override};
+use vge_run::config::{Config, apply_override};
 use vge_trainer::learner::{self, LearnerConfig};
 use vge_trainer::replay::ReplayBuffer;
 

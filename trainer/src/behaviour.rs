@@ -31,7 +31,7 @@ use thiserror::Error;
 
 use crate::replay::Source;
 use vge_controllers::{Controller, ControllerInput};
-use vge_lab::config::{BcSection, Config, FgeSection, Method};
+use vge_run::config::{BcSection, Config, FgeSection, Method};
 
 /// FGE's probability of following the controller at training step `step`: `p_start` until
 /// `decay_start`, linear to `p_end` at `decay_end`, `p_end` after.

@@ -34,16 +34,16 @@ use thiserror::Error;
 
 use crate::learner::{ACTOR_FILE, CRITIC_FILE, Learner, OPTIM_FILE, TARGET_ACTOR_FILE, TARGET_FILE};
 use crate::replay::{ReplayBuffer, ReplayError};
-use vge_lab::atomic_file::sync_dir;
-use vge_lab::run_dir::RunDir;
+use vge_run::run_dir::RunDir;
+use vge_run::run_dir::atomic_file::sync_dir;
 
 /// The checkpoint folder in a run directory; [`save`] writes to the temporary one first and
-/// keeps the previous one while it swaps them (names: [`vge_lab::run_dir`]).
-pub use vge_lab::run_dir::{CHECKPOINT as DIR, CHECKPOINT_OLD as OLD_DIR, CHECKPOINT_TMP as TMP_DIR};
+/// keeps the previous one while it swaps them (names: [`vge_run::run_dir`]).
+pub use vge_run::run_dir::{CHECKPOINT as DIR, CHECKPOINT_OLD as OLD_DIR, CHECKPOINT_TMP as TMP_DIR};
 /// The list of the checkpoint's files with their lengths and CRCs, written last.
 pub const MANIFEST: &str = "manifest.json";
 /// The training loop's state (`crate::train`).
-pub use vge_lab::run_dir::CHECKPOINT_STATE as STATE_FILE;
+pub use vge_run::run_dir::CHECKPOINT_STATE as STATE_FILE;
 /// The replay buffer ([`ReplayBuffer::write_to`]).
 pub const REPLAY_FILE: &str = "replay.bin";
 /// The envs' episodes in progress, when they go on through the checkpoint (`crate::train`).
@@ -322,7 +322,7 @@ pub fn verify(dir: &Path) -> Result<Manifest, CheckpointError> {
         return Err(CheckpointError::NotAFolder { path: dir.to_owned() });
     }
     let path = dir.join(MANIFEST);
-    let text = match vge_lab::read_limits::read_bounded(&path, vge_lab::read_limits::MAX_RECORD_FILE_LEN) {
+    let text = match vge_run::read_limits::read_bounded(&path, vge_run::read_limits::MAX_RECORD_FILE_LEN) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             return Err(CheckpointError::NoManifest { path });
@@ -413,7 +413,7 @@ pub fn open(out_dir: &Path) -> Result<Verified, CheckpointError> {
     let mut checkpoint = Verified { dir, manifest, state_toml: String::new() };
     let path = checkpoint.require(STATE_FILE)?;
     checkpoint.state_toml =
-        vge_lab::read_limits::read_to_string_bounded(&path, vge_lab::read_limits::MAX_RECORD_FILE_LEN)
+        vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_RECORD_FILE_LEN)
             .map_err(|source| CheckpointError::Read { path, source })?;
     Ok(checkpoint)
 }

@@ -6,7 +6,7 @@
 use tch::nn::{self, Module};
 use tch::{Kind, Tensor};
 
-pub use vge_lab::config::MatmulPrecision;
+pub use vge_run::config::MatmulPrecision;
 
 /// Runs `op`, which passes each matmul operand through the cast it is given: unchanged in
 /// f32, rounded to bf16 in [`MatmulPrecision::Bf16`] (and the result back to f32). One place

@@ -3,8 +3,8 @@
 
 use tch::nn::VarStore;
 use vge_export::{ActorSpec, ExportError, ObsNorm, Provenance, export_policy};
-use vge_lab::config::Config;
-pub use vge_lab::policy_meta::hand_policy_meta;
+use vge_run::config::Config;
+pub use vge_run::policy_meta::hand_policy_meta;
 use vge_sim::EnvConfig;
 use vge_sim::observation::{ObservationLayout, ObservationSet};
 

@@ -12,8 +12,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
 use vge_controllers::{ControllerInput, IgmConfig};
-use vge_lab::config::{Config, apply_override, load_config};
-use vge_lab::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
+use vge_run::config::{Config, apply_override, load_config};
+use vge_run::eval::{EpisodeOutcome, eval_policy_file, success_test_env, summarise};
 use vge_sim::Env;
 use vge_sim::gait::ContactSwitches;
 

@@ -319,7 +319,7 @@ fn bf16_updates_track_f32_ones_and_acting_stays_f32(algorithm: Algorithm) {
                 algorithm,
                 matmul,
                 entropy: EntropyCoef::Fixed(0.0),
-                ..LearnerConfig::for_hand(&vge_lab::config::Config::default())
+                ..LearnerConfig::for_hand(&vge_run::config::Config::default())
                     .expect("the default run's sizes")
             };
             learner::build_seeded(config, Device::Cpu, 3).expect("learner")

@@ -423,7 +423,7 @@ fn one_sac_alpha0_update_equals_the_textbook_update() {
     tch::set_num_threads(1);
     let runs_config = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/cube-fg-vge.toml");
     let config =
-        vge_lab::config::load_config(std::path::Path::new(runs_config), &["algorithm=sac".to_owned()])
+        vge_run::config::load_config(std::path::Path::new(runs_config), &["algorithm=sac".to_owned()])
             .expect("the runs' config");
     let learner_config = LearnerConfig::for_hand(&config).expect("sizes");
     assert_eq!(learner_config.entropy, EntropyCoef::Fixed(0.0), "the runs' SAC has a fixed alpha of 0");

@@ -8,7 +8,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
 use vge_controllers::{Controller, ControllerError, ControllerInput};
-use vge_lab::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
+use vge_run::config::{BcSection, Config, FgeSection, Method, apply_override, load_config};
 /// vge15's joints: the behaviour tests' action size (any size would do).
 const JOINTS: usize = 15;
 use vge_trainer::behaviour::{
@@ -671,7 +671,7 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     let again_dir = tempdir("again");
     train(&tiny_config(140), &again_dir, false, &never, &mut |_| {}).expect("again");
     assert!(std::fs::read(again_dir.join("policy.vgep")).expect("policy") == full_policy);
-    let report = vge_lab::eval::eval_policy_file(
+    let report = vge_run::eval::eval_policy_file(
         &full_dir.join("policy.vgep"),
         &tiny_config(140).env.env_config(0).expect("env"),
         1,
@@ -865,7 +865,7 @@ fn a_run_started_from_another_runs_networks_keeps_them_and_trains_on() {
     let err = refused(stage2(20, &["sac.hidden=[16, 16]"]));
     assert!(err.contains("sac.hidden") && err.contains(&source.display().to_string()), "{err}");
     let mut sac = stage2(20, &[]);
-    sac.algorithm = vge_lab::config::AlgorithmName::Sac;
+    sac.algorithm = vge_run::config::AlgorithmName::Sac;
     sac.td3 = Default::default();
     assert!(refused(sac).contains("algorithm"));
     let mut nowhere = stage2(20, &[]);

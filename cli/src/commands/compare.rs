@@ -63,7 +63,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     let pairs = (!pairs.is_empty()).then_some(pairs.as_slice());
     let written = vge_lab::compare::write(&groups, pairs, metric, &out, seed, &bootstrap)?;
     let md = out.join("compare.md");
-    let text = vge_lab::read_limits::read_to_string_bounded(&md, vge_lab::read_limits::MAX_RECORD_FILE_LEN);
+    let text = vge_run::read_limits::read_to_string_bounded(&md, vge_run::read_limits::MAX_RECORD_FILE_LEN);
     print!("{}", text.unwrap_or_default());
     for f in &written.files {
         eprintln!("wrote {}", f.display());

@@ -80,8 +80,8 @@ pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
     }
     let (mut default_episode_s, mut default_grasp_noise_rad) = (10.0, 0.02);
     if let Some(path) = &config {
-        let config = vge_lab::config::load_config(path, &overrides)?;
-        let env = vge_lab::eval::without_training_disturbances(&config.env_config(0)?);
+        let config = vge_run::config::load_config(path, &overrides)?;
+        let env = vge_run::eval::without_training_disturbances(&config.env_config(0)?);
         options.cs = config.cs_config(&env);
         options.env = env;
         (default_episode_s, default_grasp_noise_rad) =
@@ -92,7 +92,7 @@ pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
     anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
     anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
-    options.env = vge_lab::eval::success_test_env(&options.env, episode_s, grasp_noise_rad);
+    options.env = vge_run::eval::success_test_env(&options.env, episode_s, grasp_noise_rad);
     let summary = rollout::run_with(kind, object, episodes, seed, &options, |i, e| {
         if !json {
             eprintln!(

@@ -19,12 +19,12 @@ pub struct EpisodeArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Episode length in seconds of sim time.
-    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_EPISODE_S)]
+    #[arg(long, default_value_t = vge_run::eval::SUCCESS_TEST_EPISODE_S)]
     pub episode_s: f32,
     /// Uniform noise (+-rad) on the initial grasp's roll and closing angles; 0 starts
     /// every episode from the same grasp (then, without sensor noise or perturbations,
     /// all episodes are the same).
-    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
+    #[arg(long, default_value_t = vge_run::eval::SUCCESS_TEST_GRASP_NOISE_RAD)]
     pub grasp_noise_rad: f32,
 }
 
@@ -50,7 +50,7 @@ pub struct EvalArgs {
     #[arg(long, requires = "run")]
     write: bool,
     /// Episodes to run (the success test uses 20).
-    #[arg(long, default_value_t = vge_lab::eval::SUCCESS_TEST_EPISODES)]
+    #[arg(long, default_value_t = vge_run::eval::SUCCESS_TEST_EPISODES)]
     episodes: usize,
     #[command(flatten)]
     episode: EpisodeArgs,
@@ -104,7 +104,7 @@ pub struct EvalArgs {
 pub struct ObjectList(Vec<ObjectShape>);
 
 fn parse_object_list(s: &str) -> Result<ObjectList, String> {
-    vge_lab::eval::parse_objects(s).map(ObjectList)
+    vge_run::eval::parse_objects(s).map(ObjectList)
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -147,14 +147,14 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     // The policy's own task: its hand, orientation and observation, refused before any
     // episode if the policy cannot run on it.
     let task =
-        vge_lab::eval::policy_task_env(&vge_lab::eval::read_policy_file(&policy)?, hand.as_deref(), object)
+        vge_run::eval::policy_task_env(&vge_run::eval::read_policy_file(&policy)?, hand.as_deref(), object)
             .with_context(|| format!("the task of {}", policy.display()))?;
     // The success test's env for an object, with the robustness test's disturbances set the
     // one way it sets them.
     let env_for = |object: ObjectShape| {
         let env =
             EnvConfig { object: vge_sim::ObjectConfig { shape: object, ..task.object }, ..task.clone() };
-        let mut env = vge_lab::eval::success_test_env(&env, episode_s, grasp_noise_rad);
+        let mut env = vge_run::eval::success_test_env(&env, episode_s, grasp_noise_rad);
         use vge_lab::robustness::Axis;
         for (axis, level) in [
             (Axis::JointNoise, noise_q_rad),
@@ -176,7 +176,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(path) = &record {
         record_episode(&policy, &env, seed, path)?;
     }
-    let report = vge_lab::eval::eval_policy_file(&policy, &env, episodes, seed)
+    let report = vge_run::eval::eval_policy_file(&policy, &env, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
     if let Some(png) = &plot {
         draw_gait_diagram(&policy, &env, seed, png)?;
@@ -199,8 +199,8 @@ fn eval_objects(
     plot: Option<&Path>,
     json: bool,
 ) -> anyhow::Result<()> {
-    let bytes = vge_lab::eval::read_policy_file(policy)?;
-    let report = vge_lab::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
+    let bytes = vge_run::eval::read_policy_file(policy)?;
+    let report = vge_run::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
         .with_context(|| format!("evaluating {}", policy.display()))?;
     if let Some(png) = plot {
         let outs: Vec<PathBuf> =
@@ -222,8 +222,8 @@ fn eval_objects(
         #[derive(serde::Serialize)]
         struct Line<'a> {
             #[serde(flatten)]
-            overall: &'a vge_lab::eval::EvalReport,
-            per_object: vge_lab::eval::PerObjectFigures,
+            overall: &'a vge_run::eval::EvalReport,
+            per_object: vge_run::eval::PerObjectFigures,
         }
         let line = Line { overall: &report.overall, per_object: report.figures() };
         println!("{}", serde_json::to_string(&line).context("writing the report as JSON")?);
@@ -238,21 +238,21 @@ fn eval_objects(
     };
     println!(
         "verdict: {verdict} (success >= {:.0}% of an object's episodes)",
-        100.0 * vge_lab::eval::LEARNED_SUCCESS_RATE
+        100.0 * vge_run::eval::LEARNED_SUCCESS_RATE
     );
     Ok(())
 }
 
 /// One row per object and the overall figures: success, drops, rotation, return, switches.
 fn print_objects_table(
-    per_object: &[(ObjectShape, vge_lab::eval::EvalReport)],
-    overall: &vge_lab::eval::EvalReport,
+    per_object: &[(ObjectShape, vge_run::eval::EvalReport)],
+    overall: &vge_run::eval::EvalReport,
 ) {
     println!(
         "  {:<16} {:>8} {:>7} {:>9} {:>9} {:>9} {:>9}",
         "object", "episodes", "success", "drops", "rot_rad", "return", "switches"
     );
-    let row = |name: &str, r: &vge_lab::eval::EvalReport| {
+    let row = |name: &str, r: &vge_run::eval::EvalReport| {
         println!(
             "  {name:<16} {:>8} {:>7.2} {:>9.2} {:>9.2} {:>9.2} {:>9.1}",
             r.episodes,
@@ -271,7 +271,7 @@ fn print_objects_table(
 
 /// `vge eval --run DIR [--write]`.
 fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
-    let r = vge_lab::run_eval::rescore_final_eval(dir, write)
+    let r = vge_run::run_eval::rescore_final_eval(dir, write)
         .with_context(|| format!("scoring the run in {}", dir.display()))?;
     if json {
         println!("{}", r.report.to_json_line());
@@ -306,7 +306,7 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
 
 /// `vge eval --plot`: the gait diagram of the episode with seed `seed`.
 fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> anyhow::Result<()> {
-    let bytes = vge_lab::eval::read_policy_file(policy)?;
+    let bytes = vge_run::eval::read_policy_file(policy)?;
     vge_lab::gait_diagram::draw_episode(&bytes, env, seed, &policy.display().to_string(), png).with_context(
         || format!("drawing the gait diagram of {} into {}", policy.display(), png.display()),
     )?;
@@ -316,8 +316,8 @@ fn draw_gait_diagram(policy: &Path, env: &EnvConfig, seed: u64, png: &Path) -> a
 
 /// `vge eval --record`: the episode with seed `seed` recorded into `path`.
 fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, path: &Path) -> anyhow::Result<()> {
-    let bytes = vge_lab::eval::read_policy_file(policy)?;
-    let outcome = vge_lab::eval::record_policy_bytes(&bytes, env, seed, path)
+    let bytes = vge_run::eval::read_policy_file(policy)?;
+    let outcome = vge_run::eval::record_policy_bytes(&bytes, env, seed, path)
         .with_context(|| format!("recording {} into {}", policy.display(), path.display()))?;
     eprintln!(
         "vge eval: episode seed {seed} ({} steps) recorded in {}; see it in Rerun with \
@@ -329,7 +329,7 @@ fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, path: &Path) -> any
     Ok(())
 }
 
-fn print_eval_report(report: &vge_lab::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
+fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
     println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
     println!("  mean return        {:.3}", report.mean_return);
     println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
@@ -343,6 +343,6 @@ fn print_eval_report(report: &vge_lab::eval::EvalReport, policy: &Path, episode_
     let verdict = if report.learned() { "learned" } else { "not learned" };
     println!(
         "  verdict            {verdict} (success >= {:.0}% of episodes)",
-        100.0 * vge_lab::eval::LEARNED_SUCCESS_RATE
+        100.0 * vge_run::eval::LEARNED_SUCCESS_RATE
     );
 }

@@ -65,7 +65,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
     let set = vge_sim::ObservationSet::parse(&args.observation)
         .map_err(|e| anyhow::anyhow!("--observation: {e}"))?;
     let unknown = Provenance { vge_version: String::new(), config_hash: String::new(), seed: 0, steps: 0 };
-    let hand = vge_lab::policy_meta::hand_policy_meta(&env, set, unknown);
+    let hand = vge_run::policy_meta::hand_policy_meta(&env, set, unknown);
     let target = ImportTarget {
         obs_layout: hand.obs_layout,
         action_names: hand.action_names,
@@ -124,7 +124,7 @@ pub fn run(args: ImportArgs) -> anyhow::Result<()> {
 /// The numbers of a file, separated by whitespace or commas (`--obs-mean`, `--obs-std`).
 fn read_numbers(path: Option<&std::path::Path>) -> anyhow::Result<Option<Vec<f32>>> {
     let Some(path) = path else { return Ok(None) };
-    let text = vge_lab::read_limits::read_to_string_bounded(path, vge_lab::read_limits::MAX_NUMBERS_FILE_LEN)
+    let text = vge_run::read_limits::read_to_string_bounded(path, vge_run::read_limits::MAX_NUMBERS_FILE_LEN)
         .with_context(|| format!("reading {}", path.display()))?;
     let values = text
         .split(|c: char| c.is_whitespace() || c == ',')

@@ -65,7 +65,7 @@ pub fn run(args: PlotArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let out = out.context("--out is required without --table1")?;
-    let curves = runs.iter().map(|d| vge_lab::plot::read_run(d)).collect::<Result<Vec<_>, _>>()?;
+    let curves = runs.iter().map(|d| vge_run::run_dir::read_run(d)).collect::<Result<Vec<_>, _>>()?;
     let table = vge_lab::plot::plot(&curves, &out)?;
     print!("{table}");
     eprintln!("wrote {}", out.display());

@@ -65,10 +65,10 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
     );
     anyhow::ensure!(episode_s.is_finite() && episode_s > 0.0, "--episode-s must be positive");
     anyhow::ensure!(grasp_noise_rad.is_finite() && grasp_noise_rad >= 0.0, "--grasp-noise-rad must be >= 0");
-    let bytes = vge_lab::eval::read_policy_file(&policy)?;
+    let bytes = vge_run::eval::read_policy_file(&policy)?;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     // The policy's own task: its hand, orientation and observation.
-    let base = vge_lab::eval::policy_task_env(&bytes, None, object)
+    let base = vge_run::eval::policy_task_env(&bytes, None, object)
         .with_context(|| format!("the task of {}", policy.display()))?;
     let axes = if axes.is_empty() { robustness::Axis::ALL.to_vec() } else { axes };
     for (i, axis) in axes.iter().enumerate() {

@@ -37,10 +37,10 @@ pub struct ScoreArgs {
     #[arg(required = true)]
     runs: Vec<PathBuf>,
     /// Held-out episodes per policy.
-    #[arg(long, default_value_t = vge_lab::score::DEFAULT_EPISODES)]
+    #[arg(long, default_value_t = vge_run::score::DEFAULT_EPISODES)]
     episodes: usize,
     /// Env seed of the first held-out episode (episode k: seed + k).
-    #[arg(long, default_value_t = vge_lab::score::HELD_OUT_SEED)]
+    #[arg(long, default_value_t = vge_run::score::HELD_OUT_SEED)]
     seed: u64,
     /// Score again runs whose score.json already holds this score.
     #[arg(long)]
@@ -65,7 +65,7 @@ fn score(
     force: bool,
     threads: Option<u32>,
 ) -> anyhow::Result<()> {
-    use vge_lab::score::{ScoreOptions, ScoreOutcome, score_run};
+    use vge_run::score::{ScoreOptions, ScoreOutcome, score_run};
     let options = ScoreOptions { episodes, seed, force };
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
@@ -76,7 +76,7 @@ fn score(
     for (i, dir) in runs.iter().enumerate() {
         let started = std::time::Instant::now();
         let mut last_shown = std::time::Instant::now();
-        let mut show = |p: &vge_lab::score::ScoreProgress| {
+        let mut show = |p: &vge_run::score::ScoreProgress| {
             if p.done == p.total || last_shown.elapsed().as_secs_f64() >= 10.0 {
                 errln!(
                     "vge score: run {}/{} {}: {} episodes of {} ({}), {:.0} s",

@@ -65,7 +65,7 @@ pub fn run(args: ScreenArgs) -> anyhow::Result<()> {
     })
     .with_context(|| format!("screening {}", run.display()))?;
     let csv = run.join(ship::SCREEN_CSV);
-    vge_lab::atomic_file::write(&csv, ship::screen_csv(&rows).as_bytes())
+    vge_run::run_dir::atomic_file::write(&csv, ship::screen_csv(&rows).as_bytes())
         .with_context(|| format!("writing {}", csv.display()))?;
     println!("wrote {}", csv.display());
     Ok(())

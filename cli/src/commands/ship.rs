@@ -40,7 +40,7 @@ pub struct ShipArgs {
     /// The policy file to ship, relative to the run's folder: policy.vgep (the final policy),
     /// policy-best.vgep (the snapshot the run's selection picked on its validation grasps) or
     /// snapshots/policy-STEP.vgep.
-    #[arg(long, default_value = vge_lab::run_dir::POLICY)]
+    #[arg(long, default_value = vge_run::run_dir::POLICY)]
     policy: String,
     /// The shipped gait's name: its files are NAME.vgep, NAME.toml, NAME.json,
     /// NAME-robustness.png and NAME-gait.png (for several objects: all of them, and

@@ -165,7 +165,7 @@ fn sweep_parallel(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep, jobs: u32) ->
     use vge_lab::sweep::{Outcome, Parallel, run_parallel, summary_line};
     let exe = std::env::current_exe().context("finding the vge binary to start the jobs")?;
     // Checked here so that a typo fails once, not once per seed in each log.
-    vge_lab::config::load_config(&sweep.config, &sweep.overrides)?;
+    vge_run::config::load_config(&sweep.config, &sweep.overrides)?;
     let opts = Parallel {
         jobs: jobs as usize,
         threads_per_job: args.threads_per_job as usize,
@@ -214,7 +214,7 @@ fn sweep_slurm(args: &SweepArgs, sweep: &vge_lab::sweep::Sweep) -> anyhow::Resul
     if !args.dry_run && !on_path("sbatch") {
         bail!(vge_lab::sweep::SweepError::NoSbatch);
     }
-    vge_lab::config::load_config(&sweep.config, &sweep.overrides)?;
+    vge_run::config::load_config(&sweep.config, &sweep.overrides)?;
     let slurm = Slurm {
         partition: args.partition.clone(),
         time: args.time.clone(),

@@ -94,21 +94,16 @@ fn train_target(
     config: Option<PathBuf>,
     out: Option<PathBuf>,
     overrides: &[String],
-) -> anyhow::Result<(vge_lab::config::Config, PathBuf, bool)> {
-    use vge_lab::config as cfg;
+) -> anyhow::Result<(vge_run::config::Config, PathBuf, bool)> {
+    use vge_run::config as cfg;
     Ok(match (resume, config, out) {
         (Some(dir), _, _) => {
-            let text = vge_lab::read_limits::read_to_string_bounded(
-                &dir.join(vge_lab::run_dir::CONFIG),
-                vge_lab::read_limits::MAX_CONFIG_FILE_LEN,
-            )
-            .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
-            let origin = dir.join(vge_lab::run_dir::CONFIG).display().to_string();
-            cfg::check_resumable(&text, &origin)?;
-            let stored = cfg::parse_with_overrides(&text, &origin, &[])?;
-            let config = cfg::parse_with_overrides(&text, &origin, overrides)?;
-            config.validate()?;
-            for note in cfg::check_resume(&stored, &config, &origin)? {
+            let run = vge_run::run_dir::RunDir::new(&dir);
+            let text = run
+                .read_config_text()
+                .with_context(|| format!("{} is not a vge run directory (no config.toml)", dir.display()))?;
+            let (config, notes) = cfg::resume_config(&text, &run.config().display().to_string(), overrides)?;
+            for note in notes {
                 errln!("vge train: {note}");
             }
             (config, dir, true)
@@ -167,7 +162,7 @@ fn duration_text(seconds: f64) -> String {
 /// success 0.00, drops 1.00, return 15.78, rotation 0.99 rad (20 episodes)`, and for a run on
 /// several objects its worst object.
 #[cfg(feature = "train")]
-fn evaluation_line(step: u64, report: &vge_lab::eval::ObjectsReport) -> String {
+fn evaluation_line(step: u64, report: &vge_run::eval::ObjectsReport) -> String {
     let r = &report.overall;
     let mut line = format!(
         "test at step {step}: success {:.2}, drops {:.2}, return {:.2}, rotation {:.2} rad ({} episodes)",

@@ -8,7 +8,7 @@
 //! - `vge-python-reference policy-actions POLICY OBS OUT [HAND]`: the actions of the policy
 //!   file for the `f32` little-endian observations in OBS (rows of the policy's input width),
 //!   written to OUT the same way, loaded and run the way `vge eval` does
-//!   (`vge_lab::eval`'s `with_runtime_policy`: the file's hand, dimensions, observation layout
+//!   (`vge_run::eval`'s `with_runtime_policy`: the file's hand, dimensions, observation layout
 //!   and action names checked against the hand, its bytes copied to a 16-byte aligned buffer,
 //!   a `Policy<8, 1024>`). HAND is a shipped hand's name or an MJCF path (default `vge15`);
 //!   the layout is that of the observation set the file records, on that hand.
@@ -28,7 +28,7 @@ use vge_config_file::EnvKeys;
 use vge_runtime::{AlignedBytes, Policy};
 use vge_sim::{Env, ObservationLayout, ObservationSet};
 
-/// `vge eval`'s runtime capacity (`vge_lab::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
+/// `vge eval`'s runtime capacity (`vge_run::eval::EVAL_MAX_LAYERS`, `EVAL_MAX_WIDTH`).
 const EVAL_MAX_LAYERS: usize = 8;
 const EVAL_MAX_WIDTH: usize = 1024;
 

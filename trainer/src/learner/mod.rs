@@ -26,10 +26,12 @@ use crate::optim::{Adam, flatten_storage};
 mod obs_columns;
 mod soft_actor_critic;
 mod td3;
+pub mod threads;
 
 pub use obs_columns::ObsColumns;
 pub use soft_actor_critic::SoftActorCritic;
 pub use td3::Td3;
+pub use threads::ThreadGovernor;
 
 /// How the entropy coefficient α is set.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,11 +61,11 @@ pub enum Algorithm {
 impl Algorithm {
     /// TD3 with the `[td3]` section's defaults (CleanRL's), written once in the config.
     pub fn td3() -> Self {
-        Self::td3_of(&vge_lab::config::Td3Section::default())
+        Self::td3_of(&vge_run::config::Td3Section::default())
     }
 
     /// TD3 with a config's `[td3]` section.
-    pub fn td3_of(t: &vge_lab::config::Td3Section) -> Self {
+    pub fn td3_of(t: &vge_run::config::Td3Section) -> Self {
         Self::Td3 {
             explore_std: t.explore_std,
             target_noise_std: t.target_noise_std,
@@ -104,8 +106,8 @@ impl LearnerConfig {
     /// The learner of a run config: its hand's sizes (observation, action, the actor's
     /// observation set), the `[sac]` section's sizes and rates, `algorithm`, and `[td3]` for
     /// TD3. Refused when the config's hand does not load.
-    pub fn for_hand(config: &vge_lab::config::Config) -> Result<Self, vge_sim::SimError> {
-        use vge_lab::config::{AlgorithmName, Alpha, AlphaName};
+    pub fn for_hand(config: &vge_run::config::Config) -> Result<Self, vge_sim::SimError> {
+        use vge_run::config::{AlgorithmName, Alpha, AlphaName};
         let env = config.env_config(0)?;
         let set =
             config.env.observation_set().map_err(|e| vge_sim::SimError::InvalidConfig(e.to_string()))?;

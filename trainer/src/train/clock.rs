@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-pub use vge_lab::run_eval::RunCost;
+pub use vge_run::run_eval::RunCost;
 
 /// The run's clock: the earlier sessions' cost plus this session's so far.
 #[derive(Debug)]

@@ -15,7 +15,7 @@ use crate::behaviour::{Behaviour, ControllerCall, Decision, EnvController, StepC
 use crate::learner::{Learner, ObsColumns, mix_seed, standard_normal};
 use crate::replay::ReplayBuffer;
 use vge_controllers::{ControllerInput, IgmConfig};
-use vge_lab::config::Config;
+use vge_run::config::Config;
 
 /// Salt of the behaviour-noise seeds.
 const SALT_ACT: u64 = 0xac7;
@@ -533,7 +533,7 @@ mod tests {
     use crate::learner::{self, LearnerConfig};
 
     use super::*;
-    use vge_lab::config::apply_override;
+    use vge_run::config::apply_override;
 
     /// An actor that outputs NaN (here: weights poisoned) stops the run with an error naming
     /// the step and the env; the NaN is never clipped into a valid action.

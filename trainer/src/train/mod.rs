@@ -12,7 +12,7 @@
 //!
 //! Output directory:
 //! - `vge.lock`: held by the one process writing the folder, with its pid
-//!   ([`vge_lab::run_lock`]);
+//!   ([`vge_run::run_dir::lock`]);
 //! - `config.toml`: the effective configuration;
 //! - `metrics.csv`: one row every `run.log_interval` env steps (flushed);
 //! - `tensorboard/`: the metrics rows as TensorBoard scalars (`train/<column>`), one event
@@ -28,7 +28,7 @@
 //!   ([`crate::checkpoint`]);
 //! - `policy.vgep`: the exported actor at the end, and `final-eval.json` its evaluation,
 //!   written last: a run is finished when both read back whole
-//!   ([`vge_lab::sweep::check_finished`]);
+//!   ([`vge_run::run_dir::check_finished`]);
 //! - `snapshots/policy-<step>.vgep`: the actor exported at each periodic evaluation;
 //! - `policy-best.vgep`, `best-eval.json`: model selection, reported apart from the final
 //!   policy. The snapshot with the best periodic evaluation (success, then return; a run on
@@ -53,6 +53,7 @@
 mod clock;
 mod collector;
 mod in_progress;
+mod memory;
 mod metrics;
 mod run_folder;
 mod state;
@@ -77,11 +78,11 @@ use collector::Collector;
 use run_folder::RunFolder;
 pub use run_folder::{RUN_FILES, check_no_run};
 use state::{Counters, TrainState};
-use vge_lab::config::{Config, ConfigError};
-use vge_lab::eval::EvalError;
-use vge_lab::run_eval as evaluation;
-pub use vge_lab::run_eval::{Rescored, rescore_final_eval};
-use vge_lab::run_lock::RunLock;
+use vge_run::config::{Config, ConfigError};
+use vge_run::eval::EvalError;
+use vge_run::run_dir::lock::RunLock;
+use vge_run::run_eval as evaluation;
+pub use vge_run::run_eval::{Rescored, rescore_final_eval};
 
 #[derive(Debug, Error)]
 pub enum TrainError {
@@ -110,15 +111,17 @@ pub enum TrainError {
     #[error("{dir} already holds a run (found {found}): {advice}")]
     RunExists { dir: String, found: String, advice: String },
     #[error(transparent)]
-    Lock(#[from] vge_lab::run_lock::LockError),
+    Lock(#[from] vge_run::run_dir::lock::LockError),
     #[error("behaviour policy: {0}")]
     Behaviour(#[from] BehaviourError),
     #[error("training step {step}: the learner's action for env {env} is not finite ({value})")]
     NonFiniteAction { step: u64, env: usize, value: f32 },
     #[error(transparent)]
-    Score(#[from] vge_lab::score::ScoreError),
+    Score(#[from] vge_run::score::ScoreError),
     #[error(transparent)]
-    RunEval(#[from] vge_lab::run_eval::RunEvalError),
+    RunEval(#[from] vge_run::run_eval::RunEvalError),
+    #[error(transparent)]
+    RunFile(#[from] vge_run::run_dir::RunFileError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> TrainError + '_ {
@@ -142,7 +145,10 @@ pub struct Progress<'a> {
     /// progress bar can be drawn (a log file, a batch job), this is when to print a line.
     pub logged: bool,
     /// The periodic success test that ran at this step, if one did (`eval.csv`'s new row).
-    pub evaluation: Option<&'a vge_lab::eval::ObjectsReport>,
+    pub evaluation: Option<&'a vge_run::eval::ObjectsReport>,
+    /// Where this session's wall time went so far (`vge bench train` takes the difference
+    /// between two steps).
+    pub times: PhaseTimes,
 }
 
 /// How a call of [`train`] ended.
@@ -201,7 +207,7 @@ const OBS_MIN_STD: f32 = 1e-2;
 
 /// The effective configuration stored in a run directory (for `--resume DIR`).
 pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
-    Ok(vge_lab::run_eval::run_config(dir)?)
+    Ok(vge_run::run_eval::run_config(dir)?)
 }
 
 /// Trains `config` into `out_dir`. With `resume`, continues from `out_dir/checkpoint` (the
@@ -272,6 +278,7 @@ impl Trainer<'_> {
             let prev_step = t.c.step;
             t.c.step += t.collector.len() as u64;
             t.lap(Phase::Sim);
+            t.threads.adapt();
             t.update()?;
             t.lap(Phase::Update);
             t.periodic(prev_step, progress)?;
@@ -362,8 +369,10 @@ struct Trainer<'a> {
     resumed: bool,
     times: PhaseTimes,
     clock: Instant,
+    /// libtorch's threads, fitted to the cores other processes leave idle.
+    threads: learner::ThreadGovernor,
     /// This session's latest periodic evaluation (step, report).
-    last_evaluation: Option<(u64, vge_lab::eval::ObjectsReport)>,
+    last_evaluation: Option<(u64, vge_run::eval::ObjectsReport)>,
 }
 
 /// One writer per folder: a resume reads the checkpoint under the folder's lock, and a new
@@ -388,7 +397,7 @@ impl<'a> Trainer<'a> {
     fn new(config: &'a Config, out_dir: &Path, resume: bool) -> Result<Self, TrainError> {
         config.validate()?;
         // Before anything is allocated: what the run needs must fit this machine.
-        config.check_fits_memory()?;
+        config.check_fits_memory(&memory::learner_memory_estimate(config)?)?;
         let lock = lock_existing_folder(out_dir, resume)?;
         if config.sac.threads > 0 {
             tch::set_num_threads(config.sac.threads);
@@ -465,6 +474,7 @@ impl<'a> Trainer<'a> {
             cost: RunClock::start(before),
             times: PhaseTimes::default(),
             clock: now,
+            threads: learner::ThreadGovernor::new(),
             last_evaluation: None,
         })
     }
@@ -565,6 +575,7 @@ impl<'a> Trainer<'a> {
             updates: self.learner.updates(),
             logged,
             evaluation: self.last_evaluation.as_ref().filter(|_| evaluated).map(|(_, report)| report),
+            times: PhaseTimes { total_s: self.cost.session_wall_s(), ..self.times },
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
             self.lap(Phase::Sim);
@@ -621,14 +632,14 @@ impl<'a> Trainer<'a> {
             let evaluated = self.last_evaluation.take().filter(|(at, _)| *at == self.c.step).map(|(_, r)| r);
             let path =
                 evaluation::finish(self.folder.dir(), self.config, &bytes, self.c.step, cost, evaluated)?;
-            // The run's score on held-out episodes (`score.json`, vge_lab::score), now that every
+            // The run's score on held-out episodes (`score.json`, vge_run::score), now that every
             // policy it scores is written.
             if self.config.run.score_episodes > 0 {
-                let options = vge_lab::score::ScoreOptions {
+                let options = vge_run::score::ScoreOptions {
                     episodes: self.config.run.score_episodes,
                     ..Default::default()
                 };
-                vge_lab::score::score_run(self.folder.dir(), &options, &mut |_| {})?;
+                vge_run::score::score_run(self.folder.dir(), &options, &mut |_| {})?;
             }
             self.times.eval_s += eval_start.elapsed().as_secs_f64();
             Some(path)

@@ -2,7 +2,7 @@
 //! training goes, and the checkpoint (module docs of [`super`] list every file).
 //!
 //! One process writes a folder at a time ([`RunLock`], held as long as the [`RunFolder`]).
-//! Every file is written whole or not at all ([`vge_lab::atomic_file`]) but the ones that grow
+//! Every file is written whole or not at all ([`vge_run::run_dir::atomic_file`]) but the ones that grow
 //! row by row: `metrics.csv` and `eval.csv` get rows appended (a row cut short by a kill is
 //! past the checkpoint), and a resume checks each of them whole (a header, complete rows)
 //! before it appends, rewriting it atomically to the rows up to its checkpoint. A folder
@@ -19,16 +19,17 @@ use crate::checkpoint;
 use crate::learner::Learner;
 use crate::replay::ReplayBuffer;
 use crate::tensorboard::EventWriter;
-use vge_lab::atomic_file;
-use vge_lab::config::Config;
-use vge_lab::read_limits;
-use vge_lab::run_lock::RunLock;
+use vge_run::config::Config;
+use vge_run::read_limits;
+use vge_run::run_dir::RunDir;
+use vge_run::run_dir::atomic_file;
+use vge_run::run_dir::lock::RunLock;
 
-pub use vge_lab::run_dir::RUN_FILES;
+pub use vge_run::run_dir::RUN_FILES;
 
 /// Refuses `dir` for a new run when it holds any of [`RUN_FILES`], naming those found.
 pub fn check_no_run(dir: &Path) -> Result<(), TrainError> {
-    let found = vge_lab::run_dir::RunDir::new(dir).run_files_present();
+    let found = RunDir::new(dir).run_files_present();
     if found.is_empty() {
         return Ok(());
     }
@@ -80,8 +81,8 @@ impl RunFolder {
         resumed: bool,
         lock: RunLock,
     ) -> Result<Self, TrainError> {
-        let metrics_path = dir.join(vge_lab::run_dir::METRICS);
-        let config_path = dir.join(vge_lab::run_dir::CONFIG);
+        let metrics_path = dir.join(vge_run::run_dir::METRICS);
+        let config_path = dir.join(vge_run::run_dir::CONFIG);
         let effective = config.to_toml_string()?;
         let header = TrainingObjects::new(&config.env.objects, config.num_envs).metrics_header();
         if resumed {
@@ -89,13 +90,12 @@ impl RunFolder {
                 atomic_file::write(&metrics_path, format!("{header}\n").as_bytes())
                     .map_err(io_err(&metrics_path))?;
             }
-            let eval_path = dir.join(vge_lab::run_dir::EVAL);
+            let eval_path = dir.join(vge_run::run_dir::EVAL);
             if !resume_csv(&eval_path, step)? && eval_path.exists() {
                 // Rows are appended to it with its header when the file is new.
                 std::fs::remove_file(&eval_path).map_err(io_err(&eval_path))?;
             }
-            let stored = read_limits::read_to_string_bounded(&config_path, read_limits::MAX_CONFIG_FILE_LEN)
-                .map_err(io_err(&config_path))?;
+            let stored = RunDir::new(dir).read_config_text()?;
             if stored != effective {
                 atomic_file::write(&config_path, effective.as_bytes()).map_err(io_err(&config_path))?;
             }
@@ -111,7 +111,7 @@ impl RunFolder {
         // from one checkpoint may start within a second); a resumed one starts with a
         // session-start marker so that TensorBoard drops the interrupted session's points
         // past the checkpoint.
-        let tb_dir = dir.join(vge_lab::run_dir::TENSORBOARD);
+        let tb_dir = dir.join(vge_run::run_dir::TENSORBOARD);
         let suffix = format!(".s{step}.p{}", std::process::id());
         let mut events = EventWriter::create(&tb_dir, &suffix).map_err(io_err(&tb_dir))?;
         if resumed {
@@ -157,7 +157,7 @@ impl RunFolder {
     ) -> Result<(), TrainError> {
         let path = &self.metrics_path;
         self.metrics.get_ref().sync_data().map_err(io_err(path))?;
-        let eval = self.dir.join(vge_lab::run_dir::EVAL);
+        let eval = self.dir.join(vge_run::run_dir::EVAL);
         match File::options().append(true).open(&eval) {
             Ok(file) => file.sync_data().map_err(io_err(&eval))?,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}

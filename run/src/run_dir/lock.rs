@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// The lock file in a run folder.
-pub const LOCK_FILE: &str = crate::run_dir::LOCK;
+pub const LOCK_FILE: &str = super::LOCK;
 
 #[derive(Debug, Error)]
 pub enum LockError {

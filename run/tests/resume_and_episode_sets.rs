@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use vge_lab::config::{
+use vge_run::config::{
     Config, RESUME_MAY_CHANGE, changed_keys, check_resume, load_config, parse_with_overrides,
 };
-use vge_lab::run_eval::EpisodeSet;
+use vge_run::episode_sets::EpisodeSet;
 
 fn vge_config() -> Config {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/cube-fg-vge.toml");
@@ -72,7 +72,8 @@ fn a_seed_whose_validation_and_test_episodes_meet_is_refused() {
         config.run.eval_episodes = episodes;
         for seed in 0..2000u64 {
             config.seed = seed;
-            let (v, t) = (EpisodeSet::Validation.first_seed(&config), EpisodeSet::Test.first_seed(&config));
+            let (v, t) =
+                (EpisodeSet::Validation.first_seed(config.seed), EpisodeSet::Test.first_seed(config.seed));
             let n = episodes as u64;
             let meet = v < t.saturating_add(n) && t < v.saturating_add(n);
             match config.validate() {

@@ -1,10 +1,44 @@
-//! A run folder's layout: every file name a run writes or a tool reads, in one place.
+//! A run folder: every file name a run writes or a tool reads, and the readers of its files,
+//! in one place.
 //!
 //! `vge train` writes these (vge-trainer's `train` module says when and how each is made
-//! crash-safe); `vge score`, `vge plot`, `vge sweep` and the success tests read them. A
-//! [`RunDir`] is a path with one method per file, so no other module spells a file name.
+//! crash-safe, through [`atomic_file`] under the folder's [`lock`]); `vge score`, `vge plot`,
+//! `vge sweep` and the success tests read them. A [`RunDir`] is a path with one method per
+//! file, so no other module spells a file name; its tables are read by column name
+//! ([`csv_columns`]), its records as JSON ([`read_json`]), the whole folder as the plots see it
+//! ([`read_run`]), and every reader fails with a [`RunFileError`] naming the file.
 
 use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+use crate::config::{Config, ConfigError};
+
+pub mod atomic_file;
+pub mod lock;
+mod records;
+mod score_file;
+mod tables;
+
+pub use records::{
+    FinalEvalFields, RunCurves, Selected, check_finished, checkpoint_step, find_runs, read_final_eval,
+    read_json, read_run,
+};
+pub use score_file::{PolicyScore, Score, SnapshotsScore};
+pub use tables::{StepsAndValues, csv_columns, csv_columns_if_present, object_success, whole_steps};
+
+/// A run's file that cannot be read, or does not say what its kind must.
+#[derive(Debug, Error)]
+pub enum RunFileError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    /// A table or record whose content is not what the file's kind holds.
+    #[error("{path}: {message}")]
+    Format { path: PathBuf, message: String },
+    /// A run's `config.toml` that the config parser cannot read (the message names the file).
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+}
 
 /// The resolved configuration the run trained with.
 pub const CONFIG: &str = "config.toml";
@@ -139,6 +173,21 @@ impl RunDir {
         }
         let old = self.checkpoint_old();
         old.symlink_metadata().is_ok().then_some(old)
+    }
+
+    /// The text of the run's `config.toml` as stored (read within a config file's bound).
+    pub fn read_config_text(&self) -> Result<String, RunFileError> {
+        let path = self.config();
+        crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
+            .map_err(|source| RunFileError::Io { path, source })
+    }
+
+    /// The run's `config.toml`, read with the config parser (so a file it cannot read is an
+    /// error naming the file; keys left out take the config's defaults). Not validated: a
+    /// run's readers that go on to use it validate it (`run_eval::run_config`).
+    pub fn read_config(&self) -> Result<Config, RunFileError> {
+        let text = self.read_config_text()?;
+        Ok(crate::config::parse_with_overrides(&text, &self.config().display().to_string(), &[])?)
     }
 
     /// Which of [`RUN_FILES`] the folder holds.

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use vge_lab::config::{ConfigError, load_config, parse_with_overrides};
+use vge_run::config::{ConfigError, load_config, parse_with_overrides};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")

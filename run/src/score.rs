@@ -1,5 +1,5 @@
 //! A run's score (`vge score`, and training at its end): its policies on many held-out
-//! episodes, so that runs can be aggregated with confidence intervals ([`crate::stats`]).
+//! episodes, so that runs can be aggregated with confidence intervals (vge-lab's statistics).
 //!
 //! A finished run folder is scored on [`DEFAULT_EPISODES`] (or `--episodes N`) episodes of
 //! its own success test (its config's task without the disturbances it may train with,
@@ -28,22 +28,22 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use thiserror::Error;
 use vge_sim::EnvConfig;
 
 use crate::config::Config;
+use crate::episode_sets::EpisodeSet;
 use crate::eval::{EpisodeOutcome, EvalError, ObjectFigures, PerObjectFigures};
+use crate::run_dir::RunDir;
 
 /// The score's file in a run folder.
 pub const SCORE_FILE: &str = crate::run_dir::SCORE;
 /// What a score means; a different definition is scored again, never compared.
 pub const DEFINITION: &str = "held-out success test v1";
-/// Episodes per policy by default (and at the end of training).
-pub const DEFAULT_EPISODES: usize = 100;
-/// Env seed of the first held-out episode (episode k: this + k), 2^52: far from the seeds
-/// training's validation and test episodes start at for any seed below about 4.5e9.
-pub const HELD_OUT_SEED: u64 = 1 << 52;
+/// Episodes per policy by default (and at the end of training), and the env seed of the
+/// first (episode k: this + k).
+pub use crate::episode_sets::{HELD_OUT_EPISODES as DEFAULT_EPISODES, HELD_OUT_SEED};
 /// Periodic snapshots whose mean is scored beside the selected and final policies.
 pub const LAST_SNAPSHOTS: usize = 3;
 
@@ -55,6 +55,9 @@ pub enum ScoreError {
     Unfinished { dir: PathBuf, what: String },
     #[error("{path}: {message}")]
     RunFile { path: PathBuf, message: String },
+    /// A run's file that cannot be read (the message names it).
+    #[error(transparent)]
+    Read(#[from] crate::run_dir::RunFileError),
     #[error("policy file {path}: {message}")]
     Policy { path: PathBuf, message: String },
     #[error("scoring {path}: {source}")]
@@ -68,55 +71,8 @@ pub enum ScoreError {
     NoEpisodes,
 }
 
-/// One policy's figures on the held-out episodes.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PolicyScore {
-    /// The policy file, relative to the run folder.
-    pub file: String,
-    /// The env step it was exported at.
-    pub step: u64,
-    /// The file's CRC-32 (its format's checksum; a rescore is skipped only for the same files).
-    pub crc32: u32,
-    /// Share of episodes turned >= 2 pi about z without a drop.
-    pub success_rate: f64,
-    pub mean_return: f64,
-    pub drop_rate: f64,
-    pub mean_rotation_rad: f64,
-    pub mean_contact_switches: f64,
-    /// For a run on several objects: each object's figures (the ones above pool them).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub per_object: Option<PerObjectFigures>,
-}
-
-/// The last periodic snapshots: the mean of their figures, and each one's.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SnapshotsScore {
-    pub success_rate: f64,
-    pub mean_return: f64,
-    pub drop_rate: f64,
-    pub mean_rotation_rad: f64,
-    pub mean_contact_switches: f64,
-    pub snapshots: Vec<PolicyScore>,
-}
-
-/// `score.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Score {
-    /// [`DEFINITION`].
-    pub definition: String,
-    /// Episodes per policy.
-    pub episodes: usize,
-    /// Env seed of the first episode (episode k: seed + k).
-    pub seed: u64,
-    pub episode_s: f32,
-    pub grasp_noise_rad: f32,
-    /// The run's model selection; None for a run without one.
-    pub selected: Option<PolicyScore>,
-    #[serde(rename = "final")]
-    pub final_policy: PolicyScore,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub last_snapshots: Option<SnapshotsScore>,
-}
+/// `score.json`'s record (its readers and writer are the run folder's).
+pub use crate::run_dir::{PolicyScore, Score, SnapshotsScore};
 
 /// How to score.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -208,21 +164,18 @@ struct FinalEvalSteps {
     env_steps: u64,
 }
 
+/// A record the score needs: an error when missing or unreadable.
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ScoreError> {
-    let text = crate::read_limits::read_to_string_bounded(path, crate::read_limits::MAX_RECORD_FILE_LEN)
-        .map_err(|source| ScoreError::Io { path: path.to_owned(), source })?;
-    serde_json::from_str(&text)
-        .map_err(|e| ScoreError::RunFile { path: path.to_owned(), message: e.to_string() })
+    crate::run_dir::read_json(path)?
+        .ok_or_else(|| ScoreError::Io { path: path.to_owned(), source: std::io::ErrorKind::NotFound.into() })
 }
 
-/// The run's config (`DIR/config.toml`).
+/// The run's config (`DIR/config.toml`), validated.
 fn run_config(dir: &Path) -> Result<Config, ScoreError> {
-    let path = dir.join(crate::run_dir::CONFIG);
-    let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
-        .map_err(|source| ScoreError::Io { path: path.clone(), source })?;
-    let config = crate::config::parse_with_overrides(&text, &path.display().to_string(), &[])
-        .map_err(|e| ScoreError::RunFile { path: path.clone(), message: e.to_string() })?;
-    config.validate().map_err(|e| ScoreError::RunFile { path, message: e.to_string() })?;
+    let config = RunDir::new(dir).read_config()?;
+    config
+        .validate()
+        .map_err(|e| ScoreError::RunFile { path: RunDir::new(dir).config(), message: e.to_string() })?;
     Ok(config)
 }
 
@@ -237,12 +190,12 @@ fn score_envs(config: &Config, dir: &Path) -> Result<Vec<EnvConfig>, ScoreError>
 }
 
 /// Refuses held-out episodes that would meet the validation or test episodes training drew
-/// ([`crate::run_eval::EpisodeSet`], `run.eval_episodes` each).
+/// ([`EpisodeSet`], `run.eval_episodes` each).
 pub fn check_held_out(config: &Config, first: u64, episodes: usize) -> Result<(), ScoreError> {
     let n = config.run.eval_episodes as u64;
     let end = first.saturating_add(episodes as u64);
-    for (episode_set, set) in crate::run_eval::EpisodeSet::ALL {
-        let theirs = episode_set.first_seed(config);
+    for (episode_set, set) in EpisodeSet::ALL {
+        let theirs = episode_set.first_seed(config.seed);
         if first < theirs.saturating_add(n) && theirs < end {
             return Err(ScoreError::Overlap { first, end, set, theirs, seed: config.seed });
         }
@@ -283,12 +236,8 @@ fn plan(
     };
     let eval_csv = dir.join(crate::run_dir::EVAL);
     let steps: Vec<u64> = if eval_csv.is_file() {
-        let bad = |e: crate::plot::PlotError| ScoreError::RunFile {
-            path: eval_csv.clone(),
-            message: e.to_string(),
-        };
-        let columns = crate::plot::csv_columns(&eval_csv, &["step"]).map_err(bad)?;
-        crate::plot::whole_steps(&eval_csv, &columns.into_iter().next().unwrap_or_default()).map_err(bad)?
+        let columns = crate::run_dir::csv_columns(&eval_csv, &["step"])?;
+        crate::run_dir::whole_steps(&eval_csv, &columns.into_iter().next().unwrap_or_default())?
     } else {
         Vec::new()
     };
@@ -343,11 +292,7 @@ fn same_score(
 
 /// `DIR/score.json`, if the run has one (an error if it cannot be read).
 pub fn read_score(dir: &Path) -> Result<Option<Score>, ScoreError> {
-    let path = dir.join(SCORE_FILE);
-    if !path.exists() {
-        return Ok(None);
-    }
-    read_json(&path).map(Some)
+    Ok(crate::run_dir::read_json(&RunDir::new(dir).score())?)
 }
 
 /// Scores the finished run in `dir` ([module docs](self)) and writes `DIR/score.json`,
@@ -425,21 +370,9 @@ pub fn score_run(
     let path = dir.join(SCORE_FILE);
     let text = serde_json::to_string_pretty(&score)
         .map_err(|e| ScoreError::RunFile { path: path.clone(), message: e.to_string() })?;
-    write_whole(&path, format!("{text}\n").as_bytes()).map_err(|source| ScoreError::Io { path, source })?;
+    crate::run_dir::atomic_file::write(&path, format!("{text}\n").as_bytes())
+        .map_err(|source| ScoreError::Io { path, source })?;
     Ok((ScoreOutcome::Scored(score), notes))
-}
-
-/// Writes `bytes` to `path` whole or not at all: to `path.tmp`, synced, renamed into place
-/// (the same rule as the run folder's other files; a kill leaves the previous file).
-fn write_whole(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let mut name = path.file_name().map(std::ffi::OsStr::to_os_string).unwrap_or_default();
-    name.push(".tmp");
-    let tmp = path.with_file_name(name);
-    let mut file = std::fs::File::create(&tmp)?;
-    file.write_all(bytes)?;
-    file.sync_all()?;
-    std::fs::rename(&tmp, path)
 }
 
 fn mean_of_snapshots(snapshots: Vec<PolicyScore>) -> SnapshotsScore {

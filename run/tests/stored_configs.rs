@@ -8,13 +8,13 @@
 //! The expected hashes are in `tests/fixtures/config-hashes.txt`; a config added later only has
 //! to load and validate until the fixture is rewritten. After a deliberate change
 //! (a new key left out of the canonical TOML at its default keeps every hash), rewrite it with
-//! `VGE_BLESS_CONFIG_HASHES=1 cargo test --release -p vge-lab --test stored_configs` and say
+//! `VGE_BLESS_CONFIG_HASHES=1 cargo test --release -p vge-run --test stored_configs` and say
 //! why in the commit.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use vge_lab::config::load_config;
+use vge_run::config::load_config;
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")

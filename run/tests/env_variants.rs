@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use vge_lab::config::{Config, load_config};
+use vge_run::config::{Config, load_config};
 use vge_sim::{EnvConfig, HandOrientation};
 
 const VARIANT_KEYS: [&str; 6] = [

@@ -36,7 +36,9 @@ pub enum RunEvalError {
     #[error("{path}: not a finished run's file: {what}")]
     NotFinished { path: String, what: String },
     #[error(transparent)]
-    Lock(#[from] crate::run_lock::LockError),
+    Lock(#[from] crate::run_dir::lock::LockError),
+    #[error(transparent)]
+    RunFile(#[from] crate::run_dir::RunFileError),
 }
 
 fn io_err(path: &Path) -> impl Fn(std::io::Error) -> RunEvalError + '_ {
@@ -53,10 +55,7 @@ pub struct RunCost {
 
 /// The effective configuration stored in a run folder (`config.toml`), validated.
 pub fn run_config(dir: &Path) -> Result<Config, RunEvalError> {
-    let path = RunDir::new(dir).config();
-    let text = crate::read_limits::read_to_string_bounded(&path, crate::read_limits::MAX_CONFIG_FILE_LEN)
-        .map_err(io_err(&path))?;
-    let config = Config::from_toml_str(&text)?;
+    let config = RunDir::new(dir).read_config()?;
     config.validate()?;
     Ok(config)
 }
@@ -105,7 +104,7 @@ fn is_multi_object(config: &Config) -> bool {
 /// seeds.
 fn evaluate_policy(config: &Config, bytes: &[u8], set: EpisodeSet) -> Result<ObjectsReport, RunEvalError> {
     let run = &config.run;
-    let eval_seed = set.first_seed(config);
+    let eval_seed = set.first_seed(config.seed);
     let episodes = run.eval_episodes;
     let objects = training_objects(config);
     if let [(index, object)] = objects.as_slice() {
@@ -131,28 +130,7 @@ fn learned(r: &ObjectsReport) -> bool {
     r.overall.learned() && r.every_object_learned()
 }
 
-/// Which grasps an evaluation draws: the periodic (and final) evaluations share one set, the
-/// validation episodes a snapshot is selected on; the selected snapshot is then reported on
-/// the test set, which nothing was selected on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EpisodeSet {
-    Validation,
-    Test,
-}
-
-impl EpisodeSet {
-    /// Both sets, with their names, for checks that other episodes stay apart from them.
-    pub const ALL: [(Self, &'static str); 2] = [(Self::Validation, "validation"), (Self::Test, "test")];
-
-    /// The env seed of the set's first episode (episode k: this + k), from the run's seed
-    /// alone, so that training is not perturbed by its evaluations.
-    pub fn first_seed(self, config: &Config) -> u64 {
-        match self {
-            Self::Validation => config.seed.wrapping_mul(1_000_003).wrapping_add(0xe7a1),
-            Self::Test => config.seed.wrapping_mul(1_000_033).wrapping_add(0x7e57),
-        }
-    }
-}
+pub use crate::episode_sets::EpisodeSet;
 
 fn snapshot_path(out_dir: &Path, step: u64) -> PathBuf {
     RunDir::new(out_dir).snapshot(step)
@@ -218,14 +196,14 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
     if !csv_path.exists() {
         return Ok(());
     }
-    let columns = crate::plot::csv_columns(&csv_path, &["step", "return", "success"])
+    let columns = crate::run_dir::csv_columns(&csv_path, &["step", "return", "success"])
         .map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?;
     let multi = is_multi_object(config);
     let per_object_success: Vec<Vec<f64>> = if multi {
         let names: Vec<String> =
             training_objects(config).iter().map(|&(_, o)| object_column(o, "success")).collect();
         let names: Vec<&str> = names.iter().map(String::as_str).collect();
-        crate::plot::csv_columns(&csv_path, &names)
+        crate::run_dir::csv_columns(&csv_path, &names)
             .map_err(|e| io_err(&csv_path)(std::io::Error::other(e)))?
     } else {
         Vec::new()
@@ -257,7 +235,7 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
     };
     let r = evaluate_policy(config, &bytes, EpisodeSet::Test)?;
     let path = out_dir.join(crate::run_dir::POLICY_BEST);
-    crate::atomic_file::write(&path, &bytes).map_err(io_err(&path))?;
+    crate::run_dir::atomic_file::write(&path, &bytes).map_err(io_err(&path))?;
     let per_object = per_object_figures(&r);
     let learned = learned(&r);
     let r = &r.overall;
@@ -278,7 +256,7 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
     };
     let path = out_dir.join(crate::run_dir::BEST_EVAL);
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
-    crate::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
+    crate::run_dir::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
 }
 
 const EVAL_HEADER: &str = "step,episodes,return,rotation,success,drops,contacts,contact_switches";
@@ -381,7 +359,7 @@ fn write_final_eval(
         per_episode: &r.per_episode,
     };
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
-    crate::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
+    crate::run_dir::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
 }
 
 /// A finished run's final policy scored again by the success test of this vge (the same
@@ -403,7 +381,7 @@ pub struct Rescored {
 /// run).
 pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, RunEvalError> {
     let config = run_config(dir)?;
-    let stored = crate::plot::read_final_eval(dir);
+    let stored = crate::run_dir::read_final_eval(dir);
     // What --write keeps must be there before the episodes run.
     let kept = match (&stored, write) {
         (Ok(Some(s)), true) => Some((s.env_steps, RunCost { wall_s: s.wall_s, cpu_s: s.cpu_s })),
@@ -422,7 +400,7 @@ pub fn rescore_final_eval(dir: &Path, write: bool) -> Result<Rescored, RunEvalEr
         }
     };
     // --write replaces a file of the run: as its one writer.
-    let _lock = if write { Some(crate::run_lock::RunLock::acquire(dir)?) } else { None };
+    let _lock = if write { Some(crate::run_dir::lock::RunLock::acquire(dir)?) } else { None };
     let policy = dir.join(crate::run_dir::POLICY);
     let bytes = crate::eval::read_policy_file(&policy)?;
     let report = evaluate_policy(&config, &bytes, EpisodeSet::Validation)?;
@@ -453,7 +431,7 @@ pub fn periodic(
     let dir = RunDir::new(out_dir).snapshots();
     std::fs::create_dir_all(&dir).map_err(io_err(&dir))?;
     let path = snapshot_path(out_dir, step);
-    crate::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
+    crate::run_dir::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
     Ok(report)
 }
 
@@ -471,13 +449,13 @@ pub fn finish(
     evaluated: Option<ObjectsReport>,
 ) -> Result<PathBuf, RunEvalError> {
     let path = out_dir.join(crate::run_dir::POLICY);
-    crate::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
+    crate::run_dir::atomic_file::write(&path, bytes).map_err(io_err(&path))?;
     let report = match evaluated {
         Some(report) => report,
         None => evaluate_policy(config, bytes, EpisodeSet::Validation)?,
     };
     select_best_snapshot(out_dir, config)?;
-    // Last: a run is finished once its final-eval.json is in place (`crate::sweep::check_finished`).
+    // Last: a run is finished once its final-eval.json is in place (vge-lab's `sweep::check_finished`).
     write_final_eval(out_dir, config, &report, step, cost)?;
     Ok(path)
 }

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use vge_lab::eval::{
+use vge_run::eval::{
     SUCCESS_TEST_EPISODE_S, SUCCESS_TEST_GRASP_NOISE_RAD, eval_policy_file, success_test_env,
 };
 use vge_sim::EnvConfig;

@@ -4,7 +4,7 @@
 //! previous `NAME` as it was (and at worst a stale `NAME.tmp`, replaced by the next write).
 //!
 //! Hand-written rather than `tempfile::NamedTempFile::persist` for the fixed temporary name:
-//! a run folder has one writer at a time ([`crate::run_lock`]), so a fixed name is safe, and a
+//! a run folder has one writer at a time ([`super::lock`]), so a fixed name is safe, and a
 //! write killed midway leaves one recognisable `NAME.tmp` that the next write replaces, not a
 //! random name per kill.
 

@@ -3,7 +3,7 @@
 //! config (and so the same hash); a file that sets one setting both ways is refused, and
 //! `--set learner.KEY=...` overrides either spelling.
 
-use vge_lab::config::{AlgorithmName, Config, apply_override, parse_with_overrides};
+use vge_run::config::{AlgorithmName, Config, apply_override, parse_with_overrides};
 
 fn load(text: &str, overrides: &[&str]) -> Result<Config, String> {
     let overrides: Vec<String> = overrides.iter().map(|o| (*o).to_owned()).collect();

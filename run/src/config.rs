@@ -299,7 +299,7 @@ pub struct RunSection {
     /// deterministic episode the same).
     pub eval_grasp_noise_rad: f32,
     /// Held-out episodes training scores the run's policies on at its end (`score.json`,
-    /// [`crate::score`]: the selected, final and last snapshots' policies, this many episodes
+    /// `vge score`'s record: the selected, final and last snapshots' policies, this many episodes
     /// each); 0 leaves the scoring to `vge score`. Left out of the canonical TOML at its
     /// default, so that stored configs keep their hashes.
     #[serde(skip_serializing_if = "is_default_score_episodes")]
@@ -307,7 +307,7 @@ pub struct RunSection {
 }
 
 fn is_default_score_episodes(v: &usize) -> bool {
-    *v == crate::score::DEFAULT_EPISODES
+    *v == crate::episode_sets::HELD_OUT_EPISODES
 }
 
 impl Default for RunSection {
@@ -320,7 +320,7 @@ impl Default for RunSection {
             eval_episodes: crate::eval::SUCCESS_TEST_EPISODES,
             eval_episode_s: crate::eval::SUCCESS_TEST_EPISODE_S,
             eval_grasp_noise_rad: crate::eval::SUCCESS_TEST_GRASP_NOISE_RAD,
-            score_episodes: crate::score::DEFAULT_EPISODES,
+            score_episodes: crate::episode_sets::HELD_OUT_EPISODES,
         }
     }
 }
@@ -382,7 +382,8 @@ impl Default for Config {
     }
 }
 
-/// The most memory a run may hold by [`Config::memory_estimate`], whatever the machine: 1 TiB.
+/// The most memory a run may hold by its estimate ([`Config::check_fits_memory`]), whatever the
+/// machine: 1 TiB.
 /// Beyond it a size is a typo (`sac.buffer_size = 1000000000000` asks for 656 TB).
 pub use vge_config_file::memory::MAX_RUN_BYTES;
 /// One env of the training vector with its controller, generator and bookkeeping, besides its
@@ -482,9 +483,10 @@ impl Config {
     /// `run.eval_episodes` of each other): the selected snapshot's test score would then rest
     /// partly on episodes it was picked on.
     fn validate_episode_sets(&self) -> Result<(), ConfigError> {
-        use crate::run_eval::EpisodeSet;
+        use crate::episode_sets::EpisodeSet;
         let n = self.run.eval_episodes as u64;
-        let (validation, test) = (EpisodeSet::Validation.first_seed(self), EpisodeSet::Test.first_seed(self));
+        let (validation, test) =
+            (EpisodeSet::Validation.first_seed(self.seed), EpisodeSet::Test.first_seed(self.seed));
         if test.wrapping_sub(validation) < n || validation.wrapping_sub(test) < n {
             return Err(invalid(format!(
                 "seed = {} with run.eval_episodes = {n}: the validation episodes (env seeds from \
@@ -517,52 +519,34 @@ impl Config {
         }
     }
 
-    /// The largest allocations of a training run of this config, each estimated from the
-    /// sizes that set it: (the keys, bytes). What [`Self::validate`] and
-    /// [`Self::check_fits_memory`] bound before anything is allocated.
+    /// The largest allocations of a training run of this config outside the learner, each
+    /// estimated from the sizes that set it: (the keys, bytes). The learner (vge-trainer)
+    /// estimates its own, its replay buffer and networks, whose layouts only it knows, and
+    /// [`Self::check_fits_memory`] bounds the two together before anything is allocated;
+    /// [`Self::validate`] bounds these alone, wherever the config is read.
     pub fn memory_estimate(&self) -> Result<Vec<(&'static str, u64)>, ConfigError> {
         let env = self.env.env_config(0).map_err(|e| invalid(e.to_string()))?;
-        let (obs, act) = (env.observation_layout().dim() as u64, env.hand.num_joints() as u64);
-        // A transition: obs, next obs, action, BC action, and 4 scalars, as f32.
-        let replay = (self.sac.buffer_size as u64).saturating_mul((2 * obs + 2 * act + 4) * 4);
         // Each env, and its episode's records.
+        let joints = env.hand.num_joints() as u64;
         let per_env = ENV_BYTES
-            .saturating_add((self.env.episode_length as u64).saturating_mul(episode_step_bytes(act)));
+            .saturating_add((self.env.episode_length as u64).saturating_mul(episode_step_bytes(joints)));
         let envs = (self.num_envs as u64).saturating_mul(per_env);
-        // The actor and twin critics with their targets, Adam's moments and gradients (about
-        // 12 copies of the parameters), and a minibatch's activations through them (about 24
-        // f32 per unit and row: forward and backward passes of five networks).
-        let widths: Vec<u64> = std::iter::once(obs + act)
-            .chain(self.sac.hidden.iter().map(|&h| h.max(0) as u64))
-            .chain(std::iter::once(act))
-            .collect();
-        let params = widths.windows(2).fold(0u64, |sum, w| sum.saturating_add(w[0].saturating_mul(w[1])));
-        let units = widths.iter().fold(0u64, |sum, &w| sum.saturating_add(w));
-        let nets = params
-            .saturating_mul(12 * 4)
-            .saturating_add((self.sac.batch as u64).saturating_mul(units).saturating_mul(24 * 4));
         let eval =
             (self.run.eval_episodes.max(self.run.score_episodes) as u64).saturating_mul(EVAL_EPISODE_BYTES);
-        Ok(vec![
-            ("sac.buffer_size", replay),
-            ("num_envs, env.episode_length", envs),
-            ("sac.hidden, sac.batch", nets),
-            ("run.eval_episodes, run.score_episodes", eval),
-        ])
+        Ok(vec![("num_envs, env.episode_length", envs), ("run.eval_episodes, run.score_episodes", eval)])
     }
 
-    /// [`Self::memory_estimate`] as one sentence: the total and its parts.
-    fn memory_text(&self) -> Result<(u64, String), ConfigError> {
-        let parts = self.memory_estimate()?;
+    /// `parts` as one sentence: the total and its parts.
+    fn memory_text(parts: &[(&'static str, u64)]) -> (u64, String) {
         let total = parts.iter().fold(0u64, |sum, (_, b)| sum.saturating_add(*b));
         let shown: Vec<String> = parts.iter().map(|(k, b)| format!("{k}: {}", bytes_text(*b))).collect();
-        Ok((total, format!("about {} ({})", bytes_text(total), shown.join(", "))))
+        (total, format!("about {} ({})", bytes_text(total), shown.join(", ")))
     }
 
-    /// The sizes against [`MAX_RUN_BYTES`], independent of the machine the config is read on
+    /// `parts` against [`MAX_RUN_BYTES`], independent of the machine the config is read on
     /// (a login node checks what a cluster's nodes will run).
-    fn validate_sizes(&self) -> Result<(), ConfigError> {
-        let (total, text) = self.memory_text()?;
+    fn check_run_bound(parts: &[(&'static str, u64)]) -> Result<(), ConfigError> {
+        let (total, text) = Self::memory_text(parts);
         if total > MAX_RUN_BYTES {
             return Err(invalid(format!(
                 "this run would hold {text}, more than the {} vge allows a run: a size is wrong",
@@ -572,13 +556,22 @@ impl Config {
         Ok(())
     }
 
-    /// Refuses a run whose [`Self::memory_estimate`] exceeds this machine's memory (`MemTotal`
-    /// of `/proc/meminfo`), before anything is allocated: an allocation it cannot hold aborts
-    /// the process. Where `/proc/meminfo` cannot be read, [`Self::validate`]'s fixed bound is
-    /// all there is.
-    pub fn check_fits_memory(&self) -> Result<(), ConfigError> {
+    /// [`Self::memory_estimate`] against [`MAX_RUN_BYTES`].
+    fn validate_sizes(&self) -> Result<(), ConfigError> {
+        Self::check_run_bound(&self.memory_estimate()?)
+    }
+
+    /// Refuses a run whose memory, `learner` (the learner's estimate of its own parts) and
+    /// [`Self::memory_estimate`] together, exceeds [`MAX_RUN_BYTES`] or this machine's memory
+    /// (`MemTotal` of `/proc/meminfo`), before anything is allocated: an allocation it cannot
+    /// hold aborts the process. Where `/proc/meminfo` cannot be read, the fixed bound is all
+    /// there is.
+    pub fn check_fits_memory(&self, learner: &[(&'static str, u64)]) -> Result<(), ConfigError> {
+        let parts: Vec<(&'static str, u64)> =
+            learner.iter().copied().chain(self.memory_estimate()?).collect();
+        Self::check_run_bound(&parts)?;
         let Some(machine) = machine_memory_bytes() else { return Ok(()) };
-        let (total, text) = self.memory_text()?;
+        let (total, text) = Self::memory_text(&parts);
         if total > machine {
             return Err(invalid(format!(
                 "this run would hold {text}, more than this machine's {} of memory (MemTotal in \
@@ -917,6 +910,23 @@ pub fn check_resume(stored: &Config, resumed: &Config, origin: &str) -> Result<V
             )
         })
         .collect())
+}
+
+/// The config a resumed run trains on: its stored config (`text`, from `origin`) with the
+/// command line's `overrides`, validated; refused when the stored config predates a changed
+/// default ([`check_resumable`]) or the overrides change more than [`RESUME_MAY_CHANGE`]
+/// ([`check_resume`], whose notes come back for the caller to print).
+pub fn resume_config(
+    text: &str,
+    origin: &str,
+    overrides: &[String],
+) -> Result<(Config, Vec<String>), ConfigError> {
+    check_resumable(text, origin)?;
+    let stored = parse_with_overrides(text, origin, &[])?;
+    let config = parse_with_overrides(text, origin, overrides)?;
+    config.validate()?;
+    let notes = check_resume(&stored, &config, origin)?;
+    Ok((config, notes))
 }
 
 /// Parses `text`, applies the overrides to its TOML table, deserialises (not validated).
