@@ -114,10 +114,10 @@ export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY
 # The Python package's build script (pyo3) asks this interpreter for its configuration.
 export PYO3_PYTHON=$repo/.deps/py/bin/python
 
-step "dependency rule: only the learner links libtorch (vge-lab, vge-controllers, vge-bridge, the Python package and vge without training never do)"
+step "dependency rules: only the learner links libtorch (vge-run, vge-lab, vge-controllers, vge-bridge, the Python package and vge without training never do); the learner builds no plots, statistics or Slurm code"
 # `vge-cli --no-default-features`: the vge command without its `train` feature (eval, score,
 # compare, plot, inspect, import, controller, ...).
-for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" vge-python vge-python-reference; do
+for crate in vge-run vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" vge-python vge-python-reference; do
   # shellcheck disable=SC2086
   tree=$(cargo tree -p $crate -e normal,build --prefix none)
   if grep -q '^torch-sys ' <<<"$tree"; then
@@ -126,6 +126,15 @@ for crate in vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" 
   fi
   echo "$crate: $(wc -l <<<"$tree") dependency lines, no torch-sys"
 done
+# The learner uses runs (vge-run: config, run folder, success test, scores), not the tooling
+# above them: no plots, statistics, sweeps or Slurm (vge-lab) in what it compiles.
+tree=$(cargo tree -p vge-trainer -e normal,build --prefix none)
+for dep in vge-lab plotters; do
+  if grep -q "^$dep " <<<"$tree"; then
+    echo "vge-trainer depends on $dep:"; cargo tree -p vge-trainer -e normal,build -i "$dep"; exit 1
+  fi
+done
+echo "vge-trainer: $(wc -l <<<"$tree") dependency lines, no vge-lab, no plotters"
 # ...and that it builds, linted through the clippy wrapper. The dependencies it compiles are
 # the workspace's own (vge-workspace-hack gives every build the same features), so the test
 # build below reuses them; its vge binary then replaces this one.
