@@ -158,6 +158,53 @@ impl<P: PolicyRunner> TargetSource for PolicyTargets<P> {
     }
 }
 
+/// A target source that first holds a grasp, as the simulator's reset grips the object before
+/// an episode, and hands over to `then` once the safe targets have reached the grasp and stayed
+/// there `settle_updates` updates: a policy then starts from the targets it was trained to
+/// start from (the pressed grasp), not from the joints' measured angles at power-up, where
+/// the fingertips only touch the object and it slips out.
+#[derive(Debug)]
+pub struct FromGrasp<S> {
+    grasp_rad: [f32; NUM_JOINTS],
+    settle_updates: u32,
+    at_grasp: u32,
+    then: S,
+}
+
+impl<S> FromGrasp<S> {
+    pub fn new(grasp_rad: [f32; NUM_JOINTS], settle_updates: u32, then: S) -> Self {
+        Self { grasp_rad, settle_updates, at_grasp: 0, then }
+    }
+
+    /// Whether the grasp has settled and `then` sets the targets.
+    pub fn handed_over(&self) -> bool {
+        self.at_grasp > self.settle_updates
+    }
+
+    /// The source that takes over.
+    pub fn then(&self) -> &S {
+        &self.then
+    }
+}
+
+impl<S: TargetSource> TargetSource for FromGrasp<S> {
+    type Error = S::Error;
+    fn targets(
+        &mut self,
+        state: &JointState,
+        current_rad: &[f32; NUM_JOINTS],
+    ) -> Result<[f32; NUM_JOINTS], S::Error> {
+        if !self.handed_over() {
+            let reached = current_rad.iter().zip(&self.grasp_rad).all(|(c, g)| (c - g).abs() <= 1e-6);
+            self.at_grasp = if reached { self.at_grasp + 1 } else { 0 };
+            if !self.handed_over() {
+                return Ok(self.grasp_rad);
+            }
+        }
+        self.then.targets(state, current_rad)
+    }
+}
+
 /// Settings of one run.
 #[derive(Debug, Clone)]
 pub struct AllegroLoopConfig {

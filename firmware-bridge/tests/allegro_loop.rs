@@ -428,3 +428,40 @@ fn a_policy_sets_the_targets_at_its_rate_clipped_as_the_env_clips_and_observes_i
         assert_eq!(third[past.start + k], second[now.start + k], "joint {k}: the past is the last update");
     }
 }
+
+/// A policy over CAN starts as in training: the loop first moves the targets to the grasp the
+/// env's reset presses (here the start grasp 0.1 rad further on every joint, so that the
+/// filter needs several updates), holds it `settle_updates` more, and only then asks the
+/// policy, whose first observation has the grasp's targets.
+#[test]
+fn a_policy_over_can_takes_over_from_the_settled_grasp() {
+    use vge_bridge::allegro_loop::FromGrasp;
+    use vge_sim::observation::ObservationSet;
+    let hand = AllegroHand::shipped().expect("allegro");
+    let grasp: [f32; NUM_JOINTS] =
+        std::array::from_fn(|k| hand.limits[k].clamp(hand.start_grasp_rad[k] + 0.1));
+    let set = ObservationSet::Proprio { history: 1 };
+    let policy = PolicyTargets::new(Push { delta_rad: 0.0, observations: Vec::new() }, set, 0.05);
+    let mut targets = FromGrasp::new(grasp, 3, policy);
+    let run = run_with(InertiaPlant::at(hand.start_grasp_rad), &mut targets, |c| {
+        c.max_cycles = Some(300);
+        c.target_rate_hz = 100.0;
+        c.max_delta_rad = 0.02;
+    });
+    let report = run.report.expect("the loop ran");
+    assert!(targets.handed_over(), "{} updates", report.target_updates);
+    let observations = &targets.then().policy().observations;
+    let first = observations.first().expect("the policy ran once the grasp settled");
+    // 0.1 rad at 0.02 an update: 5 updates to reach the grasp (6 where the start, measured
+    // through the position frames' resolution, lies a little further), 3 at it, then the policy.
+    let before_policy = report.target_updates as usize - observations.len();
+    assert!((5 + 3..=6 + 3).contains(&before_policy), "{before_policy} updates before the policy");
+    for k in 0..NUM_JOINTS {
+        let observed = first[NUM_JOINTS + k];
+        assert!(
+            (observed - grasp[k]).abs() < 1e-6,
+            "joint {k}: target {observed} observed, grasp {}",
+            grasp[k]
+        );
+    }
+}

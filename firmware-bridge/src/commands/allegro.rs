@@ -15,10 +15,10 @@ use anyhow::Context;
 use serde_json::{Value, json};
 #[cfg(feature = "sim")]
 use vge_bridge::allegro_emulator::{AllegroHandEmulator, AllegroPlant};
-use vge_bridge::allegro_hand::AllegroHand;
+use vge_bridge::allegro_hand::{AllegroHand, DEFAULT_SQUEEZE_RAD};
 use vge_bridge::allegro_link::{AllegroRole, AllegroSocketCan};
 use vge_bridge::allegro_loop::{
-    self, AllegroLoopConfig, AllegroReport, HoldTargets, PERIOD, PolicyTargets, TargetSource,
+    self, AllegroLoopConfig, AllegroReport, FromGrasp, HoldTargets, PERIOD, PolicyTargets, TargetSource,
 };
 #[cfg(feature = "sim")]
 use vge_bridge::allegro_sim::{SimAllegro, SimAllegroConfig};
@@ -116,6 +116,23 @@ fn hold_targets(hand: &AllegroHand, squeeze_rad: Option<f32>) -> anyhow::Result<
     pressed_grasp().map(|targets| (json!("press"), targets))
 }
 
+/// How long a policy over CAN holds its start grasp before it acts (s): the env's reset holds
+/// the object 0.05 s while the press builds and lets it settle 0.25 s (`GraspConfig`).
+const GRIP_S: f64 = 0.3;
+
+/// The grasp a policy over CAN starts from: the env's, pressed as its reset presses it; without
+/// the simulator's statics, the flexion squeeze, saying so.
+fn policy_start_grasp(hand: &AllegroHand) -> anyhow::Result<(Value, [f32; NUM_JOINTS])> {
+    if cfg!(feature = "sim") {
+        return pressed_grasp().map(|targets| (json!("press"), targets));
+    }
+    note!(
+        "vge-bridge: note: without the simulator (cargo feature `sim`) the policy starts from the start \
+         grasp squeezed {DEFAULT_SQUEEZE_RAD} rad, not pressed as in training"
+    );
+    Ok((json!(format!("squeeze {DEFAULT_SQUEEZE_RAD} rad")), hand.squeezed_grasp_rad(DEFAULT_SQUEEZE_RAD)))
+}
+
 #[cfg(feature = "sim")]
 fn pressed_grasp() -> anyhow::Result<[f32; NUM_JOINTS]> {
     Ok(AllegroHand::pressed_grasp_rad(vge_sim::HandOrientation::PalmDown)?)
@@ -186,12 +203,17 @@ fn run_policy(
             config.target_rate_hz = rate_hz;
             // The action is clipped as the env clips it when training; --max-delta-rad is the
             // safety filter's bound on top.
-            let mut targets = PolicyTargets::new(runner, feed.set, DEFAULT_MAX_ACTION_RAD);
+            let policy = PolicyTargets::new(runner, feed.set, DEFAULT_MAX_ACTION_RAD);
+            // As the env's reset: the grasp pressed and settled first, then the policy from it.
+            let (grasp, start) = policy_start_grasp(&hand)?;
+            let settle_updates = (GRIP_S * rate_hz).round().max(1.0) as u32;
+            let mut targets = FromGrasp::new(start, settle_updates, policy);
             let stop = stop_on_signal()?;
             loop_args.realtime.apply();
             let (report, mut extra) = can_loop(iface, &mut targets, &config, &stop)?;
             extra.extend(about);
-            extra.push(("policy_updates", json!(targets.updates)));
+            extra.push(("grasp", grasp));
+            extra.push(("policy_updates", json!(targets.then().updates)));
             finish(&report, &extra, loop_args.json)
         }
         Backend::Sim => {
