@@ -113,9 +113,9 @@ impl Default for IgmConfig {
     /// turning and a finger slips off (8 drops in 24); 1.5 N holds 4.7 contacts on average,
     /// 2.5 N all five (no drops); alpha 2 mm/N overshoots (4-11 drops of 24 at 1.5-2.5 N).
     /// The same values turn the Allegro's cube 0.5-0.85 rad either way in 2 s without a
-    /// drop, until its ring finger's spread joint reaches its limit; no other floor, alpha
-    /// or selection tried held it better over 20 s, where its start grasp alone drops the
-    /// cube in 8 of 20 noisy episodes.
+    /// drop, until its ring finger's spread joint reaches its limit (with the start grasp
+    /// pressed per kg: 0.51-0.58 rad in 5 s, no drop in 20 noisy episodes; in 30 s 16 of 20
+    /// still within 0.44-0.62 rad, one dropped: docs/results/allegro/controllers.md).
     fn default() -> Self {
         Self {
             alpha_m_per_n: 1e-3,

@@ -351,3 +351,44 @@ fn allegro_fg_acts_with_one_finite_entry_per_joint() {
     println!("Allegro FG: {stats:?}");
     assert!(acted * 2 >= stats.steps, "FG acted on {acted} of {} steps", stats.steps);
 }
+
+/// A controller alone on the Allegro as `vge controller --hand allegro` runs it (episodes
+/// from the file's grasp with 0.02 rad pose noise, seeds 0..), with CS's settings changed,
+/// for trying a per-hand setting over many seeds, e.g. `VGE_KIND=cs VGE_CS_OPEN_FRACTION=0.45
+/// cargo test --release -p vge-controllers --test controllers_sim allegro_controller_figures
+/// -- --ignored --nocapture` (also `VGE_EPISODES` (20), `VGE_EPISODE_S` (30), `VGE_SEED` (0,
+/// the first episode's), `VGE_CS_HORIZON`, `VGE_CS_SPEED_MAX`).
+#[test]
+#[ignore = "a measurement, not a check"]
+fn allegro_controller_figures() {
+    let var = |name: &str| std::env::var(name).ok().and_then(|s| s.parse::<f32>().ok());
+    let kind: ControllerKind =
+        std::env::var("VGE_KIND").unwrap_or_else(|_| "fg".into()).parse().expect("kind");
+    let episodes = var("VGE_EPISODES").unwrap_or(20.0) as usize;
+    let seed = std::env::var("VGE_SEED").ok().and_then(|s| s.parse::<u64>().ok()).unwrap_or(0);
+    let steps = (var("VGE_EPISODE_S").unwrap_or(30.0) * 20.0).round() as usize;
+    let env = allegro_config(steps);
+    let mut cs = CsConfig::for_env(&env);
+    if let Some(f) = var("VGE_CS_OPEN_FRACTION") {
+        cs.open_fraction = f;
+    }
+    if let Some(h) = var("VGE_CS_HORIZON") {
+        cs.horizon_steps = h as usize;
+    }
+    if let Some(v) = var("VGE_CS_SPEED_MAX") {
+        cs.speed_max_rad_s = v;
+    }
+    println!("{kind} on the Allegro, {episodes} x {steps} steps from seed {seed}, CS {cs:?}");
+    let options = RolloutOptions { env, igm: IgmConfig::default(), cs };
+    let summary = rollout::run_with(kind, ObjectShape::Cube, episodes, seed, &options, |i, e| {
+        println!(
+            "episode {i}: rotation {:+.3} rad, switches {}, contacts {:.2}, {}",
+            e.rotation_rad,
+            e.contact_switches,
+            e.mean_contacts,
+            if e.dropped { format!("dropped at step {}", e.steps) } else { "held".to_owned() }
+        );
+    })
+    .expect("rollout");
+    println!("{}", summary.to_json_line());
+}
