@@ -85,8 +85,17 @@ fn run_and_emulate_for_the_allegro_refuse_what_does_not_apply_saying_why() {
     assert_eq!(out.status.code(), Some(2), "--hold and --policy conflict: {}", stderr(&out));
     let out = bridge(&["run", "--hand", "allegro"]);
     assert_eq!(out.status.code(), Some(2), "a policy or --hold is required: {}", stderr(&out));
-    // No interface: a clear error after the loop's settings were accepted.
-    let out = bridge(&["run", "--hand", "allegro", "--hold", "--backend", "can", "--iface", "vcan-absent"]);
+    // No interface: a clear error after the loop's settings were accepted. Without the
+    // simulator's statics --hold cannot press, and says to squeeze instead.
+    let hold = ["run", "--hand", "allegro", "--hold", "--backend", "can", "--iface", "vcan-absent"];
+    let out = bridge(&hold);
+    assert_eq!(out.status.code(), Some(1));
+    if cfg!(feature = "sim") {
+        assert!(stderr(&out).contains("opening CAN interface vcan-absent"), "{}", stderr(&out));
+    } else {
+        assert!(stderr(&out).contains("--squeeze-rad R squeezes"), "{}", stderr(&out));
+    }
+    let out = bridge(&[&hold[..], &["--squeeze-rad", "0.05"]].concat());
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr(&out).contains("opening CAN interface vcan-absent"), "{}", stderr(&out));
 }
