@@ -30,8 +30,13 @@ if ! "$venv/bin/python" -c 'import torch, stable_baselines3; assert torch.__vers
   "$venv/bin/python" -m pip install --quiet --disable-pip-version-check torch==2.13.0 stable-baselines3
 fi
 scripts/setup-libtorch.sh
-cargo build --release -p vge-cli --bin vge >&2
-vge=target/release/vge
+# The vge binary: VGE if set (built with the default `train` feature), else built here (into
+# CARGO_TARGET_DIR when set).
+vge=${VGE:-}
+if [ -z "$vge" ]; then
+  cargo build --release -p vge-cli --bin vge >&2
+  vge=${CARGO_TARGET_DIR:-target}/release/vge
+fi
 updates=400
 out=target/bench-vs-sb3.jsonl
 : >"$out"

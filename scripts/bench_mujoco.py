@@ -15,8 +15,13 @@ The settled grasp: the keyframe stepped for `--settle-s` untimed, so that MuJoCo
 contacts find their own equilibrium (vge15's cube stays within 1 mm of the keyframe on all
 five fingertips).
 
-Prints one JSON line: control_steps_per_s, sim_seconds_per_s, and whether the grasp held
-(resets, mean fingertip contacts, the object's turn about z over the run).
+The solver settings the model file carries (elliptic cones, impratio 10, no noslip) can be
+overridden with --cone, --impratio, --noslip-iterations and --solver-iterations, so that
+scripts/bench-vs-mujoco.sh can sweep MuJoCo's settings and compare against the fastest that
+holds the grasp, not only against the one the file is written with.
+
+Prints one JSON line: control_steps_per_s, sim_seconds_per_s (and per second of the thread's
+CPU time), the settings, and whether the grasp held (drops, episode ends, mean fingertip contacts, the object's turn about z).
 """
 
 import argparse
@@ -48,10 +53,23 @@ def main():
                    help="the action table (`vge bench sim --write-mjcf M --write-actions FILE`)")
     p.add_argument("--settle-s", type=float, default=1.0, help="settling time after the keyframe (default 1 s)")
     p.add_argument("--episode-steps", type=int, default=400, help="episode length in control steps (default 400)")
+    p.add_argument("--cone", choices=["pyramidal", "elliptic"], help="friction cone (default: the file's)")
+    p.add_argument("--impratio", type=float, help="frictional-to-normal impedance ratio (default: the file's)")
+    p.add_argument("--noslip-iterations", type=int, help="noslip solver iterations (default: the file's)")
+    p.add_argument("--solver-iterations", type=int, help="main solver's iteration cap (default: the file's)")
     args = p.parse_args()
     if args.steps < 1 or args.episode_steps < 1 or not args.control_hz > 0 or args.settle_s < 0:
         p.error("--steps and --episode-steps must be >= 1, --control-hz > 0, --settle-s >= 0")
     model = mujoco.MjModel.from_xml_path(args.mjcf)
+    if args.cone is not None:
+        model.opt.cone = {"pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL,
+                          "elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC}[args.cone]
+    if args.impratio is not None:
+        model.opt.impratio = args.impratio
+    if args.noslip_iterations is not None:
+        model.opt.noslip_iterations = args.noslip_iterations
+    if args.solver_iterations is not None:
+        model.opt.iterations = args.solver_iterations
     data = mujoco.MjData(model)
     # Read before MuJoCo settles the grasp, so that a bad table fails first, and before
     # timing, so that Python's speed does not count against MuJoCo.
@@ -118,7 +136,7 @@ def main():
 
     def drive(steps):
         z0 = reset()
-        resets, contacts, turned, last_yaw, t = 0, 0, 0.0, yaw(), 0
+        resets, drops, contacts, turned, last_yaw, t = 0, 0, 0, 0.0, yaw(), 0
         for k in range(steps):
             data.ctrl[:] = np.clip(data.ctrl + table[k], lo, hi)
             mujoco.mj_step(model, data, nstep=physics_per_control)
@@ -127,25 +145,34 @@ def main():
             turned += (y - last_yaw + math.pi) % (2 * math.pi) - math.pi
             last_yaw = y
             t += 1
-            if height() < z0 - 0.03 or t >= args.episode_steps:
+            dropped = height() < z0 - 0.03
+            if dropped or t >= args.episode_steps:
                 resets += 1
+                drops += dropped
                 reset()
                 last_yaw, t = yaw(), 0
-        return resets, contacts / steps, turned
+        return resets, drops, contacts / steps, turned
 
     drive(20)  # warm-up, as vge bench sim
-    start = time.perf_counter()
-    resets, mean_contacts, turned = drive(args.steps)
-    wall = time.perf_counter() - start
+    start, cpu_start = time.perf_counter(), time.thread_time()
+    resets, drops, mean_contacts, turned = drive(args.steps)
+    wall, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
     print(json.dumps({
         "bench": "mujoco",
         "mujoco_version": mujoco.__version__,
         "model": model.names.split(b"\0", 1)[0].decode(),
         "control_steps_per_s_single": args.steps / wall,
         "sim_seconds_per_s": args.steps / wall / args.control_hz,
+        # Per second of this thread's CPU time: what other processes on the core do not inflate.
+        "sim_seconds_per_cpu_s": args.steps / cpu / args.control_hz,
         "physics_steps_per_control": physics_per_control,
         "timestep_s": model.opt.timestep,
+        "cone": "elliptic" if model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC else "pyramidal",
+        "impratio": float(model.opt.impratio),
+        "noslip_iterations": int(model.opt.noslip_iterations),
+        "solver_iterations": int(model.opt.iterations),
         "resets_single": resets,
+        "drops_single": drops,
         "mean_tip_contacts": mean_contacts,
         "joints": model.nu,
         "fingertips": len(tips),
