@@ -70,34 +70,32 @@ pub(crate) fn level() -> Option<Level> {
 }
 
 /// `y = W x + b` with the fused kernel at `level` (at most [`level()`]); `false` (and `y`
-/// untouched) when this CPU or build cannot run it. The caller has checked the sizes (`Layer::check_io`): `W` holds
-/// `y.len()` rows of `x.len()`, `b` one entry per row.
+/// untouched) when this CPU or build cannot run it. The caller has checked the sizes
+/// (`Layer::check_io`): `W` holds `y.len()` rows of `x.len()`, `b` one entry per row.
 pub(crate) fn dense(level: Level, w: SimdWeights<'_>, bias: &[f32], x: &[f32], y: &mut [f32]) -> bool {
-    {
-        let available = match (level, self::level()) {
-            (_, None) | (Level::Avx512, Some(Level::Avx2)) => false,
-            (_, Some(Level::Avx512)) | (Level::Avx2, Some(Level::Avx2)) => true,
-        };
-        if !available {
-            return false;
-        }
-        // SAFETY: each function only needs the target features it enables, and `level()`
-        // found them on this CPU (std) or in this build's target features (no_std).
-        #[allow(unsafe_code)]
-        unsafe {
-            match (level, w) {
-                (Level::Avx512, SimdWeights::F32(w)) => avx512::dense(w, bias, x, y, avx512::load_f32, |v| v),
-                (Level::Avx512, SimdWeights::F16(w)) => {
-                    avx512::dense(w, bias, x, y, avx512::load_f16, crate::weights::f16_to_f32)
-                }
-                (Level::Avx2, SimdWeights::F32(w)) => avx2::dense(w, bias, x, y, avx2::load_f32, |v| v),
-                (Level::Avx2, SimdWeights::F16(w)) => {
-                    avx2::dense(w, bias, x, y, avx2::load_f16, crate::weights::f16_to_f32)
-                }
+    let available = match (level, self::level()) {
+        (_, None) | (Level::Avx512, Some(Level::Avx2)) => false,
+        (_, Some(Level::Avx512)) | (Level::Avx2, Some(Level::Avx2)) => true,
+    };
+    if !available {
+        return false;
+    }
+    // SAFETY: each function only needs the target features it enables, and `level()` found
+    // them on this CPU (std) or in this build's target features (no_std).
+    #[allow(unsafe_code)]
+    unsafe {
+        match (level, w) {
+            (Level::Avx512, SimdWeights::F32(w)) => avx512::dense(w, bias, x, y, avx512::load_f32, |v| v),
+            (Level::Avx512, SimdWeights::F16(w)) => {
+                avx512::dense(w, bias, x, y, avx512::load_f16, crate::weights::f16_to_f32)
+            }
+            (Level::Avx2, SimdWeights::F32(w)) => avx2::dense(w, bias, x, y, avx2::load_f32, |v| v),
+            (Level::Avx2, SimdWeights::F16(w)) => {
+                avx2::dense(w, bias, x, y, avx2::load_f16, crate::weights::f16_to_f32)
             }
         }
-        true
     }
+    true
 }
 
 /// Rows per block: each input vector is loaded once for this many rows, and their
