@@ -12,8 +12,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use commands::{
-    bench, compare, controller, eval, export, hand, import, inspect, plot, robustness, score, screen, ship,
-    sweep, train,
+    bench, compare, config, controller, eval, export, facts, hand, import, inspect, plot, queue, robustness,
+    score, screen, ship, sweep, table1, train,
 };
 
 /// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
@@ -33,9 +33,13 @@ struct Cli {
 enum Command {
     Train(train::TrainArgs),
     Sweep(sweep::SweepArgs),
+    Queue(queue::QueueArgs),
+    Table1(table1::Table1Args),
     Plot(plot::PlotArgs),
     Score(score::ScoreArgs),
     Compare(compare::CompareArgs),
+    Facts(facts::FactsArgs),
+    Config(config::ConfigArgs),
     Eval(eval::EvalArgs),
     Robustness(robustness::RobustnessArgs),
     Screen(screen::ScreenArgs),
@@ -63,7 +67,10 @@ pub extern "C" fn mkl_serv_intel_cpu_true() -> std::ffi::c_int {
 fn main() -> ExitCode {
     closed_output::end_quietly_when_closed();
     let command = Cli::parse().command;
-    if matches!(command, Command::Train(_) | Command::Sweep(_) | Command::Score(_)) {
+    if matches!(
+        command,
+        Command::Train(_) | Command::Sweep(_) | Command::Queue(_) | Command::Table1(_) | Command::Score(_)
+    ) {
         // Runs that take hours finish whether or not anyone still reads their output.
         closed_output::keep_going();
     }
@@ -75,9 +82,13 @@ fn main() -> ExitCode {
     let result = match command {
         Command::Train(args) => train::run(args),
         Command::Sweep(args) => sweep::run(args),
+        Command::Queue(args) => queue::run(args),
+        Command::Table1(args) => table1::run(args),
         Command::Plot(args) => plot::run(args),
         Command::Score(args) => score::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Facts(args) => facts::run(args),
+        Command::Config(args) => config::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Robustness(args) => robustness::run(args),
         Command::Screen(args) => screen::run(args),

@@ -3,18 +3,22 @@
 
 pub mod bench;
 pub mod compare;
+pub mod config;
 pub mod controller;
 pub mod eval;
 pub mod export;
+pub mod facts;
 pub mod hand;
 pub mod import;
 pub mod inspect;
 pub mod plot;
+pub mod queue;
 pub mod robustness;
 pub mod score;
 pub mod screen;
 pub mod ship;
 pub mod sweep;
+pub mod table1;
 pub mod train;
 
 /// Why a command that needs libtorch cannot run in a vge built without the `train` feature.
