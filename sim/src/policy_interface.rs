@@ -7,7 +7,7 @@
 use vge_hand::Hand;
 use vge_runtime::policy::PolicyInfo;
 
-use crate::observation::ObservationLayout;
+use crate::observation::{ObservationLayout, ObservationSet};
 
 /// Checks a policy file's description ([`vge_runtime::policy::inspect`]) against `hand` and
 /// the observation `layout` it will be given: sizes, observation slices and action names; the
@@ -29,6 +29,17 @@ pub fn check_policy_interface(
     layout
         .check(info.obs_layout.iter().map(|s| (s.name, s.start, s.end)))
         .map_err(|e| format!("another observation layout: {e}"))?;
+    // A recorded observation set must be the one its slices spell: a file whose record and
+    // layout disagree was written by something else than vge's export.
+    if let Some(task) = &info.task {
+        let recorded = ObservationSet::parse(task.observation_set)?;
+        if ObservationLayout::new(recorded, hand.num_joints(), hand.num_fingers()) != *layout {
+            return Err(format!(
+                "the policy records the observation set {}, but its inputs are another set's",
+                task.observation_set
+            ));
+        }
+    }
     crate::action::check_action_names(hand, info.action_names.iter())
         .map_err(|e| format!("other actions: {e}"))
 }
