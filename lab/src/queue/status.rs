@@ -54,7 +54,7 @@ pub fn status(checkout: &Checkout, queue: &Path) -> Result<QueueStatus, QueueErr
         } else if dir.exists() {
             let last = last_metrics(&dir);
             let mut state = format!("at step {}", last.map_or(0, |(step, _)| step));
-            let checkpoint = crate::sweep::checkpoint_step(&dir);
+            let checkpoint = vge_run::run_dir::checkpoint_step(&dir);
             match (&checkpoint, run.resume_checkpoint()) {
                 (Some(step), Some(folder)) => {
                     state += &format!(
