@@ -10,6 +10,7 @@ import numpy as np
 
 from . import _vge
 from ._checks import float32_array
+from ._hand_sizes import HandSizes
 from .hand import Hand
 
 
@@ -37,7 +38,7 @@ def episode_seed(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**63, dtype=np.int64))
 
 
-class HandEnv(gym.Env):
+class HandEnv(HandSizes, gym.Env):
     """A hand turning an object about the vertical, as vge trains it. The hand is the `[env]`
     key `hand`: `"vge15"` (vge's own 15-joint, 5-finger hand, the default), `"allegro"`
     (16 joints, 4 fingers), or the path of an MJCF file; its sizes are the env's
@@ -88,46 +89,6 @@ class HandEnv(gym.Env):
     @property
     def object(self) -> str:
         return self._core.object
-
-    @property
-    def hand(self) -> Hand:
-        """The hand the env simulates (its names, limits and kinematics)."""
-        return self._hand
-
-    @property
-    def obs_dim(self) -> int:
-        """Entries of an observation (the observation set's, on this hand)."""
-        return self._core.obs_dim
-
-    @property
-    def act_dim(self) -> int:
-        """Entries of an action: one per joint."""
-        return self._core.act_dim
-
-    @property
-    def obs_layout(self) -> list[tuple[str, int, int]]:
-        """The observation's named slices, `(name, start, end)` in order."""
-        return self._core.obs_layout
-
-    @property
-    def full_obs_layout(self) -> list[tuple[str, int, int]]:
-        """The full observation's slices (`info["full_obs"]` when the env observes less)."""
-        return self._core.full_obs_layout
-
-    @property
-    def observation(self) -> str:
-        """The observation set: `full`, `proprio` or `proprio:K`."""
-        return self._core.observation
-
-    @property
-    def joint_names(self) -> list[str]:
-        """The joints, in the order of an action's entries."""
-        return self._hand.joint_names
-
-    @property
-    def finger_names(self) -> list[str]:
-        """The fingers, in the order of the per-fingertip info entries."""
-        return self._hand.finger_names
 
     @property
     def control_hz(self) -> float:

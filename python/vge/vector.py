@@ -12,6 +12,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from . import _vge
 from ._checks import float32_array
 from .env import env_keys, episode_seed, warn_training_only
+from ._hand_sizes import HandSizes
 from .hand import Hand
 
 # Per-env info arrays (each with its "_key" mask, all True: every env reports every key).
@@ -27,7 +28,7 @@ _INFO_KEYS = (
 )
 
 
-class VecHandEnv(VectorEnv):
+class VecHandEnv(HandSizes, VectorEnv):
     """`num_envs` `HandEnv`s as one Gymnasium `VectorEnv`, stepped in Rust into numpy arrays
     allocated once, with Gymnasium 1.x's next-step autoreset (`metadata["autoreset_mode"]`):
     an env whose episode ended on step t returns that step's final observation, and on step
@@ -88,41 +89,6 @@ class VecHandEnv(VectorEnv):
     @property
     def objects(self) -> list[str]:
         return self._core.objects
-
-    @property
-    def hand(self) -> Hand:
-        """The hand every env simulates."""
-        return self._hand
-
-    @property
-    def obs_dim(self) -> int:
-        """Entries of one env's observation."""
-        return self._core.obs_dim
-
-    @property
-    def act_dim(self) -> int:
-        """Entries of one env's action: one per joint."""
-        return self._core.act_dim
-
-    @property
-    def obs_layout(self) -> list[tuple[str, int, int]]:
-        return self._core.obs_layout
-
-    @property
-    def full_obs_layout(self) -> list[tuple[str, int, int]]:
-        return self._core.full_obs_layout
-
-    @property
-    def observation(self) -> str:
-        return self._core.observation
-
-    @property
-    def joint_names(self) -> list[str]:
-        return self._hand.joint_names
-
-    @property
-    def finger_names(self) -> list[str]:
-        return self._hand.finger_names
 
     def _draw_seed(self, i: int) -> int:
         if self._env_rngs[i] is None:
