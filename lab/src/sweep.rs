@@ -307,10 +307,7 @@ fn how_it_ended(dir: &Path, status: std::process::ExitStatus, log: &Path) -> Out
 /// stderr holds a progress bar only on a terminal, so the files are what every run has.
 pub fn progress_line(dir: &Path, seed: u64, steps: Option<u64>) -> String {
     let from_config = || {
-        let path = dir.join(vge_run::run_dir::CONFIG);
-        let text =
-            vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_CONFIG_FILE_LEN)
-                .ok()?;
+        let text = vge_run::run_dir::RunDir::new(dir).read_config_text().ok()?;
         u64::try_from(text.parse::<toml::Table>().ok()?.get("total_steps")?.as_integer()?).ok()
     };
     let total_steps = steps.or_else(from_config);
@@ -384,10 +381,8 @@ fn last_success(dir: &Path) -> Option<(u64, f64)> {
 
 /// The final policy's success rate and whether the seed learned (`final-eval.json`).
 fn final_success(dir: &Path) -> Option<(f64, bool)> {
-    let path = dir.join(vge_run::run_dir::FINAL_EVAL);
-    let text = vge_run::read_limits::read_to_string_bounded(&path, vge_run::read_limits::MAX_RECORD_FILE_LEN)
-        .ok()?;
-    let doc: serde_json::Value = serde_json::from_str(&text).ok()?;
+    let path = vge_run::run_dir::RunDir::new(dir).final_eval();
+    let doc: serde_json::Value = vge_run::run_dir::read_json(&path).ok()??;
     Some((doc.get("success_rate")?.as_f64()?, doc.get("learned")?.as_bool()?))
 }
 
