@@ -21,8 +21,7 @@ const CELLS: [&str; 9] = [
     "cube-igm-vge",
 ];
 
-/// Run the paper's Table I on this machine: the controllers alone, every cell over seeds,
-/// then the table and its figures
+/// Run the paper's Table I on this machine: controllers, every cell's seeds, the table
 ///
 /// Writes OUT/controllers/{fg,cs,igm}.json first (vge controller, a minute each; kept when
 /// present), then each cell's seeds with vge sweep into OUT/CELL/seed-N (configs/CELL.toml,
