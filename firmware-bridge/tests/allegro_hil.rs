@@ -31,9 +31,9 @@ fn iface() -> String {
     std::env::var("VGE_HIL_IFACE").unwrap_or_else(|_| "vcan0".to_owned())
 }
 
-/// The position timeout for runs that test something else: 1000 periods, 3 s, so that a guest
-/// stall does not halt them.
-const TOLERANT: [&str; 2] = ["--watchdog-periods", "1000"];
+/// The position timeout for runs that test something else: 1000 periods, 3 s, and 10 s for
+/// start-up's answers, so that a guest stall does not halt them.
+const TOLERANT: [&str; 4] = ["--watchdog-periods", "1000", "--startup-timeout-s", "10"];
 /// How long the emulator waits without a frame before it ends (after the bridge has gone).
 const EMULATOR_IDLE_S: &str = "3";
 const CFG: AllegroConfig = AllegroConfig::V4;

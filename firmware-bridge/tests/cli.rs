@@ -156,11 +156,37 @@ fn run_refuses_a_seq_lag_outside_1_to_127_naming_the_flag() {
 #[test]
 fn run_refuses_times_and_rates_no_clock_holds_with_an_error_naming_the_flag_not_a_panic() {
     let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
-    for (flag, value) in [("--duration", "1e20"), ("--heartbeat-timeout-s", "1e300"), ("--rate", "1e-20")] {
+    for (flag, value) in [
+        ("--duration", "1e20"),
+        ("--heartbeat-timeout-s", "1e300"),
+        ("--rate", "1e-20"),
+        ("--startup-timeout-s", "1e300"),
+        ("--startup-timeout-s", "inf"),
+    ] {
         let out =
             bridge(&["run", "--policy", policy, "--backend", "can", "--iface", "vcan-absent", flag, value]);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(1), "{flag} {value}: an error, not a panic (101): {err}");
         assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+    let allegro_policy =
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/policies/allegro-proprio2-init.vgep");
+    for value in ["0", "nan"] {
+        let out = bridge(&[
+            "run",
+            "--hand",
+            "allegro",
+            "--policy",
+            allegro_policy,
+            "--backend",
+            "can",
+            "--iface",
+            "vcan-absent",
+            "--startup-timeout-s",
+            value,
+        ]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "allegro --startup-timeout-s {value}: {err}");
+        assert!(err.contains("--startup-timeout-s"), "{value}: {err}");
     }
 }

@@ -74,6 +74,10 @@ fn loop_config(
     let periods = args.watchdog_periods.unwrap_or(DEFAULT_WATCHDOG_PERIODS).max(1);
     config.position_timeout = PERIOD * periods;
     config.persist_limit = periods;
+    if let Some(s) = args.startup_timeout_s {
+        config.startup_timeout =
+            positive_seconds("startup-timeout-s", s, false)?.unwrap_or(config.startup_timeout);
+    }
     Ok(config)
 }
 

@@ -62,6 +62,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<ExitCode> {
         max_delta_rad: 0.05,
         watchdog_periods: Some(50),
         heartbeat_timeout_s: 0.5,
+        startup_timeout_s: None,
         max_seq_lag: control_loop::DEFAULT_MAX_SEQ_LAG,
         json,
         realtime,

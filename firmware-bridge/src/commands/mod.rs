@@ -108,6 +108,11 @@ pub struct LoopArgs {
     /// overloaded bus, unsent commands) halts too.
     #[arg(long)]
     pub watchdog_periods: Option<u32>,
+    /// Seconds start-up waits for the hand's first answers (every node's state; with --hand
+    /// allegro the info answer and four position frames) before it gives up (default 5, with
+    /// --hand allegro 2). A slow virtual bus, e.g. a loaded emulator, may need more.
+    #[arg(long)]
+    pub startup_timeout_s: Option<f64>,
     /// Seconds without a node's heartbeat before the loop halts (heartbeat_lost; vge15).
     #[arg(long, default_value_t = 0.5)]
     pub heartbeat_timeout_s: f64,

@@ -288,14 +288,20 @@ pub fn loop_config(args: &LoopArgs, policy_hz: f32, hand: ProtocolHand) -> anyho
     );
     let heartbeat_timeout =
         positive_seconds("heartbeat-timeout-s", args.heartbeat_timeout_s, false)?.unwrap_or(Duration::MAX);
+    let defaults = LoopConfig::new(rate_hz, hand);
+    let startup_timeout = match args.startup_timeout_s {
+        Some(s) => positive_seconds("startup-timeout-s", s, false)?.unwrap_or(defaults.startup_timeout),
+        None => defaults.startup_timeout,
+    };
     Ok(LoopConfig {
         duration: positive_seconds("duration", args.duration, true)?,
+        startup_timeout,
         max_steps: args.steps,
         watchdog_periods: args.watchdog_periods.unwrap_or(5).max(1),
         max_delta_rad: args.max_delta_rad,
         heartbeat_timeout,
         max_seq_lag: args.max_seq_lag,
-        ..LoopConfig::new(rate_hz, hand)
+        ..defaults
     })
 }
 
