@@ -7,6 +7,7 @@
 #![warn(clippy::too_many_lines)]
 
 pub mod behaviour;
+pub mod bench_train;
 pub mod bench_update;
 pub mod checkpoint;
 pub mod heap;

@@ -38,6 +38,49 @@ pub enum Bench {
         #[arg(long, default_value = "f32", value_parser = ["f32", "bf16"])]
         matmul: String,
     },
+    /// Training speed: env steps per second after the warm-up, and where the time goes.
+    ///
+    /// Trains the default config (or --config, with --set) for --steps env steps after its
+    /// warm-up at each of --threads libtorch threads (`sac.threads`, the most a run uses: it
+    /// fits its threads to the cores other processes leave idle unless
+    /// `VGE_FIXED_THREADS=1`), and prints env steps/s with the split of that time: sim
+    /// (physics, replay pushes, resets), controllers (the behaviour policy's controller calls
+    /// and Q queries), actor (the behaviour actions), update (minibatch sampling and gradient
+    /// updates) and other. No periodic evaluation, checkpoint or score; the run folder is a
+    /// scratch one, removed afterwards.
+    ///
+    /// --beside-busy-core measures each configuration a second time beside a process that
+    /// keeps one core busy (another job on a shared machine) and prints every rate as a
+    /// fraction of the one-thread rate without it. --fixed-threads both measures fixed and
+    /// adapting threads. Rates on a loaded machine swing: compare within one run (--rounds
+    /// alternates the configurations).
+    Train {
+        /// Print one JSON line per measured run instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Experiment config (TOML); default: the shipped protocol (`Config::default()`).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Override a config field, e.g. `--set sac.warmup=2000` (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+        /// Env steps measured after the warm-up (`sac.warmup`).
+        #[arg(long, default_value_t = 20_000)]
+        steps: u64,
+        /// libtorch thread counts to measure, in this order (comma-separated).
+        #[arg(long, value_delimiter = ',', default_value = "1,2")]
+        threads: Vec<i32>,
+        /// Each configuration again beside a process that keeps one core busy (`sh` looping).
+        #[arg(long)]
+        beside_busy_core: bool,
+        /// Rounds over all configurations, alternating them.
+        #[arg(long, default_value_t = 1)]
+        rounds: usize,
+        /// Keep libtorch's threads at --threads instead of fitting them to the idle cores:
+        /// no, yes, or both (each configuration measured both ways).
+        #[arg(long, default_value = "no", value_parser = ["no", "yes", "both"])]
+        fixed_threads: String,
+    },
     /// Simulator throughput: control steps per second of one world on one thread, and of N
     /// worlds stepped across all cores, at the default env rates.
     Sim {
@@ -147,6 +190,11 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes),
         Bench::Cores { json, window_s } => bench_cores(json, window_s),
         #[cfg(feature = "train")]
+        Bench::Train { json, config, overrides, steps, threads, beside_busy_core, rounds, fixed_threads } => {
+            let plan = libtorch::TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads };
+            libtorch::train(json, config, &overrides, &plan)
+        }
+        #[cfg(feature = "train")]
         Bench::Update { json, updates, batch, seed, algorithm, layer_norm, matmul } => {
             libtorch::update(json, updates, batch, seed, &algorithm, layer_norm, &matmul)
         }
@@ -160,6 +208,8 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
         Bench::Update { .. } | Bench::Firmware { .. } | Bench::Runtime { .. } => {
             Err(super::without_training("vge bench update/firmware/runtime (they compare with tch)"))
         }
+        #[cfg(not(feature = "train"))]
+        Bench::Train { .. } => Err(super::without_training("vge bench train")),
     }
 }
 
@@ -341,6 +391,149 @@ mod libtorch {
             );
         }
         Ok(())
+    }
+
+    /// What `vge bench train` measures.
+    pub struct TrainPlan {
+        pub steps: u64,
+        pub threads: Vec<i32>,
+        pub beside_busy_core: bool,
+        pub rounds: usize,
+        pub fixed_threads: String,
+    }
+
+    /// `vge bench train`.
+    pub fn train(
+        json: bool,
+        config: Option<PathBuf>,
+        overrides: &[String],
+        plan: &TrainPlan,
+    ) -> anyhow::Result<()> {
+        use vge_trainer::bench_train::{self, BenchRun, TrainBench};
+        let TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads } = plan;
+        let (steps, threads, rounds) = (*steps, threads.as_slice(), *rounds);
+        anyhow::ensure!(steps > 0 && rounds > 0, "--steps and --rounds must be at least 1");
+        anyhow::ensure!(
+            !threads.is_empty() && threads.iter().all(|&t| t >= 1),
+            "--threads: give thread counts of at least 1"
+        );
+        let config = match &config {
+            Some(path) => vge_run::config::load_config(path, overrides)?,
+            None => {
+                let mut c = vge_run::config::Config::default();
+                for o in overrides {
+                    vge_run::config::apply_override(&mut c, o)?;
+                }
+                c.validate()?;
+                c
+            }
+        };
+        let loads: &[bool] = if *beside_busy_core { &[false, true] } else { &[false] };
+        let modes: &[bool] = match fixed_threads.as_str() {
+            "yes" => &[false],
+            "both" => &[false, true],
+            _ => &[true],
+        };
+        if !json {
+            println!(
+                "{} {} with {} ({} envs, utd {}, warm-up {}), {steps} env steps after the warm-up",
+                config.algorithm.name().to_uppercase(),
+                config.method.name(),
+                config.controller.map_or("no controller".to_owned(), |c| c.name().to_uppercase()),
+                config.num_envs,
+                config.sac.utd,
+                config.sac.warmup,
+            );
+            println!(
+                "round threads  adapt  busy   steps/s updates/s    sim   ctrl  actor update  other  (shares of the time)"
+            );
+        }
+        let mut results: Vec<TrainBench> = Vec::new();
+        for round in 1..=rounds {
+            for &beside_busy_core in loads {
+                for &adaptive_threads in modes {
+                    for &threads in threads {
+                        let how = BenchRun { threads, steps, beside_busy_core, adaptive_threads };
+                        let r = bench_train::run(&config, how)?;
+                        print_train_row(json, round, &r);
+                        results.push(r);
+                    }
+                }
+            }
+        }
+        if !json {
+            print_train_summary(&results, threads, loads, modes);
+        }
+        Ok(())
+    }
+
+    fn print_train_row(json: bool, round: usize, r: &vge_trainer::bench_train::TrainBench) {
+        let split = r.split();
+        let total = r.phases.total_s.max(1e-9);
+        if json {
+            let mut line = serde_json::json!({
+                "bench": "train",
+                "round": round,
+                "threads": r.threads,
+                "beside_busy_core": r.beside_busy_core,
+                "adaptive_threads": r.adaptive_threads,
+                "env_steps": r.env_steps,
+                "updates": r.updates,
+                "wall_s": r.phases.total_s,
+                "steps_per_s": r.steps_per_s(),
+                "updates_per_s": r.updates_per_s(),
+            });
+            for (name, s) in split {
+                line[format!("{name}_s")] = serde_json::json!(s);
+            }
+            println!("{line}");
+        } else {
+            let shares: Vec<String> =
+                split.iter().map(|(_, s)| format!("{:>5.0}%", 100.0 * s / total)).collect();
+            println!(
+                "{round:>5} {:>7} {:>6} {:>5} {:>9.1} {:>9.1} {}",
+                r.threads,
+                if r.adaptive_threads { "yes" } else { "no" },
+                if r.beside_busy_core { "yes" } else { "no" },
+                r.steps_per_s(),
+                r.updates_per_s(),
+                shares.join(" ")
+            );
+        }
+    }
+
+    /// The median rate of each configuration, and each as a fraction of the one-thread rate
+    /// without the busy core (the yardstick: beside a busy core, at least half of it).
+    fn print_train_summary(
+        results: &[vge_trainer::bench_train::TrainBench],
+        threads: &[i32],
+        loads: &[bool],
+        modes: &[bool],
+    ) {
+        let median = |t: i32, busy: bool, adapt: bool| -> Option<f64> {
+            let mut v: Vec<f64> = results
+                .iter()
+                .filter(|r| r.threads == t && r.beside_busy_core == busy && r.adaptive_threads == adapt)
+                .map(vge_trainer::bench_train::TrainBench::steps_per_s)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            (!v.is_empty()).then(|| v[v.len() / 2])
+        };
+        let base = median(1, false, modes[0]);
+        println!("median env steps/s:");
+        for &busy in loads {
+            for &adapt in modes {
+                for &t in threads {
+                    let Some(rate) = median(t, busy, adapt) else { continue };
+                    let ratio = base.map_or(String::new(), |b| {
+                        format!("  ({:.2} of one thread without the busy core)", rate / b)
+                    });
+                    let load = if busy { "beside a busy core" } else { "without a busy core" };
+                    let mode = if adapt { "at most" } else { "fixed at" };
+                    println!("  threads {mode} {t}, {load}: {rate:.1}{ratio}");
+                }
+            }
+        }
     }
 
     /// `vge bench runtime`.

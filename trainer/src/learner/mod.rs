@@ -26,10 +26,12 @@ use crate::optim::{Adam, flatten_storage};
 mod obs_columns;
 mod soft_actor_critic;
 mod td3;
+pub mod threads;
 
 pub use obs_columns::ObsColumns;
 pub use soft_actor_critic::SoftActorCritic;
 pub use td3::Td3;
+pub use threads::ThreadGovernor;
 
 /// How the entropy coefficient α is set.
 #[derive(Debug, Clone, Copy, PartialEq)]

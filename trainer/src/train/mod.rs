@@ -146,6 +146,9 @@ pub struct Progress<'a> {
     pub logged: bool,
     /// The periodic success test that ran at this step, if one did (`eval.csv`'s new row).
     pub evaluation: Option<&'a vge_run::eval::ObjectsReport>,
+    /// Where this session's wall time went so far (`vge bench train` takes the difference
+    /// between two steps).
+    pub times: PhaseTimes,
 }
 
 /// How a call of [`train`] ended.
@@ -275,6 +278,7 @@ impl Trainer<'_> {
             let prev_step = t.c.step;
             t.c.step += t.collector.len() as u64;
             t.lap(Phase::Sim);
+            t.threads.adapt();
             t.update()?;
             t.lap(Phase::Update);
             t.periodic(prev_step, progress)?;
@@ -365,6 +369,8 @@ struct Trainer<'a> {
     resumed: bool,
     times: PhaseTimes,
     clock: Instant,
+    /// libtorch's threads, fitted to the cores other processes leave idle.
+    threads: learner::ThreadGovernor,
     /// This session's latest periodic evaluation (step, report).
     last_evaluation: Option<(u64, vge_run::eval::ObjectsReport)>,
 }
@@ -468,6 +474,7 @@ impl<'a> Trainer<'a> {
             cost: RunClock::start(before),
             times: PhaseTimes::default(),
             clock: now,
+            threads: learner::ThreadGovernor::start(),
             last_evaluation: None,
         })
     }
@@ -568,6 +575,7 @@ impl<'a> Trainer<'a> {
             updates: self.learner.updates(),
             logged,
             evaluation: self.last_evaluation.as_ref().filter(|_| evaluated).map(|(_, report)| report),
+            times: PhaseTimes { total_s: self.cost.session_wall_s(), ..self.times },
         });
         if crossed(config.run.checkpoint_interval) && step < config.total_steps {
             self.lap(Phase::Sim);

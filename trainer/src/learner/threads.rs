@@ -1,0 +1,222 @@
+//! libtorch's intra-op threads fitted, while a run trains, to the cores that other processes
+//! leave idle.
+//!
+//! libtorch's parallel regions end at a barrier that waits for every worker: when another
+//! process keeps a core busy, the worker that shares that core runs only in the scheduler's
+//! turns, and each of an update's hundreds of small regions waits for it. Two threads beside
+//! one busy core then train several times slower than one thread (docs/training.md,
+//! "Training speed"), and a thread count chosen once at the start cannot follow a machine
+//! whose other jobs come and go. [`ThreadGovernor`] measures, every [`PERIOD`], how many cores
+//! the machine's other processes kept busy (all the cores' busy time from `/proc/stat` less
+//! this process's own CPU time) and sets libtorch's threads to the idle rest, between 1 and
+//! the configured count.
+
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::time::{Duration, Instant};
+
+/// The environment variable that keeps the thread count fixed at the configured one
+/// (`VGE_FIXED_THREADS=1`), e.g. to measure what adapting gains.
+pub const FIXED_THREADS_ENV: &str = "VGE_FIXED_THREADS";
+
+/// Whether governors adapt: unset (0), yes (1), no (2).
+static ADAPTING: AtomicU8 = AtomicU8::new(0);
+
+/// Turns adapting on or off for the governors made from now on in this process (`vge bench
+/// train` measures both); without a call, [`FIXED_THREADS_ENV`] decides.
+pub fn set_adapting(adapt: bool) {
+    ADAPTING.store(if adapt { 1 } else { 2 }, Ordering::Relaxed);
+}
+
+fn adapting() -> bool {
+    match ADAPTING.load(Ordering::Relaxed) {
+        1 => true,
+        2 => false,
+        _ => std::env::var_os(FIXED_THREADS_ENV).is_none_or(|v| v.is_empty() || v == "0"),
+    }
+}
+
+/// How often the cores' use is measured: long enough for the kernel's 100 Hz counters to
+/// resolve a tenth of a core, short against a run's minutes.
+pub const PERIOD: Duration = Duration::from_secs(2);
+
+/// One reading of the machine's counters.
+#[derive(Debug, Clone, Copy)]
+struct Reading {
+    at: Instant,
+    /// Busy and total jiffies summed over every core, and the number of cores.
+    busy: u64,
+    total: u64,
+    cores: usize,
+    /// This process's CPU time, all threads (s).
+    own_cpu_s: f64,
+}
+
+/// Sets libtorch's thread count to what fits beside the machine's other work, between 1 and
+/// `max_threads`, re-measured every [`PERIOD`] ([`Self::adapt`]).
+#[derive(Debug)]
+pub struct ThreadGovernor {
+    max_threads: i32,
+    current: i32,
+    last: Option<Reading>,
+}
+
+impl ThreadGovernor {
+    /// Starts at libtorch's current thread count (what the run asked for), the most it will
+    /// use; the first [`Self::adapt`] after a [`PERIOD`] corrects it. It never adapts when
+    /// that is one thread, or where adapting is off ([`set_adapting`], [`FIXED_THREADS_ENV`]).
+    pub fn start() -> Self {
+        let max_threads = tch::get_num_threads().max(1);
+        let max_threads = if adapting() { max_threads } else { 1 };
+        Self { max_threads, current: tch::get_num_threads().max(1), last: read() }
+    }
+
+    /// The thread count now in force.
+    pub fn threads(&self) -> i32 {
+        self.current
+    }
+
+    /// Measures and sets the thread count when a [`PERIOD`] has passed since the last
+    /// measurement (else a clock read); returns the new count when it changed.
+    pub fn adapt(&mut self) -> Option<i32> {
+        if self.max_threads <= 1 {
+            return None;
+        }
+        let due = self.last.is_none_or(|last| last.at.elapsed() >= PERIOD);
+        if !due {
+            return None;
+        }
+        let now = read()?;
+        let fit = self.last.and_then(|last| threads_that_fit(&last, &now, self.max_threads));
+        self.last = Some(now);
+        let fit = fit?;
+        if fit == self.current {
+            return None;
+        }
+        self.current = fit;
+        tch::set_num_threads(fit);
+        Some(fit)
+    }
+}
+
+/// The cores other processes used between two readings, taken from the cores' busy time
+/// less this process's own, and the threads that fit beside them (idle cores rounded half down, 1 to
+/// `max_threads`). None when the counters did not advance.
+fn threads_that_fit(before: &Reading, after: &Reading, max_threads: i32) -> Option<i32> {
+    let wall_s = (after.at - before.at).as_secs_f64();
+    let (busy, total) = (after.busy.checked_sub(before.busy)?, after.total.checked_sub(before.total)?);
+    if total == 0 || wall_s <= 0.0 || after.cores != before.cores {
+        return None;
+    }
+    let cores = after.cores as f64;
+    let all_busy = busy as f64 / total as f64 * cores;
+    let own = ((after.own_cpu_s - before.own_cpu_s) / wall_s).clamp(0.0, cores);
+    let others = (all_busy - own).max(0.0);
+    // Rounded half down: half a core of someone else's work already costs a thread.
+    let idle = cores - others;
+    Some((((idle + 0.5).ceil() - 1.0) as i32).clamp(1, max_threads))
+}
+
+/// The machine's counters now; None where the OS does not give them.
+fn read() -> Option<Reading> {
+    let stat = std::fs::read_to_string("/proc/stat").ok()?;
+    let (busy, total, cores) = jiffies(&stat)?;
+    Some(Reading { at: Instant::now(), busy, total, cores, own_cpu_s: process_cpu_s()? })
+}
+
+/// Busy and total jiffies summed over the `cpuN` lines of `/proc/stat`, and their number.
+fn jiffies(stat: &str) -> Option<(u64, u64, usize)> {
+    let (mut busy, mut total, mut cores) = (0u64, 0u64, 0usize);
+    for line in stat.lines() {
+        let mut fields = line.split_ascii_whitespace();
+        let Some(cpu) = fields.next().and_then(|name| name.strip_prefix("cpu")) else { continue };
+        if cpu.parse::<usize>().is_err() {
+            continue;
+        }
+        // user nice system idle iowait irq softirq steal; guest time is already in user.
+        let values: Vec<u64> = fields.take(8).map_while(|f| f.parse().ok()).collect();
+        let [user, nice, system, idle, iowait, irq, softirq, steal] = values[..] else { return None };
+        let line_total = user + nice + system + idle + iowait + irq + softirq + steal;
+        total += line_total;
+        busy += line_total - idle - iowait;
+        cores += 1;
+    }
+    (cores > 0).then_some((busy, total, cores))
+}
+
+/// CPU time of this process, all threads (s).
+#[allow(unsafe_code)]
+fn process_cpu_s() -> Option<f64> {
+    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec through a valid pointer to a local.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
+    (rc == 0).then_some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learner::{self, Batch, LearnerConfig, standard_normal};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    /// The actor's parameters after `updates` updates of the default learner (TD3, 256x256)
+    /// on seeded batches, at `threads` libtorch threads.
+    fn actor_after_updates(threads: i32, updates: usize) -> Vec<Vec<f32>> {
+        tch::set_num_threads(threads);
+        let config = LearnerConfig::for_hand(&vge_run::config::Config::default()).expect("default hand");
+        let (obs, act) = (config.net.obs_dim, config.net.act_dim);
+        let mut learner = learner::build_seeded(config, tch::Device::Cpu, 7).expect("learner");
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..updates {
+            let batch = Batch::new(
+                standard_normal(&mut rng, 256, obs),
+                standard_normal(&mut rng, 256, act).tanh() * 0.05,
+                standard_normal(&mut rng, 256, 1),
+                standard_normal(&mut rng, 256, obs),
+                standard_normal(&mut rng, 256, 1).gt(1.5).to_kind(tch::Kind::Float),
+            );
+            learner.update(&batch);
+        }
+        let mut named: Vec<(String, tch::Tensor)> = learner.actor_vs().variables().into_iter().collect();
+        named.sort_by(|a, b| a.0.cmp(&b.0));
+        named.into_iter().map(|(_, t)| Vec::<f32>::try_from(t.flatten(0, -1)).expect("f32")).collect()
+    }
+
+    /// What lets the governor change the thread count mid-run and keep a seed's run the same
+    /// bit for bit: at the update's sizes, libtorch's kernels split the work between threads
+    /// without changing any sum's order.
+    #[test]
+    fn updates_compute_the_same_bits_at_one_and_two_threads() {
+        let before = tch::get_num_threads();
+        let one = actor_after_updates(1, 6);
+        let two = actor_after_updates(2, 6);
+        tch::set_num_threads(before);
+        assert_eq!(one.len(), two.len());
+        for (a, b) in one.iter().zip(&two) {
+            assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()), "a parameter differs");
+        }
+    }
+
+    fn reading(at: Instant, busy: u64, total: u64, own_cpu_s: f64) -> Reading {
+        Reading { at, busy, total, cores: 2, own_cpu_s }
+    }
+
+    #[test]
+    fn another_process_on_one_of_two_cores_leaves_one_thread() {
+        let t0 = Instant::now();
+        let t1 = t0 + Duration::from_secs(2);
+        // 2 s on 2 cores = 400 jiffies, all busy: 2 core-seconds of it this process's own
+        // (two spinning threads) would leave room for two; 2 of another process's, for one.
+        let before = reading(t0, 1000, 5000, 10.0);
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1400, 5400, 14.0), 2), Some(2));
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1400, 5400, 12.0), 2), Some(1));
+        // Half a core of someone else's work already costs the second thread.
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1300, 5400, 12.0), 2), Some(1));
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1280, 5400, 12.0), 2), Some(2));
+        // Never more than asked, never fewer than one.
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1000, 5400, 10.0), 1), Some(1));
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1400, 5400, 10.0), 2), Some(1));
+        // Counters that did not advance say nothing.
+        assert_eq!(threads_that_fit(&before, &reading(t1, 1000, 5000, 10.0), 2), None);
+    }
+}
