@@ -163,6 +163,11 @@ cargo build --release -p vge-runtime --target thumbv7em-none-eabihf
 cargo build --release -p vge-bridge --lib --no-default-features --target thumbv7em-none-eabihf
 ls -l target/thumbv7em-none-eabihf/release/libvge_runtime.rlib target/thumbv7em-none-eabihf/release/libvge_bridge.rlib
 
+step "the runtime's opt-in fused multiply-add kernel (feature simd) against the portable one"
+# The workspace build leaves `simd` off (the portable kernel is the default and bit-exact with
+# the firmware's), so its tests run here, in a build of the runtime alone.
+cargo test --release -p vge-runtime --features simd,std
+
 step "workspace tests (release, cargo nextest; clippy -D warnings on every target as it builds)"
 # --no-run first builds (and lints) every target, examples included, as `cargo clippy
 # --workspace --all-targets` would: the workspace has no benches.
