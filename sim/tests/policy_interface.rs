@@ -18,13 +18,13 @@ fn a_recorded_observation_set_must_be_the_one_its_inputs_spell() {
     check_policy_interface(&info, &hand, &proprio2).expect("its own set");
 
     // Other inputs than the file's: refused by the slices.
-    let err = check_policy_interface(&info, &hand, &layout(ObservationSet::Full)).unwrap_err();
+    let err = check_policy_interface(&info, &hand, &layout(ObservationSet::Full)).expect_err("full inputs");
     assert!(err.contains("observations"), "{err}");
 
     // The same inputs under another recorded set: refused by the record.
     let mut task = info.task.expect("a task record");
     task.observation_set = "proprio:1";
     let relabelled = vge_runtime::policy::PolicyInfo { task: Some(task), ..info };
-    let err = check_policy_interface(&relabelled, &hand, &proprio2).unwrap_err();
+    let err = check_policy_interface(&relabelled, &hand, &proprio2).expect_err("a relabelled file");
     assert!(err.contains("records the observation set proprio:1"), "{err}");
 }
