@@ -132,6 +132,7 @@ fn a_policy_observing_another_layout_is_refused() {
         .output()
         .expect("vge-bridge runs");
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success() && err.contains("observation layout"), "{err}");
+    // The bridge reads the set from the layout as eval does, and refuses it in the same words.
+    assert!(!run.status.success() && err.contains("the policy observes [q_target_rad 0..15"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
