@@ -162,45 +162,6 @@ struct ControllerAlone {
 /// A controller alone's figures: success rate, mean return, contact switches per episode.
 pub type AloneFigures = (f64, f64, f64);
 
-/// Every run folder at or below `roots` (a folder with `config.toml` and `metrics.csv`;
-/// subfolders are searched in name order, three levels down at most), each once however
-/// the roots overlap.
-pub fn find_runs(roots: &[PathBuf]) -> Result<Vec<PathBuf>, PlotError> {
-    fn walk(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) -> Result<(), PlotError> {
-        if dir.join(vge_run::run_dir::CONFIG).is_file() && dir.join(vge_run::run_dir::METRICS).is_file() {
-            found.push(dir.to_owned());
-            return Ok(());
-        }
-        if depth == 0 {
-            return Ok(());
-        }
-        let io = |source| PlotError::Io { path: dir.to_owned(), source };
-        let mut subdirs: Vec<PathBuf> = std::fs::read_dir(dir)
-            .map_err(io)?
-            .map(|e| e.map(|e| e.path()))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(io)?
-            .into_iter()
-            .filter(|p| p.is_dir())
-            .collect();
-        subdirs.sort();
-        subdirs.iter().try_for_each(|d| walk(d, depth - 1, found))
-    }
-    let mut found = Vec::new();
-    for root in roots {
-        if !root.is_dir() {
-            return Err(PlotError::Io {
-                path: root.clone(),
-                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a folder"),
-            });
-        }
-        walk(root, 3, &mut found)?;
-    }
-    let mut seen = std::collections::HashSet::new();
-    found.retain(|d| seen.insert(std::fs::canonicalize(d).unwrap_or_else(|_| d.clone())));
-    Ok(found)
-}
-
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len().max(1) as f64
 }
@@ -571,7 +532,7 @@ fn in_table(run: &RunCurves) -> bool {
 /// `out/table1.csv`, `out/table1.md` and `out/curves-{fg,cs}.png` (a figure only for a
 /// controller with runs).
 pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
-    let dirs = find_runs(roots)?;
+    let dirs = vge_run::run_dir::find_runs(roots)?;
     if dirs.is_empty() {
         return Err(PlotError::NoRuns);
     }
