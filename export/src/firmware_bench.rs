@@ -137,22 +137,21 @@ pub fn run(
     Ok(rows)
 }
 
-/// A tch-initialised 65 -> 256 -> 256 -> 15 actor (the hand's policy shape) from `seed`,
-/// with identity normalisation and unit scale: the default subject when no trained policy is
-/// given.
-pub fn seeded_policy(seed: i64) -> Result<PolicyFile, ExportError> {
+/// A tch-initialised actor of shape `spec` (the caller's hand and config decide it) from
+/// `seed`, with identity normalisation and unit scale: the default subject when no trained
+/// policy is given.
+pub fn seeded_policy(seed: i64, spec: &ActorSpec) -> Result<PolicyFile, ExportError> {
     tch::manual_seed(seed);
     let vs = tch::nn::VarStore::new(Device::Cpu);
-    let spec = ActorSpec { obs_dim: 65, hidden: vec![256, 256], act_dim: 15 };
-    build_actor(&(vs.root() / "actor"), &spec)?;
-    let actor = extract_actor(&vs, "actor", &spec)?;
+    build_actor(&(vs.root() / "actor"), spec)?;
+    let actor = extract_actor(&vs, "actor", spec)?;
     let provenance = Provenance {
         vge_version: env!("CARGO_PKG_VERSION").to_owned(),
         config_hash: "bench-firmware".to_owned(),
         seed: seed.unsigned_abs(),
         steps: 0,
     };
-    PolicyFile::from_actor(&actor, PolicyMeta::unnamed(65, 15, 20.0, provenance))
+    PolicyFile::from_actor(&actor, PolicyMeta::unnamed(spec.obs_dim, spec.act_dim, 20.0, provenance))
 }
 
 /// `n` observations, flat: `mean + std * z`, `z` uniform in [-3, 3) from tch's RNG.

@@ -124,7 +124,7 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
         /// Policy file to measure (e.g. a run's policy.vgep); default: a seeded untrained
-        /// 65-256-256-15 actor.
+        /// actor of the default run's shape (vge15's observation and joints, 256x256).
         #[arg(long, value_name = "FILE")]
         policy: Option<PathBuf>,
         /// Host observations compared with tch.
@@ -138,7 +138,8 @@ pub enum Bench {
         #[arg(long, value_parser = ["3", "2", "s", "z"])]
         opt_level: Option<String>,
     },
-    /// Policy forward latency at batch 1 (65-256-256-15): the no_std runtime against tch.
+    /// Policy forward latency at batch 1 for the default run's actor (vge15's observation
+    /// and joints, 256x256): the no_std runtime against tch.
     Runtime {
         /// Print one JSON line instead of a summary.
         #[arg(long)]
@@ -536,10 +537,24 @@ mod libtorch {
         }
     }
 
+    /// The default run's actor shape: its hand's observation and joints, its hidden widths.
+    fn default_actor() -> anyhow::Result<vge_export::ActorSpec> {
+        let config = vge_trainer::learner::LearnerConfig::for_hand(&vge_run::config::Config::default())?;
+        let obs: i64 = config.columns.actor.iter().map(|&(_, len)| len).sum();
+        Ok(vge_export::ActorSpec {
+            obs_dim: usize::try_from(obs)?,
+            hidden: config.net.hidden.iter().map(|&h| usize::try_from(h)).collect::<Result<_, _>>()?,
+            act_dim: usize::try_from(config.net.act_dim)?,
+        })
+    }
+
     /// `vge bench runtime`.
     pub fn runtime(json: bool, iters: usize) -> anyhow::Result<()> {
         anyhow::ensure!(iters > 0, "--iters must be at least 1");
-        let config = vge_export::bench::BenchConfig { iters, ..Default::default() };
+        let config = vge_export::bench::BenchConfig {
+            iters,
+            ..vge_export::bench::BenchConfig::of_shape(&default_actor()?)
+        };
         let r = vge_export::bench::run(&config)?;
         if json {
             println!("{}", r.to_json_line());
@@ -564,7 +579,7 @@ mod libtorch {
         let file = match &policy {
             Some(path) => vge_export::PolicyFile::read(path)
                 .with_context(|| format!("reading policy file {}", path.display()))?,
-            None => vge_export::firmware_bench::seeded_policy(seed)?,
+            None => vge_export::firmware_bench::seeded_policy(seed, &default_actor()?)?,
         };
         let target_dir = std::env::temp_dir().join("vge-bench-firmware");
         let rows =
