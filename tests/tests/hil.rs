@@ -594,25 +594,41 @@ fn longest_heartbeat_gap(seen: &[(Instant, Message)]) -> Duration {
 /// cube more than a full turn over CAN, switching contacts, without a drop: the emulated
 /// hand's nodes on vcan0, the bridge driving them for 600 steps, the demo's 30 s at 20 Hz (the
 /// shipped gait turns about 0.39 rad/s: 15 s are not a full turn). Steps, not seconds: the
-/// simulated hand moves in lockstep with the commands, so a slow guest runs the same gait.
+/// simulated hand moves in lockstep with the commands, so a slow guest runs the same gait as
+/// long as the emulated hand answers each period. A guest starved enough that it does not (the
+/// bridge counts periods without fresh positions as lost, late answers as stale) feeds the
+/// policy old state, which is not the claim: such a run that drops is run again, up to three
+/// times; a drop in a run without lost or stale frames fails at once.
 #[test]
 #[ignore = "needs vcan0: run scripts/hil.sh"]
 fn the_shipped_gait_turns_the_cube_a_full_turn_over_vcan() {
+    const ATTEMPTS: usize = 3;
     let iface = hil_iface();
     let policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/cube.vgep");
-    let emulator = spawn_emulator(&iface, 0);
-    thread::sleep(Duration::from_millis(500)); // the emulator grasps the cube first
-    let mut args = over_can(std::path::Path::new(policy), &iface, "0");
-    args.extend(["--steps", "600"]);
-    let report = bridge_run(&args);
-    let emulated = wait_for_output(emulator);
-    eprintln!("{report}\n{emulated}");
-    print_timing("shipped gait", &report);
-    assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("steps"), "{report}");
-    assert_eq!(json_f64(&report, "steps"), 600.0, "{report}");
-    assert_eq!(json_field(&emulated, "terminated").as_deref(), Some("false"), "dropped: {emulated}");
-    assert!(json_f64(&emulated, "rotation_rad") >= std::f64::consts::TAU, "{emulated}");
-    assert!(json_f64(&emulated, "contact_switches") >= 10.0, "{emulated}");
+    for attempt in 1..=ATTEMPTS {
+        let emulator = spawn_emulator(&iface, 0);
+        thread::sleep(Duration::from_millis(500)); // the emulator grasps the cube first
+        let mut args = over_can(std::path::Path::new(policy), &iface, "0");
+        args.extend(["--steps", "600"]);
+        let report = bridge_run(&args);
+        let emulated = wait_for_output(emulator);
+        eprintln!("{report}\n{emulated}");
+        print_timing("shipped gait", &report);
+        assert_eq!(json_field(&report, "stop_reason").as_deref(), Some("steps"), "{report}");
+        assert_eq!(json_f64(&report, "steps"), 600.0, "{report}");
+        let late = json_f64(&report, "lost_frames") + json_f64(&report, "stale_frames");
+        if json_field(&emulated, "terminated").as_deref() == Some("true") {
+            assert!(late > 0.0, "dropped with every period answered on time: {emulated}");
+            assert!(attempt < ATTEMPTS, "dropped in all {ATTEMPTS} runs, each fed late state: {emulated}");
+            eprintln!(
+                "shipped gait: run {attempt} dropped after {late} lost or stale frames (a starved guest); again"
+            );
+            continue;
+        }
+        assert!(json_f64(&emulated, "rotation_rad") >= std::f64::consts::TAU, "{emulated}");
+        assert!(json_f64(&emulated, "contact_switches") >= 10.0, "{emulated}");
+        return;
+    }
 }
 
 /// Emulator and bridge as processes on vcan0 (classic frames, or the FD option), against the
