@@ -94,3 +94,95 @@ pub fn json_line(
     }
     Value::Object(m).to_string()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control_loop::{ErrorFrameCounts, LinkCounts, StopReason};
+    use crate::pacing::PaceFigures;
+    use crate::safety::{SafetyCounts, SafetyFilter};
+    use crate::stats::Percentiles;
+    use vge_hand::JointLimit;
+
+    /// A report whose every figure differs, so that a key reading the wrong figure shows.
+    fn report() -> LoopReport {
+        let pace = PaceFigures {
+            steps: 41,
+            achieved_rate_hz: 19.876_54,
+            wake_jitter: Percentiles { p50_us: 12.345_6, p99_us: 45.678_9, max_us: 78.901_2 },
+            loop_time: Percentiles { p50_us: 3.141_59, p99_us: 6.283_18, max_us: 9.424_77 },
+            deadline_misses: 3,
+            skipped_periods: 2,
+        };
+        let link = LinkCounts {
+            frames_in: 101,
+            frames_out: 102,
+            messages_in: 103,
+            messages_out: 104,
+            bad_frames: 5,
+            stale_frames: 6,
+            implausible_frames: 7,
+            lost_frames: 8,
+            error_frames: ErrorFrameCounts {
+                bus_off: 21,
+                controller: 22,
+                protocol: 23,
+                no_ack: 24,
+                other: 25,
+            },
+            tx_dropped: 9,
+            overload_periods: 10,
+            heartbeats_out: 11,
+        };
+        let mut safety =
+            SafetyFilter::new(0.05, vec![JointLimit { lower_rad: -0.5, upper_rad: 0.5 }; 2], &[0.0; 2]);
+        safety.counts = SafetyCounts { non_finite_holds: 13, delta_clamps: 14, limit_clamps: 15 };
+        LoopReport::new(StopReason::Watchdog, "node 2 silent".to_owned(), pace, link, 12, 4, &safety)
+    }
+
+    /// Scripts and tests read these keys (`vge-bridge run --json`, scripts/demo.sh, the HIL
+    /// tests): every key and value of a report's line, exactly.
+    #[test]
+    fn a_reports_json_line_keeps_its_keys_and_values() {
+        let sim = SimHandSummary {
+            steps: 400,
+            rotation_rad: 0.123_456,
+            total_reward: -1.987_61,
+            terminated: false,
+            dropped: true,
+            mean_tip_contacts: 3.456_7,
+            contact_switches: 6,
+        };
+        let line = json_line(&[("mode", json!("sim"))], 20.000_4, &report(), Some(&sim));
+        let expected = concat!(
+            r#"{"achieved_rate_hz":19.877,"bad_frames":5,"contact_switches":6,"deadline_misses":3,"#,
+            r#""delta_clamps":14,"dropped":true,"error_frames":115,"error_frames_bus_off":21,"#,
+            r#""error_frames_controller":22,"error_frames_no_ack":24,"error_frames_other":25,"#,
+            r#""error_frames_protocol":23,"frames_in":101,"frames_out":102,"heartbeats_out":11,"#,
+            r#""holds":12,"implausible_frames":7,"jitter_max_us":78.901,"jitter_p50_us":12.346,"#,
+            r#""jitter_p99_us":45.679,"limit_clamps":15,"loop_max_us":9.425,"loop_p50_us":3.142,"#,
+            r#""loop_p99_us":6.283,"lost_frames":8,"mean_tip_contacts":3.457,"messages_in":103,"#,
+            r#""messages_out":104,"mode":"sim","non_finite_holds":13,"overload_periods":10,"#,
+            r#""policy_errors":4,"rate_hz":20.0,"rotation_rad":0.1235,"sim_steps":400,"#,
+            r#""skipped_periods":2,"stale_frames":6,"steps":41,"stop_detail":"node 2 silent","#,
+            r#""stop_reason":"watchdog","terminated":false,"total_reward":-1.9876,"tx_dropped":9}"#,
+        );
+        assert_eq!(line, expected);
+        // Without the simulated hand, the same line less the object's keys.
+        let sim_keys = [
+            "sim_steps",
+            "rotation_rad",
+            "total_reward",
+            "mean_tip_contacts",
+            "terminated",
+            "dropped",
+            "contact_switches",
+        ];
+        let mut expected: Map<String, Value> = serde_json::from_str(expected).expect("JSON");
+        for key in sim_keys {
+            expected.remove(key);
+        }
+        let line = json_line(&[("mode", json!("sim"))], 20.000_4, &report(), None);
+        assert_eq!(line, Value::Object(expected).to_string());
+    }
+}
