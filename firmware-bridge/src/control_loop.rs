@@ -46,7 +46,6 @@ use crate::protocol::{
 };
 use crate::protocol_hand::ProtocolHand;
 use crate::safety::{SafetyCounts, SafetyFilter};
-use crate::stats::Percentiles;
 use crate::transport::{ErrorClass, Received, Transport, TransportError};
 
 #[derive(Debug, Clone)]
@@ -262,18 +261,9 @@ pub struct LoopReport {
     pub stop_reason: StopReason,
     /// What exactly stopped the loop (which node, which error), empty for a normal end.
     pub stop_detail: String,
-    /// Command sets sent on time or late (skipped periods are not steps).
-    pub steps: u64,
-    pub achieved_rate_hz: f64,
-    /// How late the loop woke after each deadline.
-    pub wake_jitter: Percentiles,
-    /// Time from waking to commands sent.
-    pub loop_time: Percentiles,
-    /// Periods whose commands did not go out before the next deadline, skipped ones
-    /// included.
-    pub deadline_misses: u64,
-    /// Periods skipped because the loop woke after they had passed.
-    pub skipped_periods: u64,
+    /// The loop's pace: its steps (command sets sent, on time or late), the rate they
+    /// achieved, wake jitter and loop time (waking to commands sent), deadline misses.
+    pub pace: PaceFigures,
     pub link: LinkCounts,
     /// Steps that held the last safe targets instead of running the policy's action.
     pub holds: u64,
@@ -299,12 +289,7 @@ impl LoopReport {
         Self {
             stop_reason,
             stop_detail,
-            steps: pace.steps,
-            achieved_rate_hz: pace.achieved_rate_hz,
-            wake_jitter: pace.wake_jitter,
-            loop_time: pace.loop_time,
-            deadline_misses: pace.deadline_misses,
-            skipped_periods: pace.skipped_periods,
+            pace,
             link,
             holds,
             policy_errors,

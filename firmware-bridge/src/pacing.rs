@@ -62,13 +62,16 @@ pub struct Pacer {
 /// What a paced run measured of itself.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PaceFigures {
+    /// Steps done, on time or late (skipped periods are not steps).
     pub steps: u64,
     pub achieved_rate_hz: f64,
     /// How late the loop woke after each deadline.
     pub wake_jitter: Percentiles,
     /// Time from waking to the step done.
     pub loop_time: Percentiles,
+    /// Periods whose step did not finish before the next deadline, skipped ones included.
     pub deadline_misses: u64,
+    /// Periods skipped because the loop woke after they had passed.
     pub skipped_periods: u64,
 }
 

@@ -42,19 +42,19 @@ pub fn json_line(
     for (k, v) in extra {
         m.insert((*k).to_owned(), v.clone());
     }
-    let link = &r.link;
+    let (pace, link) = (&r.pace, &r.link);
     let fields = [
         ("rate_hz", round(rate_hz, 3)),
-        ("achieved_rate_hz", round(r.achieved_rate_hz, 3)),
-        ("jitter_p50_us", round(r.wake_jitter.p50_us, 3)),
-        ("jitter_p99_us", round(r.wake_jitter.p99_us, 3)),
-        ("jitter_max_us", round(r.wake_jitter.max_us, 3)),
-        ("loop_p50_us", round(r.loop_time.p50_us, 3)),
-        ("loop_p99_us", round(r.loop_time.p99_us, 3)),
-        ("loop_max_us", round(r.loop_time.max_us, 3)),
-        ("steps", json!(r.steps)),
-        ("deadline_misses", json!(r.deadline_misses)),
-        ("skipped_periods", json!(r.skipped_periods)),
+        ("achieved_rate_hz", round(pace.achieved_rate_hz, 3)),
+        ("jitter_p50_us", round(pace.wake_jitter.p50_us, 3)),
+        ("jitter_p99_us", round(pace.wake_jitter.p99_us, 3)),
+        ("jitter_max_us", round(pace.wake_jitter.max_us, 3)),
+        ("loop_p50_us", round(pace.loop_time.p50_us, 3)),
+        ("loop_p99_us", round(pace.loop_time.p99_us, 3)),
+        ("loop_max_us", round(pace.loop_time.max_us, 3)),
+        ("steps", json!(pace.steps)),
+        ("deadline_misses", json!(pace.deadline_misses)),
+        ("skipped_periods", json!(pace.skipped_periods)),
         ("frames_in", json!(link.frames_in)),
         ("frames_out", json!(link.frames_out)),
         ("messages_in", json!(link.messages_in)),
@@ -110,7 +110,7 @@ mod tests {
             steps: 41,
             achieved_rate_hz: 19.876_54,
             wake_jitter: Percentiles { p50_us: 12.345_6, p99_us: 45.678_9, max_us: 78.901_2 },
-            loop_time: Percentiles { p50_us: 3.141_59, p99_us: 6.283_18, max_us: 9.424_77 },
+            loop_time: Percentiles { p50_us: 3.171_59, p99_us: 6.213_18, max_us: 9.424_77 },
             deadline_misses: 3,
             skipped_periods: 2,
         };
@@ -160,8 +160,8 @@ mod tests {
             r#""error_frames_controller":22,"error_frames_no_ack":24,"error_frames_other":25,"#,
             r#""error_frames_protocol":23,"frames_in":101,"frames_out":102,"heartbeats_out":11,"#,
             r#""holds":12,"implausible_frames":7,"jitter_max_us":78.901,"jitter_p50_us":12.346,"#,
-            r#""jitter_p99_us":45.679,"limit_clamps":15,"loop_max_us":9.425,"loop_p50_us":3.142,"#,
-            r#""loop_p99_us":6.283,"lost_frames":8,"mean_tip_contacts":3.457,"messages_in":103,"#,
+            r#""jitter_p99_us":45.679,"limit_clamps":15,"loop_max_us":9.425,"loop_p50_us":3.172,"#,
+            r#""loop_p99_us":6.213,"lost_frames":8,"mean_tip_contacts":3.457,"messages_in":103,"#,
             r#""messages_out":104,"mode":"sim","non_finite_holds":13,"overload_periods":10,"#,
             r#""policy_errors":4,"rate_hz":20.0,"rotation_rad":0.1235,"sim_steps":400,"#,
             r#""skipped_periods":2,"stale_frames":6,"steps":41,"stop_detail":"node 2 silent","#,

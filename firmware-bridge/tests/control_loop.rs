@@ -138,13 +138,13 @@ fn loop_drives_the_emulated_hand_and_clamps_large_actions() {
     let served = emulator.join().expect("emulator thread");
 
     assert_eq!(report.stop_reason, StopReason::DurationReached);
-    assert!((45..=51).contains(&report.steps), "steps {}", report.steps);
-    assert_eq!(policy.calls, report.steps);
-    assert!((report.achieved_rate_hz - 200.0).abs() < 20.0, "rate {}", report.achieved_rate_hz);
+    assert!((45..=51).contains(&report.pace.steps), "steps {}", report.pace.steps);
+    assert_eq!(policy.calls, report.pace.steps);
+    assert!((report.pace.achieved_rate_hz - 200.0).abs() < 20.0, "rate {}", report.pace.achieved_rate_hz);
     // 0.01 rad per step from 0 reaches the 0.5 rad limit after 50 steps.
-    let expected = (report.steps as f32 * 0.01).min(0.5);
+    let expected = (report.pace.steps as f32 * 0.01).min(0.5);
     assert!((report.final_targets_rad[0] - expected).abs() < 1e-4, "{:?}", report.final_targets_rad);
-    assert_eq!(report.safety.delta_clamps, report.steps * 15);
+    assert_eq!(report.safety.delta_clamps, report.pace.steps * 15);
     // The observation carried the targets the bridge had sent.
     assert_eq!(policy.last_obs.len(), OBS_DIM);
     assert!(policy.last_obs[OBS_Q_TARGET_START] > 0.0);
@@ -172,8 +172,8 @@ fn nan_actions_hold_the_last_safe_targets_then_halt() {
     let report = run_against_emulator(bridge, nodes, &mut NanPolicy, &config(200.0, 1.0));
     // Five failing periods are held; the sixth halts.
     assert_eq!(report.stop_reason, StopReason::PolicyFailure, "{report:?}");
-    assert_eq!((report.steps, report.policy_errors, report.holds), (5, 6, 6));
-    assert_eq!(report.safety.non_finite_holds, report.steps);
+    assert_eq!((report.pace.steps, report.policy_errors, report.holds), (5, 6, 6));
+    assert_eq!(report.safety.non_finite_holds, report.pace.steps);
     assert!(report.stop_detail.contains("not finite"), "{}", report.stop_detail);
     assert!(report.final_targets_rad.iter().all(|q| q.abs() < 1e-6), "{:?}", report.final_targets_rad);
 }
@@ -196,7 +196,7 @@ fn a_silent_hand_trips_the_watchdog_and_bad_frames_are_counted() {
     assert_eq!(report.link.bad_frames, 3);
     // 100 answered commands are 20 steps (5 fingers each, startup included); the watchdog
     // allows 5 silent periods, so the loop stops well before its 5 s duration.
-    assert!(report.steps < 40, "steps {}", report.steps);
+    assert!(report.pace.steps < 40, "steps {}", report.pace.steps);
 }
 
 #[test]
@@ -251,7 +251,12 @@ fn loop_turns_the_simulated_cube_through_the_protocol() {
     assert_eq!(report.stop_reason, StopReason::DurationReached);
     assert_eq!(stats.bad_frames, 0);
     // The sim advanced once per enabled step (plus the halt's holds).
-    assert!(summary.steps >= report.steps, "{} sim steps for {} loop steps", summary.steps, report.steps);
+    assert!(
+        summary.steps >= report.pace.steps,
+        "{} sim steps for {} loop steps",
+        summary.steps,
+        report.pace.steps
+    );
     assert!(!summary.terminated, "object dropped: {summary:?}");
     assert!(summary.rotation_rad > 0.1, "the cube turned only {} rad", summary.rotation_rad);
     assert!(summary.mean_tip_contacts >= 3.0, "{summary:?}");
@@ -275,8 +280,8 @@ fn implausible_joint_positions_are_dropped_held_and_halt_when_they_persist() {
     assert!(report.stop_detail.contains("node 2 (middle)"), "{}", report.stop_detail);
     assert!(report.link.implausible_frames >= 4, "{:?}", report.link);
     // The held steps did not move the targets: the policy ran only before the fault.
-    assert_eq!(policy.calls, report.steps - (report.holds - report.policy_errors));
-    assert!(report.holds >= 4 && report.steps < 60, "{report:?}");
+    assert_eq!(policy.calls, report.pace.steps - (report.holds - report.policy_errors));
+    assert!(report.holds >= 4 && report.pace.steps < 60, "{report:?}");
 }
 
 #[test]
@@ -391,7 +396,7 @@ fn a_node_that_restarts_mid_run_halts_the_loop_with_node_restarted() {
         assert!(report.stop_detail.contains(sign), "{}", report.stop_detail);
         // It halted once the restart was on the link: before the watchdog could have.
         let limit = u64::from(cfg.watchdog_periods);
-        assert!((10..=10 + limit).contains(&report.steps), "{} steps", report.steps);
+        assert!((10..=10 + limit).contains(&report.pace.steps), "{} steps", report.pace.steps);
     }
 }
 
@@ -417,7 +422,7 @@ fn a_node_whose_heartbeat_stops_or_sticks_halts_the_loop() {
         };
         assert!(report.stop_detail.contains(want), "{}", report.stop_detail);
         // Stopped: a missing beat after 0.3 s + 0.5 s timeout; a stuck one after 4 beats.
-        assert!(report.steps < 50, "{} steps", report.steps);
+        assert!(report.pace.steps < 50, "{} steps", report.pace.steps);
     }
 }
 
@@ -457,8 +462,8 @@ fn a_flood_beyond_the_receive_budget_halts_and_below_it_is_only_counted() {
             assert!(report.link.overload_periods >= 6, "{:?}", report.link);
         } else {
             assert_eq!(report.stop_reason, StopReason::DurationReached, "{report:?}");
-            assert!(report.link.bad_frames >= 2 * 5 * report.steps, "{:?}", report.link);
-            assert_eq!(report.deadline_misses, 0, "{report:?}");
+            assert!(report.link.bad_frames >= 2 * 5 * report.pace.steps, "{:?}", report.link);
+            assert_eq!(report.pace.deadline_misses, 0, "{report:?}");
         }
     }
 }
@@ -533,9 +538,13 @@ fn a_late_loop_skips_the_periods_it_missed_instead_of_bursting() {
     let report = run_against_emulator(bridge, nodes, &mut Stall { calls: 0 }, &config(100.0, 0.5));
     // 35 ms late at 100 Hz: the stalled step misses, and the 3 periods that passed meanwhile
     // are skipped (not run late back to back); 50 periods, 46 or 47 steps.
-    assert!(report.skipped_periods >= 2 && report.deadline_misses >= 3, "{report:?}");
-    assert!(report.steps <= 48, "{report:?}");
-    assert!(report.achieved_rate_hz < 97.0, "the rate must show the gap: {}", report.achieved_rate_hz);
+    assert!(report.pace.skipped_periods >= 2 && report.pace.deadline_misses >= 3, "{report:?}");
+    assert!(report.pace.steps <= 48, "{report:?}");
+    assert!(
+        report.pace.achieved_rate_hz < 97.0,
+        "the rate must show the gap: {}",
+        report.pace.achieved_rate_hz
+    );
     let _ = FingerId::new(0);
 }
 

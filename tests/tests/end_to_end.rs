@@ -112,9 +112,9 @@ fn train_export_runtime_parity_and_bridge_on_the_sim() {
     let _ = std::fs::remove_dir_all(&dir);
 
     assert_eq!(report.stop_reason, StopReason::DurationReached);
-    assert!((38..=41).contains(&report.steps), "{} steps in 2 s at 20 Hz", report.steps);
+    assert!((38..=41).contains(&report.pace.steps), "{} steps in 2 s at 20 Hz", report.pace.steps);
     assert_eq!((report.link.bad_frames, report.safety.non_finite_holds), (0, 0));
-    assert!(sim_summary.steps >= report.steps, "{sim_summary:?}");
+    assert!(sim_summary.steps >= report.pace.steps, "{sim_summary:?}");
     assert!(sim_summary.rotation_rad.is_finite());
     eprintln!("e2e: runtime vs tch max diff {max_diff:.2e}; bridge {report:?}; object {sim_summary:?}");
 }

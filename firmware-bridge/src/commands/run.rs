@@ -343,21 +343,21 @@ pub fn print_report(
         return Ok(());
     }
     let detail = if r.stop_detail.is_empty() { String::new() } else { format!(": {}", r.stop_detail) };
-    out!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.steps);
-    out!("rate:    {:.2} Hz achieved of {:.2} Hz", r.achieved_rate_hz, rate_hz);
+    out!("stopped: {} after {} steps{detail}", r.stop_reason.as_str(), r.pace.steps);
+    out!("rate:    {:.2} Hz achieved of {:.2} Hz", r.pace.achieved_rate_hz, rate_hz);
     out!(
         "jitter:  p50 {:.1} us, p99 {:.1} us, max {:.1} us; deadline misses {} ({} periods skipped)",
-        r.wake_jitter.p50_us,
-        r.wake_jitter.p99_us,
-        r.wake_jitter.max_us,
-        r.deadline_misses,
-        r.skipped_periods
+        r.pace.wake_jitter.p50_us,
+        r.pace.wake_jitter.p99_us,
+        r.pace.wake_jitter.max_us,
+        r.pace.deadline_misses,
+        r.pace.skipped_periods
     );
     out!(
         "loop:    p50 {:.1} us, p99 {:.1} us, max {:.1} us",
-        r.loop_time.p50_us,
-        r.loop_time.p99_us,
-        r.loop_time.max_us
+        r.pace.loop_time.p50_us,
+        r.pace.loop_time.p99_us,
+        r.pace.loop_time.max_us
     );
     let l = &r.link;
     out!(
