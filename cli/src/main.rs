@@ -4,7 +4,6 @@
 #[macro_use]
 mod closed_output;
 mod commands;
-mod cpu_use;
 mod stop;
 
 use std::io::Write as _;

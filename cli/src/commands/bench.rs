@@ -270,7 +270,7 @@ fn bench_cores(json: bool, window_s: f64) -> anyhow::Result<()> {
         window_s.is_finite() && window_s > 0.0 && window_s <= 60.0,
         "--window-s {window_s}: give a time in seconds above 0 and at most 60"
     );
-    let used = crate::cpu_use::measure(std::time::Duration::from_secs_f64(window_s))
+    let used = vge_run::cpu_use::measure(std::time::Duration::from_secs_f64(window_s))
         .context("measuring the cores' use")?;
     if json {
         println!(

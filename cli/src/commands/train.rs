@@ -272,7 +272,7 @@ fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
     if threads < 2 {
         return;
     }
-    match crate::cpu_use::measure(std::time::Duration::from_millis(250)) {
+    match vge_run::cpu_use::measure(std::time::Duration::from_millis(250)) {
         Ok(used) if threads > used.threads_that_fit() => errln!(
             "vge train: other processes keep {:.1} of the {} cores this run may use busy, leaving \
              {:.1} idle for sac.threads = {threads}; libtorch's workers wait for each other, so \
@@ -282,9 +282,9 @@ fn warn_if_threads_exceed_idle_cores(config_threads: i32) {
             used.cores,
             used.idle_cores()
         ),
-        // No /proc/stat (not Linux): nothing measured, nothing to advise.
         Ok(_) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::Unsupported => {}
+        // No /proc/stat (not Linux): nothing measured, nothing to advise.
+        Err(vge_run::cpu_use::CpuUseError::Unsupported) => {}
         Err(e) => errln!("vge train: could not measure how busy the cores are ({e}); training goes on"),
     }
 }

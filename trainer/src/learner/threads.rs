@@ -7,12 +7,14 @@
 //! one busy core then train several times slower than one thread (docs/training.md,
 //! "Training speed"), and a thread count chosen once at the start cannot follow a machine
 //! whose other jobs come and go. [`ThreadGovernor`] measures, every [`PERIOD`], how many cores
-//! the machine's other processes kept busy (all the cores' busy time from `/proc/stat` less
-//! this process's own CPU time) and sets libtorch's threads to the idle rest, between 1 and
-//! the configured count.
+//! the machine's other processes kept busy (all the cores' busy time from `/proc/stat`, read
+//! by [`vge_run::cpu_use`] as `vge bench cores` reads it, less this process's own CPU time)
+//! and sets libtorch's threads to the idle rest, between 1 and the configured count.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::{Duration, Instant};
+
+use vge_run::cpu_use::Jiffies;
 
 /// The environment variable that keeps the thread count fixed at the configured one
 /// (`VGE_FIXED_THREADS=1`), e.g. to measure what adapting gains.
@@ -44,9 +46,7 @@ pub const PERIOD: Duration = Duration::from_secs(2);
 struct Reading {
     at: Instant,
     /// Busy and total jiffies summed over every core, and the number of cores.
-    busy: u64,
-    total: u64,
-    cores: usize,
+    jiffies: Jiffies,
     /// This process's CPU time, all threads (s).
     own_cpu_s: f64,
 }
@@ -103,12 +103,12 @@ impl ThreadGovernor {
 /// `max_threads`). None when the counters did not advance.
 fn threads_that_fit(before: &Reading, after: &Reading, max_threads: i32) -> Option<i32> {
     let wall_s = (after.at - before.at).as_secs_f64();
-    let (busy, total) = (after.busy.checked_sub(before.busy)?, after.total.checked_sub(before.total)?);
-    if total == 0 || wall_s <= 0.0 || after.cores != before.cores {
+    let counted = after.jiffies.since(&before.jiffies)?;
+    if wall_s <= 0.0 || after.jiffies.cores != before.jiffies.cores {
         return None;
     }
-    let cores = after.cores as f64;
-    let all_busy = busy as f64 / total as f64 * cores;
+    let all_busy = counted.busy_cores()?;
+    let cores = counted.cores as f64;
     let own = ((after.own_cpu_s - before.own_cpu_s) / wall_s).clamp(0.0, cores);
     let others = (all_busy - own).max(0.0);
     // Rounded half down: half a core of someone else's work already costs a thread.
@@ -116,31 +116,11 @@ fn threads_that_fit(before: &Reading, after: &Reading, max_threads: i32) -> Opti
     Some((((idle + 0.5).ceil() - 1.0) as i32).clamp(1, max_threads))
 }
 
-/// The machine's counters now; None where the OS does not give them.
+/// The machine's counters now, over every core; None where the OS does not give them (a
+/// governor that cannot measure keeps the thread count it has).
 fn read() -> Option<Reading> {
-    let stat = std::fs::read_to_string("/proc/stat").ok()?;
-    let (busy, total, cores) = jiffies(&stat)?;
-    Some(Reading { at: Instant::now(), busy, total, cores, own_cpu_s: process_cpu_s()? })
-}
-
-/// Busy and total jiffies summed over the `cpuN` lines of `/proc/stat`, and their number.
-fn jiffies(stat: &str) -> Option<(u64, u64, usize)> {
-    let (mut busy, mut total, mut cores) = (0u64, 0u64, 0usize);
-    for line in stat.lines() {
-        let mut fields = line.split_ascii_whitespace();
-        let Some(cpu) = fields.next().and_then(|name| name.strip_prefix("cpu")) else { continue };
-        if cpu.parse::<usize>().is_err() {
-            continue;
-        }
-        // user nice system idle iowait irq softirq steal; guest time is already in user.
-        let values: Vec<u64> = fields.take(8).map_while(|f| f.parse().ok()).collect();
-        let [user, nice, system, idle, iowait, irq, softirq, steal] = values[..] else { return None };
-        let line_total = user + nice + system + idle + iowait + irq + softirq + steal;
-        total += line_total;
-        busy += line_total - idle - iowait;
-        cores += 1;
-    }
-    (cores > 0).then_some((busy, total, cores))
+    let jiffies = Jiffies::read(|_| true).ok()?;
+    Some(Reading { at: Instant::now(), jiffies, own_cpu_s: process_cpu_s()? })
 }
 
 /// CPU time of this process, all threads (s).
@@ -198,7 +178,7 @@ mod tests {
     }
 
     fn reading(at: Instant, busy: u64, total: u64, own_cpu_s: f64) -> Reading {
-        Reading { at, busy, total, cores: 2, own_cpu_s }
+        Reading { at, jiffies: Jiffies { busy, total, cores: 2 }, own_cpu_s }
     }
 
     #[test]
