@@ -222,7 +222,12 @@ impl SimHand {
         }
         self.pending.iter_mut().for_each(|p| *p = None);
         let result = self.env.step(&action)?;
-        self.tracker.record(result.reward, result.info.object_rotation_z_rad, &result.info.tip_contacts);
+        self.tracker.record(
+            result.reward,
+            result.info.object_rotation_z_rad,
+            &result.info.tip_contacts,
+            result.info.tip_slip_m,
+        );
         self.terminated |= result.terminated;
         self.dropped |= result.info.dropped;
         if let Some(recorder) = &mut self.recorder {

@@ -106,7 +106,12 @@ pub fn run<P: PolicyRunner>(
         // The env moves its targets by the change from the ones it holds to the safe ones.
         let change: Vec<f32> = safety.apply_delta(&action).iter().zip(&targets).map(|(t, b)| t - b).collect();
         let result = env.step(&change)?;
-        tracker.record(result.reward, result.info.object_rotation_z_rad, &result.info.tip_contacts);
+        tracker.record(
+            result.reward,
+            result.info.object_rotation_z_rad,
+            &result.info.tip_contacts,
+            result.info.tip_slip_m,
+        );
         terminated |= result.terminated;
         dropped |= result.info.dropped;
         obs = result.obs;

@@ -429,6 +429,10 @@ pub struct StepInfo {
     pub object_angvel_z_rad_per_s: f32,
     /// Object rotation about world z during this step (rad; [`crate::rotation_about_z_rad`]).
     pub object_rotation_z_rad: f32,
+    /// Fingertip slip during this step (m): how far the contact points of the fingertips
+    /// touching before and after it moved over the object, in the object's frame
+    /// ([`crate::slip`]).
+    pub tip_slip_m: f32,
     /// Object height (m): its position against gravity (world z with the palm down).
     pub object_height_m: f32,
     /// Whether the object dropped below the termination height.
@@ -778,6 +782,9 @@ impl Env {
         }
         self.steps += 1;
         let state = self.read_state()?;
+        // Read off the state before the step (the reset's or the last step's) and after it:
+        // no draw, no change to what the policy sees or earns.
+        let tip_slip_m = self.state.as_ref().map_or(0.0, |before| tip_slip_m(before, &state));
         let cfg = &self.config;
         let n_contacts = state.num_tip_contacts();
         let wz = state.object.angvel_rad_per_s.z;
@@ -799,6 +806,7 @@ impl Env {
             tip_contacts: state.tip_contacts(),
             object_angvel_z_rad_per_s: wz,
             object_rotation_z_rad: rotation_z_rad,
+            tip_slip_m,
             object_height_m: height,
             dropped,
             step: self.steps,
@@ -833,7 +841,7 @@ impl Env {
         loop {
             let action = act(self, &obs)?;
             let r = self.step(&action)?;
-            tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts);
+            tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts, r.info.tip_slip_m);
             on_step(self, &r, &tracker);
             if r.terminated || r.truncated {
                 return Ok(tracker.outcome(r.terminated));
@@ -841,6 +849,18 @@ impl Env {
             obs = r.obs;
         }
     }
+}
+
+/// The fingertips' slip over the object from state `before` to state `after` (m,
+/// [`crate::slip::step_slip_m`]).
+fn tip_slip_m(before: &PrivilegedState, after: &PrivilegedState) -> f32 {
+    let in_object_frame = |s: &PrivilegedState| {
+        crate::slip::contact_points_in_object_frame(
+            &s.object.pose,
+            s.contacts.iter().map(|c| c.as_ref().map(|c| c.position_m)),
+        )
+    };
+    crate::slip::step_slip_m(&in_object_frame(before), &in_object_frame(after))
 }
 
 /// Validates an action for `hand`: one finite entry per joint.

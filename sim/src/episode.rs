@@ -1,6 +1,6 @@
 //! One episode's accounting, shared by every loop that runs episodes (training's envs,
 //! `vge eval`, the controller rollouts, the bridge's sim summary) so that they all measure
-//! return, rotation, contacts and contact switches the same way.
+//! return, rotation, contacts, contact switches and fingertip slip the same way.
 //!
 //! Rotation is the sum of each step's rotation about world z ([`crate::rotation_about_z_rad`],
 //! never Euler yaw differences, which a tipped object games), so several turns add up; sums
@@ -24,6 +24,10 @@ pub struct EpisodeOutcome {
     pub mean_contacts: f64,
     /// Fingertips that broke and remade contact ([`ContactSwitches`]).
     pub contact_switches: u32,
+    /// Fingertip slip (m): how far the fingertips' contact points travelled over the
+    /// object, in its own frame, while they touched it ([`crate::slip`]). Zero for an object
+    /// turned in a fixed grasp; a spin under fingertips that never let go slides them.
+    pub tip_slip_m: f64,
     /// Control steps run.
     pub length: usize,
 }
@@ -44,6 +48,7 @@ pub struct EpisodeTracker {
     contact_sum: u64,
     length: usize,
     switches: ContactSwitches,
+    tip_slip_m: f64,
 }
 
 impl EpisodeTracker {
@@ -53,11 +58,13 @@ impl EpisodeTracker {
         Self { switches: ContactSwitches::new(touching), ..Self::default() }
     }
 
-    /// Records one step: its reward, the object's rotation about world z during it and the
-    /// fingertips touching after it. Returns the contact switches completed on this step.
-    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: &[bool]) -> u32 {
+    /// Records one step: its reward, the object's rotation about world z during it, the
+    /// fingertips touching after it and their slip over the object during it
+    /// ([`crate::slip::step_slip_m`]). Returns the contact switches completed on this step.
+    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: &[bool], tip_slip_m: f32) -> u32 {
         self.episode_return += f64::from(reward);
         self.rotation_rad += f64::from(rotation_z_rad);
+        self.tip_slip_m += f64::from(tip_slip_m);
         self.contact_sum += touching.iter().filter(|&&t| t).count() as u64;
         self.length += 1;
         self.switches.update(touching)
@@ -84,6 +91,7 @@ impl EpisodeTracker {
             terminated,
             mean_contacts: self.contact_sum as f64 / self.length.max(1) as f64,
             contact_switches: self.switches.count,
+            tip_slip_m: self.tip_slip_m,
             length: self.length,
         }
     }
@@ -98,13 +106,14 @@ mod tests {
         let mut t = EpisodeTracker::start(&[true; 5]);
         // 0.3 rad per step, 25 steps: 7.5 rad, more than a turn.
         for _ in 0..25 {
-            t.record(1.0, 0.3, &[true; 5]);
+            t.record(1.0, 0.3, &[true; 5], 0.001);
         }
         let o = t.outcome(false);
         assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
         assert!(o.success());
         assert!(!t.outcome(true).success(), "a drop never succeeds");
         assert_eq!((o.length, o.episode_return, o.mean_contacts), (25, 25.0, 5.0));
+        assert!((o.tip_slip_m - 0.025).abs() < 1e-6, "slip adds up: {o:?}");
     }
 
     #[test]
@@ -114,9 +123,9 @@ mod tests {
         let detached = [false, true, true, true, false];
         let mut completed = 0;
         for _ in 0..crate::gait::MIN_DETACH_STEPS {
-            completed += t.record(0.0, 0.0, &detached);
+            completed += t.record(0.0, 0.0, &detached, 0.0);
         }
-        completed += t.record(0.0, 0.0, &touching);
+        completed += t.record(0.0, 0.0, &touching, 0.0);
         let o = t.outcome(false);
         assert_eq!((completed, o.contact_switches), (1, 1));
         assert!((o.mean_contacts - (3.0 * 3.0 + 4.0) / 4.0).abs() < 1e-12);

@@ -12,9 +12,9 @@
 //!   written for MuJoCo). Without it the crate is the hand description alone, with no rapier3d
 //!   or rayon: the shipped hands ([`hands`]: geometry, joint limits and kinematics are
 //!   `vge_hand::Hand`'s), the observation layout and its builder ([`observation`]), the
-//!   action's default step ([`action`]), contact switches ([`gait`]) and
-//!   [`rotation_about_z_rad`]; what the bridge needs to drive a real hand (`vge-bridge` without
-//!   its `sim` feature).
+//!   action's default step ([`action`]), contact switches ([`gait`]), fingertip slip
+//!   ([`slip`]) and [`rotation_about_z_rad`]; what the bridge needs to drive a real hand
+//!   (`vge-bridge` without its `sim` feature).
 //!
 //! With `physics`, [`recording`] writes episodes as JSON Lines files (`vge eval --record`,
 //! `vge-bridge run --record`) that the Python package shows in the Rerun viewer.
@@ -41,6 +41,7 @@ pub mod observation;
 pub mod policy_interface;
 #[cfg(feature = "physics")]
 pub mod recording;
+pub mod slip;
 #[cfg(feature = "physics")]
 pub mod vec_env;
 #[cfg(feature = "physics")]

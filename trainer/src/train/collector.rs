@@ -345,6 +345,7 @@ impl Collector {
                 r.reward,
                 r.info.object_rotation_z_rad,
                 &r.info.tip_contacts,
+                r.info.tip_slip_m,
             ));
             episode.rewards.push(r.reward);
             slot.obs = r.obs.clone();
@@ -496,7 +497,12 @@ fn replay(
             return Err(bad(format!("step {k} out of order")));
         }
         let r = slot.env.step(action)?;
-        slot.episode.tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts);
+        slot.episode.tracker.record(
+            r.reward,
+            r.info.object_rotation_z_rad,
+            &r.info.tip_contacts,
+            r.info.tip_slip_m,
+        );
         slot.episode.rewards.push(r.reward);
         slot.actor_obs = slot.observer.step(&r.obs);
         slot.obs = r.obs;
