@@ -250,3 +250,27 @@ fn a_bad_queue_is_refused_naming_every_problem() {
     assert!(text(&out.stderr).contains("is not a repository's root"), "{}", text(&out.stderr));
     let _ = std::fs::remove_dir_all(&root);
 }
+
+/// A lane asked for more free room under runs/ than the disk has starts no run, ends with an
+/// error naming the flag, and logs which run it stopped before; with room it trains that run.
+#[test]
+fn a_lane_without_room_under_runs_starts_nothing_and_says_so() {
+    let (root, c) = repository("queue-room");
+    std::fs::write(root.join("queue.txt"), format!("a/seed-0 {c} configs/tiny.toml 0\n")).expect("queue");
+    // 2^40 GiB: more than any file system holds.
+    let out = vge(&root, &["queue", "run", "queue.txt", "--min-free-gib", "1099511627776"]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("less than --min-free-gib 1099511627776"), "{stderr}");
+    let log = lane_log(&root);
+    assert!(log.contains("stopped before a/seed-0:") && log.contains("GiB free under runs/"), "{log}");
+    assert!(!log.contains(" start ") && !root.join("runs/a").exists(), "nothing started: {log}");
+
+    let out = vge(&root, &["queue", "run", "queue.txt", "--min-free-gib=-1"]);
+    assert!(text(&out.stderr).contains("expected a number of GiB, 0 or more"), "{}", text(&out.stderr));
+
+    let out = vge(&root, &["queue", "run", "queue.txt", "--min-free-gib", "0"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(lane_log(&root).contains("end a/seed-0 (exit 0)"));
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -30,7 +30,8 @@ use vge_lab::queue::{self, Checkout, lane};
 /// without its score is scored. Each run gets --threads rayon threads (its config's
 /// sac.threads sets libtorch's). runs/lanes/NAME.log records each start, end and skip. Run
 /// again, the same command continues the queue. SIGTERM, SIGINT or `vge queue stop` ends
-/// the lane: the running vge checkpoints, and no further run starts.
+/// the lane: the running vge checkpoints, and no further run starts. With less than
+/// --min-free-gib free under runs/ before a run, the lane ends with an error and starts none.
 ///
 /// Examples:
 ///   vge queue build scripts/queues/lane-a.txt
@@ -52,6 +53,12 @@ enum QueueCommand {
         /// Rayon threads of each run and of its scoring.
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
         threads: u32,
+        /// Free space (GiB) the file system holding runs/ must have before each run starts,
+        /// or the lane ends with an error instead (a run's checkpoint is written beside the
+        /// last one, so it needs about twice its replay buffer: 1.4 GiB for the Allegro's 1M
+        /// transitions).
+        #[arg(long, default_value_t = 4.0, value_parser = non_negative_gib)]
+        min_free_gib: f64,
     },
     /// Check every line: its form, its commit, its config at that commit, no run twice, the
     /// binaries built (`run` does this first).
@@ -76,7 +83,9 @@ pub fn run(args: QueueArgs) -> anyhow::Result<()> {
     let root = std::env::current_dir().context("the current folder")?;
     let checkout = Checkout::open(&root)?;
     match args.command {
-        QueueCommand::Run { queue, threads } => run_lane(&checkout, &queue, threads),
+        QueueCommand::Run { queue, threads, min_free_gib } => {
+            run_lane(&checkout, &queue, threads, min_free_gib)
+        }
         QueueCommand::Check { queue } => {
             let lines = queue::check(&checkout, &queue, true)?;
             println!("{}: every line checks ({} runs)", queue.display(), lines.len());
@@ -110,10 +119,30 @@ pub fn run(args: QueueArgs) -> anyhow::Result<()> {
     }
 }
 
-fn run_lane(checkout: &Checkout, queue: &std::path::Path, threads: u32) -> anyhow::Result<()> {
+fn non_negative_gib(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(gib) if gib.is_finite() && gib >= 0.0 => Ok(gib),
+        _ => Err(format!("expected a number of GiB, 0 or more, got {text:?}")),
+    }
+}
+
+fn run_lane(
+    checkout: &Checkout,
+    queue: &std::path::Path,
+    threads: u32,
+    min_free_gib: f64,
+) -> anyhow::Result<()> {
     let stop = stop_flag()?;
     println!("vge queue: {}, log {}", queue.display(), checkout.lane_log(queue).display());
-    let end = lane::run(checkout, queue, threads, stop, &mut |line| println!("{line}"))?;
+    // f64 to u64 saturates: a huge request asks for more than any disk has.
+    let min_free_bytes = (min_free_gib * f64::from(1u32 << 30)) as u64;
+    let end = lane::run(checkout, queue, threads, min_free_bytes, stop, &mut |line| println!("{line}"))?;
+    if let lane::LaneEnd::NoRoom { free_bytes } = end {
+        bail!(
+            "{:.1} GiB free under runs/, less than --min-free-gib {min_free_gib}: the lane ended before its next run",
+            free_bytes as f64 / f64::from(1u32 << 30)
+        );
+    }
     if end == lane::LaneEnd::Stopped {
         #[cfg(feature = "train")]
         if let Some(stopped) = crate::stop::received() {

@@ -33,6 +33,9 @@ pub enum LaneEnd {
     Done,
     /// A stop was asked for: the running child was sent SIGTERM (it checkpoints) and ended.
     Stopped,
+    /// Less room than asked for under runs/ before a run: none started (a full disk fails a
+    /// run at its next checkpoint, and the lane would go on failing the runs after it).
+    NoRoom { free_bytes: u64 },
 }
 
 /// What a picked line needs.
@@ -156,11 +159,14 @@ impl LaneLog<'_> {
 /// Trains the runs of `queue` (checked first: nothing starts while a line is wrong), each
 /// child's output appended to `runs/REL.log`, its rayon and scoring on `threads` threads.
 /// `stop` raised ends the lane: the running child gets SIGTERM, checkpoints and exits, and
-/// no further run starts. Every line of the lane log is also passed to `say`.
+/// no further run starts. Before each run, the file system holding runs/ must have
+/// `min_free_bytes` free, or the lane ends without starting it. Every line of the lane log is
+/// also passed to `say`.
 pub fn run(
     checkout: &Checkout,
     queue: &Path,
     threads: u32,
+    min_free_bytes: u64,
     stop: &AtomicBool,
     say: &mut dyn FnMut(&str),
 ) -> Result<LaneEnd, QueueError> {
@@ -175,6 +181,17 @@ pub fn run(
             return Ok(LaneEnd::Stopped);
         }
         let Some(line) = pick(checkout, queue, &tried, &mut noted, &mut log)? else { break };
+        let free_bytes = free_bytes_under(&checkout.root().join("runs"))?;
+        if free_bytes < min_free_bytes {
+            log.line(&format!(
+                "stopped before {}: {:.1} GiB free under runs/, less than the {:.1} GiB asked for; \
+                 free room and run the lane again",
+                line.rel,
+                gib(free_bytes),
+                gib(min_free_bytes)
+            ))?;
+            return Ok(LaneEnd::NoRoom { free_bytes });
+        }
         tried.push(line.rel.clone());
         if run_line(checkout, queue, &line, threads, stop, &mut log)? == LaneEnd::Stopped {
             log.line("stopped: a signal asked the lane to stop")?;
@@ -183,6 +200,18 @@ pub fn run(
     }
     log.line("queue done")?;
     Ok(LaneEnd::Done)
+}
+
+/// Bytes an unprivileged process may still write on the file system holding `dir` (or the
+/// nearest existing folder above it).
+fn free_bytes_under(dir: &Path) -> Result<u64, QueueError> {
+    let existing = dir.ancestors().find(|d| d.exists()).unwrap_or(dir);
+    let stat = nix::sys::statvfs::statvfs(existing).map_err(|e| io_err(existing)(std::io::Error::from(e)))?;
+    Ok(stat.blocks_available().saturating_mul(stat.fragment_size()))
+}
+
+fn gib(bytes: u64) -> f64 {
+    bytes as f64 / f64::from(1u32 << 30)
 }
 
 /// The queue's first line not done, not held by another process and not tried yet; each
