@@ -12,7 +12,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use commands::{
     bench, compare, config, controller, eval, export, facts, hand, import, inspect, plot, queue, robustness,
-    score, screen, ship, sweep, table1, train,
+    score, screen, ship, sweep, table1, time_to_gait, train,
 };
 
 /// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
@@ -38,6 +38,7 @@ enum Command {
     Score(score::ScoreArgs),
     Compare(compare::CompareArgs),
     Facts(facts::FactsArgs),
+    TimeToGait(time_to_gait::TimeToGaitArgs),
     Config(config::ConfigArgs),
     Eval(eval::EvalArgs),
     Robustness(robustness::RobustnessArgs),
@@ -87,6 +88,7 @@ fn main() -> ExitCode {
         Command::Score(args) => score::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Facts(args) => facts::run(args),
+        Command::TimeToGait(args) => time_to_gait::run(args),
         Command::Config(args) => config::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Robustness(args) => robustness::run(args),

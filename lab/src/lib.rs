@@ -3,8 +3,8 @@
 //! statistics ([`stats`], [`compare`], [`object_rows`]), plots ([`plot`]) and Table I
 //! ([`table1`]), gait diagrams ([`gait_diagram`]), robustness ([`robustness`]), screening and
 //! shipping a policy ([`ship`]), sweeps and Slurm ([`sweep`]), queues of runs on fixed binaries
-//! ([`queue`]) and a finished run's facts ([`run_facts`]). The learner (vge-trainer) does
-//! not depend on it.
+//! ([`queue`]), a finished run's facts ([`run_facts`]) and runs' time to a gait
+//! ([`time_to_gait`]). The learner (vge-trainer) does not depend on it.
 
 // Functions of at most 80 lines of code (clippy.toml).
 #![warn(clippy::too_many_lines)]
@@ -20,3 +20,4 @@ pub mod ship;
 pub mod stats;
 pub mod sweep;
 pub mod table1;
+pub mod time_to_gait;

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 use thiserror::Error;
-use vge_run::run_dir::{EVAL, FINAL_EVAL, METRICS, SCORE};
+use vge_run::run_dir::{EVAL, FINAL_EVAL, METRICS, RunFileError, SCORE, SegmentEnd};
 
 #[derive(Debug, Error)]
 pub enum FactsError {
@@ -20,14 +20,13 @@ pub enum FactsError {
     Io { path: String, source: std::io::Error },
     #[error("{path}: {why}")]
     Format { path: String, why: String },
+    #[error(transparent)]
+    RunFile(#[from] RunFileError),
 }
 
 /// The critic and the returns are reported from here on: the first 100k steps are the
 /// warm-up, where neither means much yet.
 pub const FROM_STEP: u64 = 100_000;
-
-/// The training log in a collected run folder.
-const TRAIN_LOG: &str = "train.log";
 
 /// The facts of the run in `run`, as lines of text. `lanes` is the folder of the lanes' logs
 /// (`runs/lanes`): their start and end lines of this run, which is named as in its queue
@@ -60,13 +59,20 @@ pub fn facts(run: &Path, lanes: &Path) -> Result<String, FactsError> {
         })
         .collect();
     let _ = writeln!(out, "periodic tests (step: success, drops): {}", tests.join("; "));
-    let segments = segments(run)?;
+    let segments = vge_run::run_dir::read_train_log(run)?.unwrap_or_default();
     if !segments.is_empty() {
         let text: Vec<String> = segments
             .iter()
             .map(|s| {
                 let wall = s.wall_s.map_or("-".to_owned(), |w| format!("{} s", thousands(w)));
-                format!("from {}, {wall}, {}", thousands(s.from_step as f64), s.end)
+                let end = match s.end {
+                    SegmentEnd::NoEndLine => "killed (no end line)".to_owned(),
+                    SegmentEnd::Stopped { step } => {
+                        format!("stopped checkpointed at {}", thousands(step as f64))
+                    }
+                    SegmentEnd::Done => "done".to_owned(),
+                };
+                format!("from {}, {wall}, {end}", thousands(s.from_step as f64))
             })
             .collect();
         let _ = writeln!(out, "segments (train.log): {}: {}", segments.len(), text.join("; "));
@@ -187,46 +193,6 @@ impl Table {
     }
 }
 
-/// One training segment of `train.log`.
-struct Segment {
-    from_step: u64,
-    wall_s: Option<f64>,
-    end: String,
-}
-
-/// Each training segment in `train.log`: where it started (0 or the step it resumed from),
-/// its wall time, and how it ended.
-fn segments(run: &Path) -> Result<Vec<Segment>, FactsError> {
-    let path = run.join(TRAIN_LOG);
-    if !path.is_file() {
-        return Ok(Vec::new());
-    }
-    let text = std::fs::read_to_string(&path)
-        .map_err(|source| FactsError::Io { path: path.display().to_string(), source })?;
-    let mut out: Vec<Segment> = Vec::new();
-    for line in text.lines() {
-        let word = |i: usize| line.split_whitespace().nth(i);
-        if line.starts_with("training ") {
-            let from_step = line
-                .split_once("resuming from step ")
-                .and_then(|(_, rest)| rest.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok())
-                .unwrap_or(0);
-            out.push(Segment { from_step, wall_s: None, end: "killed (no end line)".to_owned() });
-        } else if let Some(last) = out.last_mut() {
-            if line.starts_with("time this session: ") {
-                last.wall_s = word(3).and_then(|w| w.parse().ok());
-            } else if line.starts_with("stopped at step ") {
-                if let Some(step) = word(3).and_then(|w| w.trim_end_matches(':').parse::<u64>().ok()) {
-                    last.end = format!("stopped checkpointed at {}", thousands(step as f64));
-                }
-            } else if line.starts_with("done: ") {
-                "done".clone_into(&mut last.end);
-            }
-        }
-    }
-    Ok(out)
-}
-
 /// (time, start or end, lane) of the run in the lanes' logs, the run named as in its queue:
 /// its path after `results/`.
 fn lane_events(run: &Path, lanes: &Path) -> Vec<(String, String, String)> {
@@ -265,7 +231,7 @@ fn read_json(path: &Path) -> Result<Value, FactsError> {
 }
 
 /// `1M` for a million steps, else whole thousands: `820k`.
-fn steps_label(step: u64) -> String {
+pub(crate) fn steps_label(step: u64) -> String {
     if step == 1_000_000 { "1M".to_owned() } else { format!("{}k", step / 1000) }
 }
 
@@ -285,7 +251,7 @@ fn percent(fraction: f64) -> String {
 }
 
 /// A number rounded to a whole, its thousands comma-separated: `3,130`.
-fn thousands(value: f64) -> String {
+pub(crate) fn thousands(value: f64) -> String {
     let text = format!("{value:.0}");
     let (sign, digits) = text.strip_prefix('-').map_or(("", text.as_str()), |d| ("-", d));
     let mut out = String::new();

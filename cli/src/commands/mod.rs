@@ -19,6 +19,7 @@ pub mod screen;
 pub mod ship;
 pub mod sweep;
 pub mod table1;
+pub mod time_to_gait;
 pub mod train;
 
 /// Why a command that needs libtorch cannot run in a vge built without the `train` feature.

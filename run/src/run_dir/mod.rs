@@ -6,7 +6,8 @@
 //! `vge sweep` and the success tests read them. A [`RunDir`] is a path with one method per
 //! file, so no other module spells a file name; its tables are read by column name
 //! ([`csv_columns`]), its records as JSON ([`read_json`]), the whole folder as the plots see it
-//! ([`read_run`]), and every reader fails with a [`RunFileError`] naming the file.
+//! ([`read_run`]), its training sessions ([`read_train_log`], [`tensorboard_sessions`]), and
+//! every reader fails with a [`RunFileError`] naming the file.
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +19,7 @@ pub mod atomic_file;
 pub mod lock;
 mod records;
 mod score_file;
+mod sessions;
 mod tables;
 
 pub use records::{
@@ -25,6 +27,7 @@ pub use records::{
     read_json, read_run,
 };
 pub use score_file::{PolicyScore, Score, SnapshotsScore};
+pub use sessions::{SegmentEnd, TrainSegment, read_train_log, tensorboard_sessions};
 pub use tables::{StepsAndValues, csv_columns, csv_columns_if_present, object_success, whole_steps};
 
 /// A run's file that cannot be read, or does not say what its kind must.
@@ -60,6 +63,9 @@ pub const POLICY_BEST: &str = "policy-best.vgep";
 pub const BEST_EVAL: &str = "best-eval.json";
 /// `vge score`'s held-out scores of the selected, final and last snapshots' policies.
 pub const SCORE: &str = "score.json";
+/// `vge train`'s output, where a lane or a sweep writes it (not a run file: it is written
+/// before training starts, and a run trained by hand has none).
+pub const TRAIN_LOG: &str = "train.log";
 /// Held by the one process writing the folder.
 pub const LOCK: &str = "vge.lock";
 /// The checkpoint folder.
@@ -145,6 +151,10 @@ impl RunDir {
 
     pub fn score(&self) -> PathBuf {
         self.root.join(SCORE)
+    }
+
+    pub fn train_log(&self) -> PathBuf {
+        self.root.join(TRAIN_LOG)
     }
 
     pub fn lock(&self) -> PathBuf {
