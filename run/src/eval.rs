@@ -7,7 +7,9 @@
 //! different state in each). An episode succeeds when the object turned at least 2π about z
 //! (unwrapped rotation at the end of the episode) and the episode was not terminated (no
 //! drop), the same notion of drop as `vge controller`. Each episode also reports its
-//! fingertip contact switches ([`vge_sim::gait`]): the evidence that it gaits. A training
+//! fingertip contact switches ([`vge_sim::gait`]), the evidence that it gaits, and its
+//! fingertip slip ([`vge_sim::slip`]), the evidence that it does not merely spin the object
+//! under fingertips that slide over it. A training
 //! seed *learns* when its final policy succeeds in at least [`LEARNED_SUCCESS_RATE`] of the
 //! episodes.
 
@@ -65,6 +67,10 @@ pub struct EvalReport {
     pub mean_contacts: f64,
     /// Fingertip contact switches per episode ([`vge_sim::gait`]).
     pub mean_contact_switches: f64,
+    /// Fingertip slip per episode (m, [`vge_sim::slip`]): how far the fingertips slid over the
+    /// object while touching it; with the contact switches it tells a gait from a spin under
+    /// fingertips that never let go.
+    pub mean_tip_slip_m: f64,
     pub mean_length: f64,
     /// Every episode, in order.
     pub per_episode: Vec<EpisodeOutcome>,
@@ -198,6 +204,7 @@ pub fn summarise(outcomes: &[EpisodeOutcome]) -> EvalReport {
         drop_rate: mean(&|o| f64::from(u8::from(o.terminated))),
         mean_contacts: mean(&|o| o.mean_contacts),
         mean_contact_switches: mean(&|o| f64::from(o.contact_switches)),
+        mean_tip_slip_m: mean(&|o| o.tip_slip_m),
         mean_length: mean(&|o| o.length as f64),
         per_episode: outcomes.to_vec(),
     }

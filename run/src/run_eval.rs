@@ -182,6 +182,8 @@ struct BestEval<'a> {
     mean_rotation_rad: f64,
     drop_rate: f64,
     mean_contact_switches: f64,
+    /// Fingertip slip per episode (m, [`vge_sim::slip`]).
+    mean_tip_slip_m: f64,
     /// Several objects: each object's test figures (the overall ones above pool them).
     #[serde(skip_serializing_if = "Option::is_none")]
     per_object: Option<PerObjectFigures>,
@@ -251,6 +253,7 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
         mean_rotation_rad: r.mean_rotation_rad,
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
+        mean_tip_slip_m: r.mean_tip_slip_m,
         per_object,
         per_episode: &r.per_episode,
     };
@@ -320,6 +323,8 @@ struct FinalEval<'a> {
     mean_rotation_rad: f64,
     drop_rate: f64,
     mean_contact_switches: f64,
+    /// Fingertip slip per episode (m, [`vge_sim::slip`]).
+    mean_tip_slip_m: f64,
     /// Several objects: each object's figures (the overall ones above pool them).
     #[serde(skip_serializing_if = "Option::is_none")]
     per_object: Option<PerObjectFigures>,
@@ -352,6 +357,7 @@ fn write_final_eval(
         mean_rotation_rad: r.mean_rotation_rad,
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
+        mean_tip_slip_m: r.mean_tip_slip_m,
         per_object: per_object_figures(report),
         env_steps,
         wall_s: cost.wall_s,

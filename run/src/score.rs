@@ -347,6 +347,7 @@ pub fn score_run(
             drop_rate: report.drop_rate,
             mean_rotation_rad: report.mean_rotation_rad,
             mean_contact_switches: report.mean_contact_switches,
+            mean_tip_slip_m: Some(report.mean_tip_slip_m),
             per_object: (per_object.len() > 1).then_some(PerObjectFigures(per_object)),
         });
     }
@@ -384,8 +385,15 @@ fn mean_of_snapshots(snapshots: Vec<PolicyScore>) -> SnapshotsScore {
         drop_rate: mean(|s| s.drop_rate),
         mean_rotation_rad: mean(|s| s.mean_rotation_rad),
         mean_contact_switches: mean(|s| s.mean_contact_switches),
+        mean_tip_slip_m: mean_where_present(snapshots.iter().map(|s| s.mean_tip_slip_m)),
         snapshots,
     }
+}
+
+/// The mean of the values that are present; `None` when none is.
+fn mean_where_present(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let present: Vec<f64> = values.flatten().collect();
+    (!present.is_empty()).then(|| present.iter().sum::<f64>() / present.len() as f64)
 }
 
 /// The policy's episodes in `env`, a batch at a time (each a few episodes per thread) so

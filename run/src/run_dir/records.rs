@@ -118,6 +118,8 @@ pub struct FinalEvalFields {
     pub mean_rotation_rad: Option<f64>,
     #[serde(default)]
     pub mean_contact_switches: Option<f64>,
+    #[serde(default)]
+    pub mean_tip_slip_m: Option<f64>,
     pub env_steps: u64,
     pub wall_s: f64,
     #[serde(default)]
@@ -311,5 +313,24 @@ mod tests {
         let one: Selected =
             serde_json::from_str(r#"{"selected_step": 5, "success_rate": 0.5}"#).expect("one object");
         assert!(one.learned() && one.worst_object_success_rate.is_none());
+    }
+
+    #[test]
+    fn records_written_before_the_slip_figure_still_read() {
+        let old = r#"{"success_rate": 0.5, "mean_contact_switches": 3.0, "env_steps": 10, "wall_s": 1.0}"#;
+        let f: FinalEvalFields = serde_json::from_str(old).expect("old final-eval.json");
+        assert_eq!((f.mean_contact_switches, f.mean_tip_slip_m), (Some(3.0), None));
+        let new = old.replace("\"env_steps\"", "\"mean_tip_slip_m\": 0.25, \"env_steps\"");
+        let f: FinalEvalFields = serde_json::from_str(&new).expect("new final-eval.json");
+        assert_eq!(f.mean_tip_slip_m, Some(0.25));
+
+        let policy = r#"{"file": "policy.vgep", "step": 5, "crc32": 7, "success_rate": 1.0,
+            "mean_return": 2.0, "drop_rate": 0.0, "mean_rotation_rad": 7.0, "mean_contact_switches": 4.0}"#;
+        let old: super::super::PolicyScore = serde_json::from_str(policy).expect("old score.json entry");
+        assert_eq!(old.mean_tip_slip_m, None);
+        let scored = super::super::PolicyScore { mean_tip_slip_m: Some(1.5), ..old };
+        let text = serde_json::to_string(&scored).expect("json");
+        let back: super::super::PolicyScore = serde_json::from_str(&text).expect("read back");
+        assert_eq!(back.mean_tip_slip_m, Some(1.5), "{text}");
     }
 }

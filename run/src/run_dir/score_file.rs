@@ -20,6 +20,10 @@ pub struct PolicyScore {
     pub drop_rate: f64,
     pub mean_rotation_rad: f64,
     pub mean_contact_switches: f64,
+    /// Fingertip slip per episode (m, [`vge_sim::slip`]); absent in scores of older vge
+    /// versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_tip_slip_m: Option<f64>,
     /// For a run on several objects: each object's figures (the ones above pool them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub per_object: Option<PerObjectFigures>,
@@ -33,6 +37,9 @@ pub struct SnapshotsScore {
     pub drop_rate: f64,
     pub mean_rotation_rad: f64,
     pub mean_contact_switches: f64,
+    /// The mean over the snapshots that have one (absent in scores of older vge versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_tip_slip_m: Option<f64>,
     pub snapshots: Vec<PolicyScore>,
 }
 
