@@ -496,6 +496,7 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     assert!(shown.status.success(), "{}", text(&shown.stderr));
     let out = text(&shown.stdout);
     assert!(out.contains("success rate     0.850 (stored: 0.125)"), "{out}");
+    assert!(out.contains("  fingertip slip   ") && out.contains(" m per rad turned"), "{out}");
     let written = vge(&["eval", "--write", "--run"], std::slice::from_ref(&arg));
     assert!(written.status.success(), "{}", text(&written.stderr));
     let now: serde_json::Value =
@@ -506,6 +507,9 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     assert_eq!(now["wall_s"], doc["wall_s"]);
     assert_eq!(now["cpu_s"], doc["cpu_s"]);
     assert_eq!(now["per_episode"].as_array().map(Vec::len), Some(20));
+    let slip = now["mean_tip_slip_m"].as_f64().expect("the slip figure");
+    assert!(slip.is_finite() && slip > 0.0, "the fixture's policy turns the cube: {slip} m");
+    assert!(now["per_episode"][0]["tip_slip_m"].as_f64().is_some_and(f64::is_finite), "{now}");
 
     // An unfinished run (no final-eval.json) cannot be rewritten; neither flag: an error.
     std::fs::remove_file(dir.join("final-eval.json")).expect("remove");

@@ -142,7 +142,9 @@ fn training_writes_the_score_and_vge_score_skips_it_or_scores_again() {
     for p in [selected, &s.final_policy] {
         assert!((0.0..=1.0).contains(&p.success_rate) && (0.0..=1.0).contains(&p.drop_rate), "{p:?}");
         assert!(p.mean_return.is_finite() && p.mean_rotation_rad.is_finite(), "{p:?}");
+        assert!(p.mean_tip_slip_m.is_some_and(|m| m.is_finite() && m >= 0.0), "{p:?}");
     }
+    assert!(last.mean_tip_slip_m.is_some_and(f64::is_finite), "{last:?}");
 
     // Scored with the same episodes already: skipped, the file untouched.
     let before = std::fs::read(dir.join(SCORE_FILE)).expect("score.json");
@@ -164,6 +166,7 @@ fn training_writes_the_score_and_vge_score_skips_it_or_scores_again() {
     // --force scores again, and the episodes are the same ones: the same file.
     let out = vge(&["score", path, "--episodes", "3", "--force"]);
     assert!(String::from_utf8_lossy(&out.stdout).contains(": scored:"), "{out:?}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains(" fingertip slip"), "{out:?}");
     assert_eq!(std::fs::read(dir.join(SCORE_FILE)).expect("score.json"), three_bytes);
     assert!(!dir.join("score.json.tmp").exists(), "the temporary file is renamed into place");
 

@@ -295,6 +295,11 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
         r.report.mean_contact_switches,
         r.report.learned()
     );
+    println!(
+        "  fingertip slip   {:.3} m per episode, {}",
+        r.report.mean_tip_slip_m,
+        slip_per_rad(r.report.mean_tip_slip_m, r.report.mean_rotation_rad)
+    );
     if !r.per_object.is_empty() {
         print_objects_table(&r.per_object, &r.report);
     }
@@ -329,6 +334,15 @@ fn record_episode(policy: &Path, env: &EnvConfig, seed: u64, path: &Path) -> any
     Ok(())
 }
 
+/// Slip per radian turned, or a dash where the object did not turn.
+fn slip_per_rad(slip_m: f64, rotation_rad: f64) -> String {
+    if rotation_rad > 0.0 {
+        format!("{:.4} m per rad turned", slip_m / rotation_rad)
+    } else {
+        "- m per rad turned".to_owned()
+    }
+}
+
 fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
     println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
     println!("  mean return        {:.3}", report.mean_return);
@@ -338,6 +352,11 @@ fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_
     println!(
         "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
         report.mean_contact_switches
+    );
+    println!(
+        "  fingertip slip     {:.3} m per episode, {} (contact points' travel over the object)",
+        report.mean_tip_slip_m,
+        slip_per_rad(report.mean_tip_slip_m, report.mean_rotation_rad)
     );
     println!("  mean contacts      {:.2}; mean length {:.0} steps", report.mean_contacts, report.mean_length);
     let verdict = if report.learned() { "learned" } else { "not learned" };

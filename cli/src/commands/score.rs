@@ -17,7 +17,8 @@ use clap::Args;
 /// episodes training drew. An episode succeeds when the object turns >= 2 pi about z
 /// without a drop. score.json: {"episodes", "seed", "selected", "final",
 /// "last_snapshots"}, each policy's success_rate, mean_return, drop_rate,
-/// mean_rotation_rad, its file, step and CRC-32 (docs/scoring.md). A run on several
+/// mean_rotation_rad, mean_contact_switches, mean_tip_slip_m (m of fingertip travel over
+/// the object per episode), its file, step and CRC-32 (docs/scoring.md). A run on several
 /// objects is scored on those episodes for each object: the figures pool them, and
 /// "per_object" gives each object's.
 ///
@@ -110,6 +111,15 @@ fn score(
                     s.episodes,
                     s.final_policy.success_rate,
                     started.elapsed().as_secs_f64()
+                );
+                let switches_and_slip = |p: &vge_run::run_dir::PolicyScore| {
+                    let slip = p.mean_tip_slip_m.map_or("-".to_owned(), |m| format!("{m:.3} m"));
+                    format!("{:.1} switches, {slip} fingertip slip", p.mean_contact_switches)
+                };
+                outln!(
+                    "  per episode: selected {}, final {}",
+                    s.selected.as_ref().map_or("-".to_owned(), switches_and_slip),
+                    switches_and_slip(&s.final_policy)
                 );
                 // A run on several objects: each object's success, selected and final.
                 if let Some(per_object) = &s.final_policy.per_object {
