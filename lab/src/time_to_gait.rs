@@ -176,7 +176,12 @@ fn resume_signs(
         let from: Vec<u64> = sessions.iter().flatten().copied().filter(|s| *s > 0).collect();
         let unnamed = sessions.iter().filter(|s| s.is_none()).count();
         if !from.is_empty() || (unnamed > 0 && sessions.len() > 1) {
-            evidence.push(format!("tensorboard/: {} event files, one per session", sessions.len()));
+            let text: Vec<String> = from.iter().map(|s| thousands(*s as f64)).collect();
+            evidence.push(format!(
+                "tensorboard/: {} event files, one per session, resumed from {}",
+                sessions.len(),
+                if text.is_empty() { "steps their names do not say".to_owned() } else { text.join(", ") }
+            ));
             named |= unnamed == 0;
             steps.extend(from);
         }
@@ -223,15 +228,17 @@ struct ResumeSigns {
 pub struct GroupGait {
     pub name: String,
     pub runs: usize,
-    /// Runs whose figure counts: one session up to their first pass, or never passed.
+    /// Runs whose figure counts: one session up to their first pass, or finished without one.
     pub counted: usize,
     /// The median over the counted runs, a run that never passed counting as slower than
     /// any that did; None when the median falls on such runs (or none counts).
     pub median_wall_s: Option<f64>,
     /// The same in env steps.
     pub median_step: Option<f64>,
-    /// Runs with no passing test.
+    /// Finished runs with no passing test.
     pub never: Vec<PathBuf>,
+    /// Runs still training (no `final-eval.json`) without a passing test yet: left out.
+    pub in_progress: Vec<PathBuf>,
     /// Runs whose first pass came after a resume: their wall time is not one session's, so
     /// it is left out of the median.
     pub not_one_session: Vec<PathBuf>,
@@ -256,7 +263,12 @@ fn median_never_last(values: &[Option<f64>]) -> Option<f64> {
 /// The group `name` of `runs`: its median time to a gait and the held-out scores; the
 /// intervals are drawn with `vge compare`'s seed 0 under `name`.
 pub fn summarise(name: &str, runs: &[RunGait]) -> Result<GroupGait, TimeToGaitError> {
-    let counted: Vec<&RunGait> = runs.iter().filter(|r| r.first_pass.is_none() || r.one_session).collect();
+    let finished = |r: &RunGait| r.final_wall_s.is_some();
+    let counted: Vec<&RunGait> =
+        runs.iter().filter(|r| if r.first_pass.is_some() { r.one_session } else { finished(r) }).collect();
+    let without_pass = |done: bool| -> Vec<PathBuf> {
+        runs.iter().filter(|r| r.first_pass.is_none() && finished(r) == done).map(|r| r.run.clone()).collect()
+    };
     let wall: Vec<Option<f64>> = counted.iter().map(|r| r.first_pass.map(|p| p.wall_s)).collect();
     let step: Vec<Option<f64>> = counted.iter().map(|r| r.first_pass.map(|p| p.step as f64)).collect();
     let bootstrap = Bootstrap::default();
@@ -270,7 +282,8 @@ pub fn summarise(name: &str, runs: &[RunGait]) -> Result<GroupGait, TimeToGaitEr
         counted: counted.len(),
         median_wall_s: median_never_last(&wall),
         median_step: median_never_last(&step),
-        never: runs.iter().filter(|r| r.first_pass.is_none()).map(|r| r.run.clone()).collect(),
+        never: without_pass(true),
+        in_progress: without_pass(false),
         not_one_session: runs
             .iter()
             .filter(|r| r.first_pass.is_some() && !r.one_session)
@@ -293,6 +306,11 @@ pub fn to_text(runs: &[RunGait], group: &GroupGait) -> String {
     for r in runs {
         let opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.2}"));
         let (pass, wall, rate) = match r.first_pass {
+            None if r.final_wall_s.is_none() => (
+                format!("not yet (training, at {})", steps_label(r.last_step)),
+                "-".to_owned(),
+                format!("{:.1} (so far)", r.last_steps_per_s),
+            ),
             None => ("never".to_owned(), "-".to_owned(), format!("{:.1} (to the end)", r.last_steps_per_s)),
             Some(p) => {
                 let clock = if p.clock_step == p.step {
@@ -327,21 +345,24 @@ pub fn to_text(runs: &[RunGait], group: &GroupGait) -> String {
 }
 
 fn summary_text(out: &mut String, g: &GroupGait) {
-    let median = |v: Option<f64>, f: fn(f64) -> String| {
-        v.map_or("never (half the runs or more never passed)".to_owned(), f)
+    let median = match (g.median_wall_s, g.median_step) {
+        (Some(wall_s), Some(step)) => {
+            format!("{} s, at {} env steps", thousands(wall_s), steps_label(step as u64))
+        }
+        _ if g.counted == 0 => "none (no run counted)".to_owned(),
+        _ => "never (half the runs counted or more never passed)".to_owned(),
     };
     let _ = writeln!(
         out,
-        "{}: median time to a gait {} s, at {} env steps ({} of {} runs counted)",
-        g.name,
-        median(g.median_wall_s, thousands),
-        median(g.median_step, |s| steps_label(s as u64)),
-        g.counted,
-        g.runs
+        "{}: median time to a gait {median} ({} of {} runs counted)",
+        g.name, g.counted, g.runs
     );
     let list = |runs: &[PathBuf]| runs.iter().map(|r| r.display().to_string()).collect::<Vec<_>>().join(", ");
     if !g.never.is_empty() {
         let _ = writeln!(out, "never passed: {}", list(&g.never));
+    }
+    if !g.in_progress.is_empty() {
+        let _ = writeln!(out, "left out (still training, no pass yet): {}", list(&g.in_progress));
     }
     if !g.not_one_session.is_empty() {
         let _ = writeln!(out, "left out (first pass after a resume): {}", list(&g.not_one_session));

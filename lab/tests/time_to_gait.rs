@@ -114,3 +114,25 @@ fn two_sessions_event_files_mark_a_copy_of_a_one_session_run_as_resumed() {
     assert!(copy.resumed && !copy.one_session, "passed at 700k, after the resume: {copy:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_run_still_training_without_a_pass_is_left_out_not_counted_as_never() {
+    let dir = common::temp_dir("time-to-gait-in-progress");
+    common::copy_dir(&results("cube-fg-vge-seeds/seed-0"), &dir);
+    // The folder as it stood at 300k: the tests so far (0% each), no final test, no score.
+    for name in ["final-eval.json", "score.json"] {
+        std::fs::remove_file(dir.join(name)).expect("remove");
+    }
+    for (name, rows) in [("eval.csv", 3), ("metrics.csv", 30)] {
+        let text = std::fs::read_to_string(dir.join(name)).expect("read");
+        let kept: Vec<&str> = text.lines().take(1 + rows).collect();
+        std::fs::write(dir.join(name), kept.join("\n") + "\n").expect("write");
+    }
+    let training = read_run(&dir, 0.5).expect("reads");
+    assert_eq!((training.first_pass, training.last_step, training.final_wall_s), (None, 300_000, None));
+    let finished = run("cube-fg-vge-seeds/seed-1");
+    let group = summarise("g", &[training, finished.clone()]).expect("statistics");
+    assert_eq!((group.in_progress.clone(), group.never.len(), group.counted), (vec![dir.clone()], 0, 1));
+    assert_eq!(group.median_wall_s, finished.first_pass.map(|p| p.wall_s));
+    let _ = std::fs::remove_dir_all(&dir);
+}

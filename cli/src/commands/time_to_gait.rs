@@ -16,11 +16,12 @@ use clap::Args;
 /// or a sweep's), tensorboard/'s event files (one per session), metrics.csv's session
 /// clock going back, or passing final-eval.json's wall time (which sums every session).
 ///
-/// Over the runs given, one group: the median time to a gait (a run that never passed
-/// counts as slower than any that did; runs whose pass came after a resume are left
-/// out and named), the runs that never passed, and the IQM and mean of the held-out
-/// success with 95% intervals, drawn as `vge compare NAME=...` draws them for the same
-/// --name (Table I's cells are named `fg/vge` and so on).
+/// Over the runs given, one group: the median time to a gait (a finished run that never
+/// passed counts as slower than any that did; runs whose pass came after a resume, and
+/// runs still training without a pass, are left out and named), the runs that never
+/// passed, and the IQM and mean of the held-out success with 95% intervals, drawn as
+/// `vge compare NAME=...` draws them for the same --name (Table I's cells are named
+/// `fg/vge` and so on).
 ///
 /// Example:
 ///   vge time-to-gait docs/results/cube-fg-vge-seeds --name fg/vge
