@@ -10,6 +10,7 @@ pub mod behaviour;
 pub mod bench_train;
 pub mod bench_update;
 pub mod checkpoint;
+pub mod cpu_time;
 pub mod heap;
 pub mod learner;
 pub mod mkl;

@@ -16,6 +16,8 @@ use std::time::{Duration, Instant};
 
 use vge_run::cpu_use::Jiffies;
 
+use crate::cpu_time::process_cpu_s;
+
 /// The environment variable that keeps the thread count fixed at the configured one
 /// (`VGE_FIXED_THREADS=1`), e.g. to measure what adapting gains.
 pub const FIXED_THREADS_ENV: &str = "VGE_FIXED_THREADS";
@@ -121,15 +123,6 @@ fn threads_that_fit(before: &Reading, after: &Reading, max_threads: i32) -> Opti
 fn read() -> Option<Reading> {
     let jiffies = Jiffies::read(|_| true).ok()?;
     Some(Reading { at: Instant::now(), jiffies, own_cpu_s: process_cpu_s()? })
-}
-
-/// CPU time of this process, all threads (s).
-#[allow(unsafe_code)]
-fn process_cpu_s() -> Option<f64> {
-    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: clock_gettime writes one timespec through a valid pointer to a local.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
-    (rc == 0).then_some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
 }
 
 #[cfg(test)]

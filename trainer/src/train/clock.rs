@@ -8,6 +8,8 @@
 
 use std::time::Instant;
 
+use crate::cpu_time::process_cpu_s;
+
 pub use vge_run::run_eval::RunCost;
 
 /// The run's clock: the earlier sessions' cost plus this session's so far.
@@ -36,22 +38,6 @@ impl RunClock {
         };
         RunCost { wall_s: self.before.wall_s + self.session_wall_s(), cpu_s }
     }
-}
-
-/// CPU time of this process, all threads, user and system (s); None where the OS does
-/// not say.
-#[cfg(target_os = "linux")]
-#[allow(unsafe_code)]
-fn process_cpu_s() -> Option<f64> {
-    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: clock_gettime writes one timespec through a valid pointer to a local.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) };
-    (rc == 0).then_some(t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9)
-}
-
-#[cfg(not(target_os = "linux"))]
-fn process_cpu_s() -> Option<f64> {
-    None
 }
 
 #[cfg(test)]
