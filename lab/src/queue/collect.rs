@@ -5,18 +5,15 @@
 
 use std::path::PathBuf;
 
-use vge_run::run_dir::{BEST_EVAL, CONFIG, EVAL, FINAL_EVAL, METRICS, POLICY, POLICY_BEST, SCORE};
+use vge_run::run_dir::{BEST_EVAL, CONFIG, EVAL, FINAL_EVAL, METRICS, POLICY, POLICY_BEST, SCORE, TRAIN_LOG};
 
 use super::{Checkout, QueueError, io_err};
 
 /// The run-folder files a result keeps, when present.
 pub const COLLECTED: [&str; 8] = [CONFIG, METRICS, EVAL, FINAL_EVAL, BEST_EVAL, SCORE, POLICY, POLICY_BEST];
 
-/// The training log's name in a collected folder (`runs/REL.log` in a lane).
-pub const TRAIN_LOG: &str = "train.log";
-
-/// Copies the run `rel` (which must be scored) to `docs/results/REL`; returns that folder and
-/// the names copied.
+/// Copies the run `rel` (which must be scored) to `docs/results/REL`, its lane log
+/// `runs/REL.log` as the folder's [`TRAIN_LOG`]; returns that folder and the names copied.
 pub fn collect(checkout: &Checkout, rel: &str) -> Result<(PathBuf, Vec<String>), QueueError> {
     let dir = checkout.run_dir(rel);
     if !dir.join(SCORE).is_file() {
