@@ -539,12 +539,12 @@ mod libtorch {
 
     /// The default run's actor shape: its hand's observation and joints, its hidden widths.
     fn default_actor() -> anyhow::Result<vge_export::ActorSpec> {
-        let config = vge_trainer::learner::LearnerConfig::for_hand(&vge_run::config::Config::default())?;
-        let obs: i64 = config.columns.actor.iter().map(|&(_, len)| len).sum();
+        let net =
+            vge_trainer::learner::LearnerConfig::for_hand(&vge_run::config::Config::default())?.actor_net();
         Ok(vge_export::ActorSpec {
-            obs_dim: usize::try_from(obs)?,
-            hidden: config.net.hidden.iter().map(|&h| usize::try_from(h)).collect::<Result<_, _>>()?,
-            act_dim: usize::try_from(config.net.act_dim)?,
+            obs_dim: usize::try_from(net.obs_dim)?,
+            hidden: net.hidden.iter().map(|&h| usize::try_from(h)).collect::<Result<_, _>>()?,
+            act_dim: usize::try_from(net.act_dim)?,
         })
     }
 
