@@ -32,6 +32,9 @@ pub struct TrainBench {
     /// libtorch's threads followed the idle cores ([`crate::learner::ThreadGovernor`]); else
     /// they stayed at `threads`.
     pub adaptive_threads: bool,
+    /// With two cores or more, the envs stepped on one of them beside the updates
+    /// ([`crate::learner::ThreadGovernor::overlaps`]); else between them.
+    pub overlap: bool,
     /// Env steps and updates in the measured window (after the warm-up).
     pub env_steps: u64,
     pub updates: u64,
@@ -112,6 +115,7 @@ fn phases_between(start: &PhaseTimes, end: &PhaseTimes) -> PhaseTimes {
         behaviour_s: end.behaviour_s - start.behaviour_s,
         sim_s: end.sim_s - start.sim_s,
         update_s: end.update_s - start.update_s,
+        sim_beside_updates_s: end.sim_beside_updates_s - start.sim_beside_updates_s,
         eval_s: end.eval_s - start.eval_s,
         checkpoint_s: end.checkpoint_s - start.checkpoint_s,
         total_s: end.total_s - start.total_s,
@@ -149,13 +153,16 @@ pub struct BenchRun {
     pub beside_busy_core: bool,
     /// Whether libtorch's threads follow the idle cores (training's default) or stay fixed.
     pub adaptive_threads: bool,
+    /// Whether the envs may step beside the updates (training's default) or only between them.
+    pub overlap: bool,
 }
 
 /// Trains `config` (see [`bench_config`]) in a scratch folder through its warm-up and then
 /// `steps` env steps, beside a busy core when asked, and reports that window.
 pub fn run(config: &Config, how: BenchRun) -> Result<TrainBench, BenchTrainError> {
-    let BenchRun { threads, steps, beside_busy_core, adaptive_threads } = how;
+    let BenchRun { threads, steps, beside_busy_core, adaptive_threads, overlap } = how;
     crate::learner::threads::set_adapting(adaptive_threads);
+    crate::learner::threads::set_overlapping(overlap);
     let config = bench_config(config, threads, steps);
     let warmup = config.sac.warmup;
     let scratch = ScratchDir::new(&format!("{threads}-{}", u8::from(beside_busy_core)));
@@ -184,6 +191,7 @@ pub fn run(config: &Config, how: BenchRun) -> Result<TrainBench, BenchTrainError
         threads,
         beside_busy_core,
         adaptive_threads,
+        overlap,
         env_steps: end.0 - start.0,
         updates: end.1 - start.1,
         phases: phases_between(&start.2, &end.2),

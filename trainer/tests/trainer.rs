@@ -686,6 +686,43 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
     }
 }
 
+/// The envs stepping on a core of their own beside the updates change nothing of a run: the
+/// same metrics, model selection and policy as the loop that steps them between the updates
+/// (also across a stop and resume, which the overlapping run takes).
+#[test]
+fn stepping_the_envs_beside_the_updates_trains_the_same_run() {
+    use vge_trainer::learner::threads::{set_adapting, set_overlapping};
+    // Two cores, fixed: the governor's choice is then the switch's alone.
+    set_adapting(false);
+    let config = tiny_config_with(140, &["algorithm=\"td3\"", "sac.threads=2"]);
+    let never = AtomicBool::new(false);
+    set_overlapping(false);
+    let serial_dir = tempdir("serial-loop");
+    let serial = train(&config, &serial_dir, false, &never, &mut |_| {}).expect("serial run");
+    assert_eq!(serial.times.sim_beside_updates_s, 0.0, "{}", serial.times);
+    set_overlapping(true);
+    let beside_dir = tempdir("overlapping-loop");
+    let stop = AtomicBool::new(false);
+    let part = train(&config, &beside_dir, false, &stop, &mut |p| {
+        if p.step >= 86 {
+            stop.store(true, Ordering::SeqCst);
+        }
+    })
+    .expect("overlapping run, first session");
+    assert!(part.stopped && part.times.sim_beside_updates_s > 0.0, "{}", part.times);
+    let beside = train(&config, &beside_dir, true, &never, &mut |_| {}).expect("overlapping run, resumed");
+    assert!(beside.times.sim_beside_updates_s > 0.0, "the envs never stepped beside the updates");
+    assert_eq!((beside.steps, beside.updates), (serial.steps, serial.updates));
+    assert_eq!(beside.behaviour, serial.behaviour);
+    assert_eq!(metrics_without_speed(&beside_dir), metrics_without_speed(&serial_dir));
+    let read = |d: &std::path::Path, f: &str| std::fs::read(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+    assert!(read(&beside_dir, "policy.vgep") == read(&serial_dir, "policy.vgep"), "the policies differ");
+    assert_eq!(read(&beside_dir, "best-eval.json"), read(&serial_dir, "best-eval.json"));
+    for d in [serial_dir, beside_dir] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
+
 /// A run resumed to its end against the uninterrupted one (`full`): the same policy and
 /// model selection, and a cost counting both sessions (after `first` = (wall, CPU) s).
 fn check_resumed(

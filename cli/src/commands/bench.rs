@@ -52,8 +52,10 @@ pub enum Bench {
     /// --beside-busy-core measures each configuration a second time beside a process that
     /// keeps one core busy (another job on a shared machine) and prints every rate as a
     /// fraction of the one-thread rate without it. --fixed-threads both measures fixed and
-    /// adapting threads. Rates on a loaded machine swing: compare within one run (--rounds
-    /// alternates the configurations).
+    /// adapting threads. With two threads or more, one core steps the envs beside the updates
+    /// (the same run bit for bit); --overlap no keeps them between the updates, both measures
+    /// both. Rates on a loaded machine swing: compare within one run (--rounds alternates the
+    /// configurations).
     Train {
         /// Print one JSON line per measured run instead of a table.
         #[arg(long)]
@@ -80,6 +82,10 @@ pub enum Bench {
         /// no, yes, or both (each configuration measured both ways).
         #[arg(long, default_value = "no", value_parser = ["no", "yes", "both"])]
         fixed_threads: String,
+        /// Step the envs on a core of their own beside the updates when two or more are used
+        /// (training's default; `VGE_SERIAL_LOOP=1` turns it off): yes, no, or both.
+        #[arg(long, default_value = "yes", value_parser = ["no", "yes", "both"])]
+        overlap: String,
     },
     /// Simulator throughput: control steps per second of one world on one thread, and of N
     /// worlds stepped across all cores, at the default env rates.
@@ -191,8 +197,19 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
         Bench::Controllers { json, episodes } => bench_controllers(json, episodes),
         Bench::Cores { json, window_s } => bench_cores(json, window_s),
         #[cfg(feature = "train")]
-        Bench::Train { json, config, overrides, steps, threads, beside_busy_core, rounds, fixed_threads } => {
-            let plan = libtorch::TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads };
+        Bench::Train {
+            json,
+            config,
+            overrides,
+            steps,
+            threads,
+            beside_busy_core,
+            rounds,
+            fixed_threads,
+            overlap,
+        } => {
+            let plan =
+                libtorch::TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads, overlap };
             libtorch::train(json, config, &overrides, &plan)
         }
         #[cfg(feature = "train")]
@@ -401,6 +418,7 @@ mod libtorch {
         pub beside_busy_core: bool,
         pub rounds: usize,
         pub fixed_threads: String,
+        pub overlap: String,
     }
 
     /// `vge bench train`.
@@ -411,7 +429,7 @@ mod libtorch {
         plan: &TrainPlan,
     ) -> anyhow::Result<()> {
         use vge_trainer::bench_train::{self, BenchRun, TrainBench};
-        let TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads } = plan;
+        let TrainPlan { steps, threads, beside_busy_core, rounds, fixed_threads, overlap } = plan;
         let (steps, threads, rounds) = (*steps, threads.as_slice(), *rounds);
         anyhow::ensure!(steps > 0 && rounds > 0, "--steps and --rounds must be at least 1");
         anyhow::ensure!(
@@ -435,6 +453,11 @@ mod libtorch {
             "both" => &[false, true],
             _ => &[true],
         };
+        let overlaps: &[bool] = match overlap.as_str() {
+            "no" => &[false],
+            "both" => &[true, false],
+            _ => &[true],
+        };
         if !json {
             println!(
                 "{} {} with {} ({} envs, utd {}, warm-up {}), {steps} env steps after the warm-up",
@@ -446,24 +469,30 @@ mod libtorch {
                 config.sac.warmup,
             );
             println!(
-                "round threads  adapt  busy   steps/s updates/s    sim   ctrl  actor update  other  (shares of the time)"
+                "round threads  adapt overlap  busy   steps/s updates/s    sim   ctrl  actor update  other  (shares of the time)"
             );
         }
         let mut results: Vec<TrainBench> = Vec::new();
         for round in 1..=rounds {
             for &beside_busy_core in loads {
                 for &adaptive_threads in modes {
-                    for &threads in threads {
-                        let how = BenchRun { threads, steps, beside_busy_core, adaptive_threads };
-                        let r = bench_train::run(&config, how)?;
-                        print_train_row(json, round, &r);
-                        results.push(r);
+                    for &overlap in overlaps {
+                        for &threads in threads {
+                            if threads == 1 && !overlap && overlaps.len() > 1 {
+                                continue; // one core never overlaps: measured once
+                            }
+                            let how =
+                                BenchRun { threads, steps, beside_busy_core, adaptive_threads, overlap };
+                            let r = bench_train::run(&config, how)?;
+                            print_train_row(json, round, &r);
+                            results.push(r);
+                        }
                     }
                 }
             }
         }
         if !json {
-            print_train_summary(&results, threads, loads, modes);
+            print_train_summary(&results, threads, loads, modes, overlaps);
         }
         Ok(())
     }
@@ -478,11 +507,13 @@ mod libtorch {
                 "threads": r.threads,
                 "beside_busy_core": r.beside_busy_core,
                 "adaptive_threads": r.adaptive_threads,
+                "overlap": r.overlap,
                 "env_steps": r.env_steps,
                 "updates": r.updates,
                 "wall_s": r.phases.total_s,
                 "steps_per_s": r.steps_per_s(),
                 "updates_per_s": r.updates_per_s(),
+                "sim_beside_updates_s": r.phases.sim_beside_updates_s,
             });
             for (name, s) in split {
                 line[format!("{name}_s")] = serde_json::json!(s);
@@ -492,9 +523,10 @@ mod libtorch {
             let shares: Vec<String> =
                 split.iter().map(|(_, s)| format!("{:>5.0}%", 100.0 * s / total)).collect();
             println!(
-                "{round:>5} {:>7} {:>6} {:>5} {:>9.1} {:>9.1} {}",
+                "{round:>5} {:>7} {:>6} {:>7} {:>5} {:>9.1} {:>9.1} {}",
                 r.threads,
                 if r.adaptive_threads { "yes" } else { "no" },
+                if r.overlap { "yes" } else { "no" },
                 if r.beside_busy_core { "yes" } else { "no" },
                 r.steps_per_s(),
                 r.updates_per_s(),
@@ -510,28 +542,43 @@ mod libtorch {
         threads: &[i32],
         loads: &[bool],
         modes: &[bool],
+        overlaps: &[bool],
     ) {
-        let median = |t: i32, busy: bool, adapt: bool| -> Option<f64> {
+        // One thread never overlaps: its runs count for either setting.
+        let median = |t: i32, busy: bool, adapt: bool, overlap: bool| -> Option<f64> {
             let mut v: Vec<f64> = results
                 .iter()
                 .filter(|r| r.threads == t && r.beside_busy_core == busy && r.adaptive_threads == adapt)
+                .filter(|r| t == 1 || r.overlap == overlap)
                 .map(vge_trainer::bench_train::TrainBench::steps_per_s)
                 .collect();
             v.sort_by(f64::total_cmp);
             (!v.is_empty()).then(|| v[v.len() / 2])
         };
-        let base = median(1, false, modes[0]);
+        let base = median(1, false, modes[0], overlaps[0]);
         println!("median env steps/s:");
         for &busy in loads {
             for &adapt in modes {
-                for &t in threads {
-                    let Some(rate) = median(t, busy, adapt) else { continue };
-                    let ratio = base.map_or(String::new(), |b| {
-                        format!("  ({:.2} of one thread without the busy core)", rate / b)
-                    });
-                    let load = if busy { "beside a busy core" } else { "without a busy core" };
-                    let mode = if adapt { "at most" } else { "fixed at" };
-                    println!("  threads {mode} {t}, {load}: {rate:.1}{ratio}");
+                for &overlap in overlaps {
+                    for &t in threads {
+                        if t == 1 && overlap != overlaps[0] {
+                            continue;
+                        }
+                        let Some(rate) = median(t, busy, adapt, overlap) else { continue };
+                        let ratio = base.map_or(String::new(), |b| {
+                            format!("  ({:.2} of one thread without the busy core)", rate / b)
+                        });
+                        let load = if busy { "beside a busy core" } else { "without a busy core" };
+                        let mode = if adapt { "at most" } else { "fixed at" };
+                        let envs = if t == 1 {
+                            ""
+                        } else if overlap {
+                            ", envs beside the updates"
+                        } else {
+                            ", envs between the updates"
+                        };
+                        println!("  threads {mode} {t}{envs}, {load}: {rate:.1}{ratio}");
+                    }
                 }
             }
         }

@@ -1,5 +1,5 @@
-//! libtorch's intra-op threads fitted, while a run trains, to the cores that other processes
-//! leave idle.
+//! The cores a training run uses, fitted while it trains to the cores that other processes
+//! leave idle, and how it splits them between libtorch's threads and the envs.
 //!
 //! libtorch's parallel regions end at a barrier that waits for every worker: when another
 //! process keeps a core busy, the worker that shares that core runs only in the scheduler's
@@ -9,7 +9,11 @@
 //! whose other jobs come and go. [`ThreadGovernor`] measures, every [`PERIOD`], how many cores
 //! the machine's other processes kept busy (all the cores' busy time from `/proc/stat`, read
 //! by [`vge_run::cpu_use`] as `vge bench cores` reads it, less this process's own CPU time)
-//! and sets libtorch's threads to the idle rest, between 1 and the configured count.
+//! and uses the idle rest, between 1 and the configured count.
+//!
+//! With two cores or more, one of them steps the envs while the others update
+//! ([`ThreadGovernor::overlaps`]): the loop's schedule is the same either way (the updates
+//! of an iteration never see its own step), so only the speed changes.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::{Duration, Instant};
@@ -22,8 +26,16 @@ use crate::cpu_time::process_cpu_s;
 /// (`VGE_FIXED_THREADS=1`), e.g. to measure what adapting gains.
 pub const FIXED_THREADS_ENV: &str = "VGE_FIXED_THREADS";
 
+/// The environment variable that keeps the envs stepping on rayon's pool between the
+/// updates instead of on a core of their own beside them (`VGE_SERIAL_LOOP=1`), e.g. to
+/// measure what the overlap gains. The run's results are the same either way.
+pub const SERIAL_LOOP_ENV: &str = "VGE_SERIAL_LOOP";
+
 /// Whether governors adapt: unset (0), yes (1), no (2).
 static ADAPTING: AtomicU8 = AtomicU8::new(0);
+
+/// Whether governors let the envs step beside the updates: unset (0), yes (1), no (2).
+static OVERLAPPING: AtomicU8 = AtomicU8::new(0);
 
 /// Turns adapting on or off for the governors made from now on in this process (`vge bench
 /// train` measures both); without a call, [`FIXED_THREADS_ENV`] decides.
@@ -31,11 +43,30 @@ pub fn set_adapting(adapt: bool) {
     ADAPTING.store(if adapt { 1 } else { 2 }, Ordering::Relaxed);
 }
 
+/// Lets the governors made from now on in this process step the envs beside the updates, or
+/// not (`vge bench train` measures both); without a call, [`SERIAL_LOOP_ENV`] decides.
+pub fn set_overlapping(overlap: bool) {
+    OVERLAPPING.store(if overlap { 1 } else { 2 }, Ordering::Relaxed);
+}
+
+/// An environment switch that is on when set to anything but empty or "0".
+fn switched_on(name: &str) -> bool {
+    std::env::var_os(name).is_some_and(|v| !v.is_empty() && v != "0")
+}
+
 fn adapting() -> bool {
     match ADAPTING.load(Ordering::Relaxed) {
         1 => true,
         2 => false,
-        _ => std::env::var_os(FIXED_THREADS_ENV).is_none_or(|v| v.is_empty() || v == "0"),
+        _ => !switched_on(FIXED_THREADS_ENV),
+    }
+}
+
+fn overlapping() -> bool {
+    match OVERLAPPING.load(Ordering::Relaxed) {
+        1 => true,
+        2 => false,
+        _ => !switched_on(SERIAL_LOOP_ENV),
     }
 }
 
@@ -53,34 +84,57 @@ struct Reading {
     own_cpu_s: f64,
 }
 
-/// Sets libtorch's thread count to what fits beside the machine's other work, between 1 and
-/// `max_threads`, re-measured every [`PERIOD`] ([`Self::adapt`]).
+/// The cores the loop uses, between 1 and `max_cores`, re-measured every [`PERIOD`] against
+/// the machine's other work ([`Self::adapt`]), and libtorch's thread count that follows from
+/// them.
 #[derive(Debug)]
 pub struct ThreadGovernor {
-    max_threads: i32,
-    current: i32,
+    max_cores: i32,
+    cores: i32,
+    adapts: bool,
+    overlap: bool,
     last: Option<Reading>,
 }
 
 impl ThreadGovernor {
-    /// Starts at libtorch's current thread count (what the run asked for), the most it will
-    /// use; the first [`Self::adapt`] after a [`PERIOD`] corrects it. It never adapts when
-    /// that is one thread, or where adapting is off ([`set_adapting`], [`FIXED_THREADS_ENV`]).
+    /// Starts at libtorch's current thread count (what the run asked for: `sac.threads`), the
+    /// most cores it will use; the first [`Self::adapt`] after a [`PERIOD`] corrects it. It
+    /// never adapts when that is one, or where adapting is off ([`set_adapting`],
+    /// [`FIXED_THREADS_ENV`]). Sets libtorch's threads ([`Self::libtorch_threads`]).
     pub fn start() -> Self {
-        let max_threads = tch::get_num_threads().max(1);
-        let max_threads = if adapting() { max_threads } else { 1 };
-        Self { max_threads, current: tch::get_num_threads().max(1), last: read() }
+        let asked = tch::get_num_threads().max(1);
+        let governor = Self {
+            max_cores: asked,
+            cores: asked,
+            adapts: asked > 1 && adapting(),
+            overlap: overlapping(),
+            last: read(),
+        };
+        tch::set_num_threads(governor.libtorch_threads());
+        governor
     }
 
-    /// The thread count now in force.
-    pub fn threads(&self) -> i32 {
-        self.current
+    /// The cores the loop uses now.
+    pub fn cores(&self) -> i32 {
+        self.cores
     }
 
-    /// Measures and sets the thread count when a [`PERIOD`] has passed since the last
-    /// measurement (else a clock read); returns the new count when it changed.
+    /// Whether the envs step on a core of their own beside the updates: with two cores or
+    /// more, unless turned off ([`set_overlapping`], [`SERIAL_LOOP_ENV`]).
+    pub fn overlaps(&self) -> bool {
+        self.overlap && self.cores >= 2
+    }
+
+    /// libtorch's threads: every core the loop uses, less the envs' own when they overlap.
+    pub fn libtorch_threads(&self) -> i32 {
+        if self.overlaps() { self.cores - 1 } else { self.cores }
+    }
+
+    /// Measures and sets the cores (and libtorch's threads) when a [`PERIOD`] has passed since
+    /// the last measurement (else a clock read); returns the new count of cores when it
+    /// changed.
     pub fn adapt(&mut self) -> Option<i32> {
-        if self.max_threads <= 1 {
+        if !self.adapts {
             return None;
         }
         let due = self.last.is_none_or(|last| last.at.elapsed() >= PERIOD);
@@ -88,14 +142,14 @@ impl ThreadGovernor {
             return None;
         }
         let now = read()?;
-        let fit = self.last.and_then(|last| threads_that_fit(&last, &now, self.max_threads));
+        let fit = self.last.and_then(|last| threads_that_fit(&last, &now, self.max_cores));
         self.last = Some(now);
         let fit = fit?;
-        if fit == self.current {
+        if fit == self.cores {
             return None;
         }
-        self.current = fit;
-        tch::set_num_threads(fit);
+        self.cores = fit;
+        tch::set_num_threads(self.libtorch_threads());
         Some(fit)
     }
 }

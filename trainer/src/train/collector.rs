@@ -6,7 +6,7 @@ use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use tch::Tensor;
-use vge_sim::{Env, EpisodeTracker, NoiseConfig, Observer, PerturbationConfig, SimError};
+use vge_sim::{Env, EpisodeTracker, NoiseConfig, Observer, PerturbationConfig, SimError, StepResult};
 
 use super::TrainError;
 use super::in_progress::{EnvInProgress, EpisodeLog, InProgress};
@@ -68,6 +68,8 @@ pub(super) struct Collector {
     objects: TrainingObjects,
     /// Env steps taken so far ([`Self::set_progress`]).
     progress: u64,
+    /// The discount of the episodes' returns in the metrics (`sac.gamma`).
+    gamma: f64,
 }
 
 /// Raises each env's random force on the object and its drop penalty (over
@@ -178,6 +180,7 @@ impl Collector {
             seed: config.seed,
             objects: TrainingObjects::new(&config.env.objects, n),
             progress: 0,
+            gamma: config.sac.gamma,
         })
     }
 
@@ -310,24 +313,32 @@ impl Collector {
         Ok(decisions)
     }
 
-    /// Steps every env with its decision (in parallel), stores the transitions, accounts the
+    /// Steps every env with its decision: the physics alone, touching nothing but the envs,
+    /// so that it may run beside the learner's updates ([`super::Trainer`]'s schedule). In
+    /// parallel on rayon's pool, or one env after another on the calling thread; each env's
+    /// step is the same either way.
+    pub fn step_envs(&mut self, decisions: &[Decision], parallel: bool) -> Result<Vec<StepResult>, SimError> {
+        let step = |(slot, d): (&mut EnvSlot, &Decision)| slot.env.step(&d.action);
+        if parallel {
+            self.slots.par_iter_mut().zip(decisions.par_iter()).map(step).collect()
+        } else {
+            self.slots.iter_mut().zip(decisions).map(step).collect()
+        }
+    }
+
+    /// Takes the envs' steps ([`Self::step_envs`]): stores the transitions, accounts the
     /// steps and the finished episodes in `window`, and resets the finished envs. Returns the
     /// number of episodes that finished.
-    pub fn step(
+    pub fn record(
         &mut self,
+        results: &[StepResult],
         decisions: &[Decision],
         replay: &mut ReplayBuffer,
         window: &mut Window,
-        gamma: f64,
         behaviour: &mut Behaviour,
         rng: &mut ChaCha8Rng,
     ) -> Result<u64, TrainError> {
-        let results: Vec<_> = self
-            .slots
-            .par_iter_mut()
-            .zip(decisions.par_iter())
-            .map(|(slot, d)| slot.env.step(&d.action))
-            .collect::<Result<Vec<_>, SimError>>()?;
+        let gamma = self.gamma;
         let mut finished = Vec::new();
         for (i, ((r, d), slot)) in results.iter().zip(decisions).zip(&mut self.slots).enumerate() {
             let at = u32::try_from(slot.log.actions.len()).unwrap_or(u32::MAX);

@@ -49,6 +49,11 @@
 //! reset seed, actions and controller calls, `in_progress`), and a resume makes them again.
 //! Resuming from either kind reproduces the uninterrupted run bit for bit (tested), whatever
 //! step the stop came at.
+//!
+//! Schedule: an iteration's updates sample the replay as it was before the iteration's env
+//! step, and its transitions are stored after both. So the envs may step on a core of their
+//! own while the updates run ([`learner::ThreadGovernor::overlaps`]) or between them, with
+//! the same draws in the same order and the same run bit for bit (tested).
 
 mod clock;
 mod collector;
@@ -66,9 +71,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use tch::Device;
 use thiserror::Error;
-use vge_sim::SimError;
+use vge_sim::{SimError, StepResult};
 
-use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, bc_beta};
+use crate::behaviour::{Behaviour, BehaviourError, BehaviourStats, Decision, bc_beta};
 use crate::checkpoint::CheckpointError;
 use crate::learner::{self, Learner, LearnerConfig};
 pub use crate::policy_export::export_actor;
@@ -175,8 +180,12 @@ pub struct PhaseTimes {
     pub behaviour_s: f64,
     /// Physics: stepping the envs (in parallel), replay pushes, episode resets, logging.
     pub sim_s: f64,
-    /// Gradient updates, with minibatch sampling.
+    /// Gradient updates, with minibatch sampling; with the envs stepping beside them, the
+    /// wall time of both.
     pub update_s: f64,
+    /// Stepping the envs on a core of their own beside the updates (inside `update_s`, not
+    /// added to the total).
+    pub sim_beside_updates_s: f64,
     /// Periodic deterministic evaluations.
     pub eval_s: f64,
     /// Checkpoints (networks, optimisers, replay buffer).
@@ -197,7 +206,11 @@ impl std::fmt::Display for PhaseTimes {
         ];
         let shown: Vec<String> =
             parts.iter().map(|(name, t)| format!("{name} {t:.1} s ({:.0}%)", 100.0 * t / total)).collect();
-        write!(f, "{:.1} s: {}", self.total_s, shown.join(", "))
+        write!(f, "{:.1} s: {}", self.total_s, shown.join(", "))?;
+        if self.sim_beside_updates_s > 0.0 {
+            write!(f, "; beside the updates the envs stepped {:.1} s", self.sim_beside_updates_s)?;
+        }
+        Ok(())
     }
 }
 
@@ -218,7 +231,8 @@ pub fn run_config(dir: &Path) -> Result<Config, TrainError> {
 /// The loop is the paper's Algorithm 2: the learner proposes an action in every env, the
 /// behaviour policy follows the learner or the controller (every H steps, by a softmax over
 /// the critic's Q, until the hard stop), the transitions go to the replay buffer with the
-/// controller's action beside them for BC, and `utd` updates follow each env step.
+/// controller's action beside them for BC, and `utd` updates per env step are made on the
+/// replay as it was before the step (module docs, "Schedule").
 pub fn train(
     config: &Config,
     out_dir: &Path,
@@ -264,23 +278,16 @@ impl Trainer<'_> {
                 &mut t.rng,
             )?;
             t.lap(Phase::Behaviour);
+            let results = t.step_and_update(&decisions)?;
             let (replay, window) = (&mut t.replay, &mut t.c.window);
-            let finished = t.collector.step(
-                &decisions,
-                replay,
-                window,
-                config.sac.gamma,
-                &mut t.behaviour,
-                &mut t.rng,
-            )?;
+            let finished =
+                t.collector.record(&results, &decisions, replay, window, &mut t.behaviour, &mut t.rng)?;
             t.c.episodes += finished;
             t.c.window.add_behaviour(&stats_before, &t.behaviour.stats);
             let prev_step = t.c.step;
             t.c.step += t.collector.len() as u64;
             t.lap(Phase::Sim);
             t.threads.adapt();
-            t.update()?;
-            t.lap(Phase::Update);
             t.periodic(prev_step, progress)?;
         }
         Ok(false)
@@ -294,6 +301,38 @@ impl Trainer<'_> {
             run_folder::remove_run_files(self.folder.dir());
         }
     }
+}
+
+/// `utd` gradient updates for each of the `envs` steps of an iteration once the warm-up is
+/// over, on minibatches of `replay` with BC weight `beta` (the observation statistics fixed
+/// before the first).
+fn update(
+    config: &Config,
+    c: &mut Counters,
+    replay: &ReplayBuffer,
+    learner: &mut dyn Learner,
+    rng: &mut ChaCha8Rng,
+    envs: usize,
+    beta: f64,
+) -> Result<(), TrainError> {
+    let batch_size = config.sac.batch;
+    if c.step < config.sac.warmup || replay.len() < batch_size {
+        return Ok(());
+    }
+    if learner.updates() == 0 && config.sac.normalize_obs && config.init_from.is_none() {
+        // Once; afterwards the statistics live in the networks' var stores and come back
+        // with a checkpoint.
+        let (mean, std) = replay.obs_stats(OBS_MIN_STD);
+        learner.set_obs_normalisation(&mean, &std);
+    }
+    c.updates_due += envs as f64 * config.sac.utd;
+    while c.updates_due >= 1.0 {
+        c.updates_due -= 1.0;
+        let batch = replay.sample(batch_size, rng, (beta > 0.0).then_some(beta))?;
+        let st = learner.update(&batch);
+        c.window.add_update(&st);
+    }
+    Ok(())
 }
 
 /// Loads the networks of the run folder `source` into `learner` ([`Config::init_from`]), after
@@ -495,29 +534,40 @@ impl<'a> Trainer<'a> {
         self.clock = now;
     }
 
-    /// `utd` gradient updates per env step once the warm-up is over (the observation
-    /// statistics fixed before the first).
-    fn update(&mut self) -> Result<(), TrainError> {
-        let config = self.config;
-        let batch_size = config.sac.batch;
-        if self.c.step < config.sac.warmup || self.replay.len() < batch_size {
-            return Ok(());
-        }
-        if self.learner.updates() == 0 && config.sac.normalize_obs && config.init_from.is_none() {
-            // Once; afterwards the statistics live in the networks' var stores and come back
-            // with a checkpoint.
-            let (mean, std) = self.replay.obs_stats(OBS_MIN_STD);
-            self.learner.set_obs_normalisation(&mean, &std);
-        }
+    /// Steps the envs with `decisions` and makes this iteration's updates, which sample the
+    /// replay as it was before the step: on a core each when the governor gives the envs one
+    /// ([`learner::ThreadGovernor::overlaps`]), else one after the other. The same draws in the
+    /// same order either way, so the same run bit for bit.
+    fn step_and_update(&mut self, decisions: &[Decision]) -> Result<Vec<StepResult>, TrainError> {
         let beta = self.beta();
-        self.c.updates_due += self.collector.len() as f64 * config.sac.utd;
-        while self.c.updates_due >= 1.0 {
-            self.c.updates_due -= 1.0;
-            let batch = self.replay.sample(batch_size, &mut self.rng, (beta > 0.0).then_some(beta))?;
-            let st = self.learner.update(&batch);
-            self.c.window.add_update(&st);
+        if !self.threads.overlaps() {
+            let results = self.collector.step_envs(decisions, true)?;
+            self.lap(Phase::Sim);
+            self.update(beta)?;
+            self.lap(Phase::Update);
+            return Ok(results);
         }
-        Ok(())
+        let Self { config, collector, learner, replay, rng, c, .. } = self;
+        let envs = collector.len();
+        let (stepped, updated) = std::thread::scope(|scope| {
+            let sim = scope.spawn(|| {
+                let started = Instant::now();
+                (collector.step_envs(decisions, false), started.elapsed())
+            });
+            let updated = update(config, c, replay, learner.as_mut(), rng, envs, beta);
+            (sim.join(), updated)
+        });
+        let (results, sim_time) = stepped.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        self.times.sim_beside_updates_s += sim_time.as_secs_f64();
+        self.lap(Phase::Update);
+        updated?;
+        Ok(results?)
+    }
+
+    /// This iteration's updates ([`update`]) on the trainer's own state.
+    fn update(&mut self, beta: f64) -> Result<(), TrainError> {
+        let envs = self.collector.len();
+        update(self.config, &mut self.c, &self.replay, self.learner.as_mut(), &mut self.rng, envs, beta)
     }
 
     /// BC's weight at the current step (0 for methods without BC).
