@@ -10,6 +10,7 @@ use vge_run::config::Config;
 
 use thiserror::Error;
 
+use crate::learner::threads::Overlap;
 use crate::train::{self, PhaseTimes, TrainError};
 
 #[derive(Debug, Error)]
@@ -32,9 +33,8 @@ pub struct TrainBench {
     /// libtorch's threads followed the idle cores ([`crate::learner::ThreadGovernor`]); else
     /// they stayed at `threads`.
     pub adaptive_threads: bool,
-    /// With two cores or more, the envs stepped on one of them beside the updates
-    /// ([`crate::learner::ThreadGovernor::overlaps`]); else between them.
-    pub overlap: bool,
+    /// Where the envs stepped with two cores or more ([`Overlap`]).
+    pub overlap: Overlap,
     /// Env steps and updates in the measured window (after the warm-up).
     pub env_steps: u64,
     pub updates: u64,
@@ -153,8 +153,9 @@ pub struct BenchRun {
     pub beside_busy_core: bool,
     /// Whether libtorch's threads follow the idle cores (training's default) or stay fixed.
     pub adaptive_threads: bool,
-    /// Whether the envs may step beside the updates (training's default) or only between them.
-    pub overlap: bool,
+    /// Where the envs step with two cores or more: the faster schedule (training's default),
+    /// beside the updates, or between them.
+    pub overlap: Overlap,
 }
 
 /// Trains `config` (see [`bench_config`]) in a scratch folder through its warm-up and then
@@ -162,7 +163,7 @@ pub struct BenchRun {
 pub fn run(config: &Config, how: BenchRun) -> Result<TrainBench, BenchTrainError> {
     let BenchRun { threads, steps, beside_busy_core, adaptive_threads, overlap } = how;
     crate::learner::threads::set_adapting(adaptive_threads);
-    crate::learner::threads::set_overlapping(overlap);
+    crate::learner::threads::set_overlap(overlap);
     let config = bench_config(config, threads, steps);
     let warmup = config.sac.warmup;
     let scratch = ScratchDir::new(&format!("{threads}-{}", u8::from(beside_busy_core)));

@@ -691,16 +691,16 @@ fn check_stop_and_resume(name: &str, extra: &[&str]) {
 /// (also across a stop and resume, which the overlapping run takes).
 #[test]
 fn stepping_the_envs_beside_the_updates_trains_the_same_run() {
-    use vge_trainer::learner::threads::{set_adapting, set_overlapping};
+    use vge_trainer::learner::threads::{Overlap, set_adapting, set_overlap};
     // Two cores, fixed: the governor's choice is then the switch's alone.
     set_adapting(false);
     let config = tiny_config_with(140, &["algorithm=\"td3\"", "sac.threads=2"]);
     let never = AtomicBool::new(false);
-    set_overlapping(false);
+    set_overlap(Overlap::Never);
     let serial_dir = tempdir("serial-loop");
     let serial = train(&config, &serial_dir, false, &never, &mut |_| {}).expect("serial run");
     assert_eq!(serial.times.sim_beside_updates_s, 0.0, "{}", serial.times);
-    set_overlapping(true);
+    set_overlap(Overlap::Always);
     let beside_dir = tempdir("overlapping-loop");
     let stop = AtomicBool::new(false);
     let part = train(&config, &beside_dir, false, &stop, &mut |p| {

@@ -52,10 +52,10 @@ pub enum Bench {
     /// --beside-busy-core measures each configuration a second time beside a process that
     /// keeps one core busy (another job on a shared machine) and prints every rate as a
     /// fraction of the one-thread rate without it. --fixed-threads both measures fixed and
-    /// adapting threads. With two threads or more, one core steps the envs beside the updates
-    /// (the same run bit for bit); --overlap no keeps them between the updates, both measures
-    /// both. Rates on a loaded machine swing: compare within one run (--rounds alternates the
-    /// configurations).
+    /// adapting threads. With two threads or more the envs step on a core of their own beside
+    /// the updates or on every core between them, whichever the run timed faster (the same
+    /// run bit for bit either way); --overlap yes,no,fastest measures each schedule. Rates on a
+    /// loaded machine swing: compare within one run (--rounds alternates the configurations).
     Train {
         /// Print one JSON line per measured run instead of a table.
         #[arg(long)]
@@ -82,10 +82,11 @@ pub enum Bench {
         /// no, yes, or both (each configuration measured both ways).
         #[arg(long, default_value = "no", value_parser = ["no", "yes", "both"])]
         fixed_threads: String,
-        /// Step the envs on a core of their own beside the updates when two or more are used
-        /// (training's default; `VGE_SERIAL_LOOP=1` turns it off): yes, no, or both.
-        #[arg(long, default_value = "yes", value_parser = ["no", "yes", "both"])]
-        overlap: String,
+        /// Where the envs step when two cores or more are used, one or more of: fastest (the
+        /// schedule the run timed faster, training's default), yes (on a core of their own
+        /// beside the updates), no (on every core between the updates; `VGE_SERIAL_LOOP=1`).
+        #[arg(long, value_delimiter = ',', default_value = "fastest", value_parser = ["fastest", "yes", "no"])]
+        overlap: Vec<String>,
     },
     /// Simulator throughput: control steps per second of one world on one thread, and of N
     /// worlds stepped across all cores, at the default env rates.
@@ -351,6 +352,7 @@ mod libtorch {
     use std::path::PathBuf;
 
     use anyhow::Context;
+    use vge_trainer::learner::threads::Overlap;
 
     /// `vge bench update`.
     pub fn update(
@@ -418,7 +420,7 @@ mod libtorch {
         pub beside_busy_core: bool,
         pub rounds: usize,
         pub fixed_threads: String,
-        pub overlap: String,
+        pub overlap: Vec<String>,
     }
 
     /// `vge bench train`.
@@ -453,11 +455,15 @@ mod libtorch {
             "both" => &[false, true],
             _ => &[true],
         };
-        let overlaps: &[bool] = match overlap.as_str() {
-            "no" => &[false],
-            "both" => &[true, false],
-            _ => &[true],
-        };
+        let overlaps: Vec<Overlap> = overlap
+            .iter()
+            .map(|o| match o.as_str() {
+                "yes" => Overlap::Always,
+                "no" => Overlap::Never,
+                _ => Overlap::Fastest,
+            })
+            .collect();
+        let overlaps = overlaps.as_slice();
         if !json {
             println!(
                 "{} {} with {} ({} envs, utd {}, warm-up {}), {steps} env steps after the warm-up",
@@ -478,8 +484,8 @@ mod libtorch {
                 for &adaptive_threads in modes {
                     for &overlap in overlaps {
                         for &threads in threads {
-                            if threads == 1 && !overlap && overlaps.len() > 1 {
-                                continue; // one core never overlaps: measured once
+                            if threads == 1 && overlap != overlaps[0] {
+                                continue; // one core has one schedule: measured once
                             }
                             let how =
                                 BenchRun { threads, steps, beside_busy_core, adaptive_threads, overlap };
@@ -497,6 +503,15 @@ mod libtorch {
         Ok(())
     }
 
+    /// `--overlap`'s word for a schedule.
+    fn overlap_name(overlap: Overlap) -> &'static str {
+        match overlap {
+            Overlap::Fastest => "fastest",
+            Overlap::Always => "yes",
+            Overlap::Never => "no",
+        }
+    }
+
     fn print_train_row(json: bool, round: usize, r: &vge_trainer::bench_train::TrainBench) {
         let split = r.split();
         let total = r.phases.total_s.max(1e-9);
@@ -507,7 +522,7 @@ mod libtorch {
                 "threads": r.threads,
                 "beside_busy_core": r.beside_busy_core,
                 "adaptive_threads": r.adaptive_threads,
-                "overlap": r.overlap,
+                "overlap": overlap_name(r.overlap),
                 "env_steps": r.env_steps,
                 "updates": r.updates,
                 "wall_s": r.phases.total_s,
@@ -526,7 +541,7 @@ mod libtorch {
                 "{round:>5} {:>7} {:>6} {:>7} {:>5} {:>9.1} {:>9.1} {}",
                 r.threads,
                 if r.adaptive_threads { "yes" } else { "no" },
-                if r.overlap { "yes" } else { "no" },
+                overlap_name(r.overlap),
                 if r.beside_busy_core { "yes" } else { "no" },
                 r.steps_per_s(),
                 r.updates_per_s(),
@@ -542,10 +557,10 @@ mod libtorch {
         threads: &[i32],
         loads: &[bool],
         modes: &[bool],
-        overlaps: &[bool],
+        overlaps: &[Overlap],
     ) {
         // One thread never overlaps: its runs count for either setting.
-        let median = |t: i32, busy: bool, adapt: bool, overlap: bool| -> Option<f64> {
+        let median = |t: i32, busy: bool, adapt: bool, overlap: Overlap| -> Option<f64> {
             let mut v: Vec<f64> = results
                 .iter()
                 .filter(|r| r.threads == t && r.beside_busy_core == busy && r.adaptive_threads == adapt)
@@ -570,12 +585,11 @@ mod libtorch {
                         });
                         let load = if busy { "beside a busy core" } else { "without a busy core" };
                         let mode = if adapt { "at most" } else { "fixed at" };
-                        let envs = if t == 1 {
-                            ""
-                        } else if overlap {
-                            ", envs beside the updates"
-                        } else {
-                            ", envs between the updates"
+                        let envs = match overlap {
+                            _ if t == 1 => "",
+                            Overlap::Fastest => ", the faster schedule",
+                            Overlap::Always => ", envs beside the updates",
+                            Overlap::Never => ", envs between the updates",
                         };
                         println!("  threads {mode} {t}{envs}, {load}: {rate:.1}{ratio}");
                     }

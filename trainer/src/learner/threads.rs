@@ -11,9 +11,12 @@
 //! by [`vge_run::cpu_use`] as `vge bench cores` reads it, less this process's own CPU time)
 //! and uses the idle rest, between 1 and the configured count.
 //!
-//! With two cores or more, one of them steps the envs while the others update
-//! ([`ThreadGovernor::overlaps`]): the loop's schedule is the same either way (the updates
-//! of an iteration never see its own step), so only the speed changes.
+//! With two cores or more the envs can step on one of them while the updates run on the
+//! others, or step on all of them between the updates. Which is faster depends on the
+//! networks' width and the CPU (at 256 x 256 two-thread updates won, at 128 x 128 the overlap,
+//! docs/results/time-to-gait/), so the governor times both ([`SchedulePick`]) and keeps the
+//! faster, timing them again every [`REPICK`]. The loop's schedule makes both train the same
+//! run bit for bit (crate::train, "Schedule"), so only the speed depends on the pick.
 
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::{Duration, Instant};
@@ -27,15 +30,15 @@ use crate::cpu_time::process_cpu_s;
 pub const FIXED_THREADS_ENV: &str = "VGE_FIXED_THREADS";
 
 /// The environment variable that keeps the envs stepping on rayon's pool between the
-/// updates instead of on a core of their own beside them (`VGE_SERIAL_LOOP=1`), e.g. to
-/// measure what the overlap gains. The run's results are the same either way.
+/// updates, never on a core of their own beside them (`VGE_SERIAL_LOOP=1`). The run's
+/// results are the same either way.
 pub const SERIAL_LOOP_ENV: &str = "VGE_SERIAL_LOOP";
 
 /// Whether governors adapt: unset (0), yes (1), no (2).
 static ADAPTING: AtomicU8 = AtomicU8::new(0);
 
-/// Whether governors let the envs step beside the updates: unset (0), yes (1), no (2).
-static OVERLAPPING: AtomicU8 = AtomicU8::new(0);
+/// How governors made from now on schedule the envs ([`Overlap`] as a number; 0: unset).
+static OVERLAP: AtomicU8 = AtomicU8::new(0);
 
 /// Turns adapting on or off for the governors made from now on in this process (`vge bench
 /// train` measures both); without a call, [`FIXED_THREADS_ENV`] decides.
@@ -43,10 +46,26 @@ pub fn set_adapting(adapt: bool) {
     ADAPTING.store(if adapt { 1 } else { 2 }, Ordering::Relaxed);
 }
 
-/// Lets the governors made from now on in this process step the envs beside the updates, or
-/// not (`vge bench train` measures both); without a call, [`SERIAL_LOOP_ENV`] decides.
-pub fn set_overlapping(overlap: bool) {
-    OVERLAPPING.store(if overlap { 1 } else { 2 }, Ordering::Relaxed);
+/// Where the envs step when the loop has two cores or more.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Overlap {
+    /// Whichever of the two schedules the governor timed faster (training's default).
+    Fastest,
+    /// On a core of their own, beside the updates.
+    Always,
+    /// On every core, between the updates.
+    Never,
+}
+
+/// Sets how the governors made from now on in this process schedule the envs (`vge bench
+/// train` measures each); without a call, [`Overlap::Fastest`] unless [`SERIAL_LOOP_ENV`].
+pub fn set_overlap(overlap: Overlap) {
+    let code = match overlap {
+        Overlap::Fastest => 1,
+        Overlap::Always => 2,
+        Overlap::Never => 3,
+    };
+    OVERLAP.store(code, Ordering::Relaxed);
 }
 
 /// An environment switch that is on when set to anything but empty or "0".
@@ -62,12 +81,76 @@ fn adapting() -> bool {
     }
 }
 
-fn overlapping() -> bool {
-    match OVERLAPPING.load(Ordering::Relaxed) {
-        1 => true,
-        2 => false,
-        _ => !switched_on(SERIAL_LOOP_ENV),
+fn overlap_setting() -> Overlap {
+    match OVERLAP.load(Ordering::Relaxed) {
+        1 => Overlap::Fastest,
+        2 => Overlap::Always,
+        3 => Overlap::Never,
+        _ if switched_on(SERIAL_LOOP_ENV) => Overlap::Never,
+        _ => Overlap::Fastest,
     }
+}
+
+/// Loop iterations timed per schedule when picking: a few hundred milliseconds each at
+/// today's sizes, long against a thread switch, short against a run.
+pub const PICK_ITERATIONS: u32 = 40;
+
+/// How long a pick holds before both schedules are timed again (the machine's other work
+/// and the run's phase, warm-up or updates, change what is faster).
+pub const REPICK: Duration = Duration::from_secs(60);
+
+/// Times the two schedules one after the other, [`PICK_ITERATIONS`] iterations each (the
+/// first iteration after a switch not counted), and names the faster.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SchedulePick {
+    /// The schedule being timed: true, the envs beside the updates.
+    pub overlap: bool,
+    counted: u32,
+    skip_next: bool,
+    /// Mean seconds per iteration of the serial schedule, once timed.
+    serial_s: Option<f64>,
+    sum_s: f64,
+}
+
+impl SchedulePick {
+    /// Starts timing with the serial schedule.
+    pub fn start() -> Self {
+        Self { overlap: false, counted: 0, skip_next: true, serial_s: None, sum_s: 0.0 }
+    }
+
+    /// Counts one iteration of the schedule being timed; returns the faster schedule (true:
+    /// overlap) once both are timed.
+    pub fn record(&mut self, iteration_s: f64) -> Option<bool> {
+        if std::mem::take(&mut self.skip_next) {
+            return None;
+        }
+        self.sum_s += iteration_s;
+        self.counted += 1;
+        if self.counted < PICK_ITERATIONS {
+            return None;
+        }
+        let mean_s = self.sum_s / f64::from(self.counted);
+        match self.serial_s {
+            None => {
+                *self =
+                    Self { overlap: true, counted: 0, skip_next: true, serial_s: Some(mean_s), sum_s: 0.0 };
+                None
+            }
+            Some(serial_s) => Some(mean_s < serial_s),
+        }
+    }
+}
+
+/// Where the governor stands on the envs' schedule.
+#[derive(Debug, Clone, PartialEq)]
+enum Schedule {
+    /// Fewer than two cores, or no choice to make.
+    Fixed(bool),
+    Picking(SchedulePick),
+    Picked {
+        overlap: bool,
+        at: Instant,
+    },
 }
 
 /// How often the cores' use is measured: long enough for the kernel's 100 Hz counters to
@@ -85,14 +168,15 @@ struct Reading {
 }
 
 /// The cores the loop uses, between 1 and `max_cores`, re-measured every [`PERIOD`] against
-/// the machine's other work ([`Self::adapt`]), and libtorch's thread count that follows from
-/// them.
+/// the machine's other work ([`Self::adapt`]), where the envs step with two or more, and
+/// libtorch's thread count that follows from both.
 #[derive(Debug)]
 pub struct ThreadGovernor {
     max_cores: i32,
     cores: i32,
     adapts: bool,
-    overlap: bool,
+    setting: Overlap,
+    schedule: Schedule,
     last: Option<Reading>,
 }
 
@@ -103,15 +187,27 @@ impl ThreadGovernor {
     /// [`FIXED_THREADS_ENV`]). Sets libtorch's threads ([`Self::libtorch_threads`]).
     pub fn start() -> Self {
         let asked = tch::get_num_threads().max(1);
-        let governor = Self {
+        let mut governor = Self {
             max_cores: asked,
             cores: asked,
             adapts: asked > 1 && adapting(),
-            overlap: overlapping(),
+            setting: overlap_setting(),
+            schedule: Schedule::Fixed(false),
             last: read(),
         };
+        governor.schedule = governor.fresh_schedule();
         tch::set_num_threads(governor.libtorch_threads());
         governor
+    }
+
+    /// The schedule for the cores now: picked again from the start.
+    fn fresh_schedule(&self) -> Schedule {
+        match self.setting {
+            _ if self.cores < 2 => Schedule::Fixed(false),
+            Overlap::Always => Schedule::Fixed(true),
+            Overlap::Never => Schedule::Fixed(false),
+            Overlap::Fastest => Schedule::Picking(SchedulePick::start()),
+        }
     }
 
     /// The cores the loop uses now.
@@ -119,10 +215,12 @@ impl ThreadGovernor {
         self.cores
     }
 
-    /// Whether the envs step on a core of their own beside the updates: with two cores or
-    /// more, unless turned off ([`set_overlapping`], [`SERIAL_LOOP_ENV`]).
+    /// Whether the envs step on a core of their own beside the updates now.
     pub fn overlaps(&self) -> bool {
-        self.overlap && self.cores >= 2
+        match &self.schedule {
+            Schedule::Fixed(overlap) | Schedule::Picked { overlap, .. } => *overlap,
+            Schedule::Picking(pick) => pick.overlap,
+        }
     }
 
     /// libtorch's threads: every core the loop uses, less the envs' own when they overlap.
@@ -130,9 +228,31 @@ impl ThreadGovernor {
         if self.overlaps() { self.cores - 1 } else { self.cores }
     }
 
+    /// Takes the wall time of one loop iteration: while picking, it times the schedule in
+    /// force; a pick older than [`REPICK`] starts another.
+    pub fn iteration_took(&mut self, iteration_s: f64) {
+        let before = self.overlaps();
+        match &mut self.schedule {
+            Schedule::Fixed(_) => return,
+            Schedule::Picking(pick) => {
+                if let Some(overlap) = pick.record(iteration_s) {
+                    self.schedule = Schedule::Picked { overlap, at: Instant::now() };
+                }
+            }
+            Schedule::Picked { at, .. } => {
+                if at.elapsed() >= REPICK {
+                    self.schedule = Schedule::Picking(SchedulePick::start());
+                }
+            }
+        }
+        if self.overlaps() != before {
+            tch::set_num_threads(self.libtorch_threads());
+        }
+    }
+
     /// Measures and sets the cores (and libtorch's threads) when a [`PERIOD`] has passed since
     /// the last measurement (else a clock read); returns the new count of cores when it
-    /// changed.
+    /// changed. A change of cores picks the envs' schedule again.
     pub fn adapt(&mut self) -> Option<i32> {
         if !self.adapts {
             return None;
@@ -149,6 +269,7 @@ impl ThreadGovernor {
             return None;
         }
         self.cores = fit;
+        self.schedule = self.fresh_schedule();
         tch::set_num_threads(self.libtorch_threads());
         Some(fit)
     }
@@ -245,5 +366,30 @@ mod tests {
         assert_eq!(threads_that_fit(&before, &reading(t1, 1400, 5400, 10.0), 2), Some(1));
         // Counters that did not advance say nothing.
         assert_eq!(threads_that_fit(&before, &reading(t1, 1000, 5000, 10.0), 2), None);
+    }
+
+    #[test]
+    fn the_pick_times_serial_then_overlap_and_names_the_faster() {
+        let mut pick = SchedulePick::start();
+        assert!(!pick.overlap, "timing starts with the serial schedule");
+        // The first iteration after a switch is not counted: a slow one changes nothing.
+        assert_eq!(pick.record(9.0), None);
+        for _ in 0..PICK_ITERATIONS - 1 {
+            assert_eq!(pick.record(0.020), None);
+        }
+        assert_eq!(pick.record(0.020), None, "serial timed, overlap next");
+        assert!(pick.overlap);
+        assert_eq!(pick.record(9.0), None);
+        for _ in 0..PICK_ITERATIONS - 1 {
+            assert_eq!(pick.record(0.015), None);
+        }
+        assert_eq!(pick.record(0.015), Some(true));
+        // The other way round: serial is faster.
+        let mut pick = SchedulePick::start();
+        let picked: Vec<Option<bool>> = (0..2 * (PICK_ITERATIONS + 1))
+            .map(|k| pick.record(if k <= PICK_ITERATIONS { 0.010 } else { 0.012 }))
+            .collect();
+        assert_eq!(picked.last(), Some(&Some(false)));
+        assert!(picked[..picked.len() - 1].iter().all(Option::is_none));
     }
 }

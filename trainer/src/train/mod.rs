@@ -265,6 +265,7 @@ impl Trainer<'_> {
             if stop.load(Ordering::SeqCst) {
                 return Ok(true);
             }
+            let iteration = Instant::now();
             t.collector.set_progress(t.c.step);
             let proposals =
                 t.collector.learner_actions(t.learner.as_ref(), t.c.step, random_steps, &mut t.rng)?;
@@ -287,6 +288,7 @@ impl Trainer<'_> {
             let prev_step = t.c.step;
             t.c.step += t.collector.len() as u64;
             t.lap(Phase::Sim);
+            t.threads.iteration_took(iteration.elapsed().as_secs_f64());
             t.threads.adapt();
             t.periodic(prev_step, progress)?;
         }
