@@ -228,8 +228,9 @@ impl ThreadGovernor {
         if self.overlaps() { self.cores - 1 } else { self.cores }
     }
 
-    /// Takes the wall time of one loop iteration: while picking, it times the schedule in
-    /// force; a pick older than [`REPICK`] starts another.
+    /// Takes the wall time of one loop iteration with updates (the loop leaves out its
+    /// warm-up): while picking, it times the schedule in force; a pick older than [`REPICK`]
+    /// starts another.
     pub fn iteration_took(&mut self, iteration_s: f64) {
         let before = self.overlaps();
         match &mut self.schedule {

@@ -288,7 +288,11 @@ impl Trainer<'_> {
             let prev_step = t.c.step;
             t.c.step += t.collector.len() as u64;
             t.lap(Phase::Sim);
-            t.threads.iteration_took(iteration.elapsed().as_secs_f64());
+            // Timed only once updates run: in the warm-up the envs alone are timed, and they
+            // step faster between no updates than beside them.
+            if t.learner.updates() > 0 {
+                t.threads.iteration_took(iteration.elapsed().as_secs_f64());
+            }
             t.threads.adapt();
             t.periodic(prev_step, progress)?;
         }
