@@ -95,7 +95,9 @@ pub struct SacSection {
     pub utd: f64,
     /// Transitions collected with uniform random learner actions before updates start.
     pub warmup: u64,
-    /// libtorch intra-op threads (0: leave libtorch's default).
+    /// The most cores the training loop uses (0: libtorch's default thread count): libtorch's
+    /// intra-op threads, and with two or more possibly one core stepping the envs beside the
+    /// updates (`vge_trainer::learner::ThreadGovernor`).
     pub threads: i32,
     /// Normalise observations by the mean and std of the warm-up data (fixed after that,
     /// saved with the networks and exported in the policy file).
