@@ -546,6 +546,7 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     let out = text(&shown.stdout);
     assert!(out.contains("success rate     0.850 (stored: 0.125)"), "{out}");
     assert!(out.contains("  fingertip slip   ") && out.contains(" m per rad turned"), "{out}");
+    assert!(out.contains("about an axis tilted ") && out.contains(" deg from z"), "{out}");
     let written = vge(&["eval", "--write", "--run"], std::slice::from_ref(&arg));
     assert!(written.status.success(), "{}", text(&written.stderr));
     let now: serde_json::Value =
@@ -568,6 +569,34 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     let neither = vge(&["eval"], &[]);
     assert!(!neither.status.success());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The tilt of the axis a policy turns the object about tells an upright turn from a tumble
+/// that the success test counts only in its z part: the shipped vge15 gait turns the cube
+/// about z, the shipped Allegro policy tumbles it about an axis far from vertical.
+#[test]
+fn eval_reports_how_far_the_turning_axis_leans_from_z() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let tilt_deg = |policy: &str| -> f64 {
+        let path = root.join("policies").join(policy).display().to_string();
+        let out = vge(&["eval", "--episodes", "2", "--json", "--policy"], &[path]);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let line = text(&out.stdout);
+        let doc: serde_json::Value =
+            serde_json::from_str(line.lines().next().expect("a line")).expect("json");
+        let net =
+            doc["per_episode"][0]["net_rotation_rad"].as_array().expect("the net rotation vector").clone();
+        let z = net[2].as_f64().expect("z");
+        assert!(
+            (z - doc["per_episode"][0]["rotation_rad"].as_f64().expect("rotation")).abs() < 1e-6,
+            "{doc}"
+        );
+        doc["mean_rotation_axis_tilt_rad"].as_f64().expect("the tilt").to_degrees()
+    };
+    let upright = tilt_deg("cube.vgep");
+    let tumbling = tilt_deg("allegro-cube.vgep");
+    assert!(upright < 20.0, "the vge15 gait turns the cube about an axis {upright} deg from z");
+    assert!(tumbling > 45.0, "the Allegro policy turns the cube about an axis {tumbling} deg from z");
 }
 
 #[test]

@@ -130,6 +130,7 @@ impl EnvCore {
         let obs = self.observer.step(&r.obs);
         let info = PyDict::new(py);
         info.set_item("object_rotation_z_rad", r.info.object_rotation_z_rad)?;
+        info.set_item("object_rotation_rad", r.info.object_rotation_rad)?;
         info.set_item("object_angvel_z_rad_per_s", r.info.object_angvel_z_rad_per_s)?;
         info.set_item("object_height_m", r.info.object_height_m)?;
         info.set_item("dropped", r.info.dropped)?;

@@ -71,6 +71,11 @@ pub struct EvalReport {
     /// object while touching it; with the contact switches it tells a gait from a spin under
     /// fingertips that never let go.
     pub mean_tip_slip_m: f64,
+    /// Mean tilt of the axis the object turned about overall, from world z (rad, 0 to π/2;
+    /// [`EpisodeOutcome::rotation_axis_tilt_rad`]): near 0 for a turn in an upright grasp, large
+    /// for an object tumbling about a tilted axis, whose turning the success test counts only
+    /// in its z part.
+    pub mean_rotation_axis_tilt_rad: f64,
     pub mean_length: f64,
     /// Every episode, in order.
     pub per_episode: Vec<EpisodeOutcome>,
@@ -205,6 +210,7 @@ pub fn summarise(outcomes: &[EpisodeOutcome]) -> EvalReport {
         mean_contacts: mean(&|o| o.mean_contacts),
         mean_contact_switches: mean(&|o| f64::from(o.contact_switches)),
         mean_tip_slip_m: mean(&|o| o.tip_slip_m),
+        mean_rotation_axis_tilt_rad: mean(&EpisodeOutcome::rotation_axis_tilt_rad),
         mean_length: mean(&|o| o.length as f64),
         per_episode: outcomes.to_vec(),
     }

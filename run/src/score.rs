@@ -348,6 +348,7 @@ pub fn score_run(
             mean_rotation_rad: report.mean_rotation_rad,
             mean_contact_switches: report.mean_contact_switches,
             mean_tip_slip_m: Some(report.mean_tip_slip_m),
+            mean_rotation_axis_tilt_rad: Some(report.mean_rotation_axis_tilt_rad),
             per_object: (per_object.len() > 1).then_some(PerObjectFigures(per_object)),
         });
     }
@@ -386,6 +387,9 @@ fn mean_of_snapshots(snapshots: Vec<PolicyScore>) -> SnapshotsScore {
         mean_rotation_rad: mean(|s| s.mean_rotation_rad),
         mean_contact_switches: mean(|s| s.mean_contact_switches),
         mean_tip_slip_m: mean_where_present(snapshots.iter().map(|s| s.mean_tip_slip_m)),
+        mean_rotation_axis_tilt_rad: mean_where_present(
+            snapshots.iter().map(|s| s.mean_rotation_axis_tilt_rad),
+        ),
         snapshots,
     }
 }

@@ -17,6 +17,26 @@ pub fn rotation_about_z_rad(before: &UnitQuaternion<f32>, after: &UnitQuaternion
     (after * before.inverse()).scaled_axis().z
 }
 
+/// The world-frame rotation vector (rad) from orientation `before` to `after`: the axis of
+/// `after * before⁻¹` scaled by its angle; its z component is [`rotation_about_z_rad`]. Summed
+/// over an episode, wobbles cancel and what remains points along the axis the object turned
+/// about overall ([`rotation_axis_tilt_rad`]).
+#[must_use]
+pub fn rotation_vector_rad(before: &UnitQuaternion<f32>, after: &UnitQuaternion<f32>) -> [f32; 3] {
+    let v = (after * before.inverse()).scaled_axis();
+    [v.x, v.y, v.z]
+}
+
+/// How far the axis of a (summed) rotation vector leans from world z (rad, 0 to π/2, either
+/// sense of turning): 0 for an object turned upright about z, π/2 for one rolled about a
+/// horizontal axis; 0 for no rotation. A tumble about a tilted axis passes the success test
+/// on the z part of its turning alone; this says how tilted it was.
+#[must_use]
+pub fn rotation_axis_tilt_rad(rotation_vector_rad: [f64; 3]) -> f64 {
+    let [x, y, z] = rotation_vector_rad;
+    x.hypot(y).atan2(z.abs())
+}
+
 #[cfg(test)]
 mod tests {
     use nalgebra::{UnitQuaternion, Vector3};
@@ -60,5 +80,30 @@ mod tests {
         assert_eq!(wrap_angle_rad(0.25), 0.25);
         assert_eq!(wrap_angle_rad(PI), PI);
         assert_eq!(wrap_angle_rad(-PI), PI);
+    }
+
+    #[test]
+    fn a_turn_about_a_tilted_axis_reads_its_tilt_and_a_wobble_cancels() {
+        use super::{rotation_axis_tilt_rad, rotation_vector_rad};
+        let tilt_rad = 60f32.to_radians();
+        let axis = nalgebra::Unit::new_normalize(Vector3::new(0.0, tilt_rad.sin(), -tilt_rad.cos()));
+        let mut orientation = UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3);
+        let mut sum = [0.0f64; 3];
+        let mut add = |before: &UnitQuaternion<f32>, after: &UnitQuaternion<f32>| {
+            let v = rotation_vector_rad(before, after);
+            assert!((v[2] - rotation_about_z_rad(before, after)).abs() < 1e-7);
+            sum.iter_mut().zip(v).for_each(|(s, v)| *s += f64::from(v));
+        };
+        for k in 0..40 {
+            // A turn about the tilted axis, with a wobble about x back and forth.
+            let wobble =
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), if k % 2 == 0 { 0.2 } else { -0.2 });
+            let after = wobble * UnitQuaternion::from_axis_angle(&axis, 0.05) * orientation;
+            add(&orientation, &after);
+            orientation = after;
+        }
+        assert!((rotation_axis_tilt_rad(sum) - f64::from(tilt_rad)).abs() < 0.03, "{sum:?}");
+        assert_eq!(rotation_axis_tilt_rad([0.0, 0.0, -3.0]), 0.0, "either sense about z is upright");
+        assert_eq!(rotation_axis_tilt_rad([0.0; 3]), 0.0);
     }
 }

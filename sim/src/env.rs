@@ -33,8 +33,8 @@ use rand_chacha::ChaCha8Rng;
 use vge_hand::Hand;
 
 use crate::action::DEFAULT_MAX_ACTION_RAD;
-use crate::angle::rotation_about_z_rad;
-use crate::episode::{EpisodeOutcome, EpisodeTracker};
+use crate::angle::{rotation_about_z_rad, rotation_vector_rad};
+use crate::episode::{EpisodeOutcome, EpisodeTracker, StepRotation};
 use crate::error::SimError;
 use crate::objects::ObjectConfig;
 use crate::observation::{FingertipReading, ObservationLayout, ObservationSet, build_observation};
@@ -429,6 +429,9 @@ pub struct StepInfo {
     pub object_angvel_z_rad_per_s: f32,
     /// Object rotation about world z during this step (rad; [`crate::rotation_about_z_rad`]).
     pub object_rotation_z_rad: f32,
+    /// The object's rotation during this step as a world-frame rotation vector (rad;
+    /// [`crate::angle::rotation_vector_rad`]; its z component is `object_rotation_z_rad`).
+    pub object_rotation_rad: [f32; 3],
     /// Fingertip slip during this step (m): how far the contact points of the fingertips
     /// touching before and after it moved over the object, in the object's frame
     /// ([`crate::slip`]).
@@ -439,6 +442,14 @@ pub struct StepInfo {
     pub dropped: bool,
     /// Control steps since reset.
     pub step: usize,
+}
+
+impl StepInfo {
+    /// The object's rotation during this step, as an episode tracker records it.
+    #[must_use]
+    pub fn rotation(&self) -> StepRotation {
+        StepRotation { about_z_rad: self.object_rotation_z_rad, vector_rad: self.object_rotation_rad }
+    }
 }
 
 /// The Gymnasium step tuple.
@@ -775,7 +786,9 @@ impl Env {
         for _ in 0..n_physics {
             world.step();
         }
-        let rotation_z_rad = rotation_about_z_rad(&orientation_before, &world.object_state().pose.rotation);
+        let orientation_after = world.object_state().pose.rotation;
+        let rotation_z_rad = rotation_about_z_rad(&orientation_before, &orientation_after);
+        let rotation_rad = rotation_vector_rad(&orientation_before, &orientation_after);
         let mean_angvel_z = rotation_z_rad / cfg.control_dt_s();
         if !world.is_finite() {
             return Err(SimError::NonFiniteState(format!("at control step {}", self.steps)));
@@ -806,6 +819,7 @@ impl Env {
             tip_contacts: state.tip_contacts(),
             object_angvel_z_rad_per_s: wz,
             object_rotation_z_rad: rotation_z_rad,
+            object_rotation_rad: rotation_rad,
             tip_slip_m,
             object_height_m: height,
             dropped,
@@ -841,7 +855,7 @@ impl Env {
         loop {
             let action = act(self, &obs)?;
             let r = self.step(&action)?;
-            tracker.record(r.reward, r.info.object_rotation_z_rad, &r.info.tip_contacts, r.info.tip_slip_m);
+            tracker.record(r.reward, r.info.rotation(), &r.info.tip_contacts, r.info.tip_slip_m);
             on_step(self, &r, &tracker);
             if r.terminated || r.truncated {
                 return Ok(tracker.outcome(r.terminated));

@@ -18,6 +18,10 @@ pub struct EpisodeOutcome {
     /// Object rotation about world z over the episode (rad, unwrapped; positive = the
     /// rewarded sense).
     pub rotation_rad: f64,
+    /// The object's net rotation (rad, world frame): each step's rotation vector, summed
+    /// ([`crate::angle::rotation_vector_rad`]); its z component is `rotation_rad`, and its
+    /// direction the axis the object turned about overall.
+    pub net_rotation_rad: [f64; 3],
     /// The env ended it early (a drop), as opposed to the time limit.
     pub terminated: bool,
     /// Mean number of fingertips touching the object after each step.
@@ -33,6 +37,13 @@ pub struct EpisodeOutcome {
 }
 
 impl EpisodeOutcome {
+    /// How far the axis the object turned about overall leans from world z (rad, 0 to π/2;
+    /// [`crate::angle::rotation_axis_tilt_rad`] of `net_rotation_rad`).
+    #[must_use]
+    pub fn rotation_axis_tilt_rad(&self) -> f64 {
+        crate::angle::rotation_axis_tilt_rad(self.net_rotation_rad)
+    }
+
     /// The success test: a full turn (2π) about z without a drop.
     #[must_use]
     pub fn success(&self) -> bool {
@@ -40,11 +51,21 @@ impl EpisodeOutcome {
     }
 }
 
+/// The object's rotation during one step: about world z ([`crate::rotation_about_z_rad`]:
+/// what the reward and the success test count) and as a world-frame rotation vector
+/// ([`crate::angle::rotation_vector_rad`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepRotation {
+    pub about_z_rad: f32,
+    pub vector_rad: [f32; 3],
+}
+
 /// Accumulates one episode step by step.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EpisodeTracker {
     episode_return: f64,
     rotation_rad: f64,
+    net_rotation_rad: [f64; 3],
     contact_sum: u64,
     length: usize,
     switches: ContactSwitches,
@@ -58,12 +79,15 @@ impl EpisodeTracker {
         Self { switches: ContactSwitches::new(touching), ..Self::default() }
     }
 
-    /// Records one step: its reward, the object's rotation about world z during it, the
-    /// fingertips touching after it and their slip over the object during it
+    /// Records one step: its reward, the object's rotation during it (about world z, and about
+    /// any axis), the fingertips touching after it and their slip over the object during it
     /// ([`crate::slip::step_slip_m`]). Returns the contact switches completed on this step.
-    pub fn record(&mut self, reward: f32, rotation_z_rad: f32, touching: &[bool], tip_slip_m: f32) -> u32 {
+    pub fn record(&mut self, reward: f32, rotation: StepRotation, touching: &[bool], tip_slip_m: f32) -> u32 {
         self.episode_return += f64::from(reward);
-        self.rotation_rad += f64::from(rotation_z_rad);
+        self.rotation_rad += f64::from(rotation.about_z_rad);
+        for (sum, v) in self.net_rotation_rad.iter_mut().zip(rotation.vector_rad) {
+            *sum += f64::from(v);
+        }
         self.tip_slip_m += f64::from(tip_slip_m);
         self.contact_sum += touching.iter().filter(|&&t| t).count() as u64;
         self.length += 1;
@@ -88,6 +112,7 @@ impl EpisodeTracker {
         EpisodeOutcome {
             episode_return: self.episode_return,
             rotation_rad: self.rotation_rad,
+            net_rotation_rad: self.net_rotation_rad,
             terminated,
             mean_contacts: self.contact_sum as f64 / self.length.max(1) as f64,
             contact_switches: self.switches.count,
@@ -106,7 +131,7 @@ mod tests {
         let mut t = EpisodeTracker::start(&[true; 5]);
         // 0.3 rad per step, 25 steps: 7.5 rad, more than a turn.
         for _ in 0..25 {
-            t.record(1.0, 0.3, &[true; 5], 0.001);
+            t.record(1.0, StepRotation { about_z_rad: 0.3, vector_rad: [0.3, 0.0, 0.3] }, &[true; 5], 0.001);
         }
         let o = t.outcome(false);
         assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
@@ -114,6 +139,8 @@ mod tests {
         assert!(!t.outcome(true).success(), "a drop never succeeds");
         assert_eq!((o.length, o.episode_return, o.mean_contacts), (25, 25.0, 5.0));
         assert!((o.tip_slip_m - 0.025).abs() < 1e-6, "slip adds up: {o:?}");
+        assert!((o.net_rotation_rad[0] - 7.5).abs() < 1e-4, "the rotation vector adds up: {o:?}");
+        assert!((o.rotation_axis_tilt_rad() - std::f64::consts::FRAC_PI_4).abs() < 1e-6, "{o:?}");
     }
 
     #[test]
@@ -123,9 +150,9 @@ mod tests {
         let detached = [false, true, true, true, false];
         let mut completed = 0;
         for _ in 0..crate::gait::MIN_DETACH_STEPS {
-            completed += t.record(0.0, 0.0, &detached, 0.0);
+            completed += t.record(0.0, StepRotation::default(), &detached, 0.0);
         }
-        completed += t.record(0.0, 0.0, &touching, 0.0);
+        completed += t.record(0.0, StepRotation::default(), &touching, 0.0);
         let o = t.outcome(false);
         assert_eq!((completed, o.contact_switches), (1, 1));
         assert!((o.mean_contacts - (3.0 * 3.0 + 4.0) / 4.0).abs() < 1e-12);

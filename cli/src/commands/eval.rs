@@ -285,9 +285,10 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
         stored(r.stored_success_rate, "")
     );
     println!(
-        "  rotation         {:.2} rad per episode (stored: {})",
+        "  rotation         {:.2} rad per episode (stored: {}), about an axis tilted {:.0} deg from z",
         r.report.mean_rotation_rad,
-        stored(r.stored_rotation_rad, " rad")
+        stored(r.stored_rotation_rad, " rad"),
+        r.report.mean_rotation_axis_tilt_rad.to_degrees()
     );
     println!(
         "  drops {:.2}, contact switches {:.1} per episode, learned: {}",
@@ -346,7 +347,11 @@ fn slip_per_rad(slip_m: f64, rotation_rad: f64) -> String {
 fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
     println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
     println!("  mean return        {:.3}", report.mean_return);
-    println!("  mean rotation      {:.3} rad about z", report.mean_rotation_rad);
+    println!(
+        "  mean rotation      {:.3} rad about z, about an axis tilted {:.0} deg from z",
+        report.mean_rotation_rad,
+        report.mean_rotation_axis_tilt_rad.to_degrees()
+    );
     println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
     println!("  dropped            {:.2} of episodes", report.drop_rate);
     println!(

@@ -24,6 +24,10 @@ pub struct PolicyScore {
     /// versions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mean_tip_slip_m: Option<f64>,
+    /// Mean tilt of the axis the object turned about overall, from world z (rad,
+    /// `EvalReport::mean_rotation_axis_tilt_rad`); absent in scores of older vge versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_rotation_axis_tilt_rad: Option<f64>,
     /// For a run on several objects: each object's figures (the ones above pool them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub per_object: Option<PerObjectFigures>,
@@ -40,6 +44,9 @@ pub struct SnapshotsScore {
     /// The mean over the snapshots that have one (absent in scores of older vge versions).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mean_tip_slip_m: Option<f64>,
+    /// The mean over the snapshots that have one (absent in scores of older vge versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean_rotation_axis_tilt_rad: Option<f64>,
     pub snapshots: Vec<PolicyScore>,
 }
 
