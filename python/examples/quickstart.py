@@ -14,6 +14,8 @@ print(policy.metadata["provenance"])
 turned_rad = 0.0
 while True:
     obs, reward, terminated, truncated, info = env.step(policy(obs))
+    # The step's turn about z (what the reward and the success test count); the whole
+    # rotation, as a world-frame rotation vector, is info["object_rotation_rad"].
     turned_rad += info["object_rotation_z_rad"]
     if terminated or truncated:
         break
