@@ -224,7 +224,7 @@ impl SimHand {
         let result = self.env.step(&action)?;
         self.tracker.record(
             result.reward,
-            result.info.rotation(),
+            result.info.object_rotation_rad,
             &result.info.tip_contacts,
             result.info.tip_slip_m,
         );

@@ -108,7 +108,7 @@ pub fn run<P: PolicyRunner>(
         let result = env.step(&change)?;
         tracker.record(
             result.reward,
-            result.info.rotation(),
+            result.info.object_rotation_rad,
             &result.info.tip_contacts,
             result.info.tip_slip_m,
         );

@@ -33,8 +33,8 @@ use rand_chacha::ChaCha8Rng;
 use vge_hand::Hand;
 
 use crate::action::DEFAULT_MAX_ACTION_RAD;
-use crate::angle::{rotation_about_z_rad, rotation_vector_rad};
-use crate::episode::{EpisodeOutcome, EpisodeTracker, StepRotation};
+use crate::angle::rotation_vector_rad;
+use crate::episode::{EpisodeOutcome, EpisodeTracker};
 use crate::error::SimError;
 use crate::objects::ObjectConfig;
 use crate::observation::{FingertipReading, ObservationLayout, ObservationSet, build_observation};
@@ -444,14 +444,6 @@ pub struct StepInfo {
     pub step: usize,
 }
 
-impl StepInfo {
-    /// The object's rotation during this step, as an episode tracker records it.
-    #[must_use]
-    pub fn rotation(&self) -> StepRotation {
-        StepRotation { about_z_rad: self.object_rotation_z_rad, vector_rad: self.object_rotation_rad }
-    }
-}
-
 /// The Gymnasium step tuple.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepResult {
@@ -786,9 +778,9 @@ impl Env {
         for _ in 0..n_physics {
             world.step();
         }
-        let orientation_after = world.object_state().pose.rotation;
-        let rotation_z_rad = rotation_about_z_rad(&orientation_before, &orientation_after);
-        let rotation_rad = rotation_vector_rad(&orientation_before, &orientation_after);
+        let rotation_rad = rotation_vector_rad(&orientation_before, &world.object_state().pose.rotation);
+        // The z component: `crate::rotation_about_z_rad`, what the reward pays.
+        let rotation_z_rad = rotation_rad[2];
         let mean_angvel_z = rotation_z_rad / cfg.control_dt_s();
         if !world.is_finite() {
             return Err(SimError::NonFiniteState(format!("at control step {}", self.steps)));
@@ -855,7 +847,7 @@ impl Env {
         loop {
             let action = act(self, &obs)?;
             let r = self.step(&action)?;
-            tracker.record(r.reward, r.info.rotation(), &r.info.tip_contacts, r.info.tip_slip_m);
+            tracker.record(r.reward, r.info.object_rotation_rad, &r.info.tip_contacts, r.info.tip_slip_m);
             on_step(self, &r, &tracker);
             if r.terminated || r.truncated {
                 return Ok(tracker.outcome(r.terminated));

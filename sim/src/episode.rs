@@ -51,20 +51,11 @@ impl EpisodeOutcome {
     }
 }
 
-/// The object's rotation during one step: about world z ([`crate::rotation_about_z_rad`]:
-/// what the reward and the success test count) and as a world-frame rotation vector
-/// ([`crate::angle::rotation_vector_rad`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct StepRotation {
-    pub about_z_rad: f32,
-    pub vector_rad: [f32; 3],
-}
-
 /// Accumulates one episode step by step.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EpisodeTracker {
     episode_return: f64,
-    rotation_rad: f64,
+    /// Each step's rotation vector, summed: its z component is the rotation about z.
     net_rotation_rad: [f64; 3],
     contact_sum: u64,
     length: usize,
@@ -79,13 +70,14 @@ impl EpisodeTracker {
         Self { switches: ContactSwitches::new(touching), ..Self::default() }
     }
 
-    /// Records one step: its reward, the object's rotation during it (about world z, and about
-    /// any axis), the fingertips touching after it and their slip over the object during it
-    /// ([`crate::slip::step_slip_m`]). Returns the contact switches completed on this step.
-    pub fn record(&mut self, reward: f32, rotation: StepRotation, touching: &[bool], tip_slip_m: f32) -> u32 {
+    /// Records one step: its reward, the object's rotation during it as a world-frame rotation
+    /// vector ([`crate::angle::rotation_vector_rad`]; its z component is the rotation about z
+    /// the success test counts), the fingertips touching after it and their slip over the
+    /// object during it ([`crate::slip::step_slip_m`]). Returns the contact switches completed
+    /// on this step.
+    pub fn record(&mut self, reward: f32, rotation_rad: [f32; 3], touching: &[bool], tip_slip_m: f32) -> u32 {
         self.episode_return += f64::from(reward);
-        self.rotation_rad += f64::from(rotation.about_z_rad);
-        for (sum, v) in self.net_rotation_rad.iter_mut().zip(rotation.vector_rad) {
+        for (sum, v) in self.net_rotation_rad.iter_mut().zip(rotation_rad) {
             *sum += f64::from(v);
         }
         self.tip_slip_m += f64::from(tip_slip_m);
@@ -97,7 +89,7 @@ impl EpisodeTracker {
     /// Object rotation about z so far (rad, unwrapped).
     #[must_use]
     pub fn rotation_rad(&self) -> f64 {
-        self.rotation_rad
+        self.net_rotation_rad[2]
     }
 
     /// Steps recorded so far.
@@ -111,7 +103,7 @@ impl EpisodeTracker {
     pub fn outcome(&self, terminated: bool) -> EpisodeOutcome {
         EpisodeOutcome {
             episode_return: self.episode_return,
-            rotation_rad: self.rotation_rad,
+            rotation_rad: self.net_rotation_rad[2],
             net_rotation_rad: self.net_rotation_rad,
             terminated,
             mean_contacts: self.contact_sum as f64 / self.length.max(1) as f64,
@@ -131,7 +123,7 @@ mod tests {
         let mut t = EpisodeTracker::start(&[true; 5]);
         // 0.3 rad per step, 25 steps: 7.5 rad, more than a turn.
         for _ in 0..25 {
-            t.record(1.0, StepRotation { about_z_rad: 0.3, vector_rad: [0.3, 0.0, 0.3] }, &[true; 5], 0.001);
+            t.record(1.0, [0.3, 0.0, 0.3], &[true; 5], 0.001);
         }
         let o = t.outcome(false);
         assert!((o.rotation_rad - 7.5).abs() < 1e-4, "{o:?}");
@@ -150,9 +142,9 @@ mod tests {
         let detached = [false, true, true, true, false];
         let mut completed = 0;
         for _ in 0..crate::gait::MIN_DETACH_STEPS {
-            completed += t.record(0.0, StepRotation::default(), &detached, 0.0);
+            completed += t.record(0.0, [0.0; 3], &detached, 0.0);
         }
-        completed += t.record(0.0, StepRotation::default(), &touching, 0.0);
+        completed += t.record(0.0, [0.0; 3], &touching, 0.0);
         let o = t.outcome(false);
         assert_eq!((completed, o.contact_switches), (1, 1));
         assert!((o.mean_contacts - (3.0 * 3.0 + 4.0) / 4.0).abs() < 1e-12);

@@ -55,7 +55,7 @@ pub use env::{
 };
 #[cfg(feature = "physics")]
 pub use env_keys::EnvSection;
-pub use episode::{EpisodeOutcome, EpisodeTracker, StepRotation};
+pub use episode::{EpisodeOutcome, EpisodeTracker};
 pub use error::SimError;
 #[cfg(feature = "physics")]
 pub use objects::{ObjectConfig, ObjectShape};

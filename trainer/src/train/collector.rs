@@ -354,7 +354,7 @@ impl Collector {
             let episode = &mut slot.episode;
             window.switches += u64::from(episode.tracker.record(
                 r.reward,
-                r.info.rotation(),
+                r.info.object_rotation_rad,
                 &r.info.tip_contacts,
                 r.info.tip_slip_m,
             ));
@@ -508,7 +508,12 @@ fn replay(
             return Err(bad(format!("step {k} out of order")));
         }
         let r = slot.env.step(action)?;
-        slot.episode.tracker.record(r.reward, r.info.rotation(), &r.info.tip_contacts, r.info.tip_slip_m);
+        slot.episode.tracker.record(
+            r.reward,
+            r.info.object_rotation_rad,
+            &r.info.tip_contacts,
+            r.info.tip_slip_m,
+        );
         slot.episode.rewards.push(r.reward);
         slot.actor_obs = slot.observer.step(&r.obs);
         slot.obs = r.obs;
