@@ -36,51 +36,29 @@ fn bench_update_prints_one_json_line_per_learner() {
 
 #[test]
 fn bench_train_measures_the_envs_stepping_beside_and_between_the_updates() {
-    let out = Command::new(env!("CARGO_BIN_EXE_vge"))
-        .args([
-            "bench",
-            "train",
-            "--json",
-            "--threads",
-            "1,2",
-            "--overlap",
-            "yes,no",
-            "--fixed-threads",
-            "yes",
-        ])
-        .args([
-            "--steps",
-            "48",
-            "--set",
-            "sac.warmup=64",
-            "--set",
-            "sac.hidden=[32,32]",
-            "--set",
-            "sac.batch=32",
-        ])
-        .output()
-        .expect("vge runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let text = String::from_utf8_lossy(&out.stdout);
+    let out = vge(
+        &["bench", "train", "--json", "--threads", "1,2", "--overlap", "yes,no", "--fixed-threads", "yes"],
+        &["--steps", "48", "--set", "sac.warmup=64", "--set", "sac.hidden=[32,32]", "--set", "sac.batch=32"]
+            .map(String::from),
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
     let rows: Vec<serde_json::Value> =
-        text.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"))).collect();
+        stdout.lines().map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}"))).collect();
     // One thread never overlaps, so it is measured once; two threads both ways.
     let runs: Vec<(i64, &str)> = rows
         .iter()
         .map(|r| (r["threads"].as_i64().expect("threads"), r["overlap"].as_str().expect("overlap")))
         .collect();
-    assert_eq!(runs, [(1, "yes"), (2, "yes"), (2, "no")], "{text}");
+    assert_eq!(runs, [(1, "yes"), (2, "yes"), (2, "no")], "{stdout}");
     for (row, (threads, overlap)) in rows.iter().zip(runs) {
         assert!(row["steps_per_s"].as_f64().expect("steps_per_s") > 0.0, "{row}");
         let beside_s = row["sim_beside_updates_s"].as_f64().expect("sim_beside_updates_s");
         assert_eq!(beside_s > 0.0, threads == 2 && overlap == "yes", "{row}");
     }
-    let bad = Command::new(env!("CARGO_BIN_EXE_vge"))
-        .args(["bench", "train", "--overlap", "sometimes"])
-        .output()
-        .expect("vge runs");
+    let bad = vge(&["bench", "train", "--overlap", "sometimes"], &[]);
     assert!(!bad.status.success());
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("sometimes"));
+    assert!(text(&bad.stderr).contains("sometimes"));
 }
 
 #[test]

@@ -455,14 +455,15 @@ mod libtorch {
             "both" => &[false, true],
             _ => &[true],
         };
-        let overlaps: Vec<Overlap> = overlap
+        let overlaps = overlap
             .iter()
-            .map(|o| match o.as_str() {
-                "yes" => Overlap::Always,
-                "no" => Overlap::Never,
-                _ => Overlap::Fastest,
+            .map(|word| {
+                [Overlap::Fastest, Overlap::Always, Overlap::Never]
+                    .into_iter()
+                    .find(|&o| overlap_name(o) == word)
+                    .with_context(|| format!("--overlap {word}: give fastest, yes or no"))
             })
-            .collect();
+            .collect::<anyhow::Result<Vec<Overlap>>>()?;
         let overlaps = overlaps.as_slice();
         if !json {
             println!(

@@ -210,11 +210,6 @@ impl ThreadGovernor {
         }
     }
 
-    /// The cores the loop uses now.
-    pub fn cores(&self) -> i32 {
-        self.cores
-    }
-
     /// Whether the envs step on a core of their own beside the updates now.
     pub fn overlaps(&self) -> bool {
         match &self.schedule {

@@ -549,7 +549,8 @@ impl<'a> Trainer<'a> {
         if !self.threads.overlaps() {
             let results = self.collector.step_envs(decisions, true)?;
             self.lap(Phase::Sim);
-            self.update(beta)?;
+            let envs = self.collector.len();
+            update(self.config, &mut self.c, &self.replay, self.learner.as_mut(), &mut self.rng, envs, beta)?;
             self.lap(Phase::Update);
             return Ok(results);
         }
@@ -568,12 +569,6 @@ impl<'a> Trainer<'a> {
         self.lap(Phase::Update);
         updated?;
         Ok(results?)
-    }
-
-    /// This iteration's updates ([`update`]) on the trainer's own state.
-    fn update(&mut self, beta: f64) -> Result<(), TrainError> {
-        let envs = self.collector.len();
-        update(self.config, &mut self.c, &self.replay, self.learner.as_mut(), &mut self.rng, envs, beta)
     }
 
     /// BC's weight at the current step (0 for methods without BC).
