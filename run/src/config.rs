@@ -81,6 +81,10 @@ impl Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SacSection {
+    /// Hidden widths of the actor and both critics. 128 x 128 by default: on the shipped cube
+    /// task it reached a gait in a median 500k env steps against 256 x 256's 700k over five
+    /// seeds, with held-out success in the same interval, at about twice the env steps/s
+    /// (docs/results/time-to-gait/width-128/).
     pub hidden: Vec<i64>,
     pub actor_lr: f64,
     pub critic_lr: f64,
@@ -166,7 +170,7 @@ pub enum AlphaName {
 impl Default for SacSection {
     fn default() -> Self {
         Self {
-            hidden: vec![256, 256],
+            hidden: vec![128, 128],
             actor_lr: 3e-4,
             critic_lr: 3e-4,
             batch: 256,
