@@ -26,6 +26,26 @@ fn bench_update_prints_one_json_line_per_learner() {
         };
         assert!(field("updates_per_s") > 0.0 && field("matmul_gflops") > 0.0, "{line}");
     }
+    // The default config's widths unless --hidden names others; widths a run refuses, refused.
+    let widths = |extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_vge"))
+            .args(["bench", "update", "--json", "--updates", "2", "--batch", "8"])
+            .args(extra)
+            .output()
+            .expect("vge runs");
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let default_hidden = format!("{:?}", vge_run::config::Config::default().sac.hidden).replace(' ', "");
+    let (ok, line, err) = widths(&[]);
+    assert!(ok && line.contains(&format!("\"hidden\":{default_hidden}")), "{line}{err}");
+    let (ok, line, err) = widths(&["--hidden", "48,24"]);
+    assert!(ok && line.contains("\"hidden\":[48,24]"), "{line}{err}");
+    let (ok, _, err) = widths(&["--hidden", "0"]);
+    assert!(!ok && err.contains("--hidden") && err.contains("sac.hidden"), "{err}");
     let bad = Command::new(env!("CARGO_BIN_EXE_vge"))
         .args(["bench", "update", "--algorithm", "ppo"])
         .output()
@@ -538,6 +558,8 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
     let slip = now["mean_tip_slip_m"].as_f64().expect("the slip figure");
     assert!(slip.is_finite() && slip > 0.0, "the fixture's policy turns the cube: {slip} m");
     assert!(now["per_episode"][0]["tip_slip_m"].as_f64().is_some_and(f64::is_finite), "{now}");
+    let tilt = now["mean_rotation_axis_tilt_rad"].as_f64().expect("the tilt figure");
+    assert!((0.0..=std::f64::consts::FRAC_PI_2 + 1e-9).contains(&tilt), "{tilt} rad");
 
     // An unfinished run (no final-eval.json) cannot be rewritten; neither flag: an error.
     std::fs::remove_file(dir.join("final-eval.json")).expect("remove");

@@ -184,6 +184,9 @@ struct BestEval<'a> {
     mean_contact_switches: f64,
     /// Fingertip slip per episode (m, [`vge_sim::slip`]).
     mean_tip_slip_m: f64,
+    /// How far the axis the object turned about overall leans from z (rad, mean over the
+    /// episodes): near 0 for a finger gait, large for a policy that tumbles the object.
+    mean_rotation_axis_tilt_rad: f64,
     /// Several objects: each object's test figures (the overall ones above pool them).
     #[serde(skip_serializing_if = "Option::is_none")]
     per_object: Option<PerObjectFigures>,
@@ -254,6 +257,7 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
         mean_tip_slip_m: r.mean_tip_slip_m,
+        mean_rotation_axis_tilt_rad: r.mean_rotation_axis_tilt_rad,
         per_object,
         per_episode: &r.per_episode,
     };
@@ -325,6 +329,9 @@ struct FinalEval<'a> {
     mean_contact_switches: f64,
     /// Fingertip slip per episode (m, [`vge_sim::slip`]).
     mean_tip_slip_m: f64,
+    /// How far the axis the object turned about overall leans from z (rad, mean over the
+    /// episodes): near 0 for a finger gait, large for a policy that tumbles the object.
+    mean_rotation_axis_tilt_rad: f64,
     /// Several objects: each object's figures (the overall ones above pool them).
     #[serde(skip_serializing_if = "Option::is_none")]
     per_object: Option<PerObjectFigures>,
@@ -358,6 +365,7 @@ fn write_final_eval(
         drop_rate: r.drop_rate,
         mean_contact_switches: r.mean_contact_switches,
         mean_tip_slip_m: r.mean_tip_slip_m,
+        mean_rotation_axis_tilt_rad: r.mean_rotation_axis_tilt_rad,
         per_object: per_object_figures(report),
         env_steps,
         wall_s: cost.wall_s,
