@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # scripts/bench-vs-sb3.sh [ROUNDS] [THREADS...]: vge's SAC updates against Stable-Baselines3's,
-# timed in one run, at the sizes of `vge bench update`.
+# timed in one run, at `vge bench update`'s sizes with both learners' hidden widths HIDDEN
+# (env, default 256,256: the sizes the stored comparison used; the training default is 128,128).
 #
 # For each thread count (default: 1 and 2) the rounds alternate vge with its training
 # defaults (critic layer norm), vge without layer norm (SB3's networks), vge with bf16
@@ -38,6 +39,7 @@ if [ -z "$vge" ]; then
   vge=${CARGO_TARGET_DIR:-target}/release/vge
 fi
 updates=400
+hidden=${HIDDEN:-256,256}
 out=target/bench-vs-sb3.jsonl
 : >"$out"
 tag() { python3 -c 'import json,sys; d=json.loads(sys.stdin.read()); d.update(json.loads(sys.argv[1])); print(json.dumps(d))' "$1"; }
@@ -45,13 +47,13 @@ for t in "${threads[@]}"; do
   for r in $(seq 1 "$rounds"); do
     echo "threads $t, round $r of $rounds..." >&2
     # libtorch takes its thread count from OMP_NUM_THREADS at start.
-    OMP_NUM_THREADS=$t "$vge" bench update --json --updates $updates |
+    OMP_NUM_THREADS=$t "$vge" bench update --json --hidden "$hidden" --updates $updates |
       tag "{\"bench\": \"vge_update\", \"layer_norm\": true, \"round\": $r}" >>"$out"
-    OMP_NUM_THREADS=$t "$vge" bench update --json --updates $updates --layer-norm false |
+    OMP_NUM_THREADS=$t "$vge" bench update --json --hidden "$hidden" --updates $updates --layer-norm false |
       tag "{\"bench\": \"vge_update\", \"layer_norm\": false, \"round\": $r}" >>"$out"
-    OMP_NUM_THREADS=$t "$vge" bench update --json --updates $updates --matmul bf16 |
+    OMP_NUM_THREADS=$t "$vge" bench update --json --hidden "$hidden" --updates $updates --matmul bf16 |
       tag "{\"bench\": \"vge_update_bf16\", \"layer_norm\": true, \"round\": $r}" >>"$out"
-    OMP_NUM_THREADS=$t "$venv/bin/python" scripts/bench_sb3.py "$t" $updates |
+    OMP_NUM_THREADS=$t "$venv/bin/python" scripts/bench_sb3.py "$t" $updates "$hidden" |
       tag "{\"layer_norm\": false, \"round\": $r}" >>"$out"
   done
 done

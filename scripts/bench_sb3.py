@@ -1,12 +1,12 @@
 """Stable-Baselines3 SAC gradient updates per second at `vge bench update`'s sizes.
 
 Called by scripts/bench-vs-sb3.sh; prints one JSON line. The same work as vge's benchmark:
-observation 65, action 15, actor and twin critics 256x256, batch 256, alpha 0 (SB3's
+observation 65, action 15, actor and twin critics of HIDDEN (default 256,256), batch 256, alpha 0 (SB3's
 `ent_coef=0.0`, a fixed coefficient), tau 0.005, one target update per gradient step, on
 batches drawn from a replay buffer of random transitions. SB3's critics have no layer norm:
 compare with `vge bench update --layer-norm false` for the same networks.
 
-Usage: bench_sb3.py THREADS UPDATES
+Usage: bench_sb3.py THREADS UPDATES [HIDDEN]
 """
 
 import json
@@ -53,14 +53,15 @@ def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     threads, updates = int(sys.argv[1]), int(sys.argv[2])
-    if threads < 1 or updates < 1:
-        sys.exit("THREADS and UPDATES must be positive")
+    hidden = [int(w) for w in (sys.argv[3] if len(sys.argv) > 3 else "256,256").split(",")]
+    if threads < 1 or updates < 1 or not hidden or min(hidden) < 1:
+        sys.exit("THREADS, UPDATES and the HIDDEN widths must be positive")
     torch.set_num_threads(threads)
     torch.manual_seed(0)
     model = SAC(
         "MlpPolicy",
         ShapesOnly(),
-        policy_kwargs=dict(net_arch=[256, 256]),
+        policy_kwargs=dict(net_arch=hidden),
         batch_size=BATCH,
         buffer_size=BUFFER,
         ent_coef=0.0,
@@ -86,6 +87,7 @@ def main():
         "bench": "sb3_update",
         "threads": torch.get_num_threads(),
         "batch": BATCH,
+        "hidden": hidden,
         "updates": updates,
         "updates_per_s": updates / elapsed,
         "matmul_gflops": matmul_gflops(),

@@ -1,4 +1,4 @@
-//! `vge bench update`: full SAC (or TD3) updates per second at the paper's sizes, against
+//! `vge bench update`: full SAC (or TD3) updates per second at a learner's sizes, against
 //! the CPU's matmul throughput measured in the same run.
 
 use std::time::Instant;

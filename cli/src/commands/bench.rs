@@ -10,14 +10,19 @@ use vge_sim::{EnvConfig, ObjectShape};
 
 #[derive(Debug, Subcommand)]
 pub enum Bench {
-    /// Full SAC updates per second: batch 256, 256x256 actor and twin critics, obs 65,
-    /// action 15, alpha 0, critics with layer norm (the training defaults); also the
-    /// achieved GFLOP/s and this CPU's matmul GFLOP/s for comparison. Threads: libtorch's
-    /// default; set them with `OMP_NUM_THREADS=N` (training uses `sac.threads`).
+    /// Full SAC updates per second: batch 256, the default config's actor and twin critics
+    /// (128 x 128; --hidden for others), obs 65, action 15, alpha 0, critics with layer norm
+    /// (the training defaults); also the achieved GFLOP/s and this CPU's matmul GFLOP/s for
+    /// comparison. Threads: libtorch's default; set them with `OMP_NUM_THREADS=N` (training
+    /// uses `sac.threads`).
     Update {
         /// Print one JSON line instead of a table.
         #[arg(long)]
         json: bool,
+        /// Hidden widths of the actor and both critics, e.g. `256,256` (`sac.hidden`; default:
+        /// the default config's).
+        #[arg(long, value_delimiter = ',')]
+        hidden: Option<Vec<i64>>,
         /// Timed updates (after 20 warm-up updates).
         #[arg(long, default_value_t = 300)]
         updates: usize,
@@ -214,8 +219,8 @@ pub fn run(bench: Bench) -> anyhow::Result<()> {
             libtorch::train(json, config, &overrides, &plan)
         }
         #[cfg(feature = "train")]
-        Bench::Update { json, updates, batch, seed, algorithm, layer_norm, matmul } => {
-            libtorch::update(json, updates, batch, seed, &algorithm, layer_norm, &matmul)
+        Bench::Update { json, hidden, updates, batch, seed, algorithm, layer_norm, matmul } => {
+            libtorch::update(json, hidden, updates, batch, seed, &algorithm, layer_norm, &matmul)
         }
         #[cfg(feature = "train")]
         Bench::Firmware { json, policy, observations, seed, opt_level } => {
@@ -355,8 +360,10 @@ mod libtorch {
     use vge_trainer::learner::threads::Overlap;
 
     /// `vge bench update`.
+    #[allow(clippy::too_many_arguments)]
     pub fn update(
         json: bool,
+        hidden: Option<Vec<i64>>,
         updates: usize,
         batch: i64,
         seed: i64,
@@ -366,8 +373,13 @@ mod libtorch {
     ) -> anyhow::Result<()> {
         anyhow::ensure!(updates > 0, "--updates must be at least 1");
         anyhow::ensure!(batch > 0, "--batch must be at least 1");
-        // The default run's networks and sizes (vge15, 256x256), SAC with alpha 0 unless --algorithm td3.
-        let mut config = vge_trainer::learner::LearnerConfig::for_hand(&vge_run::config::Config::default())?;
+        // The default run's networks and sizes (vge15), SAC with alpha 0 unless --algorithm td3.
+        let mut run_config = vge_run::config::Config::default();
+        if let Some(hidden) = hidden {
+            run_config.sac.hidden = hidden;
+            run_config.validate().map_err(|e| anyhow::anyhow!("--hidden: {e}"))?;
+        }
+        let mut config = vge_trainer::learner::LearnerConfig::for_hand(&run_config)?;
         config.algorithm = vge_trainer::learner::Algorithm::Sac;
         config.entropy = vge_trainer::learner::EntropyCoef::Fixed(0.0);
         config.critic_layer_norm = layer_norm;
@@ -377,6 +389,7 @@ mod libtorch {
         if algorithm == "td3" {
             config.algorithm = vge_trainer::learner::Algorithm::td3();
         }
+        let config_hidden = config.net.hidden.clone();
         let r = vge_trainer::bench_update::run(config, batch, 20, updates, seed)?;
         if json {
             let line = serde_json::json!({
@@ -384,6 +397,7 @@ mod libtorch {
                 "algorithm": algorithm,
                 "layer_norm": layer_norm,
                 "matmul": matmul,
+                "hidden": config_hidden,
                 "updates_per_s": r.updates_per_s,
                 "gflops": r.gflops,
                 "matmul_gflops": r.matmul_gflops,
@@ -396,8 +410,9 @@ mod libtorch {
             println!("{line}");
         } else {
             println!(
-                "{} update, batch {}, {} threads, {} updates, critic layer norm {layer_norm}, {matmul} matmuls",
+                "{} update, hidden {:?}, batch {}, {} threads, {} updates, critic layer norm {layer_norm}, {matmul} matmuls",
                 algorithm.to_uppercase(),
+                config_hidden,
                 r.batch,
                 r.threads,
                 r.updates
