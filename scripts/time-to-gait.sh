@@ -13,8 +13,9 @@
 # TIME_TO_GAIT_SUCCESS). A seed that never passes trains to its end.
 set -euo pipefail
 
-if [[ $# -lt 4 ]]; then
+if [[ ${1:-} == -h || ${1:-} == --help || $# -lt 4 ]]; then
   sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
+  [[ ${1:-} == -h || ${1:-} == --help ]] && exit 0
   exit 2
 fi
 vge=$1 config=$2 out=$3
