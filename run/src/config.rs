@@ -82,9 +82,9 @@ impl Method {
 #[serde(default, deny_unknown_fields)]
 pub struct SacSection {
     /// Hidden widths of the actor and both critics. 128 x 128 by default: on the shipped cube
-    /// task it reached a gait in a median 500k env steps against 256 x 256's 700k over five
-    /// seeds, with held-out success in the same interval, at about twice the env steps/s
-    /// (docs/results/time-to-gait/width-128/).
+    /// task it reaches a gait in no more env steps than 256 x 256 (medians 500k and 700k in two
+    /// sets of five seeds, against 700k), with held-out success in the same interval, at about
+    /// twice the env steps/s (docs/results/time-to-gait/).
     pub hidden: Vec<i64>,
     pub actor_lr: f64,
     pub critic_lr: f64,
