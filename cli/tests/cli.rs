@@ -28,16 +28,11 @@ fn bench_update_prints_one_json_line_per_learner() {
     }
     // The default config's widths unless --hidden names others; widths a run refuses, refused.
     let widths = |extra: &[&str]| {
-        let out = Command::new(env!("CARGO_BIN_EXE_vge"))
-            .args(["bench", "update", "--json", "--updates", "2", "--batch", "8"])
-            .args(extra)
-            .output()
-            .expect("vge runs");
-        (
-            out.status.success(),
-            String::from_utf8_lossy(&out.stdout).into_owned(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
+        let out = vge(
+            &["bench", "update", "--json", "--updates", "2", "--batch", "8"],
+            &extra.iter().map(|s| s.to_string()).collect::<Vec<_>>(),
+        );
+        (out.status.success(), text(&out.stdout), text(&out.stderr))
     };
     let default_hidden = format!("{:?}", vge_run::config::Config::default().sac.hidden).replace(' ', "");
     let (ok, line, err) = widths(&[]);
