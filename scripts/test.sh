@@ -37,6 +37,10 @@ breakdown() {
     printf '%6d  %s\n' $((next - step_starts[i])) "${step_names[i]}"
   done
   printf '%6d  total\n' "$end"
+  # A build that runs out of disk fails as a linker crash (lld: signal 7, Bus error), not as
+  # "no space left": the disk left and the build's size say which it was.
+  printf 'disk: %s free under target/, target/ holds %s\n' \
+    "$(df -h --output=avail target 2>/dev/null | tail -n 1 | tr -d ' ')" "$(du -sh target 2>/dev/null | cut -f1)"
   # CPU time of this script and everything it ran: a fresh machine's wall time is bounded
   # below by the children's CPU time over its cores.
   printf 'CPU time (user, system) of the shell, then of its children:\n'; times
