@@ -66,6 +66,9 @@ pub struct HoldSummary {
     pub tips_touching: usize,
     /// Its turn about z, summed over the samples (rad, the reward's sense).
     pub rotation_z_rad: f32,
+    /// How far the axis it turned about overall leans from z (rad, 0 to π/2; the samples'
+    /// rotation vectors summed, [`vge_sim::angle::rotation_axis_tilt_rad`]).
+    pub rotation_axis_tilt_rad: f32,
     /// Fingertips that let go and touched again ([`ContactSwitches`], sampled).
     pub contact_switches: u32,
     /// Whether it sank by the drop height at some sample.
@@ -78,6 +81,8 @@ struct Episode {
     /// The cube at the last sample.
     last: ObjectState,
     rotation_z_rad: f32,
+    /// Each sample's world-frame rotation vector, summed.
+    net_rotation_rad: [f64; 3],
     switches: ContactSwitches,
     dropped: bool,
 }
@@ -163,6 +168,10 @@ impl SimAllegro {
         let drop_height_m = self.config.drop_height_m;
         if let Some(e) = &mut self.episode {
             e.rotation_z_rad += vge_sim::rotation_about_z_rad(&e.last.pose.rotation, &now.pose.rotation);
+            let turn = vge_sim::angle::rotation_vector_rad(&e.last.pose.rotation, &now.pose.rotation);
+            for (sum, v) in e.net_rotation_rad.iter_mut().zip(turn) {
+                *sum += f64::from(v);
+            }
             e.last = now;
             e.switches.update(&touching);
             e.dropped |= fell_m >= drop_height_m;
@@ -185,6 +194,8 @@ impl SimAllegro {
             turned_rad: 2.0 * dot.acos(),
             tips_touching: self.tips_touching(),
             rotation_z_rad: episode.map_or(0.0, |e| e.rotation_z_rad),
+            rotation_axis_tilt_rad: episode
+                .map_or(0.0, |e| vge_sim::angle::rotation_axis_tilt_rad(e.net_rotation_rad) as f32),
             contact_switches: episode.map_or(0, |e| e.switches.count),
             dropped: episode.is_some_and(|e| e.dropped),
         })
@@ -234,6 +245,7 @@ impl AllegroPlant for SimAllegro {
                     self.episode = Some(Episode {
                         last: self.world.object_state(),
                         rotation_z_rad: 0.0,
+                        net_rotation_rad: [0.0; 3],
                         switches: ContactSwitches::new(&self.touching()),
                         dropped: false,
                     });

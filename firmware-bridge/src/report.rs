@@ -22,6 +22,31 @@ pub struct SimHandSummary {
     pub mean_tip_contacts: f32,
     /// Fingertips that broke and remade contact with the object ([`vge_sim::gait`]).
     pub contact_switches: u32,
+    /// How far the axis the object turned about overall leans from z (rad, 0 to π/2): near 0
+    /// for a turn in an upright grasp, large for an object rolled about a tilted axis, which
+    /// `rotation_rad` counts only in part.
+    pub rotation_axis_tilt_rad: f32,
+    /// How far the fingertips' contact points slid over the object (m, in its frame).
+    pub tip_slip_m: f32,
+}
+
+impl SimHandSummary {
+    /// The summary of an episode the env's tracker accounted; `dropped` is the env's own drop
+    /// flag (the outcome's `terminated` also counts lost contacts).
+    #[must_use]
+    pub fn new(o: &vge_sim::episode::EpisodeOutcome, dropped: bool) -> Self {
+        Self {
+            steps: o.length as u64,
+            rotation_rad: o.rotation_rad as f32,
+            total_reward: o.episode_return as f32,
+            terminated: o.terminated,
+            dropped,
+            mean_tip_contacts: o.mean_contacts as f32,
+            contact_switches: o.contact_switches,
+            rotation_axis_tilt_rad: o.rotation_axis_tilt_rad() as f32,
+            tip_slip_m: o.tip_slip_m as f32,
+        }
+    }
 }
 
 /// Rounds to `digits` decimals, so the summary line stays short.
@@ -91,6 +116,8 @@ pub fn json_line(
         m.insert("terminated".to_owned(), json!(s.terminated));
         m.insert("dropped".to_owned(), json!(s.dropped));
         m.insert("contact_switches".to_owned(), json!(s.contact_switches));
+        m.insert("rotation_axis_tilt_rad".to_owned(), round(f64::from(s.rotation_axis_tilt_rad), 4));
+        m.insert("tip_slip_m".to_owned(), round(f64::from(s.tip_slip_m), 4));
     }
     Value::Object(m).to_string()
 }
@@ -152,6 +179,8 @@ mod tests {
             dropped: true,
             mean_tip_contacts: 3.456_7,
             contact_switches: 6,
+            rotation_axis_tilt_rad: 1.047_198,
+            tip_slip_m: 0.012_345_6,
         };
         let line = json_line(&[("mode", json!("sim"))], 20.000_4, &report(), Some(&sim));
         let expected = concat!(
@@ -163,9 +192,11 @@ mod tests {
             r#""jitter_p99_us":45.679,"limit_clamps":15,"loop_max_us":9.425,"loop_p50_us":3.172,"#,
             r#""loop_p99_us":6.213,"lost_frames":8,"mean_tip_contacts":3.457,"messages_in":103,"#,
             r#""messages_out":104,"mode":"sim","non_finite_holds":13,"overload_periods":10,"#,
-            r#""policy_errors":4,"rate_hz":20.0,"rotation_rad":0.1235,"sim_steps":400,"#,
+            r#""policy_errors":4,"rate_hz":20.0,"rotation_axis_tilt_rad":1.0472,"rotation_rad":0.1235,"#,
+            r#""sim_steps":400,"#,
             r#""skipped_periods":2,"stale_frames":6,"steps":41,"stop_detail":"node 2 silent","#,
-            r#""stop_reason":"watchdog","terminated":false,"total_reward":-1.9876,"tx_dropped":9}"#,
+            r#""stop_reason":"watchdog","terminated":false,"tip_slip_m":0.0123,"total_reward":-1.9876,"#,
+            r#""tx_dropped":9}"#,
         );
         assert_eq!(line, expected);
         // Without the simulated hand, the same line less the object's keys.
@@ -177,6 +208,8 @@ mod tests {
             "terminated",
             "dropped",
             "contact_switches",
+            "rotation_axis_tilt_rad",
+            "tip_slip_m",
         ];
         let mut expected: Map<String, Value> = serde_json::from_str(expected).expect("JSON");
         for key in sim_keys {

@@ -176,16 +176,7 @@ impl SimHand {
     }
 
     pub fn summary(&self) -> SimHandSummary {
-        let o = self.tracker.outcome(self.terminated);
-        SimHandSummary {
-            steps: o.length as u64,
-            rotation_rad: o.rotation_rad as f32,
-            total_reward: o.episode_return as f32,
-            terminated: o.terminated,
-            dropped: self.dropped,
-            mean_tip_contacts: o.mean_contacts as f32,
-            contact_switches: o.contact_switches,
-        }
+        SimHandSummary::new(&self.tracker.outcome(self.terminated), self.dropped)
     }
 
     /// Takes one message received at `now`; returns the frames the nodes send in reply.

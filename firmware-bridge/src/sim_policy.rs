@@ -118,15 +118,7 @@ pub fn run<P: PolicyRunner>(
         pacer.step_done(&tick);
     };
     let outcome = tracker.outcome(terminated);
-    let summary = SimHandSummary {
-        steps: outcome.length as u64,
-        rotation_rad: outcome.rotation_rad as f32,
-        total_reward: outcome.episode_return as f32,
-        terminated: outcome.terminated,
-        dropped,
-        mean_tip_contacts: outcome.mean_contacts as f32,
-        contact_switches: outcome.contact_switches,
-    };
+    let summary = SimHandSummary::new(&outcome, dropped);
     // No bus: the link counts are zero.
     let pace = pacer.figures();
     let report =

@@ -266,3 +266,39 @@ fn vge15_runs_a_proprio_policy_over_its_protocol_in_the_sim() {
     assert_eq!((r["hand"].as_str(), r["stop_reason"].as_str()), (Some("vge15"), Some("steps")), "{r}");
     assert_eq!(r["policy_errors"], 0, "{r}");
 }
+
+/// The sim summary says how upright the turn was: the shipped vge15 gait turns its cube about
+/// an axis near z, the shipped Allegro policy rolls its cube about a tilted one (its results
+/// README), and `rotation_rad` alone cannot tell them apart.
+#[cfg(feature = "sim")]
+#[test]
+fn the_sim_summary_tells_an_upright_turn_from_a_tumble() {
+    let allegro_policy = concat!(env!("CARGO_MANIFEST_DIR"), "/../policies/allegro-cube.vgep");
+    let tilt_deg = |hand: &str, policy: &str| {
+        // 10 s of the hand's time, run at 200 Hz of wall time.
+        let out = bridge(&[
+            "run",
+            "--hand",
+            hand,
+            "--backend",
+            "sim",
+            "--policy",
+            policy,
+            "--steps",
+            "200",
+            "--rate",
+            "200",
+            "--json",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+        let r = json(&out);
+        eprintln!("{hand}, {policy}: {r}");
+        assert_eq!(r["dropped"], false, "{r}");
+        assert!(r["rotation_rad"].as_f64() > Some(2.0), "it turns the cube: {r}");
+        assert!(r["tip_slip_m"].as_f64() >= Some(0.0), "{r}");
+        r["rotation_axis_tilt_rad"].as_f64().expect("the tilt").to_degrees()
+    };
+    let upright = tilt_deg("vge15", VGE15_POLICY);
+    let tumbling = tilt_deg("allegro", allegro_policy);
+    assert!(upright < 20.0 && tumbling > 40.0, "vge15 {upright:.1} deg, Allegro {tumbling:.1} deg from z");
+}

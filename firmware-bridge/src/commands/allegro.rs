@@ -409,6 +409,7 @@ fn hold_json(plant: &SimAllegro) -> Option<Value> {
             "turned_rad": round(f64::from(h.turned_rad), 4),
             "tips_touching": h.tips_touching,
             "rotation_rad": round(f64::from(h.rotation_z_rad), 4),
+            "rotation_axis_tilt_rad": round(f64::from(h.rotation_axis_tilt_rad), 4),
             "contact_switches": h.contact_switches,
             "dropped": h.dropped,
         })

@@ -225,6 +225,8 @@ fn emulate_sim(
         "sim_steps": s.steps,
         "rotation_rad": (f64::from(s.rotation_rad) * 1e4).round() / 1e4,
         "contact_switches": s.contact_switches,
+        "rotation_axis_tilt_rad": (f64::from(s.rotation_axis_tilt_rad) * 1e4).round() / 1e4,
+        "tip_slip_m": (f64::from(s.tip_slip_m) * 1e4).round() / 1e4,
         "terminated": s.terminated,
         "dropped": s.dropped,
     }))

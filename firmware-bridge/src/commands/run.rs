@@ -388,12 +388,14 @@ pub fn print_report(
     );
     if let Some(s) = sim {
         out!(
-            "object:  turned {:.3} rad about z in {} sim steps; return {:.3}; {:.2} fingertip contacts on average, {} contact switches{}",
+            "object:  turned {:.3} rad about z in {} sim steps, about an axis {:.0} deg from z; return {:.3}; {:.2} fingertip contacts on average, {} contact switches, {:.3} m fingertip slip{}",
             s.rotation_rad,
             s.steps,
+            s.rotation_axis_tilt_rad.to_degrees(),
             s.total_reward,
             s.mean_tip_contacts,
             s.contact_switches,
+            s.tip_slip_m,
             match (s.dropped, s.terminated) {
                 (true, _) => "; the object dropped",
                 (false, true) => "; the episode terminated (lost contacts)",
