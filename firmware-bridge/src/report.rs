@@ -179,7 +179,7 @@ mod tests {
             dropped: true,
             mean_tip_contacts: 3.456_7,
             contact_switches: 6,
-            rotation_axis_tilt_rad: 1.047_198,
+            rotation_axis_tilt_rad: 0.876_543,
             tip_slip_m: 0.012_345_6,
         };
         let line = json_line(&[("mode", json!("sim"))], 20.000_4, &report(), Some(&sim));
@@ -192,7 +192,7 @@ mod tests {
             r#""jitter_p99_us":45.679,"limit_clamps":15,"loop_max_us":9.425,"loop_p50_us":3.172,"#,
             r#""loop_p99_us":6.213,"lost_frames":8,"mean_tip_contacts":3.457,"messages_in":103,"#,
             r#""messages_out":104,"mode":"sim","non_finite_holds":13,"overload_periods":10,"#,
-            r#""policy_errors":4,"rate_hz":20.0,"rotation_axis_tilt_rad":1.0472,"rotation_rad":0.1235,"#,
+            r#""policy_errors":4,"rate_hz":20.0,"rotation_axis_tilt_rad":0.8765,"rotation_rad":0.1235,"#,
             r#""sim_steps":400,"#,
             r#""skipped_periods":2,"stale_frames":6,"steps":41,"stop_detail":"node 2 silent","#,
             r#""stop_reason":"watchdog","terminated":false,"tip_slip_m":0.0123,"total_reward":-1.9876,"#,
