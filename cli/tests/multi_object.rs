@@ -214,6 +214,24 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert_eq!(vge_rows(&csv).len(), 3, "selected, final, last snapshots: {csv}");
     let md = std::fs::read_to_string(compared.join("compare.md")).expect("compare.md");
     assert!(md.contains("| group | cube | sphere |") && md.contains("each object is a task"), "{md}");
+    // P(A > B) of the final policies too, each ordered pair: the two directions sum to 1
+    // (ties count half to each).
+    let last =
+        std::fs::read_to_string(compared.join("improvement-final.csv")).expect("improvement-final.csv");
+    let p: Vec<(String, f64)> = last
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (format!("{}>{}", f[0], f[1]), f[2].parse().expect("a probability"))
+        })
+        .collect();
+    assert_eq!(p.iter().map(|(k, _)| k.as_str()).collect::<Vec<_>>(), ["vge>one", "one>vge"], "{last}");
+    assert!((p[0].1 + p[1].1 - 1.0).abs() < 1e-4, "{last}");
+    assert!(
+        md.contains("Probability of improvement (final policy's success, `improvement-final.csv`)"),
+        "{md}"
+    );
     // Each run on each object: 4 runs x 2 objects, the set selected success on its object.
     let per_object = std::fs::read_to_string(compared.join("per-object.csv")).expect("per-object.csv");
     let lines: Vec<Vec<&str>> = per_object.lines().skip(1).map(|l| l.split(',').collect()).collect();

@@ -514,7 +514,10 @@ pub fn compare_csv(rows: &[CompareRow]) -> String {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Written {
     pub rows: Vec<CompareRow>,
+    /// P(A > B) of the selected policies (`improvement.csv`).
     pub improvements: Vec<Improvement>,
+    /// P(A > B) of the final policies (`improvement-final.csv`).
+    pub improvements_final: Vec<Improvement>,
     pub files: Vec<PathBuf>,
 }
 
@@ -584,24 +587,26 @@ pub fn write(
     rows.sort_by_key(|r| {
         (names.iter().position(|n| *n == r.group), Judged::ALL.iter().position(|j| *j == r.judged))
     });
-    let by_name: BTreeMap<&str, &Vec<&RunCurves>> = refs.iter().map(|(n, rs)| (*n, rs)).collect();
     let selected_objects = object_tasks(&refs, Judged::Selected);
     let selected = Figure { judged: Judged::Selected, metric };
-    let mut improvements = Vec::new();
-    for (a, b) in &pairs {
-        let x = judged_scores(by_name[a.as_str()], selected, selected_objects.as_deref())?;
-        let y = judged_scores(by_name[b.as_str()], selected, selected_objects.as_deref())?;
-        if let (Some(x), Some(y)) = (x, y) {
-            let estimate =
-                bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, &format!("{a} > {b}")))?;
-            improvements.push(Improvement { a: a.clone(), b: b.clone(), estimate });
-        }
-    }
+    let improvements = improvements_between(&refs, &pairs, Judged::Selected, metric, bootstrap, seed)?;
+    let improvements_final = improvements_between(&refs, &pairs, Judged::Final, metric, bootstrap, seed)?;
     std::fs::create_dir_all(out).map_err(|source| CompareError::Io { path: out.to_owned(), source })?;
     let mut files = Vec::new();
-    let mut md = markdown(&refs, &rows, &improvements, bootstrap, selected_objects.as_deref(), metric, seed)?;
-    let mut texts =
-        vec![("compare.csv", compare_csv(&rows)), ("improvement.csv", improvement_csv(&improvements))];
+    let mut md = markdown(
+        &refs,
+        &rows,
+        [&improvements, &improvements_final],
+        bootstrap,
+        selected_objects.as_deref(),
+        metric,
+        seed,
+    )?;
+    let mut texts = vec![
+        ("compare.csv", compare_csv(&rows)),
+        ("improvement.csv", improvement_csv(&improvements)),
+        ("improvement-final.csv", improvement_csv(&improvements_final)),
+    ];
     if let Some(objects) = selected_objects.as_deref() {
         let object_rows = crate::object_rows::rows(&refs, objects)?;
         md.push_str(&format!(
@@ -628,7 +633,37 @@ pub fn write(
     let path = out.join("curves.png");
     draw_iqm_curves(&group_map, bootstrap, seed, "IQM over runs, 95% bootstrap band", &names, &path)?;
     files.push(path);
-    Ok(Written { rows, improvements, files })
+    Ok(Written { rows, improvements, improvements_final, files })
+}
+
+/// P(A > B) of `judged` policies for each pair whose groups both have scores. The selected
+/// policies' draws are labelled `A > B`, the final ones' `A > B final`, so that each interval
+/// is the same whichever others are computed beside it.
+fn improvements_between(
+    groups: &[(&str, Vec<&RunCurves>)],
+    pairs: &[(String, String)],
+    judged: Judged,
+    metric: Metric,
+    bootstrap: &Bootstrap,
+    seed: u64,
+) -> Result<Vec<Improvement>, CompareError> {
+    let by_name: BTreeMap<&str, &Vec<&RunCurves>> = groups.iter().map(|(n, rs)| (*n, rs)).collect();
+    let objects = object_tasks(groups, judged);
+    let figure = Figure { judged, metric };
+    let mut found = Vec::new();
+    for (a, b) in pairs {
+        let x = judged_scores(by_name[a.as_str()], figure, objects.as_deref())?;
+        let y = judged_scores(by_name[b.as_str()], figure, objects.as_deref())?;
+        if let (Some(x), Some(y)) = (x, y) {
+            let label = match judged {
+                Judged::Selected => format!("{a} > {b}"),
+                _ => format!("{a} > {b} {}", judged.name()),
+            };
+            let estimate = bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, &label))?;
+            found.push(Improvement { a: a.clone(), b: b.clone(), estimate });
+        }
+    }
+    Ok(found)
 }
 
 /// `aggregates.png`: each group's IQM and mean of the selected policies' `metric` with their
@@ -701,11 +736,27 @@ fn checked_pairs(
     })
 }
 
+/// The selected policies' P(A > B) table, then the final policies' (each when not empty).
+fn both_improvements_markdown(name: &str, selected: &[Improvement], last: &[Improvement]) -> String {
+    let mut text = String::new();
+    if !selected.is_empty() {
+        text.push_str(&format!("\nProbability of improvement (selected policy's {name}):\n\n"));
+        text.push_str(&improvement_markdown(selected));
+    }
+    if !last.is_empty() {
+        text.push_str(&format!(
+            "\nProbability of improvement (final policy's {name}, `improvement-final.csv`):\n\n"
+        ));
+        text.push_str(&improvement_markdown(last));
+    }
+    text
+}
+
 /// `compare.md`: the groups' aggregates, the improvements and what the scores are.
 fn markdown(
     groups: &[(&str, Vec<&RunCurves>)],
     rows: &[CompareRow],
-    improvements: &[Improvement],
+    [improvements, improvements_final]: [&[Improvement]; 2],
     bootstrap: &Bootstrap,
     objects: Option<&[vge_sim::ObjectShape]>,
     metric: Metric,
@@ -729,10 +780,7 @@ fn markdown(
             with_interval(&r.aggregates.mean),
         ));
     }
-    if !improvements.is_empty() {
-        text.push_str(&format!("\nProbability of improvement (selected policy's {name}):\n\n"));
-        text.push_str(&improvement_markdown(improvements));
-    }
+    text.push_str(&both_improvements_markdown(name, improvements, improvements_final));
     if let Some(objects) = objects {
         // Each object's mean over runs, with its interval: where a group's score comes from.
         let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();

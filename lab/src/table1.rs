@@ -323,9 +323,14 @@ pub fn to_csv(rows: &[Row]) -> String {
     text
 }
 
-/// `table1.md`: [`to_markdown`], then the probability of improvement between cells.
+/// `table1.md`: [`to_markdown`], then the probability of improvement between cells, of the
+/// selected policies and then of the final ones.
 #[must_use]
-pub fn to_markdown_with(rows: &[Row], improvements: &[crate::compare::Improvement]) -> String {
+pub fn to_markdown_with(
+    rows: &[Row],
+    improvements: &[crate::compare::Improvement],
+    improvements_final: &[crate::compare::Improvement],
+) -> String {
     let mut text = to_markdown(rows);
     if !improvements.is_empty() {
         text.push_str(
@@ -334,6 +339,10 @@ pub fn to_markdown_with(rows: &[Row], improvements: &[crate::compare::Improvemen
              with its 95% stratified bootstrap interval.\n\n",
         );
         text.push_str(&crate::compare::improvement_markdown(improvements));
+    }
+    if !improvements_final.is_empty() {
+        text.push_str("\nThe same of the final policies (`improvement-final.csv`):\n\n");
+        text.push_str(&crate::compare::improvement_markdown(improvements_final));
     }
     text
 }
@@ -492,12 +501,19 @@ pub struct Written {
     pub files: Vec<PathBuf>,
     /// Runs found that are not a cell of the table (no controller, or not the cube alone).
     pub skipped: Vec<PathBuf>,
-    /// [`IMPROVEMENT_PAIRS`] whose cells both have scored runs.
+    /// [`IMPROVEMENT_PAIRS`] whose cells both have scored runs, by their selected policies.
     pub improvements: Vec<crate::compare::Improvement>,
+    /// The same by their final policies.
+    pub improvements_final: Vec<crate::compare::Improvement>,
 }
 
-/// P(A > B) for the pairs of [`IMPROVEMENT_PAIRS`] whose cells both have scored runs.
-fn improvements(runs: &[RunCurves]) -> Result<Vec<crate::compare::Improvement>, PlotError> {
+/// P(A > B) of `judged` policies for the pairs of [`IMPROVEMENT_PAIRS`] whose cells both have
+/// scored runs. The selected policies' draws are labelled `A > B`, the final ones'
+/// `A > B final`.
+fn improvements(
+    runs: &[RunCurves],
+    judged: crate::compare::Judged,
+) -> Result<Vec<crate::compare::Improvement>, PlotError> {
     use crate::compare::{Improvement, Judged, success_rates};
     let cell = |controller: ControllerKind, method: &str| -> Vec<f64> {
         let finished: Vec<&RunCurves> = runs
@@ -506,13 +522,16 @@ fn improvements(runs: &[RunCurves]) -> Result<Vec<crate::compare::Improvement>, 
                 r.controller == Some(controller) && r.method.name() == method && r.env_steps.is_some()
             })
             .collect();
-        success_rates(&finished, Judged::Selected)
+        success_rates(&finished, judged)
     };
     let mut found = Vec::new();
     for (controller, method_a, method_b) in IMPROVEMENT_PAIRS {
         let (x, y) = (cell(controller, method_a), cell(controller, method_b));
         let (a, b) = (cell_label(controller, method_a), cell_label(controller, method_b));
-        let label = format!("{a} > {b}");
+        let label = match judged {
+            Judged::Selected => format!("{a} > {b}"),
+            _ => format!("{a} > {b} {}", judged.name()),
+        };
         let estimate =
             crate::compare::improvement(&x, &y, &crate::stats::Bootstrap::default(), BOOTSTRAP_SEED, &label)
                 .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
@@ -541,14 +560,16 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
     let skipped = others.into_iter().map(|r| r.dir).collect();
     let alone = read_controllers_alone(out)?;
     let rows = rows(&runs, &alone)?;
-    let improvements = improvements(&runs)?;
+    let improvements_selected = improvements(&runs, crate::compare::Judged::Selected)?;
+    let improvements_final = improvements(&runs, crate::compare::Judged::Final)?;
     std::fs::create_dir_all(out).map_err(|source| PlotError::Io { path: out.to_owned(), source })?;
     let mut files = Vec::new();
-    let mut texts =
-        vec![("table1.csv", to_csv(&rows)), ("table1.md", to_markdown_with(&rows, &improvements))];
+    let md = to_markdown_with(&rows, &improvements_selected, &improvements_final);
+    let mut texts = vec![("table1.csv", to_csv(&rows)), ("table1.md", md)];
     // Only once runs are scored: a table without scores has no improvements to give.
-    if !improvements.is_empty() {
-        texts.push(("improvement.csv", crate::compare::improvement_csv(&improvements)));
+    if !improvements_selected.is_empty() {
+        texts.push(("improvement.csv", crate::compare::improvement_csv(&improvements_selected)));
+        texts.push(("improvement-final.csv", crate::compare::improvement_csv(&improvements_final)));
     }
     for (name, text) in texts {
         let path = out.join(name);
@@ -601,7 +622,7 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
             files.push(path);
         }
     }
-    Ok(Written { rows, files, skipped, improvements })
+    Ok(Written { rows, files, skipped, improvements: improvements_selected, improvements_final })
 }
 
 /// The step between periodic evaluations of the first run with two (for the caption).

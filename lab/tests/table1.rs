@@ -259,8 +259,17 @@ fn scored_cells_get_their_iqm_intervals_improvements_and_profiles() {
     assert!(row.starts_with("fg/rl-bc,fg/rl,0.5000,"), "{improvement}");
     assert_eq!(lines.next(), None, "the other pairs' cells have no runs: {improvement}");
     assert_eq!(written.improvements.len(), 2);
+    // The final policies score half their selected ones (write_score): VGE's 0.1, 0.45,
+    // 0.475, 0.5 beat RL's 0.05 and 0.15 in 7 of 8 pairs; RL + BC's 0.1 sits between RL's.
+    let last = std::fs::read_to_string(out.join("improvement-final.csv")).expect("improvement-final.csv");
+    let mut lines = last.lines();
+    assert_eq!(lines.next(), Some("a,b,prob_improvement,ci_low,ci_high"));
+    assert!(lines.next().is_some_and(|r| r.starts_with("fg/vge,fg/rl,0.8750,")), "{last}");
+    assert!(lines.next().is_some_and(|r| r.starts_with("fg/rl-bc,fg/rl,0.5000,")), "{last}");
+    assert_eq!(written.improvements_final.len(), 2, "{last}");
     let md = std::fs::read_to_string(out.join("table1.md")).expect("md");
     assert!(md.contains("| fg/vge | fg/rl | 0.88 |"), "{md}");
+    assert!(md.contains("The same of the final policies (`improvement-final.csv`)"), "{md}");
     assert!(md.contains("0.93 ["), "the IQM with its interval: {md}");
     assert!(md.contains("(2 of 3 runs)"), "{md}");
     let png = std::fs::read(out.join("profiles-fg.png")).expect("profiles-fg.png");

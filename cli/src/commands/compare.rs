@@ -14,7 +14,8 @@ use clap::Args;
 /// run must have its score.json (`vge score`). Writes OUT/compare.csv (group, policy,
 /// runs, iqm, iqm_ci_low, iqm_ci_high, mean, mean_ci_low, mean_ci_high; for the
 /// selected, final and last-snapshot policies), OUT/compare.md, OUT/improvement.csv
-/// (a, b, prob_improvement, ci_low, ci_high; selected policy), OUT/aggregates.png,
+/// (a, b, prob_improvement, ci_low, ci_high; selected policy), OUT/improvement-final.csv
+/// (the same for the final policies), OUT/aggregates.png,
 /// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
 /// env steps, with 95% bands). Definitions: docs/scoring.md.
 ///

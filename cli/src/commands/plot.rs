@@ -24,7 +24,8 @@ use clap::Args;
 /// final_iqm_ci_high), DIR/table1.md (beside the paper's numbers), DIR/curves-fg.png,
 /// DIR/curves-cs.png (periodic success rate and return against env steps, one band per
 /// method) and, once runs are scored, DIR/improvement.csv (every guided method against RL,
-/// VGE against FGE, VGE + BC against VGE) and DIR/profiles-fg.png, DIR/profiles-cs.png.
+/// VGE against FGE, VGE + BC against VGE, by the selected policies), DIR/improvement-final.csv
+/// (the same by the final policies) and DIR/profiles-fg.png, DIR/profiles-cs.png.
 /// Runs without final-eval.json are counted as running.
 /// The controllers alone come from DIR/controllers/{fg,cs,igm}.json when present
 /// (`vge controller --kind fg --episodes 20 --episode-s 30 --json`).
@@ -55,7 +56,14 @@ pub fn run(args: PlotArgs) -> anyhow::Result<()> {
     let PlotArgs { runs, out, success_csv, table1 } = args;
     if let Some(dir) = table1 {
         let written = vge_lab::table1::write(&runs, &dir)?;
-        print!("{}", vge_lab::table1::to_markdown_with(&written.rows, &written.improvements));
+        print!(
+            "{}",
+            vge_lab::table1::to_markdown_with(
+                &written.rows,
+                &written.improvements,
+                &written.improvements_final
+            )
+        );
         for d in &written.skipped {
             eprintln!("not in Table I (not the cube alone, or no controller): {}", d.display());
         }
