@@ -49,6 +49,9 @@ fn a_committed_run_gives_its_row_its_two_segments_and_its_lanes() {
         "{text}"
     );
     assert!(text.contains("periodic tests (step: success, drops): 100k: 0%, 95%;"), "{text}");
+    // metrics.csv's last three windows: mean Q minus the collected return -9.85, -20.98, -6.96.
+    assert!(text.contains("\n  gap (mean Q - return), mean of the last 3 windows: -12.6\n"), "{text}");
+    assert!(!text.contains("actor log-std"), "its binary did not log one: {text}");
     assert!(
         text.contains(
             "lanes: 2026-11-20T10:00:00Z start (lane-a); 2026-11-20T11:00:00Z end (lane-a); \
@@ -67,5 +70,28 @@ fn a_folder_without_a_score_is_refused_naming_what_is_missing() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(stderr.contains("missing score.json, final-eval.json, eval.csv"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A run whose metrics carry the actor's log-std (SAC, newer binaries) gets its last value.
+#[test]
+fn a_run_that_logged_its_actors_log_std_gives_the_last_one() {
+    let dir = common::temp_dir("facts-log-std");
+    let run = dir.join("seed-6");
+    common::copy_dir(&repo().join("docs/results/variants/sac-alpha0/table1/rl/seed-6"), &run);
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).expect("metrics.csv");
+    let rows: Vec<&str> = metrics.lines().collect();
+    let mut with_log_std = vec![format!("{},actor_log_std", rows[0])];
+    for (k, row) in rows[1..].iter().enumerate() {
+        // Empty in the first rows (no update yet), then a value per window.
+        let value = if k < 2 { String::new() } else { format!("{:.3}", -0.5 - k as f64 / 100.0) };
+        with_log_std.push(format!("{row},{value}"));
+    }
+    std::fs::write(run.join("metrics.csv"), with_log_std.join("\n") + "\n").expect("write");
+    let out = facts(&[run.to_str().expect("utf-8 path")], &dir);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let last = -0.5 - (rows.len() - 2) as f64 / 100.0;
+    assert!(text.contains(&format!("\nactor log-std at 1M: {last:.2}\n")), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -7,8 +7,9 @@ use clap::Args;
 /// Print a finished, scored run's facts as the results write-ups report them
 ///
 /// Reads RUN_DIR/score.json (held-out scores), final-eval.json (wall time), metrics.csv
-/// (the critic's mean Q against the discounted return collected, from 100k steps on; the BC
-/// term; the controller's share), eval.csv (the periodic tests), train.log (each training
+/// (the critic's mean Q against the discounted return collected, from 100k steps on, and
+/// their gap over the last three windows; the actor's last log-std where it was logged; the
+/// BC term; the controller's share), eval.csv (the periodic tests), train.log (each training
 /// segment: where it started, its wall time, how it ended) and the lanes' logs (when each
 /// lane started and ended the run, named by its path after results/), and prints one table
 /// row and the numbers a bullet quotes.
