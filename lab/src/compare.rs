@@ -636,9 +636,19 @@ pub fn write(
     Ok(Written { rows, improvements, improvements_final, files })
 }
 
-/// P(A > B) of `judged` policies for each pair whose groups both have scores. The selected
-/// policies' draws are labelled `A > B`, the final ones' `A > B final`, so that each interval
-/// is the same whichever others are computed beside it.
+/// The label P(A > B)'s bootstrap draws are seeded by ([`rng_for`]): `A > B` for the selected
+/// policies (the label they had before other policies were compared), `A > B final` for the
+/// final ones, so that each interval is the same whichever others are computed beside it.
+#[must_use]
+pub fn improvement_label(a: &str, b: &str, judged: Judged) -> String {
+    match judged {
+        Judged::Selected => format!("{a} > {b}"),
+        _ => format!("{a} > {b} {}", judged.name()),
+    }
+}
+
+/// P(A > B) of `judged` policies for each pair whose groups both have scores
+/// ([`improvement_label`]).
 fn improvements_between(
     groups: &[(&str, Vec<&RunCurves>)],
     pairs: &[(String, String)],
@@ -655,10 +665,7 @@ fn improvements_between(
         let x = judged_scores(by_name[a.as_str()], figure, objects.as_deref())?;
         let y = judged_scores(by_name[b.as_str()], figure, objects.as_deref())?;
         if let (Some(x), Some(y)) = (x, y) {
-            let label = match judged {
-                Judged::Selected => format!("{a} > {b}"),
-                _ => format!("{a} > {b} {}", judged.name()),
-            };
+            let label = improvement_label(a, b, judged);
             let estimate = bootstrap.probability_of_improvement(&x, &y, &mut rng_for(seed, &label))?;
             found.push(Improvement { a: a.clone(), b: b.clone(), estimate });
         }

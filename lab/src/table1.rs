@@ -508,13 +508,12 @@ pub struct Written {
 }
 
 /// P(A > B) of `judged` policies for the pairs of [`IMPROVEMENT_PAIRS`] whose cells both have
-/// scored runs. The selected policies' draws are labelled `A > B`, the final ones'
-/// `A > B final`.
+/// scored runs ([`crate::compare::improvement_label`]).
 fn improvements(
     runs: &[RunCurves],
     judged: crate::compare::Judged,
 ) -> Result<Vec<crate::compare::Improvement>, PlotError> {
-    use crate::compare::{Improvement, Judged, success_rates};
+    use crate::compare::{Improvement, success_rates};
     let cell = |controller: ControllerKind, method: &str| -> Vec<f64> {
         let finished: Vec<&RunCurves> = runs
             .iter()
@@ -528,10 +527,7 @@ fn improvements(
     for (controller, method_a, method_b) in IMPROVEMENT_PAIRS {
         let (x, y) = (cell(controller, method_a), cell(controller, method_b));
         let (a, b) = (cell_label(controller, method_a), cell_label(controller, method_b));
-        let label = match judged {
-            Judged::Selected => format!("{a} > {b}"),
-            _ => format!("{a} > {b} {}", judged.name()),
-        };
+        let label = crate::compare::improvement_label(&a, &b, judged);
         let estimate =
             crate::compare::improvement(&x, &y, &crate::stats::Bootstrap::default(), BOOTSTRAP_SEED, &label)
                 .map_err(|e| PlotError::Draw(format!("{label}: {e}")))?;
