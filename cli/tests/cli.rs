@@ -568,13 +568,15 @@ fn eval_run_rescores_a_finished_run_and_write_replaces_its_final_eval() {
 
 /// The tilt of the axis a policy turns the object about tells an upright turn from a tumble
 /// that the success test counts only in its z part: the shipped vge15 gait turns the cube
-/// about z, the shipped Allegro policy tumbles it about an axis far from vertical.
+/// about z, the shipped Allegro policy tumbles it about an axis far from vertical; both pass
+/// the success test, and only the first passes it with the object upright (`--max-tilt-rad`).
 #[test]
 fn eval_reports_how_far_the_turning_axis_leans_from_z() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let tilt_deg = |policy: &str| -> f64 {
+    // (tilt of the turning axis in deg, upright success rate)
+    let tilt_deg = |policy: &str| -> (f64, f64) {
         let path = root.join("policies").join(policy).display().to_string();
-        let out = vge(&["eval", "--episodes", "2", "--json", "--policy"], &[path]);
+        let out = vge(&["eval", "--episodes", "2", "--json", "--max-tilt-rad", "0.35", "--policy"], &[path]);
         assert!(out.status.success(), "{}", text(&out.stderr));
         let line = text(&out.stdout);
         let doc: serde_json::Value =
@@ -586,12 +588,53 @@ fn eval_reports_how_far_the_turning_axis_leans_from_z() {
             (z - doc["per_episode"][0]["rotation_rad"].as_f64().expect("rotation")).abs() < 1e-6,
             "{doc}"
         );
-        doc["mean_rotation_axis_tilt_rad"].as_f64().expect("the tilt").to_degrees()
+        assert_eq!(doc["success_rate"].as_f64(), Some(1.0), "{policy}: {doc}");
+        assert_eq!(doc["max_tilt_rad"].as_f64(), Some(0.35), "{doc}");
+        let tilt_deg = doc["mean_rotation_axis_tilt_rad"].as_f64().expect("the tilt").to_degrees();
+        (tilt_deg, doc["upright_success_rate"].as_f64().expect("the upright success rate"))
     };
-    let upright = tilt_deg("cube.vgep");
-    let tumbling = tilt_deg("allegro-cube.vgep");
+    let (upright, upright_success) = tilt_deg("cube.vgep");
+    let (tumbling, tumbling_success) = tilt_deg("allegro-cube.vgep");
     assert!(upright < 20.0, "the vge15 gait turns the cube about an axis {upright} deg from z");
     assert!(tumbling > 45.0, "the Allegro policy turns the cube about an axis {tumbling} deg from z");
+    assert_eq!((upright_success, tumbling_success), (1.0, 0.0));
+    // A bound a tilt cannot have is refused before any episode.
+    let policy = root.join("policies/cube.vgep").display().to_string();
+    let refused = vge(&["eval", "--max-tilt-rad", "1.6", "--policy"], &[policy]);
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("outside 0 to pi/2"), "{}", text(&refused.stderr));
+}
+
+/// `--max-tilt-rad` with `--objects`: each object's upright success rate beside its success
+/// rate, in the order asked for. The shipped multi-object gait turns its objects upright, so
+/// every success is an upright one, and a bound of 0 rad passes none.
+#[test]
+fn eval_objects_scores_the_upright_success_test_per_object() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let policy = root.join("policies/multi-object.vgep").display().to_string();
+    // (the report, its raw line: serde_json's Value sorts keys, the line keeps their order)
+    let run = |max_tilt_rad: &str| -> (serde_json::Value, String) {
+        let args = ["eval", "--json", "--objects", "sphere,cube", "--episodes", "2", "--episode-s", "10"];
+        let out = vge(
+            &args,
+            &["--max-tilt-rad".to_owned(), max_tilt_rad.to_owned(), "--policy".to_owned(), policy.clone()],
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        (serde_json::from_slice(&out.stdout).expect("one JSON line"), text(&out.stdout))
+    };
+    let (doc, raw) = run("0.35");
+    let upright = doc["upright_success_rate_per_object"].as_object().expect("per object");
+    assert_eq!(upright.len(), 2, "{doc}");
+    let per_object = &raw[raw.find("\"upright_success_rate_per_object\"").expect("the key")..];
+    let at = |name: &str| per_object.find(&format!("\"{name}\"")).expect(name);
+    assert!(at("sphere") < at("cube"), "in the order asked for: {per_object}");
+    for (object, rate) in upright {
+        assert_eq!(rate.as_f64(), doc["per_object"][object]["success_rate"].as_f64(), "{object}: {doc}");
+    }
+    assert!(doc["upright_success_rate"].as_f64().expect("overall") > 0.0, "{doc}");
+    assert_eq!(doc["upright_success_rate"], doc["success_rate"], "{doc}");
+    let (none, _) = run("0");
+    assert_eq!(none["upright_success_rate"].as_f64(), Some(0.0), "{none}");
 }
 
 #[test]

@@ -91,6 +91,14 @@ impl EvalReport {
     pub fn learned(&self) -> bool {
         self.success_rate >= LEARNED_SUCCESS_RATE
     }
+
+    /// Share of episodes that pass the success test with the object upright
+    /// ([`EpisodeOutcome::upright_success`]: turned about an axis within `max_tilt_rad` of z);
+    /// at most `success_rate`.
+    pub fn upright_success_rate(&self, max_tilt_rad: f64) -> f64 {
+        let upright = self.per_episode.iter().filter(|o| o.upright_success(max_tilt_rad)).count();
+        upright as f64 / self.per_episode.len().max(1) as f64
+    }
 }
 
 pub use vge_sim::EpisodeOutcome;

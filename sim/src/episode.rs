@@ -49,6 +49,14 @@ impl EpisodeOutcome {
     pub fn success(&self) -> bool {
         !self.terminated && self.rotation_rad >= std::f64::consts::TAU
     }
+
+    /// The success test, with the object kept upright: a success whose overall turning axis
+    /// leans at most `max_tilt_rad` from z. A tumble about a tilted axis can pass the success
+    /// test on the z part of its turning alone; it does not pass this one.
+    #[must_use]
+    pub fn upright_success(&self, max_tilt_rad: f64) -> bool {
+        self.success() && self.rotation_axis_tilt_rad() <= max_tilt_rad
+    }
 }
 
 /// Accumulates one episode step by step.
@@ -133,6 +141,9 @@ mod tests {
         assert!((o.tip_slip_m - 0.025).abs() < 1e-6, "slip adds up: {o:?}");
         assert!((o.net_rotation_rad[0] - 7.5).abs() < 1e-4, "the rotation vector adds up: {o:?}");
         assert!((o.rotation_axis_tilt_rad() - std::f64::consts::FRAC_PI_4).abs() < 1e-6, "{o:?}");
+        // Turned about an axis 45 deg from z: a success, upright only under a looser bound.
+        assert!(!o.upright_success(0.7) && o.upright_success(0.8), "{o:?}");
+        assert!(!t.outcome(true).upright_success(std::f64::consts::FRAC_PI_2), "a drop never succeeds");
     }
 
     #[test]

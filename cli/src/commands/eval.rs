@@ -92,6 +92,14 @@ pub struct EvalArgs {
     /// summary.
     #[arg(long)]
     json: bool,
+    /// Also score the success test with the object upright: an episode passes it only if it
+    /// succeeds and the axis the object turned about overall leans at most RAD from z (the
+    /// tilt printed beside the rotation). A tumble about a tilted axis can turn the object
+    /// 2 pi about z and pass the success test; it fails this one. For example 0.35 (20 deg):
+    /// the shipped vge15 gait turns the cube about an axis about 5 deg from z, the shipped
+    /// Allegro policy about 65 deg. With --json: `max_tilt_rad` and `upright_success_rate`.
+    #[arg(long, value_name = "RAD", value_parser = parse_max_tilt_rad)]
+    max_tilt_rad: Option<f64>,
     /// The hand to run the policy on, in place of the one its file records (a shipped
     /// hand's name or an MJCF file: a policy of a hand vge does not ship is run so). The
     /// hand's orientation and the observation the policy takes come from the file.
@@ -105,6 +113,39 @@ pub struct ObjectList(Vec<ObjectShape>);
 
 fn parse_object_list(s: &str) -> Result<ObjectList, String> {
     vge_run::eval::parse_objects(s).map(ObjectList)
+}
+
+/// A bound on the turning axis's tilt: 0 to pi/2 rad (the tilt's range).
+fn parse_max_tilt_rad(s: &str) -> Result<f64, String> {
+    let rad: f64 = s.trim().parse().map_err(|e| format!("`{s}` is not a number of radians: {e}"))?;
+    if (0.0..=std::f64::consts::FRAC_PI_2).contains(&rad) {
+        Ok(rad)
+    } else {
+        Err(format!("{rad} rad is outside 0 to pi/2 (1.571), the range of a tilt from z"))
+    }
+}
+
+/// A report as one JSON object, with the upright success test's figures when one was asked.
+fn report_json(report: &vge_run::eval::EvalReport, max_tilt_rad: Option<f64>) -> anyhow::Result<String> {
+    let mut doc = serde_json::to_value(report).context("writing the report as JSON")?;
+    if let (Some(rad), Some(map)) = (max_tilt_rad, doc.as_object_mut()) {
+        map.insert("max_tilt_rad".to_owned(), rad.into());
+        map.insert("upright_success_rate".to_owned(), report.upright_success_rate(rad).into());
+    }
+    serde_json::to_string(&doc).context("writing the report as JSON")
+}
+
+/// The upright success line of a text report, if one was asked, its label padded to
+/// `label_width` as the report's other labels are.
+fn print_upright(report: &vge_run::eval::EvalReport, max_tilt_rad: Option<f64>, label_width: usize) {
+    if let Some(rad) = max_tilt_rad {
+        println!(
+            "  {:<label_width$}{:.2} (a success about an axis within {:.0} deg of z)",
+            "upright success",
+            report.upright_success_rate(rad),
+            rad.to_degrees()
+        );
+    }
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -121,12 +162,13 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         plot,
         record,
         json,
+        max_tilt_rad,
         run,
         write,
         hand,
     } = args;
     if let Some(dir) = run {
-        return rescore_run(&dir, write, json);
+        return rescore_run(&dir, write, json, max_tilt_rad);
     }
     if let Some(path) = &record {
         vge_sim::recording::check_path(path)?;
@@ -169,7 +211,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     };
     if let Some(ObjectList(objects)) = objects {
         let envs: Vec<EnvConfig> = objects.iter().map(|&o| env_for(o)).collect();
-        return eval_objects(&policy, &envs, episodes, seed, episode_s, plot.as_deref(), json);
+        let out = ObjectsOutput { plot: plot.as_deref(), json, max_tilt_rad };
+        return eval_objects(&policy, &envs, episodes, seed, episode_s, out);
     }
     let env = env_for(object);
     // Before the evaluation, so that a path that cannot be written fails at once.
@@ -182,11 +225,19 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         draw_gait_diagram(&policy, &env, seed, png)?;
     }
     if json {
-        println!("{}", report.to_json_line());
+        println!("{}", report_json(&report, max_tilt_rad)?);
     } else {
-        print_eval_report(&report, &policy, episode_s, object);
+        print_eval_report(&report, &policy, episode_s, object, max_tilt_rad);
     }
     Ok(())
+}
+
+/// What `vge eval --objects` writes beside the table: the gait diagrams (`--plot`), JSON in
+/// place of text (`--json`), the upright success test (`--max-tilt-rad`).
+struct ObjectsOutput<'a> {
+    plot: Option<&'a Path>,
+    json: bool,
+    max_tilt_rad: Option<f64>,
 }
 
 /// `vge eval --objects`: the success test on each of `envs` (one per object).
@@ -196,8 +247,7 @@ fn eval_objects(
     episodes: usize,
     seed: u64,
     episode_s: f32,
-    plot: Option<&Path>,
-    json: bool,
+    ObjectsOutput { plot, json, max_tilt_rad }: ObjectsOutput<'_>,
 ) -> anyhow::Result<()> {
     let bytes = vge_run::eval::read_policy_file(policy)?;
     let report = vge_run::eval::eval_policy_bytes_per_object(&bytes, envs, episodes, seed)
@@ -224,13 +274,55 @@ fn eval_objects(
             #[serde(flatten)]
             overall: &'a vge_run::eval::EvalReport,
             per_object: vge_run::eval::PerObjectFigures,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            max_tilt_rad: Option<f64>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            upright_success_rate: Option<f64>,
+            /// Per object, in the order asked for.
+            #[serde(skip_serializing_if = "Option::is_none")]
+            upright_success_rate_per_object: Option<InOrder>,
         }
-        let line = Line { overall: &report.overall, per_object: report.figures() };
+        /// Name-value pairs as a JSON object in their order (serde_json's map sorts its keys).
+        struct InOrder(Vec<(String, f64)>);
+        impl serde::Serialize for InOrder {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                serializer.collect_map(self.0.iter().map(|(k, v)| (k, v)))
+            }
+        }
+        let upright_per_object = max_tilt_rad.map(|rad| {
+            InOrder(
+                report
+                    .per_object
+                    .iter()
+                    .map(|(o, r)| (o.name().to_owned(), r.upright_success_rate(rad)))
+                    .collect(),
+            )
+        });
+        let line = Line {
+            overall: &report.overall,
+            per_object: report.figures(),
+            max_tilt_rad,
+            upright_success_rate: max_tilt_rad.map(|rad| report.overall.upright_success_rate(rad)),
+            upright_success_rate_per_object: upright_per_object,
+        };
         println!("{}", serde_json::to_string(&line).context("writing the report as JSON")?);
         return Ok(());
     }
     println!("{episodes} episodes of {episode_s} s per object, policy {}", policy.display());
     print_objects_table(&report.per_object, &report.overall);
+    if let Some(rad) = max_tilt_rad {
+        let per_object: Vec<String> = report
+            .per_object
+            .iter()
+            .map(|(o, r)| format!("{o} {:.2}", r.upright_success_rate(rad)))
+            .collect();
+        println!(
+            "upright success (a success about an axis within {:.0} deg of z): overall {:.2}; {}",
+            rad.to_degrees(),
+            report.overall.upright_success_rate(rad),
+            per_object.join(", ")
+        );
+    }
     let verdict = match report.worst_object() {
         Some(_) if report.every_object_learned() => "learned on every object".to_owned(),
         Some((object, success)) => format!("not learned on every object (worst: the {object}, {success:.2})"),
@@ -270,11 +362,11 @@ fn print_objects_table(
 }
 
 /// `vge eval --run DIR [--write]`.
-fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
+fn rescore_run(dir: &Path, write: bool, json: bool, max_tilt_rad: Option<f64>) -> anyhow::Result<()> {
     let r = vge_run::run_eval::rescore_final_eval(dir, write)
         .with_context(|| format!("scoring the run in {}", dir.display()))?;
     if json {
-        println!("{}", r.report.to_json_line());
+        println!("{}", report_json(&r.report, max_tilt_rad)?);
         return Ok(());
     }
     let stored = |v: Option<f64>, unit: &str| v.map_or("-".to_owned(), |v| format!("{v:.3}{unit}"));
@@ -284,6 +376,7 @@ fn rescore_run(dir: &Path, write: bool, json: bool) -> anyhow::Result<()> {
         r.report.success_rate,
         stored(r.stored_success_rate, "")
     );
+    print_upright(&r.report, max_tilt_rad, 17);
     println!(
         "  rotation         {:.2} rad per episode (stored: {}), about an axis tilted {:.0} deg from z",
         r.report.mean_rotation_rad,
@@ -344,7 +437,13 @@ fn slip_per_rad(slip_m: f64, rotation_rad: f64) -> String {
     }
 }
 
-fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_s: f32, object: ObjectShape) {
+fn print_eval_report(
+    report: &vge_run::eval::EvalReport,
+    policy: &Path,
+    episode_s: f32,
+    object: ObjectShape,
+    max_tilt_rad: Option<f64>,
+) {
     println!("{} episodes of {episode_s} s on the {object}, policy {}", report.episodes, policy.display());
     println!("  mean return        {:.3}", report.mean_return);
     println!(
@@ -353,6 +452,7 @@ fn print_eval_report(report: &vge_run::eval::EvalReport, policy: &Path, episode_
         report.mean_rotation_axis_tilt_rad.to_degrees()
     );
     println!("  success rate       {:.2} (turned >= 2 pi without a drop)", report.success_rate);
+    print_upright(report, max_tilt_rad, 19);
     println!("  dropped            {:.2} of episodes", report.drop_rate);
     println!(
         "  contact switches   {:.1} per episode (a fingertip let go and touched again)",
