@@ -214,6 +214,13 @@ fn a_two_object_run_evaluates_both_objects_and_writes_per_object() {
     assert_eq!(vge_rows(&csv).len(), 3, "selected, final, last snapshots: {csv}");
     let md = std::fs::read_to_string(compared.join("compare.md")).expect("compare.md");
     assert!(md.contains("| group | cube | sphere |") && md.contains("each object is a task"), "{md}");
+    // The critic at the end of each run, per group: the copies are one run three times.
+    let critic = md.split("The critic at the end of each run").nth(1).expect("the critic's section");
+    let vge_row = critic.lines().find(|l| l.starts_with("| vge |")).expect("vge's critic row");
+    let gaps: Vec<&str> = vge_row.split(" | ").nth(2).expect("per run").split(", ").collect();
+    assert_eq!(gaps.len(), 3, "{vge_row}");
+    let gap = |g: &str| g.split(": ").nth(1).expect("seed: gap").parse::<f64>().expect("a gap");
+    assert!(gaps.iter().all(|g| gap(g) == gap(gaps[0])), "{vge_row}");
     // P(A > B) of the final policies too, each ordered pair: the two directions sum to 1
     // (ties count half to each).
     let last =

@@ -395,6 +395,36 @@ pub fn with_interval(e: &Estimate) -> String {
     format!("{:.2} [{:.2}, {:.2}]", e.point, e.ci_low, e.ci_high)
 }
 
+/// The critic at the end of each group's runs: every run's gap
+/// ([`RunCurves::critic_gap_at_end`]: mean Q minus the collected return over its last metrics
+/// windows) and the group's mean; empty where no run logged both figures. A comparison of
+/// off-policy learners is read with it: a critic far above the returns its behaviour collects
+/// has not converged, and a run's failure then says little about its method.
+#[must_use]
+pub fn critic_gap_markdown(groups: &[(&str, Vec<&RunCurves>)]) -> String {
+    let mut rows = String::new();
+    for (name, runs) in groups {
+        let gaps: Vec<(u64, f64)> =
+            runs.iter().filter_map(|r| r.critic_gap_at_end().map(|gap| (r.seed, gap))).collect();
+        if gaps.is_empty() {
+            continue;
+        }
+        let mean = gaps.iter().map(|(_, gap)| gap).sum::<f64>() / gaps.len() as f64;
+        let per_run: Vec<String> = gaps.iter().map(|(seed, gap)| format!("{seed}: {gap:.1}")).collect();
+        rows.push_str(&format!("| {name} | {} | {} | {mean:.1} |\n", gaps.len(), per_run.join(", ")));
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    format!(
+        "\nThe critic at the end of each run: mean Q minus the collected discounted return \
+         (`metrics.csv`'s `mean_q` - `mc_return`), the mean over its last {} metrics windows; above 0 \
+         the critic overestimates what its behaviour collected.\n\n| group | runs | per run (seed: \
+         gap) | mean |\n|---|---|---|---|\n{rows}",
+        vge_run::run_dir::CRITIC_GAP_WINDOWS
+    )
+}
+
 /// The panels of the IQM curves: periodic success and return against env steps.
 pub const CURVE_SPECS: [(&str, Series); 2] = [
     ("success rate (periodic tests), IQM", |r| (&r.eval_step, &r.eval_success)),
@@ -788,6 +818,7 @@ fn markdown(
         ));
     }
     text.push_str(&both_improvements_markdown(name, improvements, improvements_final));
+    text.push_str(&critic_gap_markdown(groups));
     if let Some(objects) = objects {
         // Each object's mean over runs, with its interval: where a group's score comes from.
         let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();

@@ -28,9 +28,6 @@ pub enum FactsError {
 /// warm-up, where neither means much yet.
 pub const FROM_STEP: u64 = 100_000;
 
-/// Metrics windows the critic's gap is averaged over (the last ones).
-pub const GAP_WINDOWS: usize = 3;
-
 /// The facts of the run in `run`, as lines of text. `lanes` is the folder of the lanes' logs
 /// (`runs/lanes`): their start and end lines of this run, which is named as in its queue
 /// (the path after `results/`).
@@ -139,14 +136,14 @@ fn critic(out: &mut String, metrics: &Table) {
         let _ =
             writeln!(out, "  at {}: mean Q {:.1}, return {:.1}", steps_label(q_last.0), q_last.1, ret_last.1);
     }
-    // The critic's gap as the budget plans' rules read it: mean Q minus the collected return,
-    // averaged over the last windows that have both (one window's gap swings by tens).
+    // The critic's gap as the budget plans' rules, `vge compare` and Table I read it: mean Q
+    // minus the collected return over the last windows that have both.
     let returns: std::collections::BTreeMap<u64, f64> = ret.iter().copied().collect();
-    let gaps: Vec<f64> = q.iter().filter_map(|(step, v)| returns.get(step).map(|r| v - r)).collect();
-    let last = &gaps[gaps.len().saturating_sub(GAP_WINDOWS)..];
-    if !last.is_empty() {
-        let mean = last.iter().sum::<f64>() / last.len() as f64;
-        let _ = writeln!(out, "  gap (mean Q - return), mean of the last {} windows: {mean:.1}", last.len());
+    let (q, ret): (Vec<f64>, Vec<f64>) =
+        q.iter().filter_map(|(step, v)| returns.get(step).map(|r| (*v, *r))).unzip();
+    if let Some(gap) = vge_run::run_dir::critic_gap_at_end(&q, &ret) {
+        let windows = vge_run::run_dir::CRITIC_GAP_WINDOWS.min(q.len());
+        let _ = writeln!(out, "  gap (mean Q - return), mean of the last {windows} windows: {gap:.1}");
     }
     // The actor's exploration: SAC's mean log-std (empty for TD3, absent in older binaries).
     if let Some((step, log_std)) = metrics.column("actor_log_std", 0).last() {

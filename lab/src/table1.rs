@@ -538,6 +538,26 @@ fn improvements(
     Ok(found)
 }
 
+/// The critic at the end of each cell's finished runs ([`crate::compare::critic_gap_markdown`]),
+/// cells in the table's order.
+fn critic_gaps(runs: &[RunCurves]) -> String {
+    let mut cells: Vec<(String, Vec<&RunCurves>)> = Vec::new();
+    for controller in CONTROLLERS {
+        for method in Method::ALL {
+            let cell: Vec<&RunCurves> = runs
+                .iter()
+                .filter(|r| r.controller == Some(controller) && r.method == method && r.env_steps.is_some())
+                .collect();
+            if !cell.is_empty() {
+                cells.push((cell_label(controller, method.name()), cell));
+            }
+        }
+    }
+    let cells: Vec<(&str, Vec<&RunCurves>)> =
+        cells.iter().map(|(label, c)| (label.as_str(), c.clone())).collect();
+    crate::compare::critic_gap_markdown(&cells)
+}
+
 /// Whether a run belongs in the table: the cube alone, with a controller named.
 fn in_table(run: &RunCurves) -> bool {
     run.controller.is_some() && run.objects == [vge_sim::ObjectShape::Cube]
@@ -560,7 +580,8 @@ pub fn write(roots: &[PathBuf], out: &Path) -> Result<Written, PlotError> {
     let improvements_final = improvements(&runs, crate::compare::Judged::Final)?;
     std::fs::create_dir_all(out).map_err(|source| PlotError::Io { path: out.to_owned(), source })?;
     let mut files = Vec::new();
-    let md = to_markdown_with(&rows, &improvements_selected, &improvements_final);
+    let mut md = to_markdown_with(&rows, &improvements_selected, &improvements_final);
+    md.push_str(&critic_gaps(&runs));
     let mut texts = vec![("table1.csv", to_csv(&rows)), ("table1.md", md)];
     // Only once runs are scored: a table without scores has no improvements to give.
     if !improvements_selected.is_empty() {

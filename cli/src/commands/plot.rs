@@ -21,7 +21,8 @@ use clap::Args;
 /// DIR/table1.csv (controller,method,seeds,learned,success_rate_mean,return_mean,
 /// return_std,env_steps; once runs are scored also scored and the IQM and mean of their
 /// held-out success with 95% intervals, selected and final: iqm, iqm_ci_low, ...,
-/// final_iqm_ci_high), DIR/table1.md (beside the paper's numbers), DIR/curves-fg.png,
+/// final_iqm_ci_high), DIR/table1.md (beside the paper's numbers, and each cell's critic at
+/// the end of its runs: mean Q minus the collected return), DIR/curves-fg.png,
 /// DIR/curves-cs.png (periodic success rate and return against env steps, one band per
 /// method) and, once runs are scored, DIR/improvement.csv (every guided method against RL,
 /// VGE against FGE, VGE + BC against VGE, by the selected policies), DIR/improvement-final.csv

@@ -23,8 +23,8 @@ mod sessions;
 mod tables;
 
 pub use records::{
-    FinalEvalFields, RunCurves, Selected, check_finished, checkpoint_step, find_runs, read_final_eval,
-    read_json, read_run,
+    CRITIC_GAP_WINDOWS, FinalEvalFields, RunCurves, Selected, check_finished, checkpoint_step,
+    critic_gap_at_end, find_runs, read_final_eval, read_json, read_run,
 };
 pub use score_file::{PolicyScore, Score, SnapshotsScore};
 pub use sessions::{SegmentEnd, TrainSegment, read_train_log, tensorboard_sessions};

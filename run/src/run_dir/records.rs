@@ -105,6 +105,28 @@ impl RunCurves {
     pub fn learned(&self) -> Option<bool> {
         self.final_success.map(|s| learned(s, self.final_worst_object_success))
     }
+
+    /// The critic's gap at the end of the run ([`critic_gap_at_end`] of its metrics).
+    pub fn critic_gap_at_end(&self) -> Option<f64> {
+        critic_gap_at_end(&self.mean_q, &self.mc_return)
+    }
+}
+
+/// Metrics windows the critic's gap at the end of a run is averaged over: one window's gap
+/// swings by tens.
+pub const CRITIC_GAP_WINDOWS: usize = 3;
+
+/// The critic's gap at the end of a run: mean Q minus the collected discounted Monte-Carlo
+/// return, averaged over the last [`CRITIC_GAP_WINDOWS`] metrics windows that have both
+/// (`mean_q` and `mc_return`, one entry per window, NaN where a window lacks the figure).
+/// Above 0 the critic overestimates what the behaviour policy collected. None where no
+/// window has both.
+#[must_use]
+pub fn critic_gap_at_end(mean_q: &[f64], mc_return: &[f64]) -> Option<f64> {
+    let gaps: Vec<f64> =
+        mean_q.iter().zip(mc_return).map(|(q, r)| q - r).filter(|gap| gap.is_finite()).collect();
+    let last = &gaps[gaps.len().saturating_sub(CRITIC_GAP_WINDOWS)..];
+    (!last.is_empty()).then(|| last.iter().sum::<f64>() / last.len() as f64)
 }
 
 /// The fields of `final-eval.json` that the plot and `vge eval --run` read.
@@ -287,6 +309,18 @@ pub fn checkpoint_step(dir: &Path) -> Option<u64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_critic_gap_at_the_end_averages_the_last_windows_with_both_figures() {
+        let nan = f64::NAN;
+        // Windows: gaps 100, 1, (no return), 2, 3, (no Q), 7.
+        let q = [110.0, 11.0, 5.0, 12.0, 13.0, nan, 17.0];
+        let ret = [10.0, 10.0, nan, 10.0, 10.0, 4.0, 10.0];
+        assert_eq!(critic_gap_at_end(&q, &ret), Some((2.0 + 3.0 + 7.0) / 3.0));
+        assert_eq!(critic_gap_at_end(&q[..2], &ret[..2]), Some((100.0 + 1.0) / 2.0), "fewer windows");
+        assert_eq!(critic_gap_at_end(&[], &[]), None, "a run that predates the columns");
+        assert_eq!(critic_gap_at_end(&[nan], &[1.0]), None);
+    }
 
     #[test]
     fn a_selection_on_several_objects_learned_only_if_every_object_passed() {
