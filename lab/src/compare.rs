@@ -404,8 +404,9 @@ pub fn with_interval(e: &Estimate) -> String {
 pub fn critic_gap_markdown(groups: &[(&str, Vec<&RunCurves>)]) -> String {
     let mut rows = String::new();
     for (name, runs) in groups {
-        let gaps: Vec<(u64, f64)> =
+        let mut gaps: Vec<(u64, f64)> =
             runs.iter().filter_map(|r| r.critic_gap_at_end().map(|gap| (r.seed, gap))).collect();
+        gaps.sort_by_key(|&(seed, _)| seed);
         if gaps.is_empty() {
             continue;
         }
