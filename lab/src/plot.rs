@@ -183,7 +183,7 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
     }
     // Each panel: a title and its series (a second one, e.g. Monte-Carlo returns beside
     // mean Q, is drawn dashed in the same colour).
-    let specs: [PanelSpec; 4] = [
+    let specs: [PanelSpec; 5] = [
         ("episode return", |r| (&r.step, &r.mean_return), None),
         ("rotation about z per episode (rad)", |r| (&r.step, &r.rotation_rad), None),
         ("controller share", |r| (&r.step, &r.controller_share), None),
@@ -192,6 +192,8 @@ pub fn plot(runs: &[RunCurves], out: &Path) -> Result<String, PlotError> {
             |r| (&r.step, &r.mean_q),
             Some(|r| (&r.step, &r.mc_return)),
         ),
+        // Their difference, which the runs' critic tables and budget rules read.
+        ("critic gap: mean Q - Monte-Carlo return", |r| (&r.step, &r.critic_gap), None),
     ];
     draw_figure(&groups, &specs, "", &[], out)?;
     Ok(success_table(&groups))

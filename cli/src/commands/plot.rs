@@ -11,8 +11,10 @@ use clap::Args;
 /// PNG, with a markdown table of final success rates printed; --table1 builds Table I and
 /// Fig. 3 from all runs below the given folders.
 ///
-/// Panels: episode return, rotation, controller share, and the critic's mean Q beside the
-/// discounted Monte-Carlo returns of its data (a sound critic stays within them). A run
+/// Panels: episode return, rotation, controller share, the critic's mean Q beside the
+/// discounted Monte-Carlo returns of its data (a sound critic stays within them), and their
+/// difference, the critic's gap (what `vge facts`, `vge compare` and Table I report at a
+/// run's end). A run
 /// learned when its final-eval.json success rate is >= 50% (`vge eval`'s success test).
 /// Runs trained on several objects also get OUT-per-object.png beside OUT: each object's
 /// success in the periodic evaluations, one panel per object.

@@ -32,6 +32,9 @@ pub struct RunCurves {
     pub mean_q: Vec<f64>,
     /// Mean discounted Monte-Carlo return of the visited states (empty when not logged).
     pub mc_return: Vec<f64>,
+    /// The critic's gap per metrics window: `mean_q - mc_return` (NaN where a window lacks
+    /// either; empty where the run logged neither).
+    pub critic_gap: Vec<f64>,
     /// The periodic evaluations (`eval.csv`: the success test on the exported policy):
     /// their env steps, mean returns and success rates (empty without evaluations).
     pub eval_step: Vec<f64>,
@@ -108,7 +111,7 @@ impl RunCurves {
 
     /// The critic's gap at the end of the run ([`critic_gap_at_end`] of its metrics).
     pub fn critic_gap_at_end(&self) -> Option<f64> {
-        critic_gap_at_end(&self.mean_q, &self.mc_return)
+        mean_of_last_gaps(self.critic_gap.iter().copied())
     }
 }
 
@@ -123,8 +126,12 @@ pub const CRITIC_GAP_WINDOWS: usize = 3;
 /// window has both.
 #[must_use]
 pub fn critic_gap_at_end(mean_q: &[f64], mc_return: &[f64]) -> Option<f64> {
-    let gaps: Vec<f64> =
-        mean_q.iter().zip(mc_return).map(|(q, r)| q - r).filter(|gap| gap.is_finite()).collect();
+    mean_of_last_gaps(mean_q.iter().zip(mc_return).map(|(q, r)| q - r))
+}
+
+/// The mean of the last [`CRITIC_GAP_WINDOWS`] finite gaps (None if none is).
+fn mean_of_last_gaps(gaps: impl Iterator<Item = f64>) -> Option<f64> {
+    let gaps: Vec<f64> = gaps.filter(|gap| gap.is_finite()).collect();
     let last = &gaps[gaps.len().saturating_sub(CRITIC_GAP_WINDOWS)..];
     (!last.is_empty()).then(|| last.iter().sum::<f64>() / last.len() as f64)
 }
@@ -165,6 +172,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, RunFileError> {
             .map(|c| c.and_then(|c| c.into_iter().next()).unwrap_or_default())
     };
     let (mean_q, mc_return) = (optional("mean_q")?, optional("mc_return")?);
+    let critic_gap = mean_q.iter().zip(&mc_return).map(|(q, r)| q - r).collect();
     let final_eval = read_final_eval(dir)?;
     let eval = RunDir::new(dir).eval_csv();
     let [eval_step, eval_return, eval_success]: [Vec<f64>; 3] = if eval.exists() {
@@ -195,6 +203,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, RunFileError> {
         controller_share,
         mean_q,
         mc_return,
+        critic_gap,
         eval_step,
         eval_return,
         eval_success,
