@@ -63,13 +63,44 @@ fn a_committed_run_gives_its_row_its_two_segments_and_its_lanes() {
 }
 
 #[test]
-fn a_folder_without_a_score_is_refused_naming_what_is_missing() {
-    let dir = common::temp_dir("facts-unscored");
-    std::fs::write(dir.join("metrics.csv"), "step\n").expect("write");
-    let out = facts(&[dir.to_str().expect("utf-8 path")], &dir);
+fn a_run_still_training_shows_where_it_stands_and_a_folder_without_metrics_is_refused() {
+    let dir = common::temp_dir("facts-training");
+    let run = dir.join("seed-6");
+    common::copy_dir(&repo().join("docs/results/variants/sac-alpha0/table1/rl/seed-6"), &run);
+    // Stopped at 500k: no final evaluation or score yet, periodic tests to 500k.
+    for file in ["final-eval.json", "score.json", "best-eval.json"] {
+        let _ = std::fs::remove_file(run.join(file));
+    }
+    let keep_to = |file: &str, last_step: u64| {
+        let text = std::fs::read_to_string(run.join(file)).expect(file);
+        let kept: Vec<&str> = text
+            .lines()
+            .filter(|l| {
+                l.split(',').next().and_then(|s| s.parse::<u64>().ok()).is_none_or(|s| s <= last_step)
+            })
+            .collect();
+        std::fs::write(run.join(file), kept.join("\n") + "\n").expect(file);
+    };
+    keep_to("metrics.csv", 500_000);
+    keep_to("eval.csv", 500_000);
+    let out = facts(&[run.to_str().expect("utf-8 path")], &dir);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        text.contains("in training (no final-eval.json yet): its last metrics window at 500,000"),
+        "{text}"
+    );
+    assert!(text.contains("  at 500k: mean Q "), "the critic at its last window: {text}");
+    assert!(text.contains("gap (mean Q - return), mean of the last 3 windows: "), "{text}");
+    assert!(text.contains("periodic tests (step: success, drops): 100k: "), "{text}");
+    assert!(!text.contains("row: "), "no table row before the score: {text}");
+
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).expect("dir");
+    let out = facts(&[empty.to_str().expect("utf-8 path")], &dir);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(stderr.contains("missing score.json, final-eval.json, eval.csv"), "{stderr}");
+    assert!(stderr.contains("no metrics.csv: not a training run's folder"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -1,9 +1,9 @@
-//! `vge facts`: a finished, scored run's facts as the results write-ups report them: one
-//! table row (selected and final success and drops, where the selection fell, the final
-//! policy's rotation, the wall time) and the numbers a bullet quotes (the critic's mean Q
-//! against the discounted return collected, the BC term, the controller's share, the
-//! periodic tests, each training segment of `train.log`, and when each lane started and
-//! ended the run).
+//! `vge facts`: a run's facts as the results write-ups report them: for a finished, scored
+//! run one table row (selected and final success and drops, where the selection fell, the
+//! final policy's rotation, the wall time), and for any run the numbers a bullet quotes (the
+//! critic's mean Q against the discounted return collected, the BC term, the controller's
+//! share, the periodic tests, each training segment of `train.log`, and when each lane
+//! started and ended the run): a run still training shows where it stands.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -14,8 +14,8 @@ use vge_run::run_dir::{EVAL, FINAL_EVAL, METRICS, RunFileError, SCORE, SegmentEn
 
 #[derive(Debug, Error)]
 pub enum FactsError {
-    #[error("{run}: missing {}: not a finished, scored run", .missing.join(", "))]
-    Missing { run: String, missing: Vec<String> },
+    #[error("{run}: no {METRICS}: not a training run's folder")]
+    NotARun { run: String },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("{path}: {why}")]
@@ -32,21 +32,30 @@ pub const FROM_STEP: u64 = 100_000;
 /// (`runs/lanes`): their start and end lines of this run, which is named as in its queue
 /// (the path after `results/`).
 pub fn facts(run: &Path, lanes: &Path) -> Result<String, FactsError> {
-    let missing: Vec<String> = [SCORE, FINAL_EVAL, METRICS, EVAL]
-        .into_iter()
-        .filter(|f| !run.join(f).is_file())
-        .map(str::to_owned)
-        .collect();
-    if !missing.is_empty() {
-        return Err(FactsError::Missing { run: run.display().to_string(), missing });
+    if !run.join(METRICS).is_file() {
+        return Err(FactsError::NotARun { run: run.display().to_string() });
     }
-    let score = read_json(&run.join(SCORE))?;
-    let final_eval = read_json(&run.join(FINAL_EVAL))?;
     let metrics = Table::read(&run.join(METRICS))?;
-    let periodic = Table::read(&run.join(EVAL))?;
+    let periodic = if run.join(EVAL).is_file() { Table::read(&run.join(EVAL))? } else { Table::default() };
     let mut out = String::new();
     let _ = writeln!(out, "== {}", run.display());
-    row(&mut out, &score, &final_eval, &run.join(SCORE))?;
+    match (run.join(FINAL_EVAL).is_file(), run.join(SCORE).is_file()) {
+        (true, true) => {
+            let score = read_json(&run.join(SCORE))?;
+            let final_eval = read_json(&run.join(FINAL_EVAL))?;
+            row(&mut out, &score, &final_eval, &run.join(SCORE))?;
+        }
+        (true, false) => {
+            let _ = writeln!(out, "finished, not scored: `vge score {}` gives its row", run.display());
+        }
+        (false, _) => {
+            let last =
+                metrics.column("step", 0).last().map_or("no metrics window yet".to_owned(), |(step, _)| {
+                    format!("its last metrics window at {}", thousands(*step as f64))
+                });
+            let _ = writeln!(out, "in training (no {FINAL_EVAL} yet): {last}");
+        }
+    }
     critic(&mut out, &metrics);
     let tests: Vec<String> = periodic
         .rows
@@ -58,7 +67,8 @@ pub fn facts(run: &Path, lanes: &Path) -> Result<String, FactsError> {
             Some(format!("{}: {}, {}", steps_label(step), percent(success), percent(drops)))
         })
         .collect();
-    let _ = writeln!(out, "periodic tests (step: success, drops): {}", tests.join("; "));
+    let tests = if tests.is_empty() { "none yet".to_owned() } else { tests.join("; ") };
+    let _ = writeln!(out, "periodic tests (step: success, drops): {tests}");
     let segments = vge_run::run_dir::read_train_log(run)?.unwrap_or_default();
     if !segments.is_empty() {
         let text: Vec<String> = segments
@@ -169,6 +179,7 @@ fn critic(out: &mut String, metrics: &Table) {
 }
 
 /// A CSV file with a header (metrics.csv, eval.csv), its fields as text.
+#[derive(Default)]
 struct Table {
     header: Vec<String>,
     rows: Vec<Vec<String>>,
