@@ -127,12 +127,19 @@ fn parse_max_tilt_rad(s: &str) -> Result<f64, String> {
 
 /// A report as one JSON object, with the upright success test's figures when one was asked.
 fn report_json(report: &vge_run::eval::EvalReport, max_tilt_rad: Option<f64>) -> anyhow::Result<String> {
-    let mut doc = serde_json::to_value(report).context("writing the report as JSON")?;
-    if let (Some(rad), Some(map)) = (max_tilt_rad, doc.as_object_mut()) {
-        map.insert("max_tilt_rad".to_owned(), rad.into());
-        map.insert("upright_success_rate".to_owned(), report.upright_success_rate(rad).into());
+    /// The report's fields in their order, then the upright test's.
+    #[derive(serde::Serialize)]
+    struct Line<'a> {
+        #[serde(flatten)]
+        report: &'a vge_run::eval::EvalReport,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        max_tilt_rad: Option<f64>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        upright_success_rate: Option<f64>,
     }
-    serde_json::to_string(&doc).context("writing the report as JSON")
+    let upright_success_rate = max_tilt_rad.map(|rad| report.upright_success_rate(rad));
+    serde_json::to_string(&Line { report, max_tilt_rad, upright_success_rate })
+        .context("writing the report as JSON")
 }
 
 /// The upright success line of a text report, if one was asked, its label padded to
