@@ -149,10 +149,9 @@ fn critic(out: &mut String, metrics: &Table) {
     // The critic's gap as the budget plans' rules, `vge compare` and Table I read it: mean Q
     // minus the collected return over the last windows that have both.
     let returns: std::collections::BTreeMap<u64, f64> = ret.iter().copied().collect();
-    let (q, ret): (Vec<f64>, Vec<f64>) =
-        q.iter().filter_map(|(step, v)| returns.get(step).map(|r| (*v, *r))).unzip();
-    if let Some(gap) = vge_run::run_dir::critic_gap_at_end(&q, &ret) {
-        let windows = vge_run::run_dir::CRITIC_GAP_WINDOWS.min(q.len());
+    let gaps: Vec<f64> = q.iter().filter_map(|(step, v)| returns.get(step).map(|r| v - r)).collect();
+    if let Some(gap) = vge_run::run_dir::critic_gap_at_end(&gaps) {
+        let windows = vge_run::run_dir::CRITIC_GAP_WINDOWS.min(gaps.len());
         let _ = writeln!(out, "  gap (mean Q - return), mean of the last {windows} windows: {gap:.1}");
     }
     // The actor's exploration: SAC's mean log-std (empty for TD3, absent in older binaries).

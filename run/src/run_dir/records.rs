@@ -111,7 +111,7 @@ impl RunCurves {
 
     /// The critic's gap at the end of the run ([`critic_gap_at_end`] of its metrics).
     pub fn critic_gap_at_end(&self) -> Option<f64> {
-        mean_of_last_gaps(self.critic_gap.iter().copied())
+        critic_gap_at_end(&self.critic_gap)
     }
 }
 
@@ -119,19 +119,13 @@ impl RunCurves {
 /// swings by tens.
 pub const CRITIC_GAP_WINDOWS: usize = 3;
 
-/// The critic's gap at the end of a run: mean Q minus the collected discounted Monte-Carlo
-/// return, averaged over the last [`CRITIC_GAP_WINDOWS`] metrics windows that have both
-/// (`mean_q` and `mc_return`, one entry per window, NaN where a window lacks the figure).
-/// Above 0 the critic overestimates what the behaviour policy collected. None where no
-/// window has both.
+/// The critic's gap at the end of a run from its gap per metrics window (mean Q minus the
+/// collected discounted Monte-Carlo return, NaN where a window lacks either): the mean over
+/// the last [`CRITIC_GAP_WINDOWS`] windows that have both. Above 0 the critic overestimates
+/// what the behaviour policy collected. None where no window has both.
 #[must_use]
-pub fn critic_gap_at_end(mean_q: &[f64], mc_return: &[f64]) -> Option<f64> {
-    mean_of_last_gaps(mean_q.iter().zip(mc_return).map(|(q, r)| q - r))
-}
-
-/// The mean of the last [`CRITIC_GAP_WINDOWS`] finite gaps (None if none is).
-fn mean_of_last_gaps(gaps: impl Iterator<Item = f64>) -> Option<f64> {
-    let gaps: Vec<f64> = gaps.filter(|gap| gap.is_finite()).collect();
+pub fn critic_gap_at_end(gaps: &[f64]) -> Option<f64> {
+    let gaps: Vec<f64> = gaps.iter().copied().filter(|gap| gap.is_finite()).collect();
     let last = &gaps[gaps.len().saturating_sub(CRITIC_GAP_WINDOWS)..];
     (!last.is_empty()).then(|| last.iter().sum::<f64>() / last.len() as f64)
 }
@@ -325,10 +319,11 @@ mod tests {
         // Windows: gaps 100, 1, (no return), 2, 3, (no Q), 7.
         let q = [110.0, 11.0, 5.0, 12.0, 13.0, nan, 17.0];
         let ret = [10.0, 10.0, nan, 10.0, 10.0, 4.0, 10.0];
-        assert_eq!(critic_gap_at_end(&q, &ret), Some((2.0 + 3.0 + 7.0) / 3.0));
-        assert_eq!(critic_gap_at_end(&q[..2], &ret[..2]), Some((100.0 + 1.0) / 2.0), "fewer windows");
-        assert_eq!(critic_gap_at_end(&[], &[]), None, "a run that predates the columns");
-        assert_eq!(critic_gap_at_end(&[nan], &[1.0]), None);
+        let gaps: Vec<f64> = q.iter().zip(&ret).map(|(q, r)| q - r).collect();
+        assert_eq!(critic_gap_at_end(&gaps), Some((2.0 + 3.0 + 7.0) / 3.0));
+        assert_eq!(critic_gap_at_end(&gaps[..2]), Some((100.0 + 1.0) / 2.0), "fewer windows");
+        assert_eq!(critic_gap_at_end(&[]), None, "a run that predates the columns");
+        assert_eq!(critic_gap_at_end(&[nan - 1.0]), None);
     }
 
     #[test]
