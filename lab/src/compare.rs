@@ -401,9 +401,10 @@ pub fn with_interval(e: &Estimate) -> String {
 /// off-policy learners is read with it: a critic far above the returns its behaviour collects
 /// has not converged, and a run's failure then says little about its method.
 #[must_use]
-pub fn critic_gap_markdown(groups: &[(&str, Vec<&RunCurves>)]) -> String {
+pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
     let mut rows = String::new();
     for (name, runs) in groups {
+        let name = name.as_ref();
         let mut gaps: Vec<(u64, f64)> =
             runs.iter().filter_map(|r| r.critic_gap_at_end().map(|gap| (r.seed, gap))).collect();
         gaps.sort_by_key(|&(seed, _)| seed);

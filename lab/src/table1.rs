@@ -183,8 +183,7 @@ pub fn rows(
     let mut rows = Vec::new();
     for controller in CONTROLLERS {
         for method in Method::ALL {
-            let cell: Vec<&RunCurves> =
-                runs.iter().filter(|r| r.controller == Some(controller) && r.method == method).collect();
+            let cell: Vec<&RunCurves> = runs.iter().filter(|r| in_cell(r, controller, method)).collect();
             if !cell.is_empty() {
                 rows.push(cell_row(controller, method, &cell)?);
             }
@@ -544,18 +543,19 @@ fn critic_gaps(runs: &[RunCurves]) -> String {
     let mut cells: Vec<(String, Vec<&RunCurves>)> = Vec::new();
     for controller in CONTROLLERS {
         for method in Method::ALL {
-            let cell: Vec<&RunCurves> = runs
-                .iter()
-                .filter(|r| r.controller == Some(controller) && r.method == method && r.env_steps.is_some())
-                .collect();
-            if !cell.is_empty() {
-                cells.push((cell_label(controller, method.name()), cell));
+            let finished: Vec<&RunCurves> =
+                runs.iter().filter(|r| in_cell(r, controller, method) && r.env_steps.is_some()).collect();
+            if !finished.is_empty() {
+                cells.push((cell_label(controller, method.name()), finished));
             }
         }
     }
-    let cells: Vec<(&str, Vec<&RunCurves>)> =
-        cells.iter().map(|(label, c)| (label.as_str(), c.clone())).collect();
     crate::compare::critic_gap_markdown(&cells)
+}
+
+/// Whether `run` belongs to the cell of `controller` and `method`.
+fn in_cell(run: &RunCurves, controller: ControllerKind, method: Method) -> bool {
+    run.controller == Some(controller) && run.method == method
 }
 
 /// Whether a run belongs in the table: the cube alone, with a controller named.
