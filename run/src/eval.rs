@@ -262,6 +262,11 @@ pub struct ObjectsReport {
 }
 
 impl ObjectsReport {
+    /// Each object's upright success rate ([`EvalReport::upright_success_rate`]), in order.
+    pub fn upright_success_rates(&self, max_tilt_rad: f64) -> ByObject<f64> {
+        ByObject(self.per_object.iter().map(|(o, r)| (*o, r.upright_success_rate(max_tilt_rad))).collect())
+    }
+
     /// The object with the lowest success rate (the first such) and that rate.
     pub fn worst_object(&self) -> Option<(ObjectShape, f64)> {
         self.per_object.iter().map(|(o, r)| (*o, r.success_rate)).fold(None, |worst, (o, s)| match worst {
@@ -351,13 +356,32 @@ impl<'de> serde::Deserialize<'de> for PerObjectFigures {
 
 impl Serialize for PerObjectFigures {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::SerializeMap;
-        let mut map = serializer.serialize_map(Some(self.0.len()))?;
-        for (object, figures) in &self.0 {
-            map.serialize_entry(object.name(), figures)?;
-        }
-        map.end()
+        serialize_by_object(&self.0, serializer)
     }
+}
+
+/// One value per object, serialised as a JSON object keyed by object name in their order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ByObject<T>(pub Vec<(ObjectShape, T)>);
+
+impl<T: Serialize> Serialize for ByObject<T> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serialize_by_object(&self.0, serializer)
+    }
+}
+
+/// `entries` as a map keyed by object name, in their order (a JSON object; serde_json's own
+/// map would sort the names).
+fn serialize_by_object<S: serde::Serializer, T: Serialize>(
+    entries: &[(ObjectShape, T)],
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let mut map = serializer.serialize_map(Some(entries.len()))?;
+    for (object, value) in entries {
+        map.serialize_entry(object.name(), value)?;
+    }
+    map.end()
 }
 
 /// The success test of an encoded policy file on each of `envs` (one per object, each

@@ -125,21 +125,28 @@ fn parse_max_tilt_rad(s: &str) -> Result<f64, String> {
     }
 }
 
-/// A report as one JSON object, with the upright success test's figures when one was asked.
-fn report_json(report: &vge_run::eval::EvalReport, max_tilt_rad: Option<f64>) -> anyhow::Result<String> {
-    /// The report's fields in their order, then the upright test's.
-    #[derive(serde::Serialize)]
-    struct Line<'a> {
-        #[serde(flatten)]
-        report: &'a vge_run::eval::EvalReport,
-        #[serde(skip_serializing_if = "Option::is_none")]
-        max_tilt_rad: Option<f64>,
-        #[serde(skip_serializing_if = "Option::is_none")]
-        upright_success_rate: Option<f64>,
+/// A report's JSON object: its fields in their order, then the upright success test's
+/// figures when one was asked.
+#[derive(serde::Serialize)]
+struct ReportLine<'a> {
+    #[serde(flatten)]
+    report: &'a vge_run::eval::EvalReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_tilt_rad: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    upright_success_rate: Option<f64>,
+}
+
+impl<'a> ReportLine<'a> {
+    fn new(report: &'a vge_run::eval::EvalReport, max_tilt_rad: Option<f64>) -> Self {
+        let upright_success_rate = max_tilt_rad.map(|rad| report.upright_success_rate(rad));
+        Self { report, max_tilt_rad, upright_success_rate }
     }
-    let upright_success_rate = max_tilt_rad.map(|rad| report.upright_success_rate(rad));
-    serde_json::to_string(&Line { report, max_tilt_rad, upright_success_rate })
-        .context("writing the report as JSON")
+}
+
+/// A report as one JSON object ([`ReportLine`]).
+fn report_json(report: &vge_run::eval::EvalReport, max_tilt_rad: Option<f64>) -> anyhow::Result<String> {
+    serde_json::to_string(&ReportLine::new(report, max_tilt_rad)).context("writing the report as JSON")
 }
 
 /// The upright success line of a text report, if one was asked, its label padded to
@@ -279,38 +286,16 @@ fn eval_objects(
         #[derive(serde::Serialize)]
         struct Line<'a> {
             #[serde(flatten)]
-            overall: &'a vge_run::eval::EvalReport,
+            overall: ReportLine<'a>,
             per_object: vge_run::eval::PerObjectFigures,
-            #[serde(skip_serializing_if = "Option::is_none")]
-            max_tilt_rad: Option<f64>,
-            #[serde(skip_serializing_if = "Option::is_none")]
-            upright_success_rate: Option<f64>,
             /// Per object, in the order asked for.
             #[serde(skip_serializing_if = "Option::is_none")]
-            upright_success_rate_per_object: Option<InOrder>,
+            upright_success_rate_per_object: Option<vge_run::eval::ByObject<f64>>,
         }
-        /// Name-value pairs as a JSON object in their order (serde_json's map sorts its keys).
-        struct InOrder(Vec<(String, f64)>);
-        impl serde::Serialize for InOrder {
-            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                serializer.collect_map(self.0.iter().map(|(k, v)| (k, v)))
-            }
-        }
-        let upright_per_object = max_tilt_rad.map(|rad| {
-            InOrder(
-                report
-                    .per_object
-                    .iter()
-                    .map(|(o, r)| (o.name().to_owned(), r.upright_success_rate(rad)))
-                    .collect(),
-            )
-        });
         let line = Line {
-            overall: &report.overall,
+            overall: ReportLine::new(&report.overall, max_tilt_rad),
             per_object: report.figures(),
-            max_tilt_rad,
-            upright_success_rate: max_tilt_rad.map(|rad| report.overall.upright_success_rate(rad)),
-            upright_success_rate_per_object: upright_per_object,
+            upright_success_rate_per_object: max_tilt_rad.map(|rad| report.upright_success_rates(rad)),
         };
         println!("{}", serde_json::to_string(&line).context("writing the report as JSON")?);
         return Ok(());
@@ -318,11 +303,8 @@ fn eval_objects(
     println!("{episodes} episodes of {episode_s} s per object, policy {}", policy.display());
     print_objects_table(&report.per_object, &report.overall);
     if let Some(rad) = max_tilt_rad {
-        let per_object: Vec<String> = report
-            .per_object
-            .iter()
-            .map(|(o, r)| format!("{o} {:.2}", r.upright_success_rate(rad)))
-            .collect();
+        let per_object: Vec<String> =
+            report.upright_success_rates(rad).0.iter().map(|(o, rate)| format!("{o} {rate:.2}")).collect();
         println!(
             "upright success (a success about an axis within {:.0} deg of z): overall {:.2}; {}",
             rad.to_degrees(),
