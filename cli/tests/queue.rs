@@ -251,6 +251,39 @@ fn a_bad_queue_is_refused_naming_every_problem() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
+/// A finished run's commit needs no binary: a new checkout, whose `runs/bin` is empty, checks
+/// a queue whose unbuilt commit only finished runs name, and `build` does not build it; once
+/// a run to do names it, the check asks for it.
+#[test]
+fn only_the_runs_still_to_do_need_their_binaries() {
+    let (root, c) = repository("queue-done-binaries");
+    std::fs::write(root.join("later.toml"), "name = \"later\"\n").expect("file");
+    git(&root, &["add", "later.toml"]);
+    git(&root, &["commit", "-q", "-m", "a second commit"]);
+    let unbuilt = git(&root, &["rev-parse", "--short=7", "HEAD"]);
+    std::fs::create_dir_all(root.join("docs/results/old/seed-0")).expect("results");
+    std::fs::write(root.join("docs/results/old/seed-0/score.json"), "{}").expect("score");
+    let done_only = format!("old/seed-0 {unbuilt} configs/tiny.toml 0\na/seed-0 {c} configs/tiny.toml 0\n");
+    std::fs::write(root.join("queue.txt"), done_only).expect("queue");
+    let out = vge(&root, &["queue", "check", "queue.txt"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = vge(&root, &["queue", "build", "queue.txt"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let built = text(&out.stdout);
+    assert!(
+        built.lines().count() == 1 && built.trim_end().ends_with(&format!("runs/bin/vge-{c}")),
+        "{built}"
+    );
+    assert!(!root.join(format!("runs/src/{unbuilt}")).exists(), "no worktree for a finished run's commit");
+
+    std::fs::remove_file(root.join("docs/results/old/seed-0/score.json")).expect("remove");
+    let out = vge(&root, &["queue", "check", "queue.txt"]);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(stderr.contains(&format!("(the vge of commit {unbuilt}): build it with")), "{stderr}");
+    let _ = std::fs::remove_dir_all(&root);
+}
+
 /// A lane asked for more free room under runs/ than the disk has starts no run, ends with an
 /// error naming the flag, and logs which run it stopped before; with room it trains that run.
 #[test]

@@ -218,6 +218,13 @@ fn queue_name(queue: &Path) -> String {
     queue.file_stem().map_or_else(|| "queue".to_owned(), |s| s.to_string_lossy().into_owned())
 }
 
+/// Every commit the queue's runs not yet done ([`lane::is_done`]) train or score with, each
+/// once, in order of first use: the binaries a lane still needs.
+pub fn commits_to_do(checkout: &Checkout, lines: &[QueueLine]) -> Vec<String> {
+    let to_do: Vec<QueueLine> = lines.iter().filter(|l| !lane::is_done(checkout, l)).cloned().collect();
+    commits(&to_do)
+}
+
 /// Every commit a queue's lines train or score with, each once, in order of first use.
 pub fn commits(lines: &[QueueLine]) -> Vec<String> {
     let mut seen = Vec::new();
@@ -230,8 +237,10 @@ pub fn commits(lines: &[QueueLine]) -> Vec<String> {
 }
 
 /// Every line of `queue` well formed, its commits in the repository, its config at its
-/// commit, no run twice, and (with `binaries`) every commit's vge built: a typo found when
-/// a lane reaches its line would cost the hours before it. Ok: the lines.
+/// commit, no run twice, and (with `binaries`) the vge built of every commit a run still to
+/// do names: a typo found when a lane reaches its line would cost the hours before it. A
+/// finished run's commit needs no binary, so a new checkout builds only what is left. Ok:
+/// the lines.
 pub fn check(checkout: &Checkout, queue: &Path, binaries: bool) -> Result<Vec<QueueLine>, QueueError> {
     let text = std::fs::read_to_string(queue).map_err(io_err(queue))?;
     let source = queue.display().to_string();
@@ -255,7 +264,8 @@ pub fn check(checkout: &Checkout, queue: &Path, binaries: bool) -> Result<Vec<Qu
         }
     }
     if binaries {
-        for commit in commits(&lines).iter().filter(|c| known.get(c.as_str()) == Some(&true)) {
+        for commit in commits_to_do(checkout, &lines).iter().filter(|c| known.get(c.as_str()) == Some(&true))
+        {
             if !checkout.binary(commit).is_file() {
                 problems.push(format!(
                     "{source}: no {} (the vge of commit {commit}): build it with `vge queue build {source}`",

@@ -61,9 +61,10 @@ enum QueueCommand {
         min_free_gib: f64,
     },
     /// Check every line: its form, its commit, its config at that commit, no run twice, the
-    /// binaries built (`run` does this first).
+    /// binaries of the runs still to do built (`run` does this first).
     Check { queue: PathBuf },
-    /// Build runs/bin/vge-COMMIT for every commit the queue names (minutes each; once).
+    /// Build runs/bin/vge-COMMIT for every commit the queue's runs still to do name (minutes
+    /// each; once; a finished run's commit is not built).
     Build { queue: PathBuf },
     /// Each run's state, latest step and training time left, and the queue's env steps and
     /// hours to go.
@@ -93,7 +94,7 @@ pub fn run(args: QueueArgs) -> anyhow::Result<()> {
         }
         QueueCommand::Build { queue } => {
             let lines = queue::check(&checkout, &queue, false)?;
-            for commit in queue::commits(&lines) {
+            for commit in queue::commits_to_do(&checkout, &lines) {
                 let bin = queue::build::build(&checkout, &commit, &mut |s| errln!("vge queue: {s}"))?;
                 println!("{}", bin.display());
             }
