@@ -133,7 +133,9 @@ impl EnvCore {
         info.set_item("object_rotation_rad", r.info.object_rotation_rad)?;
         info.set_item("object_angvel_z_rad_per_s", r.info.object_angvel_z_rad_per_s)?;
         info.set_item("object_height_m", r.info.object_height_m)?;
+        info.set_item("object_tilt_rad", r.info.object_tilt_rad)?;
         info.set_item("dropped", r.info.dropped)?;
+        info.set_item("tipped_over", r.info.tipped_over)?;
         info.set_item("step", r.info.step)?;
         state_info(py, &info, self)?;
         if !self.observation.is_full() {

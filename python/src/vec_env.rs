@@ -30,7 +30,9 @@ struct Row<'a> {
     external_force_n: &'a mut [f32],
     rotation_z_rad: &'a mut f32,
     height_m: &'a mut f32,
+    tilt_rad: &'a mut f32,
     dropped: &'a mut bool,
+    tipped_over: &'a mut bool,
     step: &'a mut i64,
 }
 
@@ -50,13 +52,13 @@ struct Slot {
 
 fn run(slot: &mut Slot, op: Op<'_>, row: Row<'_>) -> Result<bool, SimError> {
     let env = &mut slot.env;
-    let (full, rotation, dropped, step, ended) = match op {
+    let (full, rotation, tilt_rad, dropped, tipped_over, step, ended) = match op {
         Op::Reset(seed) => {
             let (full, _) = env.reset(seed)?;
             row.obs.copy_from_slice(&slot.observer.start(&full));
             *row.reward = 0.0;
             (*row.terminated, *row.truncated, *row.autoreset) = (false, false, true);
-            (full, 0.0, false, 0, false)
+            (full, 0.0, 0.0, false, false, 0, false)
         }
         Op::Step(action) => {
             let r = env.step(action)?;
@@ -64,7 +66,16 @@ fn run(slot: &mut Slot, op: Op<'_>, row: Row<'_>) -> Result<bool, SimError> {
             *row.reward = f64::from(r.reward);
             (*row.terminated, *row.truncated, *row.autoreset) = (r.terminated, r.truncated, false);
             let ended = r.terminated || r.truncated;
-            (r.obs, r.info.object_rotation_z_rad, r.info.dropped, r.info.step as i64, ended)
+            let i = &r.info;
+            (
+                r.obs,
+                i.object_rotation_z_rad,
+                i.object_tilt_rad,
+                i.dropped,
+                i.tipped_over,
+                i.step as i64,
+                ended,
+            )
         }
     };
     if !row.full_obs.is_empty() {
@@ -79,7 +90,9 @@ fn run(slot: &mut Slot, op: Op<'_>, row: Row<'_>) -> Result<bool, SimError> {
     row.external_force_n.copy_from_slice(&[f.x, f.y, f.z]);
     *row.rotation_z_rad = rotation;
     *row.height_m = state.object.pose.translation.vector.dot(&env.config().physics.hand_orientation.up());
+    *row.tilt_rad = tilt_rad;
     *row.dropped = dropped;
+    *row.tipped_over = tipped_over;
     *row.step = step;
     Ok(ended)
 }
@@ -100,7 +113,9 @@ struct Buffers {
     external_force_n: Py<PyArray2<f32>>,
     rotation_z_rad: Py<PyArray1<f32>>,
     height_m: Py<PyArray1<f32>>,
+    tilt_rad: Py<PyArray1<f32>>,
     dropped: Py<PyArray1<bool>>,
+    tipped_over: Py<PyArray1<bool>>,
     step: Py<PyArray1<i64>>,
 }
 
@@ -180,8 +195,14 @@ impl VecEnvCore {
         );
         let (mut tips, mut forces, mut ext) =
             (rw!(b.tip_contacts), rw!(b.contact_forces_n), rw!(b.external_force_n));
-        let (mut rot, mut height, mut dropped, mut step) =
-            (rw!(b.rotation_z_rad), rw!(b.height_m), rw!(b.dropped), rw!(b.step));
+        let (mut rot, mut height, mut tilt, mut dropped, mut tipped, mut step) = (
+            rw!(b.rotation_z_rad),
+            rw!(b.height_m),
+            rw!(b.tilt_rad),
+            rw!(b.dropped),
+            rw!(b.tipped_over),
+            rw!(b.step),
+        );
         macro_rules! slice {
             ($a:expr) => {
                 $a.as_slice_mut().map_err(borrow_error)?
@@ -207,10 +228,12 @@ impl VecEnvCore {
             slice!(forces).chunks_exact_mut(w.fingers.max(1)),
             slice!(ext).chunks_exact_mut(3),
         );
-        let (mut rot, mut height, mut dropped, mut step) = (
+        let (mut rot, mut height, mut tilt, mut dropped, mut tipped, mut step) = (
             slice!(rot).iter_mut(),
             slice!(height).iter_mut(),
+            slice!(tilt).iter_mut(),
             slice!(dropped).iter_mut(),
+            slice!(tipped).iter_mut(),
             slice!(step).iter_mut(),
         );
         let rows = (0..n)
@@ -227,7 +250,9 @@ impl VecEnvCore {
                     external_force_n: ext.next()?,
                     rotation_z_rad: rot.next()?,
                     height_m: height.next()?,
+                    tilt_rad: tilt.next()?,
                     dropped: dropped.next()?,
+                    tipped_over: tipped.next()?,
                     step: step.next()?,
                 })
             })
@@ -310,7 +335,9 @@ impl VecEnvCore {
             external_force_n: PyArray2::zeros(py, [n, 3], false).unbind(),
             rotation_z_rad: PyArray1::zeros(py, n, false).unbind(),
             height_m: PyArray1::zeros(py, n, false).unbind(),
+            tilt_rad: PyArray1::zeros(py, n, false).unbind(),
             dropped: PyArray1::zeros(py, n, false).unbind(),
+            tipped_over: PyArray1::zeros(py, n, false).unbind(),
             step: PyArray1::zeros(py, n, false).unbind(),
         };
         Ok(Self {
@@ -381,7 +408,9 @@ impl VecEnvCore {
         d.set_item("external_force_n", b.external_force_n.bind(py))?;
         d.set_item("object_rotation_z_rad", b.rotation_z_rad.bind(py))?;
         d.set_item("object_height_m", b.height_m.bind(py))?;
+        d.set_item("object_tilt_rad", b.tilt_rad.bind(py))?;
         d.set_item("dropped", b.dropped.bind(py))?;
+        d.set_item("tipped_over", b.tipped_over.bind(py))?;
         d.set_item("step", b.step.bind(py))?;
         Ok(d)
     }

@@ -93,3 +93,28 @@ def test_bad_actions_raise_value_error(actions, match):
     env.reset(seed=0)
     with pytest.raises(ValueError, match=match):
         env.step(actions)
+
+
+def test_tilt_and_tipping_over_match_hand_env():
+    """With the upright task's bound, each env's tilt and its tipping over read as a HandEnv's
+    do, and tipping over ends the episode as a drop."""
+    keys = {"episode_length": 200, "upright_within_rad": 0.05}
+    ours = vge.VecHandEnv(N, **keys)
+    singles = [vge.HandEnv(**keys) for _ in range(N)]
+    ours.reset(seed=3)
+    for i, env in enumerate(singles):
+        env.reset(seed=3 + i)
+    rng = np.random.default_rng(5)
+    for step in range(200):
+        actions = rng.uniform(-0.05, 0.05, size=(N, 15)).astype(np.float32)
+        _, _, terminated, _, info = ours.step(actions)
+        for i, env in enumerate(singles):
+            _, _, t, _, single = env.step(actions[i])
+            assert info["object_tilt_rad"][i] == single["object_tilt_rad"], f"step {step}"
+            assert info["tipped_over"][i] == single["tipped_over"] and terminated[i] == t
+        if terminated.any():
+            break
+    assert terminated.any(), "random actions tip a cube past 0.05 rad"
+    ended = np.flatnonzero(terminated)
+    assert info["tipped_over"][ended].all() and info["dropped"][ended].all()
+    assert (info["object_tilt_rad"][ended] > 0.05).all()

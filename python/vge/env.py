@@ -56,10 +56,12 @@ class HandEnv(HandSizes, gym.Env):
     - Reward: the object's rotation rate about z (rad/s), clipped to +-`max_reward_rad_per_s`,
       while enough fingertips touch it; a backward turn is charged whatever the contacts
       (`charge_reverse_rotation`, on by default), and `drop_penalty` (0 by default) on a drop.
-    - terminated: the object dropped; truncated: the episode's time limit.
+    - terminated: the object dropped (or tipped past `upright_within_rad`, when set); truncated:
+      the episode's time limit.
     - info: `tip_contacts`, `num_tip_contacts`, `contact_forces_n` (per fingertip, N),
       `external_force_n` (the push on the object, N), `object_rotation_z_rad` (this
-      step's), `object_angvel_z_rad_per_s`, `object_height_m`, `dropped`, `step`, and
+      step's), `object_angvel_z_rad_per_s`, `object_height_m`, `object_tilt_rad` (how far
+      the object has tipped since the grasp), `dropped`, `tipped_over`, `step`, and
       `full_obs` when the env observes less than the full observation.
 
     `object` is one of `vge.OBJECTS`; any key of a vge config's `[env]` section is accepted by

@@ -22,7 +22,9 @@ _INFO_KEYS = (
     "external_force_n",
     "object_rotation_z_rad",
     "object_height_m",
+    "object_tilt_rad",
     "dropped",
+    "tipped_over",
     "step",
     "autoreset",
 )

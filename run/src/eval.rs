@@ -120,8 +120,8 @@ pub fn success_test_env(env: &EnvConfig, episode_s: f32, grasp_noise_rad: f32) -
 /// `env` as the success test runs it: without the sensor noise, forces on the object,
 /// domain randomisation, drop penalty and early ending on lost contacts that a training
 /// config may add for robustness, so that every run is judged by the same test as `vge
-/// eval` (the paper's ends: a drop or the time limit). Object, hand, physics, control rate
-/// and action bound stay: they define the task the policy acts in.
+/// eval` (the paper's ends: a drop or the time limit). Object, hand, physics, control rate,
+/// action bound and upright bound stay: they define the task the policy acts in.
 #[must_use]
 pub fn without_training_disturbances(env: &EnvConfig) -> EnvConfig {
     let nominal = EnvConfig::default();

@@ -1,4 +1,4 @@
-//! How far an object turned about world z between two orientations. Physics-free (it stays in the crate without the `physics` feature), since
+//! How far an object turned about world z between two orientations, and how far it tipped. Physics-free (it stays in the crate without the `physics` feature), since
 //! episode accounting and the bridge use it as well as the env.
 
 use nalgebra::UnitQuaternion;
@@ -35,6 +35,17 @@ pub fn rotation_vector_rad(before: &UnitQuaternion<f32>, after: &UnitQuaternion<
 pub fn rotation_axis_tilt_rad(rotation_vector_rad: [f64; 3]) -> f64 {
     let [x, y, z] = rotation_vector_rad;
     x.hypot(y).atan2(z.abs())
+}
+
+/// How far an object has tipped since orientation `reference` (rad, 0 to π): the angle
+/// between world z and where the object's axis that pointed along world z at `reference`
+/// points now. 0 for any turn about z, whatever its size; a cube rolled onto its side reads
+/// π/2. Where [`rotation_axis_tilt_rad`] judges an episode's turning after the fact, this is
+/// the state at one instant, which an env can end an episode on.
+#[must_use]
+pub fn tilt_rad(reference: &UnitQuaternion<f32>, now: &UnitQuaternion<f32>) -> f32 {
+    let axis = (now * reference.inverse()) * nalgebra::Vector3::z();
+    axis.x.hypot(axis.y).atan2(axis.z)
 }
 
 #[cfg(test)]
@@ -105,5 +116,17 @@ mod tests {
         assert!((rotation_axis_tilt_rad(sum) - f64::from(tilt_rad)).abs() < 0.03, "{sum:?}");
         assert_eq!(rotation_axis_tilt_rad([0.0, 0.0, -3.0]), 0.0, "either sense about z is upright");
         assert_eq!(rotation_axis_tilt_rad([0.0; 3]), 0.0);
+    }
+
+    #[test]
+    fn tilt_ignores_turns_about_z_and_reads_a_roll() {
+        use super::tilt_rad;
+        let reference = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+        let turned = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 2.5) * reference;
+        assert!(tilt_rad(&reference, &turned) < 1e-6, "a turn about z is no tilt");
+        for roll_rad in [0.1f32, 0.6, 1.2, 2.0, 3.0] {
+            let rolled = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), roll_rad) * turned;
+            assert!((tilt_rad(&reference, &rolled) - roll_rad).abs() < 1e-5, "{roll_rad}");
+        }
     }
 }

@@ -17,8 +17,9 @@
 //! - Terminated: the object centre fell more than [`EnvConfig::drop_height_m`] below its
 //!   height after the grasp, measured along gravity (world -z with the palm down, the
 //!   hand's +x side on: [`crate::HandOrientation`]), i.e. it left the hand (a drop, the
-//!   paper's only end besides the time limit), or,
-//!   when [`EnvConfig::min_contacts`] > 0, fewer than that many fingertips touch it.
+//!   paper's only end besides the time limit); with [`EnvConfig::upright_within_rad`] set, it
+//!   tipped past that bound (counted as a drop); or, when [`EnvConfig::min_contacts`] > 0,
+//!   fewer than that many fingertips touch it.
 //! - Truncated: [`EnvConfig::episode_length_steps`] control steps without termination.
 //!
 //! Every random draw (grasp randomisation, noise, perturbation forces) comes from the
@@ -27,7 +28,7 @@
 
 use std::sync::Arc;
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use vge_hand::Hand;
@@ -162,6 +163,12 @@ pub struct EnvConfig {
     /// Terminate when the object centre has fallen this far along gravity from its
     /// post-grasp position (m).
     pub drop_height_m: f32,
+    /// End the episode, as a drop, once the object has tipped more than this from upright
+    /// ([`crate::angle::tilt_rad`] since the post-grasp orientation; rad, in (0, π]). None:
+    /// no bound, the paper's task, which a policy can pass by tumbling the object about a
+    /// leaning axis (the Allegro's did). A bound makes turning about z upright the task, in
+    /// training and in the success test alike.
+    pub upright_within_rad: Option<f32>,
     /// Subtracted from the reward of the step on which the object drops (the reward's units,
     /// rad/s). 0: the paper's reward, where a drop costs only the turn it ends. A training
     /// term for gaits that must hold under pushes: the success and robustness tests run
@@ -244,6 +251,7 @@ impl EnvConfig {
             reward_min_contacts: 3,
             charge_reverse_rotation: true,
             drop_height_m: 0.03,
+            upright_within_rad: None,
             drop_penalty: 0.0,
             max_reward_rad_per_s: 3.0,
             grasp: GraspConfig::default(),
@@ -356,6 +364,11 @@ impl EnvConfig {
                 return bad(what, v);
             }
         }
+        if let Some(tilt) = self.upright_within_rad
+            && !(tilt > 0.0 && tilt <= std::f32::consts::PI)
+        {
+            return bad("upright bound (rad, in (0, pi])", tilt);
+        }
         let p = self.perturbation.change_probability;
         if !(0.0..=1.0).contains(&p) {
             return bad("perturbation change probability", p);
@@ -438,8 +451,14 @@ pub struct StepInfo {
     pub tip_slip_m: f32,
     /// Object height (m): its position against gravity (world z with the palm down).
     pub object_height_m: f32,
-    /// Whether the object dropped below the termination height.
+    /// How far the object has tipped from its post-grasp orientation (rad;
+    /// [`crate::angle::tilt_rad`]).
+    pub object_tilt_rad: f32,
+    /// Whether the object dropped below the termination height, or tipped past
+    /// [`EnvConfig::upright_within_rad`].
     pub dropped: bool,
+    /// Whether the object tipped past [`EnvConfig::upright_within_rad`] (a drop, by the bound).
+    pub tipped_over: bool,
     /// Control steps since reset.
     pub step: usize,
 }
@@ -496,6 +515,8 @@ pub struct Env {
     state: Option<PrivilegedState>,
     external_force_n: Vector3<f32>,
     reference_height_m: f32,
+    /// The object's post-grasp orientation: the reference its tilt is measured from.
+    reference_orientation: UnitQuaternion<f32>,
     steps: usize,
     /// Actions waiting out `randomization.action_latency_steps`, oldest first.
     in_flight: std::collections::VecDeque<Vec<f32>>,
@@ -519,6 +540,7 @@ impl Env {
             state: None,
             external_force_n: Vector3::zeros(),
             reference_height_m: 0.0,
+            reference_orientation: UnitQuaternion::identity(),
             steps: 0,
             in_flight: std::collections::VecDeque::new(),
         })
@@ -675,6 +697,7 @@ impl Env {
             .extend(std::iter::repeat_n(vec![0.0; joints], self.config.randomization.action_latency_steps));
         let state = self.read_state()?;
         self.reference_height_m = self.height_m(&state);
+        self.reference_orientation = state.object.pose.rotation;
         let info = ResetInfo {
             grasping_fingers: grasping,
             num_tip_contacts: state.num_tip_contacts(),
@@ -802,7 +825,10 @@ impl Env {
             0.0
         };
         let height = self.height_m(&state);
-        let dropped = height < self.reference_height_m - cfg.drop_height_m;
+        let tilt_rad = crate::angle::tilt_rad(&self.reference_orientation, &state.object.pose.rotation);
+        let tipped_over = cfg.upright_within_rad.is_some_and(|max| tilt_rad > max);
+        // A tip past the bound ends the episode as a drop does, and costs what a drop costs.
+        let dropped = height < self.reference_height_m - cfg.drop_height_m || tipped_over;
         let reward = if dropped { reward - cfg.drop_penalty } else { reward };
         let terminated = dropped || n_contacts < cfg.min_contacts;
         let truncated = !terminated && self.steps >= cfg.episode_length_steps;
@@ -814,7 +840,9 @@ impl Env {
             object_rotation_rad: rotation_rad,
             tip_slip_m,
             object_height_m: height,
+            object_tilt_rad: tilt_rad,
             dropped,
+            tipped_over,
             step: self.steps,
         };
         let obs = self.observe(&state);

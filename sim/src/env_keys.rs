@@ -96,6 +96,12 @@ pub struct EnvSection {
     /// and robustness tests run without it.
     #[serde(skip_serializing_if = "is_zero_f32")]
     pub drop_penalty: f32,
+    /// The upright task: end an episode, as a drop, once the object has tipped more than
+    /// this (rad, in (0, π]) from its orientation after the grasp. It stays in the success
+    /// test (it defines the task, as the object does). Absent: no bound, the paper's task,
+    /// which a policy can pass by tumbling the object about a leaning axis.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub upright_within_rad: Option<f32>,
     /// Curriculum: the force on the object (`perturb_force_std_n`) grows linearly from 0
     /// to its level over the first this-many env steps, set at each episode's start (0:
     /// full from the start). Sensor noise is not ramped: the observation normaliser is
@@ -215,6 +221,7 @@ impl Default for EnvSection {
             friction_scale: env.randomization.friction_scale,
             action_latency_steps: env.randomization.action_latency_steps,
             drop_penalty: env.drop_penalty,
+            upright_within_rad: env.upright_within_rad,
             perturb_ramp_steps: 0,
             perturb_ramp_start: 0,
             noise_ramp_steps: 0,
@@ -247,6 +254,7 @@ impl EnvSection {
         env.charge_reverse_rotation = self.charge_reverse_rotation;
         env.reward_min_contacts = self.reward_min_contacts;
         env.drop_penalty = self.drop_penalty;
+        env.upright_within_rad = self.upright_within_rad;
         env.grasp.randomize_fingers = self.randomize_fingers;
         env.grasp.pose_noise_rad = self.grasp_pose_noise_rad;
         env.noise = NoiseConfig {
@@ -332,6 +340,13 @@ impl EnvSection {
                 return Err(InvalidEnvSection::new(format!("{key} must be a finite number {need}, got {v}")));
             }
         }
+        if let Some(tilt) = self.upright_within_rad
+            && !(tilt > 0.0 && tilt <= std::f32::consts::PI)
+        {
+            return Err(InvalidEnvSection::new(format!(
+                "env.upright_within_rad = {tilt}: needs an angle in (0, pi] rad (0.35 is 20 degrees)"
+            )));
+        }
         if !(1..=crate::env::MAX_EPISODE_STEPS).contains(&self.episode_length) {
             return Err(InvalidEnvSection::new(format!(
                 "env.episode_length = {}: needs 1 to {} control steps",
@@ -415,8 +430,8 @@ mod tests {
     #[test]
     fn the_keys_are_the_fields_in_order() {
         let keys = EnvSection::keys();
-        assert_eq!(keys.len(), 30, "{keys:?}");
-        assert_eq!((keys[0], keys[29]), ("hand", "finger_collisions"));
+        assert_eq!(keys.len(), 31, "{keys:?}");
+        assert_eq!((keys[0], keys[30]), ("hand", "finger_collisions"));
         // Every key the default section writes is one of them, and an unknown one is refused.
         let written = serde_json::to_value(EnvSection::default()).expect("json");
         let written = written.as_object().expect("an object");
@@ -451,5 +466,21 @@ mod tests {
         let too_many = EnvSection { reward_min_contacts: 5, ..allegro };
         let err = too_many.validate().expect_err("4 fingertips");
         assert!(err.0.contains("4 fingertips"), "{err}");
+    }
+
+    #[test]
+    fn the_tilt_bound_is_off_unless_written_and_an_angle_out_of_range_is_refused() {
+        let written = serde_json::to_value(EnvSection::default()).expect("json");
+        assert!(written.get("upright_within_rad").is_none(), "off: not written, old configs keep their hash");
+        assert_eq!(EnvSection::default().env_config(0).expect("env").upright_within_rad, None);
+        let upright = EnvSection { upright_within_rad: Some(0.35), ..EnvSection::default() };
+        assert!(upright.validate().is_ok());
+        assert_eq!(upright.env_config(0).expect("env").upright_within_rad, Some(0.35));
+        for bad in [0.0, -0.1, 3.2, f32::NAN, f32::INFINITY] {
+            let err = EnvSection { upright_within_rad: Some(bad), ..EnvSection::default() }
+                .validate()
+                .expect_err("bad");
+            assert!(err.0.contains("env.upright_within_rad") && err.0.contains("(0, pi]"), "{bad}: {err}");
+        }
     }
 }
