@@ -93,3 +93,36 @@ fn the_allegro_trains_exports_and_evaluates_from_its_file_and_refuses_the_other_
     assert!(err.contains("drives the hand vge15, not allegro_right"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--set` without `--config` overrides the default task on `--hand` (it once went unread
+/// there): a tilt bound tighter than the grasp's settling ends every episode as a drop, and
+/// a key that does not exist is refused by name.
+#[test]
+fn controller_set_without_a_config_changes_the_hands_task() {
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "controller",
+            "--kind",
+            "fg",
+            "--hand",
+            "allegro",
+            "--episodes",
+            "2",
+            "--episode-s",
+            "2",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, out, err) = vge(&args);
+        assert!(ok, "{err}");
+        serde_json::from_str::<serde_json::Value>(out.trim()).expect("one JSON line")
+    };
+    let free = run(&[]);
+    assert_eq!(free["drops"], 0, "{free}");
+    let bounded = run(&["--set", "env.upright_within_rad=0.0001"]);
+    assert_eq!(bounded["drops"], 2, "{bounded}");
+    assert!(bounded["mean_steps"].as_f64() < free["mean_steps"].as_f64(), "{bounded} {free}");
+    let (ok, _, err) =
+        vge(&["controller", "--kind", "fg", "--hand", "allegro", "--set", "env.no_such_key=1"]);
+    assert!(!ok && err.contains("no_such_key"), "{err}");
+}

@@ -47,8 +47,9 @@ pub struct ControllerArgs {
     /// object is the one its file is sized for.
     #[arg(long, default_value = "vge15", conflicts_with = "config")]
     hand: String,
-    /// Override a key of --config, e.g. `--set env.object_mass_kg=0.4` (repeatable).
-    #[arg(long = "set", value_name = "KEY=VALUE", requires = "config")]
+    /// Override a config key, e.g. `--set env.object_mass_kg=0.4` (repeatable): of --config,
+    /// or without it of the default config on --hand.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
     /// Print one JSON line instead of a summary.
     #[arg(long)]
@@ -73,20 +74,30 @@ pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
         json,
     } = args;
     let mut options = RolloutOptions::default();
-    if config.is_none() {
-        let hand = vge_sim::hands::load(&hand).with_context(|| format!("--hand {hand}"))?;
-        options.env = vge_sim::EnvConfig::for_hand(hand)?;
-        options.cs = vge_controllers::CsConfig::for_env(&options.env);
-    }
     let (mut default_episode_s, mut default_grasp_noise_rad) = (10.0, 0.02);
-    if let Some(path) = &config {
-        let config = vge_run::config::load_config(path, &overrides)?;
-        let env = vge_run::eval::without_training_disturbances(&config.env_config(0)?);
-        options.cs = config.cs_config(&env);
-        options.env = env;
-        (default_episode_s, default_grasp_noise_rad) =
-            (config.run.eval_episode_s, config.run.eval_grasp_noise_rad);
-    }
+    let config = match &config {
+        Some(path) => {
+            let config = vge_run::config::load_config(path, &overrides)?;
+            (default_episode_s, default_grasp_noise_rad) =
+                (config.run.eval_episode_s, config.run.eval_grasp_noise_rad);
+            config
+        }
+        // The default task on --hand (its own object), with the overrides over it: a --set
+        // is never dropped for want of a file.
+        None => {
+            vge_sim::hands::load(&hand).with_context(|| format!("--hand {hand}"))?;
+            let mut config = vge_run::config::Config::default();
+            config.env.hand = hand;
+            for assignment in &overrides {
+                vge_run::config::apply_override(&mut config, assignment)?;
+            }
+            config.validate()?;
+            config
+        }
+    };
+    let env = vge_run::eval::without_training_disturbances(&config.env_config(0)?);
+    options.cs = config.cs_config(&env);
+    options.env = env;
     let episode_s = episode_s.unwrap_or(default_episode_s);
     let grasp_noise_rad = grasp_noise_rad.unwrap_or(default_grasp_noise_rad);
     anyhow::ensure!(episodes > 0, "--episodes must be at least 1");
