@@ -163,18 +163,12 @@ fn object_column(object: ObjectShape, figure: &str) -> String {
     format!("{}_{figure}", object.name())
 }
 
-/// What `best-eval.json` holds: which snapshot was selected on the validation episodes, and
-/// its success test on the held-out test episodes.
+/// A policy's success test as `final-eval.json` and `best-eval.json` both record it, in
+/// their key order (each file adds its own keys).
 #[derive(Debug, Serialize)]
-struct BestEval<'a> {
-    selected_step: u64,
-    validation_success_rate: f64,
-    /// Several objects: the lowest object success rate on the validation episodes, what the
-    /// selection ranked by first.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    validation_worst_object_success_rate: Option<f64>,
-    validation_mean_return: f64,
-    /// Whether the selected policy learned on the test episodes (on every object).
+struct TestFigures<'a> {
+    /// Whether the policy learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`], on
+    /// every object for a run on several).
     learned: bool,
     success_rate: f64,
     episodes: usize,
@@ -187,10 +181,45 @@ struct BestEval<'a> {
     /// How far the axis the object turned about overall leans from z (rad, mean over the
     /// episodes): near 0 for a finger gait, large for a policy that tumbles the object.
     mean_rotation_axis_tilt_rad: f64,
-    /// Several objects: each object's test figures (the overall ones above pool them).
+    /// Several objects: each object's figures (the overall ones above pool them).
     #[serde(skip_serializing_if = "Option::is_none")]
     per_object: Option<PerObjectFigures>,
     per_episode: &'a [EpisodeOutcome],
+}
+
+impl<'a> TestFigures<'a> {
+    fn of(report: &'a ObjectsReport) -> Self {
+        let r = &report.overall;
+        Self {
+            learned: learned(report),
+            success_rate: r.success_rate,
+            episodes: r.episodes,
+            mean_return: r.mean_return,
+            mean_rotation_rad: r.mean_rotation_rad,
+            drop_rate: r.drop_rate,
+            mean_contact_switches: r.mean_contact_switches,
+            mean_tip_slip_m: r.mean_tip_slip_m,
+            mean_rotation_axis_tilt_rad: r.mean_rotation_axis_tilt_rad,
+            per_object: per_object_figures(report),
+            per_episode: &r.per_episode,
+        }
+    }
+}
+
+/// What `best-eval.json` holds: which snapshot was selected on the validation episodes, and
+/// its success test on the held-out test episodes.
+#[derive(Debug, Serialize)]
+struct BestEval<'a> {
+    selected_step: u64,
+    validation_success_rate: f64,
+    /// Several objects: the lowest object success rate on the validation episodes, what the
+    /// selection ranked by first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    validation_worst_object_success_rate: Option<f64>,
+    validation_mean_return: f64,
+    /// The selected policy on the test episodes.
+    #[serde(flatten)]
+    test: TestFigures<'a>,
 }
 
 /// Model selection ([module docs](self)): copies the best snapshot to `policy-best.vgep` and
@@ -241,25 +270,12 @@ fn select_best_snapshot(out_dir: &Path, config: &Config) -> Result<(), RunEvalEr
     let r = evaluate_policy(config, &bytes, EpisodeSet::Test)?;
     let path = out_dir.join(crate::run_dir::POLICY_BEST);
     crate::run_dir::atomic_file::write(&path, &bytes).map_err(io_err(&path))?;
-    let per_object = per_object_figures(&r);
-    let learned = learned(&r);
-    let r = &r.overall;
     let doc = BestEval {
         selected_step: best.step,
         validation_success_rate: best.success,
         validation_worst_object_success_rate: multi.then_some(best.worst_object_success),
         validation_mean_return: best.mean_return,
-        learned,
-        success_rate: r.success_rate,
-        episodes: r.episodes,
-        mean_return: r.mean_return,
-        mean_rotation_rad: r.mean_rotation_rad,
-        drop_rate: r.drop_rate,
-        mean_contact_switches: r.mean_contact_switches,
-        mean_tip_slip_m: r.mean_tip_slip_m,
-        mean_rotation_axis_tilt_rad: r.mean_rotation_axis_tilt_rad,
-        per_object,
-        per_episode: &r.per_episode,
+        test: TestFigures::of(&r),
     };
     let path = out_dir.join(crate::run_dir::BEST_EVAL);
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
@@ -313,28 +329,12 @@ fn append_eval_row(out_dir: &Path, step: u64, report: &ObjectsReport) -> Result<
     writer.flush().map_err(io_err(&path))
 }
 
-/// What `final-eval.json` holds: the final policy's success test, and what it cost.
+/// What `final-eval.json` holds: the test's settings, what the run cost, and the final
+/// policy's success test.
 #[derive(Debug, Serialize)]
 struct FinalEval<'a> {
-    /// Whether the seed learned (success rate >= [`crate::eval::LEARNED_SUCCESS_RATE`], on
-    /// every object for a run on several).
-    learned: bool,
-    success_rate: f64,
-    episodes: usize,
     episode_s: f32,
     grasp_noise_rad: f32,
-    mean_return: f64,
-    mean_rotation_rad: f64,
-    drop_rate: f64,
-    mean_contact_switches: f64,
-    /// Fingertip slip per episode (m, [`vge_sim::slip`]).
-    mean_tip_slip_m: f64,
-    /// How far the axis the object turned about overall leans from z (rad, mean over the
-    /// episodes): near 0 for a finger gait, large for a policy that tumbles the object.
-    mean_rotation_axis_tilt_rad: f64,
-    /// Several objects: each object's figures (the overall ones above pool them).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    per_object: Option<PerObjectFigures>,
     env_steps: u64,
     /// Wall time of the training run, pauses and time waiting for a core included.
     wall_s: f64,
@@ -342,7 +342,9 @@ struct FinalEval<'a> {
     /// made by a vge that did not count it).
     #[serde(skip_serializing_if = "Option::is_none")]
     cpu_s: Option<f64>,
-    per_episode: &'a [EpisodeOutcome],
+    /// The final policy on the test episodes.
+    #[serde(flatten)]
+    test: TestFigures<'a>,
 }
 
 fn write_final_eval(
@@ -353,24 +355,13 @@ fn write_final_eval(
     cost: RunCost,
 ) -> Result<(), RunEvalError> {
     let path = out_dir.join(crate::run_dir::FINAL_EVAL);
-    let r = &report.overall;
     let doc = FinalEval {
-        learned: learned(report),
-        success_rate: r.success_rate,
-        episodes: r.episodes,
         episode_s: config.run.eval_episode_s,
         grasp_noise_rad: config.run.eval_grasp_noise_rad,
-        mean_return: r.mean_return,
-        mean_rotation_rad: r.mean_rotation_rad,
-        drop_rate: r.drop_rate,
-        mean_contact_switches: r.mean_contact_switches,
-        mean_tip_slip_m: r.mean_tip_slip_m,
-        mean_rotation_axis_tilt_rad: r.mean_rotation_axis_tilt_rad,
-        per_object: per_object_figures(report),
         env_steps,
         wall_s: cost.wall_s,
         cpu_s: cost.cpu_s,
-        per_episode: &r.per_episode,
+        test: TestFigures::of(report),
     };
     let text = serde_json::to_string_pretty(&doc).map_err(|e| io_err(&path)(std::io::Error::other(e)))?;
     crate::run_dir::atomic_file::write(&path, (text + "\n").as_bytes()).map_err(io_err(&path))
