@@ -16,26 +16,25 @@ fn vge(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// `vge controller --kind fg --hand allegro` for two 2 s episodes with `extra` arguments: its
+/// JSON summary.
+fn allegro_fg_controller(extra: &[&str]) -> serde_json::Value {
+    let mut args =
+        vec!["controller", "--kind", "fg", "--hand", "allegro", "--episodes", "2", "--episode-s", "2"];
+    args.extend_from_slice(extra);
+    args.push("--json");
+    let (ok, out, err) = vge(&args);
+    assert!(ok, "{err}");
+    serde_json::from_str(out.trim()).expect("one JSON line")
+}
+
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 #[test]
 fn the_allegro_trains_exports_and_evaluates_from_its_file_and_refuses_the_other_hands_policy() {
-    let (ok, out, err) = vge(&[
-        "controller",
-        "--kind",
-        "fg",
-        "--hand",
-        "allegro",
-        "--episodes",
-        "2",
-        "--episode-s",
-        "2",
-        "--json",
-    ]);
-    assert!(ok, "{err}");
-    let summary: serde_json::Value = serde_json::from_str(out.trim()).expect("one JSON line");
+    let summary = allegro_fg_controller(&[]);
     assert!(summary["mean_rotation_rad"].as_f64().is_some_and(f64::is_finite), "{summary}");
 
     let dir = std::env::temp_dir().join(format!("vge-second-hand-{}", std::process::id()));
@@ -94,32 +93,14 @@ fn the_allegro_trains_exports_and_evaluates_from_its_file_and_refuses_the_other_
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// `--set` without `--config` overrides the default task on `--hand` (it once went unread
-/// there): a tilt bound tighter than the grasp's settling ends every episode as a drop, and
-/// a key that does not exist is refused by name.
+/// `--set` without `--config` overrides the default task on `--hand`: a tilt bound tighter
+/// than the grasp's settling ends every episode as a drop, and a key that does not exist is
+/// refused by name.
 #[test]
 fn controller_set_without_a_config_changes_the_hands_task() {
-    let run = |extra: &[&str]| {
-        let mut args = vec![
-            "controller",
-            "--kind",
-            "fg",
-            "--hand",
-            "allegro",
-            "--episodes",
-            "2",
-            "--episode-s",
-            "2",
-            "--json",
-        ];
-        args.extend_from_slice(extra);
-        let (ok, out, err) = vge(&args);
-        assert!(ok, "{err}");
-        serde_json::from_str::<serde_json::Value>(out.trim()).expect("one JSON line")
-    };
-    let free = run(&[]);
+    let free = allegro_fg_controller(&[]);
     assert_eq!(free["drops"], 0, "{free}");
-    let bounded = run(&["--set", "env.upright_within_rad=0.0001"]);
+    let bounded = allegro_fg_controller(&["--set", "env.upright_within_rad=0.0001"]);
     assert_eq!(bounded["drops"], 2, "{bounded}");
     assert!(bounded["mean_steps"].as_f64() < free["mean_steps"].as_f64(), "{bounded} {free}");
     let (ok, _, err) =
