@@ -55,6 +55,14 @@ fn repository(name: &str) -> (PathBuf, String) {
     (root, commit)
 }
 
+/// A second commit on `root` (adding `later.toml`), with no vge built for it: its short hash.
+fn second_commit(root: &Path) -> String {
+    std::fs::write(root.join("later.toml"), "name = \"later\"\n").expect("file");
+    git(root, &["add", "later.toml"]);
+    git(root, &["commit", "-q", "-m", "a second commit"]);
+    git(root, &["rev-parse", "--short=7", "HEAD"])
+}
+
 fn lane_log(root: &Path) -> String {
     std::fs::read_to_string(root.join("runs/lanes/queue.log")).unwrap_or_default()
 }
@@ -214,10 +222,7 @@ fn a_stopped_lane_resumes_its_run_from_the_checkpoint() {
 #[test]
 fn a_bad_queue_is_refused_naming_every_problem() {
     let (root, c) = repository("queue-check");
-    std::fs::write(root.join("later.toml"), "name = \"later\"\n").expect("file");
-    git(&root, &["add", "later.toml"]);
-    git(&root, &["commit", "-q", "-m", "a second commit"]);
-    let unbuilt = git(&root, &["rev-parse", "--short=7", "HEAD"]);
+    let unbuilt = second_commit(&root);
     let queue = format!(
         "a/seed-0 {c} configs/tiny.toml zero\n\
          b/seed-0 0000000 configs/tiny.toml 0\n\
@@ -257,10 +262,7 @@ fn a_bad_queue_is_refused_naming_every_problem() {
 #[test]
 fn only_the_runs_still_to_do_need_their_binaries() {
     let (root, c) = repository("queue-done-binaries");
-    std::fs::write(root.join("later.toml"), "name = \"later\"\n").expect("file");
-    git(&root, &["add", "later.toml"]);
-    git(&root, &["commit", "-q", "-m", "a second commit"]);
-    let unbuilt = git(&root, &["rev-parse", "--short=7", "HEAD"]);
+    let unbuilt = second_commit(&root);
     std::fs::create_dir_all(root.join("docs/results/old/seed-0")).expect("results");
     std::fs::write(root.join("docs/results/old/seed-0/score.json"), "{}").expect("score");
     let done_only = format!("old/seed-0 {unbuilt} configs/tiny.toml 0\na/seed-0 {c} configs/tiny.toml 0\n");
