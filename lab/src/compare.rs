@@ -427,6 +427,47 @@ pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> St
     )
 }
 
+/// The critic where the guided methods' controllers stop acting: every run's gap at its hard
+/// stop ([`RunCurves::critic_gap_at_step`] at `vge.hard_stop`: mean Q minus the collected
+/// return over its last metrics windows up to that step) and the group's mean. Plain RL's
+/// configs carry the same hard stop, so every group is read at one step; a run that has not
+/// reached it, or logged neither figure, is left out. Empty where no run has a gap there.
+#[must_use]
+pub fn critic_gap_at_hard_stop_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
+    let mut rows = String::new();
+    let mut hard_stops = std::collections::BTreeSet::new();
+    for (name, runs) in groups {
+        let mut gaps: Vec<(u64, u64, f64)> = runs
+            .iter()
+            .filter_map(|r| r.critic_gap_at_step(r.hard_stop_step).map(|gap| (r.seed, r.hard_stop_step, gap)))
+            .collect();
+        gaps.sort_by_key(|&(seed, _, _)| seed);
+        if gaps.is_empty() {
+            continue;
+        }
+        hard_stops.extend(gaps.iter().map(|&(_, step, _)| step));
+        let mean = gaps.iter().map(|(_, _, gap)| gap).sum::<f64>() / gaps.len() as f64;
+        let per_run: Vec<String> = gaps.iter().map(|(seed, _, gap)| format!("{seed}: {gap:.1}")).collect();
+        rows.push_str(&format!(
+            "| {} | {} | {} | {mean:.1} |\n",
+            name.as_ref(),
+            gaps.len(),
+            per_run.join(", ")
+        ));
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    let steps: Vec<String> = hard_stops.iter().map(|s| s.to_string()).collect();
+    format!(
+        "\nThe critic at the hard stop (`vge.hard_stop`, env step {}): the same gap over the last {} \
+         metrics windows up to that step, where the controllers stop acting.\n\n| group | runs | per \
+         run (seed: gap) | mean |\n|---|---|---|---|\n{rows}",
+        steps.join(", "),
+        vge_run::run_dir::CRITIC_GAP_WINDOWS
+    )
+}
+
 /// The panels of the IQM curves: periodic success and return against env steps.
 pub const CURVE_SPECS: [(&str, Series); 2] = [
     ("success rate (periodic tests), IQM", |r| (&r.eval_step, &r.eval_success)),
@@ -821,6 +862,7 @@ fn markdown(
     }
     text.push_str(&both_improvements_markdown(name, improvements, improvements_final));
     text.push_str(&critic_gap_markdown(groups));
+    text.push_str(&critic_gap_at_hard_stop_markdown(groups));
     if let Some(objects) = objects {
         // Each object's mean over runs, with its interval: where a group's score comes from.
         let names: Vec<&str> = objects.iter().map(|o| o.name()).collect();
@@ -920,6 +962,41 @@ mod tests {
         assert!(improvement_verdict(&e(0.8, 0.55, 0.95)).starts_with("supported"));
         assert!(improvement_verdict(&e(0.7, 0.45, 0.9)).starts_with("not supported"));
         assert!(improvement_verdict(&e(0.2, 0.05, 0.4)).starts_with("reversed"));
+    }
+
+    /// A committed run's gap at its hard stop, against the gap computed here from its
+    /// `metrics.csv` by hand: the last three windows up to the hard stop.
+    #[test]
+    fn the_critic_at_the_hard_stop_is_read_from_the_windows_up_to_it() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../docs/results/variants/fixed-start-paper-reward/table1");
+        let vge = vge_run::run_dir::read_run(&root.join("vge/seed-2")).expect("a committed run");
+        let rl = vge_run::run_dir::read_run(&root.join("rl/seed-4")).expect("a committed run");
+        assert_eq!((vge.hard_stop_step, rl.hard_stop_step), (200_000, 200_000));
+        let by_hand = |run: &RunCurves| {
+            let text = std::fs::read_to_string(run.dir.join("metrics.csv")).expect("metrics.csv");
+            let mut lines = text.lines();
+            let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+            let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+            let (step, q, ret) = (col("step"), col("mean_q"), col("mc_return"));
+            let gaps: Vec<f64> = lines
+                .map(|l| l.split(',').collect::<Vec<_>>())
+                .filter(|f| f[step].parse::<u64>().expect("step") <= 200_000)
+                .map(|f| f[q].parse::<f64>().expect("q") - f[ret].parse::<f64>().expect("return"))
+                .collect();
+            gaps[gaps.len() - 3..].iter().sum::<f64>() / 3.0
+        };
+        let (vge_gap, rl_gap) = (by_hand(&vge), by_hand(&rl));
+        assert!((vge.critic_gap_at_step(200_000).expect("a gap") - vge_gap).abs() < 1e-9);
+        // Not the gap at the end: the hard stop is read where it is.
+        assert!((vge.critic_gap_at_end().expect("a gap") - vge_gap).abs() > 1.0);
+        let md = critic_gap_at_hard_stop_markdown(&[("vge", vec![&vge]), ("rl", vec![&rl])]);
+        assert!(md.contains("env step 200000"), "{md}");
+        assert!(md.contains(&format!("| vge | 1 | 2: {vge_gap:.1} | {vge_gap:.1} |")), "{md}");
+        assert!(md.contains(&format!("| rl | 1 | 4: {rl_gap:.1} | {rl_gap:.1} |")), "{md}");
+        let mut short = rl.clone();
+        short.step.retain(|&s| s < 200_000.0);
+        assert_eq!(critic_gap_at_hard_stop_markdown(&[("rl", vec![&short])]), "", "not reached yet");
     }
 
     #[test]

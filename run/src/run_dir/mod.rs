@@ -24,7 +24,7 @@ mod tables;
 
 pub use records::{
     CRITIC_GAP_WINDOWS, FinalEvalFields, RunCurves, Selected, check_finished, checkpoint_step,
-    critic_gap_at_end, find_runs, read_final_eval, read_json, read_run,
+    critic_gap_at_end, critic_gap_at_step, find_runs, read_final_eval, read_json, read_run,
 };
 pub use score_file::{PolicyScore, Score, SnapshotsScore};
 pub use sessions::{SegmentEnd, TrainSegment, read_train_log, tensorboard_sessions};

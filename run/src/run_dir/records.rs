@@ -35,6 +35,9 @@ pub struct RunCurves {
     /// The critic's gap per metrics window: `mean_q - mc_return` (NaN where a window lacks
     /// either; empty where the run logged neither).
     pub critic_gap: Vec<f64>,
+    /// The run config's hard stop (`vge.hard_stop`, env steps): where the guided methods'
+    /// controllers stop acting; every config carries it, so runs compare at one step.
+    pub hard_stop_step: u64,
     /// The periodic evaluations (`eval.csv`: the success test on the exported policy):
     /// their env steps, mean returns and success rates (empty without evaluations).
     pub eval_step: Vec<f64>,
@@ -113,6 +116,24 @@ impl RunCurves {
     pub fn critic_gap_at_end(&self) -> Option<f64> {
         critic_gap_at_end(&self.critic_gap)
     }
+
+    /// The critic's gap at env step `step`: [`critic_gap_at_end`] of the metrics windows up to
+    /// and including it. None where no window up to `step` has both figures, or where the run
+    /// has not reached `step` (its gap there is not known yet).
+    pub fn critic_gap_at_step(&self, step: u64) -> Option<f64> {
+        critic_gap_at_step(&self.step, &self.critic_gap, step)
+    }
+}
+
+/// [`RunCurves::critic_gap_at_step`] on a run's metrics steps and gaps (one per window).
+#[must_use]
+pub fn critic_gap_at_step(steps: &[f64], gaps: &[f64], step: u64) -> Option<f64> {
+    let step = step as f64;
+    if !steps.last().is_some_and(|&last| last >= step) {
+        return None;
+    }
+    let upto = steps.iter().take_while(|&&s| s <= step).count().min(gaps.len());
+    critic_gap_at_end(&gaps[..upto])
 }
 
 /// Metrics windows the critic's gap at the end of a run is averaged over: one window's gap
@@ -198,6 +219,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, RunFileError> {
         mean_q,
         mc_return,
         critic_gap,
+        hard_stop_step: config.vge.hard_stop,
         eval_step,
         eval_return,
         eval_success,
@@ -324,6 +346,21 @@ mod tests {
         assert_eq!(critic_gap_at_end(&gaps[..2]), Some((100.0 + 1.0) / 2.0), "fewer windows");
         assert_eq!(critic_gap_at_end(&[]), None, "a run that predates the columns");
         assert_eq!(critic_gap_at_end(&[nan - 1.0]), None);
+    }
+
+    #[test]
+    fn the_critic_gap_at_a_step_reads_only_the_windows_up_to_it() {
+        let nan = f64::NAN;
+        let steps = [10.0, 20.0, 30.0, 40.0, 50.0, 60.0];
+        let gaps = [1.0, 2.0, nan, 4.0, 8.0, 16.0];
+        // At 40: the last three windows with both figures up to 40 (10, 20, 40).
+        assert_eq!(critic_gap_at_step(&steps, &gaps, 40), Some((1.0 + 2.0 + 4.0) / 3.0));
+        // Between windows: those before it.
+        assert_eq!(critic_gap_at_step(&steps, &gaps, 55), Some((2.0 + 4.0 + 8.0) / 3.0));
+        assert_eq!(critic_gap_at_step(&steps, &gaps, 60), critic_gap_at_end(&gaps), "the end");
+        assert_eq!(critic_gap_at_step(&steps, &gaps, 5), None, "no window yet");
+        assert_eq!(critic_gap_at_step(&steps, &gaps, 61), None, "a run that has not reached it");
+        assert_eq!(critic_gap_at_step(&steps, &[], 40), None, "a run that predates the columns");
     }
 
     #[test]
