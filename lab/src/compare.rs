@@ -402,19 +402,7 @@ pub fn with_interval(e: &Estimate) -> String {
 /// has not converged, and a run's failure then says little about its method.
 #[must_use]
 pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
-    let mut rows = String::new();
-    for (name, runs) in groups {
-        let name = name.as_ref();
-        let mut gaps: Vec<(u64, f64)> =
-            runs.iter().filter_map(|r| r.critic_gap_at_end().map(|gap| (r.seed, gap))).collect();
-        gaps.sort_by_key(|&(seed, _)| seed);
-        if gaps.is_empty() {
-            continue;
-        }
-        let mean = gaps.iter().map(|(_, gap)| gap).sum::<f64>() / gaps.len() as f64;
-        let per_run: Vec<String> = gaps.iter().map(|(seed, gap)| format!("{seed}: {gap:.1}")).collect();
-        rows.push_str(&format!("| {name} | {} | {} | {mean:.1} |\n", gaps.len(), per_run.join(", ")));
-    }
+    let rows = critic_gap_rows(groups, RunCurves::critic_gap_at_end);
     if rows.is_empty() {
         return rows;
     }
@@ -427,27 +415,21 @@ pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> St
     )
 }
 
-/// The critic where the guided methods' controllers stop acting: every run's gap at its hard
-/// stop ([`RunCurves::critic_gap_at_step`] at `vge.hard_stop`: mean Q minus the collected
-/// return over its last metrics windows up to that step) and the group's mean. Plain RL's
-/// configs carry the same hard stop, so every group is read at one step; a run that has not
-/// reached it, or logged neither figure, is left out. Empty where no run has a gap there.
-#[must_use]
-pub fn critic_gap_at_hard_stop_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
+/// One table row per group with a gap for any of its runs: the runs with one (`gap` of the
+/// run), as `seed: gap` in seed order, and their mean.
+fn critic_gap_rows<S: AsRef<str>>(
+    groups: &[(S, Vec<&RunCurves>)],
+    gap: impl Fn(&RunCurves) -> Option<f64>,
+) -> String {
     let mut rows = String::new();
-    let mut hard_stops = std::collections::BTreeSet::new();
     for (name, runs) in groups {
-        let mut gaps: Vec<(u64, u64, f64)> = runs
-            .iter()
-            .filter_map(|r| r.critic_gap_at_step(r.hard_stop_step).map(|gap| (r.seed, r.hard_stop_step, gap)))
-            .collect();
-        gaps.sort_by_key(|&(seed, _, _)| seed);
+        let mut gaps: Vec<(u64, f64)> = runs.iter().filter_map(|r| gap(r).map(|g| (r.seed, g))).collect();
+        gaps.sort_by_key(|&(seed, _)| seed);
         if gaps.is_empty() {
             continue;
         }
-        hard_stops.extend(gaps.iter().map(|&(_, step, _)| step));
-        let mean = gaps.iter().map(|(_, _, gap)| gap).sum::<f64>() / gaps.len() as f64;
-        let per_run: Vec<String> = gaps.iter().map(|(seed, _, gap)| format!("{seed}: {gap:.1}")).collect();
+        let mean = gaps.iter().map(|(_, gap)| gap).sum::<f64>() / gaps.len() as f64;
+        let per_run: Vec<String> = gaps.iter().map(|(seed, gap)| format!("{seed}: {gap:.1}")).collect();
         rows.push_str(&format!(
             "| {} | {} | {} | {mean:.1} |\n",
             name.as_ref(),
@@ -455,9 +437,25 @@ pub fn critic_gap_at_hard_stop_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCur
             per_run.join(", ")
         ));
     }
+    rows
+}
+
+/// The critic where the guided methods' controllers stop acting: every run's gap at its hard
+/// stop ([`RunCurves::critic_gap_at_step`] at `vge.hard_stop`: mean Q minus the collected
+/// return over its last metrics windows up to that step) and the group's mean. Plain RL's
+/// configs carry the same hard stop, so every group is read at one step; a run that has not
+/// reached it, or logged neither figure, is left out. Empty where no run has a gap there.
+#[must_use]
+pub fn critic_gap_at_hard_stop_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
+    let at_hard_stop = |r: &RunCurves| r.critic_gap_at_step(r.hard_stop_step);
+    let rows = critic_gap_rows(groups, at_hard_stop);
     if rows.is_empty() {
         return rows;
     }
+    let hard_stops: std::collections::BTreeSet<u64> = groups
+        .iter()
+        .flat_map(|(_, runs)| runs.iter().filter(|r| at_hard_stop(r).is_some()).map(|r| r.hard_stop_step))
+        .collect();
     let steps: Vec<String> = hard_stops.iter().map(|s| s.to_string()).collect();
     format!(
         "\nThe critic at the hard stop (`vge.hard_stop`, env step {}): the same gap over the last {} \
