@@ -188,7 +188,10 @@ hil_run=$!
 # nextest runs every test in a process of its own, two at a time on two cores, the longest
 # first (.config/nextest.toml); `cargo test` ran one binary after another and left a core
 # idle through each long single-threaded test. Doctests are cargo test's alone.
-cargo nextest run --release --workspace
+# One libtorch thread per test unless a test sets its own: with libtorch's default (a thread
+# per core) two tests side by side put four spinning OpenMP threads on two cores, and a test's
+# updates took 42 s instead of 4-5 s (docs/testing.md).
+OMP_NUM_THREADS=1 cargo nextest run --release --workspace
 cargo test --release --workspace --doc
 
 # The Slurm test (step below) runs beside the Python step: each is mostly one process at a
