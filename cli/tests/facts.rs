@@ -52,6 +52,7 @@ fn a_committed_run_gives_its_row_its_two_segments_and_its_lanes() {
     // metrics.csv's last three windows: mean Q minus the collected return -9.85, -20.98, -6.96.
     assert!(text.contains("\n  gap (mean Q - return), mean of the last 3 windows: -12.6\n"), "{text}");
     assert!(!text.contains("actor log-std"), "its binary did not log one: {text}");
+    assert!(!text.contains("early steps"), "nor the early steps' returns: {text}");
     assert!(
         text.contains(
             "lanes: 2026-11-20T10:00:00Z start (lane-a); 2026-11-20T11:00:00Z end (lane-a); \
@@ -83,9 +84,29 @@ fn a_run_still_training_shows_where_it_stands_and_a_folder_without_metrics_is_re
     };
     keep_to("metrics.csv", 500_000);
     keep_to("eval.csv", 500_000);
+    // As newer binaries log it: the early steps' returns, here each window's return + 10.
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).expect("metrics.csv");
+    let mut lines = metrics.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let at = header.iter().position(|c| *c == "mc_return").expect("mc_return");
+    let with_early: Vec<String> = std::iter::once(format!("{},mc_return_early", header.join(",")))
+        .chain(lines.map(|l| {
+            let ret = l.split(',').nth(at).expect("field");
+            let early = ret.parse::<f64>().map_or(String::new(), |r| format!("{:.6}", r + 10.0));
+            format!("{l},{early}")
+        }))
+        .collect();
+    std::fs::write(run.join("metrics.csv"), with_early.join("\n") + "\n").expect("metrics.csv");
     let out = facts(&[run.to_str().expect("utf-8 path")], &dir);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let gap_after = |label: &str| -> f64 {
+        let line = text.lines().find(|l| l.contains(label)).unwrap_or_else(|| panic!("{label}: {text}"));
+        line.rsplit(": ").next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{line}"))
+    };
+    let (gap, early_gap) =
+        (gap_after("gap (mean Q - return), mean"), gap_after("gap (mean Q - early steps' return), mean"));
+    assert!((gap - early_gap - 10.0).abs() < 0.11, "{gap} and {early_gap}: {text}");
     assert!(
         text.contains("in training (no final-eval.json yet): its last metrics window at 500,000"),
         "{text}"

@@ -415,6 +415,26 @@ pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> St
     )
 }
 
+/// The critic at the end of each run against the returns of its episodes' early steps
+/// ([`RunCurves::critic_gap_early_at_end`]), which the time limit cuts by at most 5%, while
+/// the collected return of a step near the limit lacks most of what the critic bootstraps
+/// past it. Empty where no run logged them (binaries from before `mc_return_early`).
+#[must_use]
+pub fn critic_gap_early_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
+    let rows = critic_gap_rows(groups, RunCurves::critic_gap_early_at_end);
+    if rows.is_empty() {
+        return rows;
+    }
+    format!(
+        "\nThe same gap against the returns of the episodes' early steps (`mean_q` - \
+         `mc_return_early`: the steps whose return the time limit cuts by at most 5%), the mean over \
+         the last {} metrics windows; the collected return of a step near the limit lacks what the \
+         critic counts past it, so this is the gap without that bias.\n\n| group | runs | per run \
+         (seed: gap) | mean |\n|---|---|---|---|\n{rows}",
+        vge_run::run_dir::CRITIC_GAP_WINDOWS
+    )
+}
+
 /// One table row per group with a gap for any of its runs: the runs with one (`gap` of the
 /// run), as `seed: gap` in seed order, and their mean.
 fn critic_gap_rows<S: AsRef<str>>(
@@ -860,6 +880,7 @@ fn markdown(
     }
     text.push_str(&both_improvements_markdown(name, improvements, improvements_final));
     text.push_str(&critic_gap_markdown(groups));
+    text.push_str(&critic_gap_early_markdown(groups));
     text.push_str(&critic_gap_at_hard_stop_markdown(groups));
     if let Some(objects) = objects {
         // Each object's mean over runs, with its interval: where a group's score comes from.
@@ -995,6 +1016,15 @@ mod tests {
         let mut short = rl.clone();
         short.step.retain(|&s| s < 200_000.0);
         assert_eq!(critic_gap_at_hard_stop_markdown(&[("rl", vec![&short])]), "", "not reached yet");
+
+        // Its binary logged no early steps' returns: no table; a run with them gets one.
+        assert!(vge.critic_gap_early.is_empty());
+        assert_eq!(critic_gap_early_markdown(&[("vge", vec![&vge])]), "");
+        let mut early = vge.clone();
+        early.critic_gap_early = vge.critic_gap.iter().map(|gap| gap - 12.0).collect();
+        let end = vge.critic_gap_at_end().expect("a gap") - 12.0;
+        let md = critic_gap_early_markdown(&[("vge", vec![&early])]);
+        assert!(md.contains(&format!("| vge | 1 | 2: {end:.1} | {end:.1} |")), "{md}");
     }
 
     #[test]

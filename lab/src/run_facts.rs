@@ -148,12 +148,11 @@ fn critic(out: &mut String, metrics: &Table) {
     }
     // The critic's gap as the budget plans' rules, `vge compare` and Table I read it: mean Q
     // minus the collected return over the last windows that have both.
-    let returns: std::collections::BTreeMap<u64, f64> = ret.iter().copied().collect();
-    let gaps: Vec<f64> = q.iter().filter_map(|(step, v)| returns.get(step).map(|r| v - r)).collect();
-    if let Some(gap) = vge_run::run_dir::critic_gap_at_end(&gaps) {
-        let windows = vge_run::run_dir::CRITIC_GAP_WINDOWS.min(gaps.len());
-        let _ = writeln!(out, "  gap (mean Q - return), mean of the last {windows} windows: {gap:.1}");
-    }
+    gap_line(out, "gap (mean Q - return)", &q, &ret);
+    // The same against the early steps' returns, which the time limit cuts by at most 5%
+    // (binaries from before the column have none; docs/scoring.md).
+    let early = metrics.column("mc_return_early", FROM_STEP);
+    gap_line(out, "gap (mean Q - early steps' return)", &q, &early);
     // The actor's exploration: SAC's mean log-std (empty for TD3, absent in older binaries).
     if let Some((step, log_std)) = metrics.column("actor_log_std", 0).last() {
         let _ = writeln!(out, "actor log-std at {}: {log_std:.2}", steps_label(*step));
@@ -174,6 +173,17 @@ fn critic(out: &mut String, metrics: &Table) {
             percent(last_acting.1),
             steps_label(last_acting.0)
         );
+    }
+}
+
+/// `label`: mean Q minus `returns` over the last windows that have both; nothing when
+/// no window has both.
+fn gap_line(out: &mut String, label: &str, q: &[(u64, f64)], returns: &[(u64, f64)]) {
+    let returns: std::collections::BTreeMap<u64, f64> = returns.iter().copied().collect();
+    let gaps: Vec<f64> = q.iter().filter_map(|(step, v)| returns.get(step).map(|r| v - r)).collect();
+    if let Some(gap) = vge_run::run_dir::critic_gap_at_end(&gaps) {
+        let windows = vge_run::run_dir::CRITIC_GAP_WINDOWS.min(gaps.len());
+        let _ = writeln!(out, "  {label}, mean of the last {windows} windows: {gap:.1}");
     }
 }
 

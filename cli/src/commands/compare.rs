@@ -19,9 +19,10 @@ use clap::Args;
 /// OUT/profiles.png and OUT/curves.png (IQM of the periodic success and return against
 /// env steps, with 95% bands). compare.md ends with the critic at the end of each run:
 /// mean Q minus the collected return over its last 3 metrics windows (as `vge facts`
-/// prints it), per run and the group's mean, then the same gap at each run's hard stop
-/// (`vge.hard_stop`, where the controllers stop acting: the windows up to that step).
-/// Definitions: docs/scoring.md.
+/// prints it), per run and the group's mean; for runs that log `mc_return_early`, the
+/// gap against their episodes' early steps' returns, which the time limit does not cut;
+/// then the gap at each run's hard stop (`vge.hard_stop`, where the controllers stop
+/// acting: the windows up to that step). Definitions: docs/scoring.md.
 ///
 /// --metric ranks runs by another figure of the same held-out episodes: held (share
 /// without a drop), rotation_rad (mean rotation about z per episode) or return. The

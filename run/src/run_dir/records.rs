@@ -35,6 +35,9 @@ pub struct RunCurves {
     /// The critic's gap per metrics window: `mean_q - mc_return` (NaN where a window lacks
     /// either; empty where the run logged neither).
     pub critic_gap: Vec<f64>,
+    /// The same against the early steps' returns, which the time limit cuts by little:
+    /// `mean_q - mc_return_early` (empty in runs that predate the column).
+    pub critic_gap_early: Vec<f64>,
     /// The run config's hard stop (`vge.hard_stop`, env steps): where the guided methods'
     /// controllers stop acting; every config carries it, so runs compare at one step.
     pub hard_stop_step: u64,
@@ -117,6 +120,12 @@ impl RunCurves {
         critic_gap_at_end(&self.critic_gap)
     }
 
+    /// [`Self::critic_gap_at_end`] against the early steps' returns (None in runs that
+    /// predate them, or where episodes are too short to have early steps).
+    pub fn critic_gap_early_at_end(&self) -> Option<f64> {
+        critic_gap_at_end(&self.critic_gap_early)
+    }
+
     /// The critic's gap at env step `step`: [`critic_gap_at_end`] of the metrics windows up to
     /// and including it. None where no window up to `step` has both figures, or where the run
     /// has not reached `step` (its gap there is not known yet).
@@ -188,6 +197,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, RunFileError> {
     };
     let (mean_q, mc_return) = (optional("mean_q")?, optional("mc_return")?);
     let critic_gap = mean_q.iter().zip(&mc_return).map(|(q, r)| q - r).collect();
+    let critic_gap_early = mean_q.iter().zip(&optional("mc_return_early")?).map(|(q, r)| q - r).collect();
     let final_eval = read_final_eval(dir)?;
     let eval = RunDir::new(dir).eval_csv();
     let [eval_step, eval_return, eval_success]: [Vec<f64>; 3] = if eval.exists() {
@@ -219,6 +229,7 @@ pub fn read_run(dir: &Path) -> Result<RunCurves, RunFileError> {
         mean_q,
         mc_return,
         critic_gap,
+        critic_gap_early,
         hard_stop_step: config.vge.hard_stop,
         eval_step,
         eval_return,

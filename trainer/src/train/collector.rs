@@ -10,7 +10,7 @@ use vge_sim::{Env, EpisodeTracker, NoiseConfig, Observer, PerturbationConfig, Si
 
 use super::TrainError;
 use super::in_progress::{EnvInProgress, EpisodeLog, InProgress};
-use super::metrics::{TrainingObjects, Window};
+use super::metrics::{Discount, TrainingObjects, Window};
 use crate::behaviour::{Behaviour, ControllerCall, Decision, EnvController, StepContext};
 use crate::learner::{Learner, ObsColumns, mix_seed, standard_normal};
 use crate::replay::ReplayBuffer;
@@ -68,8 +68,9 @@ pub(super) struct Collector {
     objects: TrainingObjects,
     /// Env steps taken so far ([`Self::set_progress`]).
     progress: u64,
-    /// The discount of the episodes' returns in the metrics (`sac.gamma`).
-    gamma: f64,
+    /// The discount of the episodes' returns in the metrics (`sac.gamma`) and their early
+    /// steps.
+    discount: Discount,
 }
 
 /// Raises each env's random force on the object and its drop penalty (over
@@ -180,7 +181,7 @@ impl Collector {
             seed: config.seed,
             objects: TrainingObjects::new(&config.env.objects, n),
             progress: 0,
-            gamma: config.sac.gamma,
+            discount: Discount::new(config.sac.gamma, config.env.episode_length),
         })
     }
 
@@ -338,7 +339,7 @@ impl Collector {
         behaviour: &mut Behaviour,
         rng: &mut ChaCha8Rng,
     ) -> Result<u64, TrainError> {
-        let gamma = self.gamma;
+        let discount = self.discount;
         let mut finished = Vec::new();
         for (i, ((r, d), slot)) in results.iter().zip(decisions).zip(&mut self.slots).enumerate() {
             let at = u32::try_from(slot.log.actions.len()).unwrap_or(u32::MAX);
@@ -363,7 +364,7 @@ impl Collector {
             slot.actor_obs = next_actor_obs;
             if r.terminated || r.truncated {
                 let outcome = episode.tracker.outcome(r.terminated);
-                window.add_episode(&outcome, &episode.rewards, gamma);
+                window.add_episode(&outcome, &episode.rewards, discount);
                 window.add_object_episode(&self.objects, i, &outcome);
                 finished.push(i);
             }

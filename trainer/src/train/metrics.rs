@@ -7,7 +7,7 @@ use vge_sim::{EpisodeOutcome, ObjectShape};
 use crate::behaviour::BehaviourStats;
 use crate::learner::UpdateStats;
 
-pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,actor_log_std,beta,updates,steps_per_s";
+pub(super) const METRICS_HEADER: &str = "step,episodes,return,rotation,contacts,success,controller_share,p_psi,switches_per_1k,critic_loss,actor_loss,bc_loss,alpha,mean_q,mc_return,mc_return_max,mc_return_early,actor_log_std,beta,updates,steps_per_s";
 
 /// Sums over the current metrics window.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -35,6 +35,11 @@ pub(super) struct Window {
     mc_return_sum: f64,
     mc_return_count: u64,
     mc_return_max: Option<f64>,
+    /// The same returns of the episodes' early steps only ([`Discount::early_steps`]), whose
+    /// return the time limit cuts by little: a reading of the critic's gap without the
+    /// truncation's bias.
+    mc_return_early_sum: f64,
+    mc_return_early_count: u64,
     /// Per training object of a run on several ([`TrainingObjects`]); empty, and left out of
     /// the checkpoint, on one object.
     #[serde(skip_serializing_if = "Vec::is_empty")]
@@ -104,16 +109,18 @@ const OBJECT_FIGURES: [&str; 3] = ["success", "return", "rotation"];
 
 impl Window {
     /// A finished episode, with its rewards for the Monte-Carlo returns.
-    pub fn add_episode(&mut self, outcome: &EpisodeOutcome, rewards: &[f32], gamma: f64) {
+    pub fn add_episode(&mut self, outcome: &EpisodeOutcome, rewards: &[f32], discount: Discount) {
         self.episodes += 1;
         self.ret += outcome.episode_return;
         self.rotation += outcome.rotation_rad;
         self.contacts += outcome.mean_contacts;
         self.successes += u64::from(outcome.success());
-        let (sum, count, max) = discounted_returns(rewards, gamma);
-        self.mc_return_sum += sum;
-        self.mc_return_count += count;
-        self.mc_return_max = match (self.mc_return_max, max) {
+        let returns = discounted_returns(rewards, discount);
+        self.mc_return_sum += returns.sum;
+        self.mc_return_count += returns.count;
+        self.mc_return_early_sum += returns.early_sum;
+        self.mc_return_early_count += returns.early_count;
+        self.mc_return_max = match (self.mc_return_max, returns.max) {
             (Some(a), Some(b)) => Some(a.max(b)),
             (a, b) => a.or(b),
         };
@@ -213,6 +220,10 @@ impl Window {
             ("mean_q", per_update(w.mean_q)),
             ("mc_return", (w.mc_return_count > 0).then(|| w.mc_return_sum / w.mc_return_count as f64)),
             ("mc_return_max", w.mc_return_max),
+            (
+                "mc_return_early",
+                (w.mc_return_early_count > 0).then(|| w.mc_return_early_sum / w.mc_return_early_count as f64),
+            ),
             ("actor_log_std", actor_log_std),
             ("beta", Some(beta)),
             ("updates", Some(updates as f64)),
@@ -221,17 +232,63 @@ impl Window {
     }
 }
 
-/// Sum, count and largest of the discounted returns `G_t = r_t + γ G_{t+1}` of every step
-/// of an episode (no bootstrap past its end).
-pub(super) fn discounted_returns(rewards: &[f32], gamma: f64) -> (f64, u64, Option<f64>) {
-    let mut g = 0.0f64;
-    let (mut sum, mut max) = (0.0f64, None::<f64>);
-    for &r in rewards.iter().rev() {
-        g = f64::from(r) + gamma * g;
-        sum += g;
-        max = Some(max.map_or(g, |m| m.max(g)));
+/// The largest share of an early step's return that may lie past the time limit: the
+/// discount's weight on the steps after it.
+pub(super) const EARLY_TAIL: f64 = 0.05;
+
+/// How the metrics discount an episode's rewards (`sac.gamma`), and which of its steps are
+/// early: those at least H steps before the time limit (`env.episode_length`), where
+/// `gamma^H <= EARLY_TAIL`. The critic bootstraps through the time limit (only a drop is
+/// terminal) while a collected return stops there, so a return of a step near the limit
+/// lacks most of what the critic's Q counts; an early step's lacks at most `EARLY_TAIL` of it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Discount {
+    pub gamma: f64,
+    /// Steps from an episode's start whose returns count as early (0 where episodes are too
+    /// short for any).
+    pub early_steps: usize,
+}
+
+impl Discount {
+    pub fn new(gamma: f64, episode_length_steps: usize) -> Self {
+        // Step t (from 0) is early when gamma^(T - t) <= EARLY_TAIL, t <= T - H.
+        let horizon = if gamma > 0.0 && gamma < 1.0 {
+            (EARLY_TAIL.ln() / gamma.ln()).ceil() as usize
+        } else if gamma <= 0.0 {
+            0
+        } else {
+            usize::MAX
+        };
+        let early_steps = episode_length_steps.checked_sub(horizon).map_or(0, |last| last + 1);
+        Self { gamma, early_steps }
     }
-    (sum, rewards.len() as u64, max)
+}
+
+/// The discounted returns `G_t = r_t + γ G_{t+1}` of an episode's steps (no bootstrap past
+/// its end): sum, count and largest over every step, and sum and count over the early ones.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Returns {
+    pub sum: f64,
+    pub count: u64,
+    pub max: Option<f64>,
+    pub early_sum: f64,
+    pub early_count: u64,
+}
+
+pub(super) fn discounted_returns(rewards: &[f32], discount: Discount) -> Returns {
+    let mut g = 0.0f64;
+    let mut returns =
+        Returns { sum: 0.0, count: rewards.len() as u64, max: None, early_sum: 0.0, early_count: 0 };
+    for (t, &r) in rewards.iter().enumerate().rev() {
+        g = f64::from(r) + discount.gamma * g;
+        returns.sum += g;
+        returns.max = Some(returns.max.map_or(g, |m| m.max(g)));
+        if t < discount.early_steps {
+            returns.early_sum += g;
+            returns.early_count += 1;
+        }
+    }
+    returns
 }
 
 /// The CSV fields of a metrics row: counts whole, speed to 0.1, the rest to 6 decimals,
@@ -296,9 +353,36 @@ mod tests {
 
     #[test]
     fn discounted_returns_bootstrap_nothing_past_the_end() {
-        let (sum, count, max) = discounted_returns(&[1.0, 0.0, 2.0], 0.5);
-        // G = [1 + 0.5 * (0 + 0.5 * 2), 0 + 0.5 * 2, 2] = [1.5, 1, 2]
-        assert_eq!((sum, count, max), (4.5, 3, Some(2.0)));
-        assert_eq!(discounted_returns(&[], 0.9), (0.0, 0, None));
+        let half = Discount { gamma: 0.5, early_steps: 1 };
+        let r = discounted_returns(&[1.0, 0.0, 2.0], half);
+        // G = [1 + 0.5 * (0 + 0.5 * 2), 0 + 0.5 * 2, 2] = [1.5, 1, 2]; the first is early.
+        assert_eq!((r.sum, r.count, r.max), (4.5, 3, Some(2.0)));
+        assert_eq!((r.early_sum, r.early_count), (1.5, 1));
+        let none = discounted_returns(&[], Discount { gamma: 0.9, early_steps: 5 });
+        assert_eq!((none.sum, none.count, none.max, none.early_count), (0.0, 0, None, 0));
+    }
+
+    #[test]
+    fn early_steps_leave_at_most_the_tail_past_the_time_limit() {
+        // 0.99^299 = 0.0495 <= 0.05 < 0.99^298: steps 0..=101 of 400 are early.
+        assert_eq!(Discount::new(0.99, 400).early_steps, 102);
+        assert!(0.99f64.powi(400 - 101) <= EARLY_TAIL && 0.99f64.powi(400 - 102) > EARLY_TAIL);
+        // Episodes shorter than the horizon have no early step; gamma 0 makes every step one.
+        assert_eq!(Discount::new(0.99, 298).early_steps, 0);
+        assert_eq!(Discount::new(0.99, 299).early_steps, 1);
+        assert_eq!(Discount::new(0.0, 10).early_steps, 11);
+        assert_eq!(Discount::new(1.0, 10).early_steps, 0);
+
+        // Steady reward 1 over 400 steps: an early return is within 5% of 1 / (1 - 0.99) =
+        // 100, while the mean over every step is about 0.757 of it.
+        let discount = Discount::new(0.99, 400);
+        let r = discounted_returns(&[1.0; 400], discount);
+        let (all, early) = (r.sum / r.count as f64, r.early_sum / r.early_count as f64);
+        let untruncated = 1.0 / (1.0 - 0.99);
+        let expected = |steps: i32| {
+            (0..steps).map(|t| untruncated * (1.0 - 0.99f64.powi(400 - t))).sum::<f64>() / f64::from(steps)
+        };
+        assert!((all - expected(400)).abs() < 1e-6 && (75.0..76.5).contains(&all), "{all}");
+        assert!((early - expected(102)).abs() < 1e-6 && early >= 95.0, "{early}");
     }
 }
