@@ -96,11 +96,57 @@ fn budget(checkout: &Checkout, line: &QueueLine) -> u64 {
     load_config(&config, &line.sets).map_or(Config::default().total_steps, |c| c.total_steps)
 }
 
-/// The last metrics row's step and env steps per second (its last column).
+/// The last metrics row's step, and its env steps per second where they tell how fast the
+/// run trains: read by column name (a run on several objects has columns after
+/// `steps_per_s`), and only for a window spent wholly learning (the row before it had
+/// updates). The first window is mostly warm-up, stepping without updates at several times
+/// the learning rate, and would promise an end far too early.
 fn last_metrics(dir: &Path) -> Option<(u64, f64)> {
     let text = std::fs::read_to_string(dir.join(METRICS)).ok()?;
-    let last = text.lines().rev().find(|l| l.starts_with(|c: char| c.is_ascii_digit()))?;
-    let step = last.split(',').next()?.parse().ok()?;
-    let rate = last.rsplit(',').next()?.parse().ok()?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next()?.split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name);
+    let (rate_at, updates_at) = (column("steps_per_s"), column("updates"));
+    let rows: Vec<Vec<&str>> = lines
+        .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+        .map(|l| l.split(',').collect())
+        .collect();
+    let field =
+        |row: &[&str], at: Option<usize>| at.and_then(|i| row.get(i)).and_then(|v| v.parse::<f64>().ok());
+    let last = rows.last()?;
+    let step = last.first()?.parse().ok()?;
+    let learning = rows.len() >= 2 && field(&rows[rows.len() - 2], updates_at).is_some_and(|u| u > 0.0);
+    let rate = if learning { field(last, rate_at).unwrap_or(0.0) } else { 0.0 };
     Some((step, rate))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metrics(name: &str, text: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("vge-status-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        std::fs::write(dir.join(METRICS), text).expect("metrics.csv");
+        dir
+    }
+
+    #[test]
+    fn the_rate_is_read_by_name_from_a_window_spent_learning() {
+        // After warm-up: the first window's 802.7 steps/s (2 updates) is no guide.
+        let one = metrics("warm-up", "step,updates,steps_per_s\n10000,2,802.7\n");
+        assert_eq!(last_metrics(&one), Some((10_000, 0.0)));
+        let two = metrics("learning", "step,updates,steps_per_s\n10000,2,802.7\n20000,2502,214.5\n");
+        assert_eq!(last_metrics(&two), Some((20_000, 214.5)));
+        // Several objects: per-object columns follow steps_per_s.
+        let objects = metrics(
+            "objects",
+            "step,updates,steps_per_s,cube_success,cube_rotation\n10000,2,800.0,0.5,3.0\n\
+             20000,2502,201.5,0.25,6.5\n",
+        );
+        assert_eq!(last_metrics(&objects), Some((20_000, 201.5)));
+        for dir in [one, two, objects] {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
 }
