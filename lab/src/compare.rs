@@ -402,17 +402,21 @@ pub fn with_interval(e: &Estimate) -> String {
 /// has not converged, and a run's failure then says little about its method.
 #[must_use]
 pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
-    let rows = critic_gap_rows(groups, RunCurves::critic_gap_at_end);
-    if rows.is_empty() {
-        return rows;
-    }
-    format!(
-        "\nThe critic at the end of each run: mean Q minus the collected discounted return \
+    let intro = format!(
+        "The critic at the end of each run: mean Q minus the collected discounted return \
          (`metrics.csv`'s `mean_q` - `mc_return`), the mean over its last {} metrics windows; above 0 \
-         the critic overestimates what its behaviour collected.\n\n| group | runs | per run (seed: \
-         gap) | mean |\n|---|---|---|---|\n{rows}",
+         the critic overestimates what its behaviour collected.",
         vge_run::run_dir::CRITIC_GAP_WINDOWS
-    )
+    );
+    critic_gap_table(&intro, &critic_gap_rows(groups, RunCurves::critic_gap_at_end))
+}
+
+/// A critic-gap table after its paragraph, or nothing where it has no rows.
+fn critic_gap_table(intro: &str, rows: &str) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    format!("\n{intro}\n\n| group | runs | per run (seed: gap) | mean |\n|---|---|---|---|\n{rows}")
 }
 
 /// The critic at the end of each run against the returns of its episodes' early steps
@@ -421,18 +425,14 @@ pub fn critic_gap_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> St
 /// past it. Empty where no run logged them (binaries from before `mc_return_early`).
 #[must_use]
 pub fn critic_gap_early_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
-    let rows = critic_gap_rows(groups, RunCurves::critic_gap_early_at_end);
-    if rows.is_empty() {
-        return rows;
-    }
-    format!(
-        "\nThe same gap against the returns of the episodes' early steps (`mean_q` - \
+    let intro = format!(
+        "The same gap against the returns of the episodes' early steps (`mean_q` - \
          `mc_return_early`: the steps whose return the time limit cuts by at most 5%), the mean over \
          the last {} metrics windows; the collected return of a step near the limit lacks what the \
-         critic counts past it, so this is the gap without that bias.\n\n| group | runs | per run \
-         (seed: gap) | mean |\n|---|---|---|---|\n{rows}",
+         critic counts past it, so this is the gap without that bias.",
         vge_run::run_dir::CRITIC_GAP_WINDOWS
-    )
+    );
+    critic_gap_table(&intro, &critic_gap_rows(groups, RunCurves::critic_gap_early_at_end))
 }
 
 /// One table row per group with a gap for any of its runs: the runs with one (`gap` of the
@@ -468,22 +468,18 @@ fn critic_gap_rows<S: AsRef<str>>(
 #[must_use]
 pub fn critic_gap_at_hard_stop_markdown<S: AsRef<str>>(groups: &[(S, Vec<&RunCurves>)]) -> String {
     let at_hard_stop = |r: &RunCurves| r.critic_gap_at_step(r.hard_stop_step);
-    let rows = critic_gap_rows(groups, at_hard_stop);
-    if rows.is_empty() {
-        return rows;
-    }
     let hard_stops: std::collections::BTreeSet<u64> = groups
         .iter()
         .flat_map(|(_, runs)| runs.iter().filter(|r| at_hard_stop(r).is_some()).map(|r| r.hard_stop_step))
         .collect();
     let steps: Vec<String> = hard_stops.iter().map(|s| s.to_string()).collect();
-    format!(
-        "\nThe critic at the hard stop (`vge.hard_stop`, env step {}): the same gap over the last {} \
-         metrics windows up to that step, where the controllers stop acting.\n\n| group | runs | per \
-         run (seed: gap) | mean |\n|---|---|---|---|\n{rows}",
+    let intro = format!(
+        "The critic at the hard stop (`vge.hard_stop`, env step {}): the same gap over the last {} \
+         metrics windows up to that step, where the controllers stop acting.",
         steps.join(", "),
         vge_run::run_dir::CRITIC_GAP_WINDOWS
-    )
+    );
+    critic_gap_table(&intro, &critic_gap_rows(groups, at_hard_stop))
 }
 
 /// The panels of the IQM curves: periodic success and return against env steps.
