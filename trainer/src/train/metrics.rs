@@ -255,7 +255,8 @@ impl Discount {
         let horizon = if gamma > 0.0 && gamma < 1.0 {
             (EARLY_TAIL.ln() / gamma.ln()).ceil() as usize
         } else if gamma <= 0.0 {
-            0
+            // gamma^1 = 0: a step's return lacks nothing once one step lies before the limit.
+            1
         } else {
             usize::MAX
         };
@@ -370,7 +371,7 @@ mod tests {
         // Episodes shorter than the horizon have no early step; gamma 0 makes every step one.
         assert_eq!(Discount::new(0.99, 298).early_steps, 0);
         assert_eq!(Discount::new(0.99, 299).early_steps, 1);
-        assert_eq!(Discount::new(0.0, 10).early_steps, 11);
+        assert_eq!(Discount::new(0.0, 10).early_steps, 10);
         assert_eq!(Discount::new(1.0, 10).early_steps, 0);
 
         // Steady reward 1 over 400 steps: an early return is within 5% of 1 / (1 - 0.99) =
