@@ -255,7 +255,8 @@ impl Discount {
         let horizon = if gamma > 0.0 && gamma < 1.0 {
             (EARLY_TAIL.ln() / gamma.ln()).ceil() as usize
         } else if gamma <= 0.0 {
-            // gamma^1 = 0: a step's return lacks nothing once one step lies before the limit.
+            // The formula's limit as gamma -> 0: gamma^1 = 0 <= EARLY_TAIL, a one-step horizon,
+            // so every step of an episode is early.
             1
         } else {
             usize::MAX
