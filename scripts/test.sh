@@ -58,7 +58,7 @@ step "system packages"
 scripts/ensure-packages.sh user-mode-linux kmod iproute2 gcc python3 python3-venv qemu-system-arm strace
 
 step "python tools (cantools, tensorboard, rerun-sdk, mujoco, rliable, onnx, in .deps/py; a first install in the background)"
-# export/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
+# export/tch/tests/onnx.rs checks exported ONNX files with onnx's checker and runs them (and
 # imported actors) in onnxruntime.
 # The HIL tests decode captured CAN frames with cantools and docs/vge-hand.dbc; the trainer's
 # event files are read back with TensorBoard's own reader; `--record`'s recordings are drawn
@@ -118,10 +118,10 @@ export RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY
 # The Python package's build script (pyo3) asks this interpreter for its configuration.
 export PYO3_PYTHON=$repo/.deps/py/bin/python
 
-step "dependency rules: only the learner links libtorch (vge-run, vge-lab, vge-controllers, vge-bridge, the Python package and vge without training never do); the learner builds no plots, statistics or Slurm code"
+step "dependency rules: only the learner links libtorch (vge-export, vge-run, vge-lab, vge-controllers, vge-bridge, the Python package and vge without training never do); the learner builds no plots, statistics or Slurm code"
 # `vge-cli --no-default-features`: the vge command without its `train` feature (eval, score,
 # compare, plot, inspect, import, controller, ...).
-for crate in vge-run vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" vge-python vge-python-reference; do
+for crate in vge-export vge-run vge-lab vge-controllers vge-bridge "vge-cli --no-default-features" vge-python vge-python-reference; do
   # shellcheck disable=SC2086
   tree=$(cargo tree -p $crate -e normal,build --prefix none)
   if grep -q '^torch-sys ' <<<"$tree"; then
@@ -139,9 +139,11 @@ for dep in vge-lab plotters; do
   fi
 done
 echo "vge-trainer: $(wc -l <<<"$tree") dependency lines, no vge-lab, no plotters"
-# ...and that it builds, linted through the clippy wrapper. The dependencies it compiles are
-# the workspace's own (vge-workspace-hack gives every build the same features), so the test
-# build below reuses them; its vge binary then replaces this one.
+# ...and that it builds, linted through the clippy wrapper. Everything it compiles but the vge
+# binary is what the test build below uses as it is: every crate under vge-cli has one
+# configuration (libtorch's half of policy export is vge-export-tch, not a feature of
+# vge-export) and vge-workspace-hack gives every dependency the same features. The test
+# build's vge binary then replaces this one.
 cargo build --release -p vge-cli --no-default-features
 
 step "vge-bridge for real hands builds without the simulator (no rapier3d, no rayon)"
@@ -213,12 +215,20 @@ ls -l target/wheels/
 # Every build above shares one build of the simulator's physics: a second rapier3d means that
 # some build's dependency features differ from the others' (a dependency added without
 # `cargo hakari generate`), which costs minutes on a fresh machine.
-rapier_builds=$(find target/release/.fingerprint -maxdepth 1 -name 'rapier3d-*' -newer "$started_marker" | wc -l)
-echo "rapier3d compiled $rapier_builds time(s) in this run"
-if ((rapier_builds > 1)); then
-  echo "rapier3d was compiled $rapier_builds times: the builds' dependency features differ; regenerate workspace-hack/ (cargo hakari generate; docs/testing.md, "One build of each dependency")"
-  exit 1
-fi
+# One build of each library on the host: a second build of one means that two builds of this
+# run resolved different features (the dependency rules' `vge` without training, the CAN-only
+# bridge, the workspace's tests, maturin's). vge-sim (without physics for the CAN-only
+# bridge), vge-runtime (its simd kernel) and vge-bridge (CAN-only) are built twice on purpose.
+for lib in rapier3d:rapier3d vge-export:vge_export vge-export-tch:vge_export_tch vge-hand:vge_hand \
+  vge-controllers:vge_controllers vge-config-file:vge_config_file vge-run:vge_run vge-lab:vge_lab \
+  vge-trainer:vge_trainer; do
+  builds=$(find target/release/.fingerprint -maxdepth 2 -path "*/${lib%%:*}-*/lib-${lib#*:}" -newer "$started_marker" | wc -l)
+  echo "${lib%%:*} compiled $builds time(s) in this run"
+  if ((builds > 1)); then
+    echo "${lib%%:*} was compiled $builds times: the builds' features differ; regenerate workspace-hack/ (cargo hakari generate; docs/testing.md, \"One build of each dependency\")"
+    exit 1
+  fi
+done
 
 step "Slurm sweep test (scripts/slurm/test.sh: a one-node cluster on localhost; running since the Python step began)"
 # Installs slurmctld, slurmd, slurm-client and munge when missing, starts a throw-away

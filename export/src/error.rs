@@ -23,10 +23,10 @@ pub enum ExportError {
     /// The extracted layers were rejected by the runtime.
     #[error("runtime rejected the exported layers")]
     Runtime(#[from] vge_runtime::RuntimeError),
-    /// libtorch failed while copying a tensor out.
-    #[cfg(feature = "tch")]
+    /// libtorch failed while copying a tensor out: tch's error, boxed so that this crate does
+    /// not link libtorch (vge-export-tch reads tch actors).
     #[error(transparent)]
-    Tch(#[from] tch::TchError),
+    Tch(Box<dyn std::error::Error + Send + Sync>),
     /// The policy file (or the metadata going into it) failed validation.
     #[error("invalid policy file")]
     Format(#[from] vge_runtime::PolicyError),

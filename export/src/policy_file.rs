@@ -5,13 +5,9 @@ use std::ops::Range;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
-#[cfg(feature = "tch")]
-use tch::nn::VarStore;
 use vge_runtime::format::{self, ACT_IDENTITY, ACT_RELU, ACT_TANH};
 use vge_runtime::{Activation, PolicyError, WeightType};
 
-#[cfg(feature = "tch")]
-use crate::{ActorSpec, extract_actor};
 use crate::{ExportError, ExportedActor, ExportedLayer};
 
 /// Who made the policy, from what.
@@ -357,17 +353,4 @@ pub(crate) fn check_regular_file(path: &Path) -> std::io::Result<()> {
             "not a regular file: vge reads regular files only (not read)",
         ))
     }
-}
-
-/// Reads the actor under `prefix` (`"actor"` for the trainer's `GaussianActor`) out of `vs`
-/// and encodes it with `meta` as a policy file (version 3, `f32` weights).
-#[cfg(feature = "tch")]
-pub fn export_policy(
-    vs: &VarStore,
-    prefix: &str,
-    spec: &ActorSpec,
-    meta: PolicyMeta,
-) -> Result<Vec<u8>, ExportError> {
-    let actor = extract_actor(vs, prefix, spec)?;
-    PolicyFile::from_actor(&actor, meta)?.to_bytes()
 }

@@ -2,7 +2,7 @@
 //! sizes in `OUT_DIR/policy_sizes.rs`.
 //!
 //! The policy file comes from `VGE_POLICY` (a `.vgep` written by vge-export; the host test
-//! `export/tests/cortex_m.rs` and `vge bench firmware` write them from a tch actor). Without
+//! `export/tch/tests/cortex_m.rs` and `vge bench firmware` write them from a tch actor). Without
 //! it, the shipped cube policy (`policies/cube.vgep`, format version 2, f32) is embedded, so
 //! that a plain `cargo build` / `cargo run` works with a real actor of a real hand's shape.
 //!

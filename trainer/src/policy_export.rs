@@ -2,7 +2,8 @@
 //! hand's metadata ([`hand_policy_meta`]).
 
 use tch::nn::VarStore;
-use vge_export::{ActorSpec, ExportError, ObsNorm, Provenance, export_policy};
+use vge_export::{ActorSpec, ExportError, ObsNorm, Provenance};
+use vge_export_tch::export_policy;
 use vge_run::config::Config;
 pub use vge_run::policy_meta::hand_policy_meta;
 use vge_sim::EnvConfig;

@@ -628,11 +628,11 @@ mod libtorch {
     /// `vge bench runtime`.
     pub fn runtime(json: bool, iters: usize) -> anyhow::Result<()> {
         anyhow::ensure!(iters > 0, "--iters must be at least 1");
-        let config = vge_export::bench::BenchConfig {
+        let config = vge_export_tch::bench::BenchConfig {
             iters,
-            ..vge_export::bench::BenchConfig::of_shape(&default_actor()?)
+            ..vge_export_tch::bench::BenchConfig::of_shape(&default_actor()?)
         };
-        let r = vge_export::bench::run(&config)?;
+        let r = vge_export_tch::bench::run(&config)?;
         if json {
             println!("{}", r.to_json_line());
         } else {
@@ -656,11 +656,11 @@ mod libtorch {
         let file = match &policy {
             Some(path) => vge_export::PolicyFile::read(path)
                 .with_context(|| format!("reading policy file {}", path.display()))?,
-            None => vge_export::firmware_bench::seeded_policy(seed, &default_actor()?)?,
+            None => vge_export_tch::firmware_bench::seeded_policy(seed, &default_actor()?)?,
         };
         let target_dir = std::env::temp_dir().join("vge-bench-firmware");
         let rows =
-            vge_export::firmware_bench::run(&file, &target_dir, opt_level, observations, seed, |msg| {
+            vge_export_tch::firmware_bench::run(&file, &target_dir, opt_level, observations, seed, |msg| {
                 eprintln!("{msg}")
             })?;
         if json {
@@ -688,7 +688,7 @@ mod libtorch {
                 r.flash_bytes,
                 r.ram_bytes,
                 r.instructions_per_forward,
-                r.instructions_per_forward / vge_export::firmware_bench::CLOCK_HZ * 1e3,
+                r.instructions_per_forward / vge_export_tch::firmware_bench::CLOCK_HZ * 1e3,
                 r.max_abs_diff
             );
         }

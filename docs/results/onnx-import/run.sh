@@ -16,7 +16,7 @@ vge=target/release/vge
 bridge=target/release/vge-bridge
 py=.deps/py/bin/python
 sb3=.deps/sb3/bin/python
-check=export/tests/onnx_check.py
+check=export/tch/tests/onnx_check.py
 run() { # run NAME CMD...: print the command, run it, keep both in $here/NAME.txt
   local name=$1; shift
   echo "\$ $*" | tee "$here/$name.txt"

@@ -6,8 +6,9 @@ use tch::Device;
 use tch::nn::VarStore;
 use vge_export::{
     ActorSpec, ExportError, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, PolicyTask, Provenance, WeightType,
-    build_actor, export_policy, extract_actor, inspect,
+    inspect,
 };
+use vge_export_tch::{build_actor, export_policy, extract_actor};
 use vge_runtime::format::crc32;
 use vge_runtime::{AlignedBytes, HandPolicy, PolicyError, RuntimeError};
 
@@ -232,7 +233,7 @@ fn a_malformed_task_is_rejected_when_encoding() {
 /// becomes version 3 without a task record, same model.
 #[test]
 fn stored_policy_files_still_load_as_the_unrecorded_hand() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).unwrap();
     let mut stack = vec![root.join("policies"), root.join("docs/results"), root.join("tests/fixtures")];
     let mut files = Vec::new();
     while let Some(dir) = stack.pop() {

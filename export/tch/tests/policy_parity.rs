@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use tch::nn::{Module, VarStore};
 use tch::{Device, Kind, Tensor};
-use vge_export::{ActorSpec, ObsNorm, ObsSlice, PolicyMeta, Provenance, build_actor, export_policy};
+use vge_export::{ActorSpec, ObsNorm, ObsSlice, PolicyMeta, Provenance};
+use vge_export_tch::{build_actor, export_policy};
 use vge_runtime::HandPolicy;
 
 #[test]

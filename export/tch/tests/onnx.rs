@@ -1,5 +1,5 @@
 //! ONNX export and import against the real `onnx` and `onnxruntime` packages (through
-//! `export/tests/onnx_check.py` in `.deps/py`, which scripts/test.sh installs): the checker
+//! `export/tch/tests/onnx_check.py` in `.deps/py`, which scripts/test.sh installs): the checker
 //! accepts every exported file, onnxruntime's actions equal the runtime's, torch-layout MLPs
 //! import, broken graphs are refused with the node named, and export then import is exact.
 #![allow(clippy::unwrap_used)]
@@ -12,9 +12,8 @@ use rand_chacha::ChaCha8Rng;
 use tch::Device;
 use tch::nn::VarStore;
 use vge_export::onnx::{self, ActionScale, ImportOptions, ImportTarget, OnnxError};
-use vge_export::{
-    ActorSpec, ObsNorm, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor, export_policy,
-};
+use vge_export::{ActorSpec, ObsNorm, PolicyFile, PolicyMeta, Provenance, WeightType};
+use vge_export_tch::{build_actor, export_policy};
 use vge_runtime::policy::{HAND_MAX_LAYERS, HAND_MAX_WIDTH};
 use vge_runtime::{AlignedBytes, HandPolicy};
 
@@ -22,7 +21,7 @@ const N_OBS: usize = 10_000;
 const TOLERANCE: f32 = 1e-5;
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_owned()
+    Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).unwrap().to_path_buf()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -42,7 +41,7 @@ fn py(args: &[&str]) -> String {
         python.display()
     );
     let out =
-        Command::new(&python).arg(root().join("export/tests/onnx_check.py")).args(args).output().unwrap();
+        Command::new(&python).arg(root().join("export/tch/tests/onnx_check.py")).args(args).output().unwrap();
     assert!(
         out.status.success(),
         "onnx_check.py {args:?} failed (are onnx and onnxruntime installed in .deps/py?):\n{}{}",

@@ -17,7 +17,9 @@ use tch::nn::{Module, VarStore};
 use tch::{Device, Kind, Tensor};
 use vge_runtime::PolicyMlp;
 
-use crate::{ActorSpec, ExportError, build_actor, extract_actor};
+use vge_export::{ActorSpec, ExportError};
+
+use crate::{build_actor, extract_actor, tch_error};
 
 /// Multiply-accumulates per forward of a `dims[0] -> ... -> dims[n]` MLP.
 pub fn macs(dims: &[usize]) -> usize {
@@ -98,6 +100,13 @@ impl RuntimeBench {
     }
 }
 
+/// `n` observations uniform in [-3, 3) as a `[n, dim]` tensor and flattened row-major.
+fn uniform_observations(n: i64, dim: i64) -> Result<(Tensor, Vec<f32>), tch::TchError> {
+    let obs = Tensor::f_rand([n, dim], (Kind::Float, Device::Cpu))?.f_mul_scalar(6.0)?.f_sub_scalar(3.0)?;
+    let flat = Vec::<f32>::try_from(&obs.f_flatten(0, -1)?)?;
+    Ok((obs, flat))
+}
+
 /// Runs the benchmark (a few seconds with the default config).
 pub fn run(config: &BenchConfig) -> Result<RuntimeBench, ExportError> {
     let spec = ActorSpec { obs_dim: config.obs_dim, hidden: config.hidden.clone(), act_dim: config.act_dim };
@@ -113,9 +122,7 @@ pub fn run(config: &BenchConfig) -> Result<RuntimeBench, ExportError> {
     let n_obs = 64;
     let obs_dim = i64::try_from(config.obs_dim)
         .map_err(|_| ExportError::InvalidSpec(format!("obs_dim {} does not fit in i64", config.obs_dim)))?;
-    let obs_t =
-        Tensor::f_rand([n_obs, obs_dim], (Kind::Float, Device::Cpu))?.f_mul_scalar(6.0)?.f_sub_scalar(3.0)?;
-    let obs_flat = Vec::<f32>::try_from(&obs_t.f_flatten(0, -1)?)?;
+    let (obs_t, obs_flat) = uniform_observations(n_obs, obs_dim).map_err(tch_error)?;
     let obs_rows: Vec<&[f32]> = obs_flat.chunks_exact(config.obs_dim).collect();
     let obs_tensors: Vec<Tensor> = (0..n_obs).map(|i| obs_t.narrow(0, i, 1)).collect();
 
@@ -134,7 +141,7 @@ pub fn run(config: &BenchConfig) -> Result<RuntimeBench, ExportError> {
             if i >= config.warmup {
                 runtime.push((t1 - t0).as_nanos() as f64);
                 torch.push((t2 - t1).as_nanos() as f64);
-                let y = Vec::<f32>::try_from(&y.f_flatten(0, -1)?)?;
+                let y = y.f_flatten(0, -1).and_then(|y| Vec::<f32>::try_from(&y)).map_err(tch_error)?;
                 for (a, b) in action.iter().zip(&y) {
                     max_abs_diff = max_abs_diff.max((a - b).abs());
                 }

@@ -20,9 +20,8 @@ use std::time::Duration;
 use tch::nn::{Module, VarStore};
 use tch::{Device, Tensor};
 use vge_export::firmware::{self, FirmwareRun};
-use vge_export::{
-    ActorSpec, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, WeightType, build_actor, export_policy,
-};
+use vge_export::{ActorSpec, ObsNorm, ObsSlice, PolicyFile, PolicyMeta, Provenance, WeightType};
+use vge_export_tch::{build_actor, export_policy};
 use vge_runtime::{AlignedBytes, HandPolicy};
 
 const OBS_DIM: usize = 65;
@@ -33,7 +32,7 @@ const QEMU_TIMEOUT: Duration = Duration::from_secs(120);
 const TOLERANCE: f32 = 1e-6;
 
 fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).unwrap().to_path_buf()
 }
 
 fn build_and_run(policy: &Path) -> FirmwareRun {

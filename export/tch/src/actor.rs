@@ -3,7 +3,7 @@
 use tch::Tensor;
 use tch::nn::{self, Module};
 
-use crate::{ActorSpec, ExportError};
+use vge_export::{ActorSpec, ExportError};
 
 /// The deterministic head of a SAC actor: `tanh(mean(relu(... relu(l0(obs)))))`.
 ///

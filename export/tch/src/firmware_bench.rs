@@ -1,5 +1,5 @@
 //! `vge bench firmware`: one policy as f32, f16 and i8, each built into the Cortex-M4F
-//! firmware and run under qemu (see [`crate::firmware`]): flash, RAM, instructions per
+//! firmware and run under qemu (see [`vge_export::firmware`]): flash, RAM, instructions per
 //! forward, and the accuracy of each weight type against tch's f32 forward on the host.
 
 use std::path::Path;
@@ -8,8 +8,10 @@ use std::time::Duration;
 use tch::{Device, Kind, Tensor};
 use vge_runtime::{AlignedBytes, HandPolicy, WeightType};
 
-use crate::firmware::{self, FirmwareError};
-use crate::{ActorSpec, ExportError, PolicyFile, PolicyMeta, Provenance, build_actor, extract_actor};
+use vge_export::firmware::{self, FirmwareError};
+use vge_export::{ActorSpec, ExportError, PolicyFile, PolicyMeta, Provenance};
+
+use crate::{build_actor, extract_actor};
 
 /// Why the benchmark could not run.
 #[derive(Debug, thiserror::Error)]

@@ -3,7 +3,8 @@
 
 use tch::Device;
 use tch::nn::VarStore;
-use vge_export::{ActorSpec, ExportError, build_actor, extract_actor};
+use vge_export::{ActorSpec, ExportError};
+use vge_export_tch::{build_actor, extract_actor};
 
 fn store(spec: &ActorSpec) -> VarStore {
     tch::manual_seed(3);

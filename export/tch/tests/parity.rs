@@ -3,7 +3,8 @@
 
 use tch::nn::{Module, VarStore};
 use tch::{Device, Kind, Tensor};
-use vge_export::{Activation, ActorSpec, build_actor, extract_actor};
+use vge_export::{Activation, ActorSpec};
+use vge_export_tch::{build_actor, extract_actor};
 use vge_runtime::PolicyMlp;
 
 fn spec() -> ActorSpec {

@@ -5,7 +5,9 @@ use std::collections::HashMap;
 use tch::{Device, Kind, Tensor, nn::VarStore};
 use vge_runtime::Activation;
 
-use crate::{ActorSpec, ExportError, ExportedActor, ExportedLayer};
+use vge_export::{ActorSpec, ExportError, ExportedActor, ExportedLayer};
+
+use crate::tch_error;
 
 /// Reads the actor built by [`build_actor`](crate::build_actor) under `prefix` (e.g. `"actor"`)
 /// from `vs`, checking names, shapes, kinds and finiteness against `spec`.
@@ -51,14 +53,15 @@ fn read_f32(vars: &HashMap<String, Tensor>, name: &str, shape: &[usize]) -> Resu
     if got != expected {
         return Err(ExportError::WrongShape { name: name.to_owned(), expected, got });
     }
-    let kind = t.f_kind()?;
+    let kind = t.f_kind().map_err(tch_error)?;
     if kind != Kind::Float {
         return Err(ExportError::WrongKind { name: name.to_owned(), kind: format!("{kind:?}") });
     }
     let flat = tch::no_grad(|| -> Result<Tensor, tch::TchError> {
         t.f_detach()?.f_to_device(Device::Cpu)?.f_contiguous()?.f_flatten(0, -1)
-    })?;
-    let values = Vec::<f32>::try_from(&flat)?;
+    })
+    .map_err(tch_error)?;
+    let values = Vec::<f32>::try_from(&flat).map_err(tch_error)?;
     if let Some(index) = values.iter().position(|v| !v.is_finite()) {
         return Err(ExportError::NonFinite { name: name.to_owned(), index });
     }

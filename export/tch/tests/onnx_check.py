@@ -1,4 +1,4 @@
-"""ONNX side of vge's ONNX tests (export/tests/onnx.rs) and of docs/results/onnx-import/.
+"""ONNX side of vge's ONNX tests (export/tch/tests/onnx.rs) and of docs/results/onnx-import/.
 
 Uses the real `onnx` and `onnxruntime` packages (from .deps/py); no fallbacks.
 
