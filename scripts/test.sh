@@ -219,13 +219,12 @@ ls -l target/wheels/
 # run resolved different features (the dependency rules' `vge` without training, the CAN-only
 # bridge, the workspace's tests, maturin's). vge-sim (without physics for the CAN-only
 # bridge), vge-runtime (its simd kernel) and vge-bridge (CAN-only) are built twice on purpose.
-for lib in rapier3d:rapier3d vge-export:vge_export vge-export-tch:vge_export_tch vge-hand:vge_hand \
-  vge-controllers:vge_controllers vge-config-file:vge_config_file vge-run:vge_run vge-lab:vge_lab \
-  vge-trainer:vge_trainer; do
-  builds=$(find target/release/.fingerprint -maxdepth 2 -path "*/${lib%%:*}-*/lib-${lib#*:}" -newer "$started_marker" | wc -l)
-  echo "${lib%%:*} compiled $builds time(s) in this run"
+# A package's library fingerprint is `<package>-<hash>/lib-<crate>`, the crate its name with `_`.
+for pkg in rapier3d vge-export vge-export-tch vge-hand vge-controllers vge-config-file vge-run vge-lab vge-trainer; do
+  builds=$(find target/release/.fingerprint -maxdepth 2 -path "*/$pkg-*/lib-${pkg//-/_}" -newer "$started_marker" | wc -l)
+  echo "$pkg compiled $builds time(s) in this run"
   if ((builds > 1)); then
-    echo "${lib%%:*} was compiled $builds times: the builds' features differ; regenerate workspace-hack/ (cargo hakari generate; docs/testing.md, \"One build of each dependency\")"
+    echo "$pkg was compiled $builds times: the builds' features differ; regenerate workspace-hack/ (cargo hakari generate; docs/testing.md, \"One build of each dependency\")"
     exit 1
   fi
 done
