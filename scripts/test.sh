@@ -162,7 +162,7 @@ done
 cargo test --release "${can_only[@]}" --no-run
 ls -l target/release/vge-bridge
 # Its command line: hand files, and a clear refusal of the simulator it does not have.
-cargo test --release "${can_only[@]}" --test cli
+cargo test --release "${can_only[@]}" --test integration cli::
 
 step "no_std builds for thumbv7em-none-eabihf (Cortex-M4F): runtime, CAN protocol"
 cargo build --release -p vge-runtime --target thumbv7em-none-eabihf

@@ -1,7 +1,7 @@
 //! The `vge` command's machine-readable outputs, and `vge sweep`'s parallel jobs and Slurm
 //! job script (cli/tests/slurm.rs runs that script on a real Slurm).
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

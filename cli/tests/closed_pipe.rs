@@ -7,7 +7,7 @@
 //! The episode counts are tiny: this is about the output, not the work. The commands that
 //! train or score are the exception: they drop their output and finish their work.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -22,14 +22,14 @@ fn vge() -> Command {
 }
 
 #[path = "../../tests/support/closed_pipe.rs"]
-mod closed_pipe;
-use closed_pipe::Stream;
+mod pipes;
+use pipes::Stream;
 
-/// Runs `vge args` with `closed` a pipe without a reader ([`closed_pipe::run_closed`]).
+/// Runs `vge args` with `closed` a pipe without a reader ([`pipes::run_closed`]).
 fn run_closed(args: &[String], closed: Stream) -> (Option<i32>, String) {
     let mut cmd = vge();
     cmd.args(args);
-    closed_pipe::run_closed(cmd, closed)
+    pipes::run_closed(cmd, closed)
 }
 
 /// `vge args` with both streams open: its status and (stdout, stderr).

@@ -3,7 +3,7 @@
 //! that no machine holds are refused with the memory they would take, and a policy file
 //! longer than any policy is refused unread by `vge inspect` and `vge eval`.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

@@ -1,7 +1,7 @@
 //! `vge facts`, which the results write-ups quote, on a committed run folder: its row and
 //! segments are what the run's own files say, and its lane lines come from the lanes' logs.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -4,7 +4,7 @@
 //! record, `vge compare` with each object as a task), and `vge eval --objects` gives one row per object whose figures are those of
 //! `vge eval --object` on the same episodes.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Output;

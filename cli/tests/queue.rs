@@ -3,7 +3,7 @@
 //! and scores, what it logs, how it is stopped and continued, the checks that keep a bad
 //! queue from starting, and `collect` with the facts it prints.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -2,7 +2,7 @@
 //! package's converter and read back by Rerun's own Python SDK (sim/tests/rrd_summary.py,
 //! rerun-sdk 0.36.3 in .deps/py); a `.rrd` name is refused with the way to get one.
 
-mod common;
+use crate::common;
 
 use std::process::{Command, Output};
 

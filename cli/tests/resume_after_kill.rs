@@ -6,7 +6,7 @@
 //! the checkpoint the stop writes, the envs' episodes in progress included), which exit with
 //! 143 and 130 and say where they stopped.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

@@ -3,7 +3,7 @@
 //! which episodes, skipping and rescoring, and the refusals (a damaged, missing or
 //! other-layout policy file names the file; an unfinished run writes nothing).
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

@@ -1,7 +1,7 @@
 //! `vge table1`: the controllers alone, a cell's sweep and the table, on a tiny budget; run
 //! again it trains nothing more.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -355,7 +355,7 @@ fn allegro_fg_acts_with_one_finite_entry_per_joint() {
 /// A controller alone on the Allegro as `vge controller --hand allegro` runs it (episodes
 /// from the file's grasp with 0.02 rad pose noise, seeds 0..), with CS's settings changed,
 /// for trying a per-hand setting over many seeds, e.g. `VGE_KIND=cs VGE_CS_OPEN_FRACTION=0.45
-/// cargo test --release -p vge-controllers --test controllers_sim allegro_controller_figures
+/// cargo test --release -p vge-controllers --test integration allegro_controller_figures
 /// -- --ignored --nocapture` (also `VGE_EPISODES` (20), `VGE_EPISODE_S` (30), `VGE_SEED` (0,
 /// the first episode's), `VGE_CS_HORIZON`, `VGE_CS_SPEED_MAX`).
 #[test]

@@ -14,6 +14,8 @@
 
 #[path = "support/allegro_dbc.rs"]
 mod allegro_dbc;
+#[path = "../../tests/support/python.rs"]
+mod python_env;
 
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;

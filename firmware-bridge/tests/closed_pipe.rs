@@ -17,14 +17,14 @@ fn bridge() -> Command {
 }
 
 #[path = "../../tests/support/closed_pipe.rs"]
-mod closed_pipe;
-use closed_pipe::Stream;
+mod pipes;
+use pipes::Stream;
 
-/// Runs `vge-bridge args` with `closed` a pipe without a reader ([`closed_pipe::run_closed`]).
+/// Runs `vge-bridge args` with `closed` a pipe without a reader ([`pipes::run_closed`]).
 fn run_closed(args: &[&str], closed: Stream) -> (Option<i32>, String) {
     let mut cmd = bridge();
     cmd.args(args);
-    closed_pipe::run_closed(cmd, closed)
+    pipes::run_closed(cmd, closed)
 }
 
 /// Asserts that `args` prints on `closed` when it is open, and exits 0 without a panic when

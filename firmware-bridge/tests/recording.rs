@@ -9,8 +9,7 @@ use std::process::Command;
 /// The bridge binary built with this test's features (`sim` among them).
 const BRIDGE: &str = env!("CARGO_BIN_EXE_vge-bridge");
 
-#[path = "../../tests/support/python.rs"]
-mod python_env;
+use crate::python_env;
 use python_env::recording_summary;
 
 #[test]

@@ -5,7 +5,7 @@
 //! Without Python or rliable the test fails: it is the check that the statistics are the
 //! field's.
 
-mod common;
+use crate::common;
 
 use std::io::Write;
 use std::process::{Command, Stdio};

@@ -3,7 +3,7 @@
 //! their `train.log` tells, a resumed run whose only record is its `metrics.csv`, and a
 //! copy of a run given the event files of two sessions.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

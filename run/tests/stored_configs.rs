@@ -8,8 +8,8 @@
 //! The expected hashes are in `tests/fixtures/config-hashes.txt`; a config added later only has
 //! to load and validate until the fixture is rewritten. After a deliberate change
 //! (a new key left out of the canonical TOML at its default keeps every hash), rewrite it with
-//! `VGE_BLESS_CONFIG_HASHES=1 cargo test --release -p vge-run --test stored_configs` and say
-//! why in the commit.
+//! `VGE_BLESS_CONFIG_HASHES=1 cargo test --release -p vge-run --test integration stored_configs`
+//! and say why in the commit.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -246,7 +246,7 @@ fn the_allegro_holds_the_cube_palm_up_for_5_s() {
 }
 
 /// Per-seed figures for the report, e.g. `VGE_HOLD_NOISE=0.02 cargo test --release -p
-/// vge-sim --test allegro hold_figures -- --ignored --nocapture` (also `VGE_HOLD_SEEDS`,
+/// vge-sim --test integration hold_figures -- --ignored --nocapture` (also `VGE_HOLD_SEEDS`,
 /// `VGE_HOLD_STEPS`, `VGE_HOLD_MASS_KG`, `VGE_HOLD_SQUEEZE_N_PER_KG`, `VGE_HOLD_PALM_UP`).
 #[test]
 #[ignore = "a measurement, not a check"]

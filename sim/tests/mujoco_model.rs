@@ -13,8 +13,7 @@ use std::sync::Arc;
 use vge_hand::Hand;
 use vge_sim::{Env, EnvConfig};
 
-#[path = "../../tests/support/python.rs"]
-mod python_env;
+use crate::python_env;
 use python_env::python;
 
 /// The bench's MuJoCo time step (`vge bench sim --mujoco-timestep-s`'s default).

@@ -6,8 +6,7 @@
 
 use vge_sim::{Env, EnvConfig, EpisodeRecorder, ObjectShape, RecordingError};
 
-#[path = "../../tests/support/python.rs"]
-mod python_env;
+use crate::python_env;
 use python_env::recording_summary;
 
 #[test]

@@ -1,11 +1,11 @@
 //! The Allegro frames as `allegro_dbc_check.py` reads them: each frame's DBC message name and
 //! signal values as the Rust decoder reads them, checked by cantools with docs/allegro-v4.dbc.
-//! Included by path from the tests that check frames against the DBC.
+//! Included by path from the tests that check frames against the DBC; each declares
+//! `python_env` (tests/support/python.rs) at its root.
 
 #![allow(dead_code)] // not every including test uses every helper
 
-#[path = "../../../tests/support/python.rs"]
-mod python_env;
+use crate::python_env;
 
 use vge_bridge::protocol::allegro::{
     AllegroConfig, AllegroFrame, Command, Handedness, Report, Request, Status,

@@ -1,0 +1,8 @@
+//! The crate's integration tests: one module per file beside this one, built as one test binary
+//! that links the dependencies once rather than once per file (docs/testing.md). Under `cargo
+//! nextest run` each test still runs in a process of its own.
+
+mod common;
+mod stats_vs_rliable;
+mod table1;
+mod time_to_gait;
