@@ -453,7 +453,10 @@ fn a_flood_beyond_the_receive_budget_halts_and_below_it_is_only_counted() {
             out.extend((0..junk_per_frame).map(|_| Received::Frame(RawFrame { id: 0x000, data: [0; 8] })));
             out
         });
-        let cfg = LoopConfig { rx_budget: 256, ..config(50.0, 0.6) };
+        // The flood halts within a few periods; its run may last seconds so that a host too
+        // loaded to keep the emulator's pace (a stall of several periods) cannot end it first.
+        let duration_s = if halts { 5.0 } else { 0.6 };
+        let cfg = LoopConfig { rx_budget: 256, ..config(50.0, duration_s) };
         let report = run_against_emulator(bridge, nodes, &mut hold_policy(), &cfg);
         if halts {
             // 5 answers x 81 frames = 405 per command set (and 5 sets per query round): far
