@@ -9,27 +9,20 @@ fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The member folders (one or two levels below the root) whose Cargo.toml turns autotests off.
+/// The workspace's members (root Cargo.toml's `workspace.members`) whose Cargo.toml turns
+/// autotests off.
 fn crates_without_autotests(root: &Path) -> Vec<PathBuf> {
-    let mut found = Vec::new();
-    let mut folders: Vec<PathBuf> = Vec::new();
-    for entry in std::fs::read_dir(root).expect("workspace root").flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            if let Ok(inner) = std::fs::read_dir(&path) {
-                folders.extend(inner.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
-            }
-            folders.push(path);
-        }
-    }
-    for folder in folders {
-        let Ok(manifest) = std::fs::read_to_string(folder.join("Cargo.toml")) else { continue };
-        if manifest.lines().any(|l| l.trim() == "autotests = false") {
-            found.push(folder);
-        }
-    }
-    found.sort();
-    found
+    let workspace: toml::Table =
+        std::fs::read_to_string(root.join("Cargo.toml")).expect("Cargo.toml").parse().expect("TOML");
+    let members = workspace["workspace"]["members"].as_array().expect("workspace.members");
+    members
+        .iter()
+        .map(|m| root.join(m.as_str().expect("a member's path")))
+        .filter(|folder| {
+            let manifest = std::fs::read_to_string(folder.join("Cargo.toml")).expect("member Cargo.toml");
+            manifest.lines().any(|l| l.trim() == "autotests = false")
+        })
+        .collect()
 }
 
 #[test]
