@@ -55,3 +55,64 @@ fn every_test_file_is_a_module_of_the_integration_binary_or_a_test_target_of_its
          [[test]] with its path to its Cargo.toml): {missing:?}"
     );
 }
+
+/// Calls that change state shared by every thread of a process: the environment, the working
+/// folder, libtorch's seed and thread pools.
+const PROCESS_WIDE: &[&str] = &[
+    "set_var(",
+    "remove_var(",
+    "set_current_dir(",
+    "manual_seed(",
+    "set_num_threads(",
+    "set_num_interop_threads(",
+];
+
+/// Every `.rs` file under `folder`, its subfolders included.
+fn rust_files(folder: &Path, into: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(folder).expect("a readable tests/ folder").flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            rust_files(&path, into);
+        } else if path.extension().and_then(|e| e.to_str()) == Some("rs") {
+            into.push(path);
+        }
+    }
+}
+
+#[test]
+fn no_test_merged_into_an_integration_binary_changes_process_wide_state() {
+    // Under plain `cargo test` one binary's tests run as threads of one process: a test in the
+    // merged binary that sets an environment variable or libtorch's seed would change what the
+    // tests beside it see, by timing. Such a test belongs in a `[[test]]` of its own.
+    let root = workspace_root();
+    let mut offending = Vec::new();
+    for krate in crates_without_autotests(&root) {
+        let manifest = std::fs::read_to_string(krate.join("Cargo.toml")).expect("Cargo.toml");
+        let mut files = Vec::new();
+        rust_files(&krate.join("tests"), &mut files);
+        for file in files {
+            let relative = file.strip_prefix(&krate).expect("under the crate").to_string_lossy().into_owned();
+            let own_target =
+                relative != "tests/main.rs" && manifest.contains(&format!("path = \"{relative}\""));
+            if own_target {
+                continue;
+            }
+            let text = std::fs::read_to_string(&file).expect("a readable test file");
+            for (number, line) in text.lines().enumerate() {
+                let code = line.trim_start();
+                if code.starts_with("//") {
+                    continue;
+                }
+                if let Some(call) = PROCESS_WIDE.iter().find(|call| code.contains(*call)) {
+                    offending.push(format!("{}:{}: {call}", file.display(), number + 1));
+                }
+            }
+        }
+    }
+    assert!(
+        offending.is_empty(),
+        "tests in a merged `integration` binary that change process-wide state (move each into a \
+         [[test]] of its own in the crate's Cargo.toml, as the learner's seeded tests are): \
+         {offending:#?}"
+    );
+}
