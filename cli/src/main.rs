@@ -15,12 +15,13 @@ use commands::{
     score, screen, ship, sweep, table1, time_to_gait, train,
 };
 
-/// Value-guided exploration for dexterous finger-gaiting: SAC whose behaviour policy follows
-/// sub-skill controllers where the critic values them, on a simulated 15-DOF hand.
+/// Value-guided exploration for dexterous finger-gaiting: an off-policy learner (TD3, or SAC)
+/// whose behaviour policy follows sub-skill controllers where the critic values them, on a
+/// simulated hand read from its MJCF file.
 #[derive(Debug, Parser)]
 #[command(version, about, long_about = None)]
 #[command(after_help = "A closed stdout or stderr (`vge ... | head -1`) ends vge quietly with status 0, \
-but for `vge train`, `vge sweep` and `vge score`, which drop the lines and go on to the end of their \
+but for `vge train`, `vge sweep`, `vge queue`, `vge table1` and `vge score`, which drop the lines and go on to the end of their \
 runs. Exit status: 0 done, 1 an error, 128 + a signal's number (130 SIGINT, 143 SIGTERM, 129 SIGHUP) \
 when a signal stopped training with its checkpoint saved.")]
 struct Cli {

@@ -1,5 +1,5 @@
-//! `vge bench`: vge's hot paths on this machine (updates, simulator, firmware, runtime,
-//! controllers).
+//! `vge bench`: vge's hot paths on this machine (updates, training, simulator, firmware,
+//! runtime, controllers, idle cores).
 
 use std::path::PathBuf;
 
@@ -10,8 +10,9 @@ use vge_sim::{EnvConfig, ObjectShape};
 
 #[derive(Debug, Subcommand)]
 pub enum Bench {
-    /// Full SAC updates per second: batch 256, the default config's actor and twin critics
-    /// (128 x 128; --hidden for others), obs 65, action 15, alpha 0, critics with layer norm
+    /// Full learner updates per second (SAC, or TD3 with --algorithm td3): batch 256, the
+    /// default config's actor and twin critics (128 x 128; --hidden for others) on its hand's
+    /// observation and joints (vge15: 65 and 15), SAC's alpha 0, critics with layer norm
     /// (the training defaults); also the achieved GFLOP/s and this CPU's matmul GFLOP/s for
     /// comparison. Threads: libtorch's default; set them with `OMP_NUM_THREADS=N` (training
     /// uses `sac.threads`).
@@ -136,7 +137,7 @@ pub enum Bench {
         #[arg(long)]
         json: bool,
         /// Policy file to measure (e.g. a run's policy.vgep); default: a seeded untrained
-        /// actor of the default run's shape (vge15's observation and joints, 256x256).
+        /// actor of the default run's shape (vge15's observation and joints, 128 x 128).
         #[arg(long, value_name = "FILE")]
         policy: Option<PathBuf>,
         /// Host observations compared with tch.
@@ -151,7 +152,7 @@ pub enum Bench {
         opt_level: Option<String>,
     },
     /// Policy forward latency at batch 1 for the default run's actor (vge15's observation
-    /// and joints, 256x256): the no_std runtime against tch.
+    /// and joints, 128 x 128): the no_std runtime against tch.
     Runtime {
         /// Print one JSON line instead of a summary.
         #[arg(long)]
