@@ -1,7 +1,7 @@
-//! Every test file is built. Crates that build their test files as modules of one binary
-//! (`autotests = false`, `tests/main.rs`) compile only the files that `main.rs` declares or
-//! that `Cargo.toml` names as a test target: a new `tests/*.rs` left out of both would never
-//! run, and nothing else would say so.
+//! Every test file is built, and merged test files leave the process alone. Crates that build
+//! their test files as modules of one binary (`autotests = false`, `tests/main.rs`) compile
+//! only the files that `main.rs` declares or that `Cargo.toml` names as a test target: a new
+//! `tests/*.rs` left out of both would never run, and nothing else would say so.
 
 use std::path::{Path, PathBuf};
 
@@ -9,18 +9,36 @@ fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// A workspace member that builds its test files as modules of one binary.
+struct MergedCrate {
+    folder: PathBuf,
+    /// Its Cargo.toml's text.
+    manifest: String,
+}
+
+impl MergedCrate {
+    /// Whether `relative` (a path from the crate's folder, e.g. `tests/slurm.rs`) is a
+    /// `[[test]]` target of its own, not a module of the merged binary.
+    fn is_own_test_target(&self, relative: &str) -> bool {
+        relative != "tests/main.rs" && self.manifest.contains(&format!("path = \"{relative}\""))
+    }
+}
+
 /// The workspace's members (root Cargo.toml's `workspace.members`) whose Cargo.toml turns
 /// autotests off.
-fn crates_without_autotests(root: &Path) -> Vec<PathBuf> {
+fn crates_without_autotests(root: &Path) -> Vec<MergedCrate> {
     let workspace: toml::Table =
         std::fs::read_to_string(root.join("Cargo.toml")).expect("Cargo.toml").parse().expect("TOML");
     let members = workspace["workspace"]["members"].as_array().expect("workspace.members");
     members
         .iter()
         .map(|m| root.join(m.as_str().expect("a member's path")))
-        .filter(|folder| {
+        .filter_map(|folder| {
             let manifest = std::fs::read_to_string(folder.join("Cargo.toml")).expect("member Cargo.toml");
-            manifest.lines().any(|l| l.trim() == "autotests = false")
+            manifest
+                .lines()
+                .any(|l| l.trim() == "autotests = false")
+                .then_some(MergedCrate { folder, manifest })
         })
         .collect()
 }
@@ -30,12 +48,12 @@ fn every_test_file_is_a_module_of_the_integration_binary_or_a_test_target_of_its
     let root = workspace_root();
     let crates = crates_without_autotests(&root);
     // The simulator, hand files, controllers, runs, lab, runtime, bridge and CLI.
-    assert!(crates.len() >= 8, "only {} crates with autotests = false: {crates:?}", crates.len());
+    let folders: Vec<&PathBuf> = crates.iter().map(|krate| &krate.folder).collect();
+    assert!(crates.len() >= 8, "only {} crates with autotests = false: {folders:?}", crates.len());
     let mut missing = Vec::new();
     for krate in &crates {
-        let manifest = std::fs::read_to_string(krate.join("Cargo.toml")).expect("Cargo.toml");
-        let main = std::fs::read_to_string(krate.join("tests/main.rs")).expect("tests/main.rs");
-        for entry in std::fs::read_dir(krate.join("tests")).expect("tests/").flatten() {
+        let main = std::fs::read_to_string(krate.folder.join("tests/main.rs")).expect("tests/main.rs");
+        for entry in std::fs::read_dir(krate.folder.join("tests")).expect("tests/").flatten() {
             let path = entry.path();
             if path.extension().and_then(|e| e.to_str()) != Some("rs") {
                 continue;
@@ -43,7 +61,7 @@ fn every_test_file_is_a_module_of_the_integration_binary_or_a_test_target_of_its
             let stem = path.file_stem().and_then(|s| s.to_str()).expect("utf-8 name");
             let declared = stem == "main"
                 || main.lines().any(|l| l.trim() == format!("mod {stem};"))
-                || manifest.contains(&format!("path = \"tests/{stem}.rs\""));
+                || krate.is_own_test_target(&format!("tests/{stem}.rs"));
             if !declared {
                 missing.push(path);
             }
@@ -87,14 +105,12 @@ fn no_test_merged_into_an_integration_binary_changes_process_wide_state() {
     let root = workspace_root();
     let mut offending = Vec::new();
     for krate in crates_without_autotests(&root) {
-        let manifest = std::fs::read_to_string(krate.join("Cargo.toml")).expect("Cargo.toml");
         let mut files = Vec::new();
-        rust_files(&krate.join("tests"), &mut files);
+        rust_files(&krate.folder.join("tests"), &mut files);
         for file in files {
-            let relative = file.strip_prefix(&krate).expect("under the crate").to_string_lossy().into_owned();
-            let own_target =
-                relative != "tests/main.rs" && manifest.contains(&format!("path = \"{relative}\""));
-            if own_target {
+            let relative =
+                file.strip_prefix(&krate.folder).expect("under the crate").to_string_lossy().into_owned();
+            if krate.is_own_test_target(&relative) {
                 continue;
             }
             let text = std::fs::read_to_string(&file).expect("a readable test file");
